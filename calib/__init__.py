@@ -25,6 +25,7 @@ from .kinematics import (
     parameter_jacobian,
     pose_jacobian,
 )
+from .outliers import OutlierReport, find_outliers
 from .metrics import (
     CompensationEvaluation,
     ConsistencyCheck,
@@ -50,5 +51,5 @@ __all__ = [
     "pose_jacobian", "CompensationEvaluation", "ConsistencyCheck", "consistency_check",
     "evaluate_compensation", "integrated_error", "SensorNoise", "euler_from_matrix",
     "euler_from_quaternion", "matrix_from_quaternion", "quaternion_from_euler",
-    "rotation_matrix", "random_poses",
+    "rotation_matrix", "random_poses", "OutlierReport", "find_outliers",
 ]

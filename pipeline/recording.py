@@ -1,0 +1,213 @@
+"""Measurement recordings on disk: a CSV of measurements plus a JSON sidecar.
+
+CSV: one row per measurement in the order taken, columns
+
+    t_s, l1_mm, ..., l6_mm, x_mm, y_mm, z_mm, alpha_rad, beta_rad, gamma_rad[, set]
+
+(time, commanded leg lengths, measured pose; the optional ``set`` column is ``calibration``
+or ``validation`` and defaults to ``calibration``). The JSON sidecar (same stem, ``.json``)
+names the robot's nominal geometry, the declared sensor noise and the units.
+
+Reading validates everything and names file, row and column on error; writing is atomic
+(temporary file + rename) and never overwrites an existing file unless asked to.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calib.hexapod import HexapodGeometry
+from calib.noise import SensorNoise
+
+__all__ = ["COLUMNS", "RecordingError", "Recording", "write_recording", "read_recording",
+           "atomic_write", "sidecar_path"]
+
+POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad")
+LENGTH_COLUMNS = tuple(f"l{i}_mm" for i in range(1, 7))
+COLUMNS = ("t_s",) + LENGTH_COLUMNS + POSE_COLUMNS
+SETS = ("calibration", "validation")
+FORMAT = "parallel-calib recording"
+UNITS = {"length": "mm", "angle": "rad", "time": "s"}
+
+
+class RecordingError(ValueError):
+    """A recording file is malformed; the message names file, row and column."""
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """Measurements of a hexapod and what is needed to analyse them.
+
+    Attributes:
+        geometry: nominal geometry of the robot measured.
+        noise: declared sensor noise.
+        t_s: (N,) time of each measurement, s, non-decreasing.
+        commanded: (N, 6) commanded leg lengths, mm.
+        measured: (N, 6) measured poses, mm and rad.
+        sets: (N,) str, ``"calibration"`` or ``"validation"``.
+        meta: free-form JSON-ready information (scenario, seed, simulation truth...).
+    """
+
+    geometry: HexapodGeometry
+    noise: SensorNoise
+    t_s: np.ndarray
+    commanded: np.ndarray
+    measured: np.ndarray
+    sets: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    def subset(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(commanded, measured)`` of the rows in set ``name``."""
+        mask = self.sets == name
+        return self.commanded[mask], self.measured[mask]
+
+
+def sidecar_path(csv_path: str | Path) -> Path:
+    """The JSON sidecar of a CSV recording."""
+    return Path(csv_path).with_suffix(".json")
+
+
+def atomic_write(path: str | Path, text: str, *, overwrite: bool = False) -> Path:
+    """Write ``text`` to ``path`` atomically; refuse to replace an existing file unless asked.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite it (choose another name or pass overwrite)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:
+    """Write ``rec`` as ``csv_path`` plus its JSON sidecar.
+
+    Both files are checked before either is written, so that nothing is half-replaced.
+
+    Returns:
+        The paths of the CSV and JSON files.
+    """
+    csv_path = Path(csv_path)
+    json_path = sidecar_path(csv_path)
+    if not overwrite:
+        for p in (csv_path, json_path):
+            if p.exists():
+                raise FileExistsError(f"{p} exists; refusing to overwrite it (choose another name or pass overwrite)")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COLUMNS + ("set",))
+    for k in range(len(rec.t_s)):
+        w.writerow([repr(float(rec.t_s[k]))] + [repr(float(v)) for v in rec.commanded[k]]
+                   + [repr(float(v)) for v in rec.measured[k]] + [rec.sets[k]])
+    sidecar = {
+        "format": FORMAT,
+        "version": 1,
+        "robot": "hexapod",
+        "units": UNITS,
+        "columns": list(COLUMNS) + ["set"],
+        "nominal_geometry": rec.geometry.to_dict(),
+        "declared_noise": rec.noise.to_dict(),
+        "meta": rec.meta,
+    }
+    atomic_write(csv_path, buf.getvalue(), overwrite=overwrite)
+    atomic_write(json_path, json.dumps(sidecar, indent=1), overwrite=overwrite)
+    return csv_path, json_path
+
+
+def _read_sidecar(json_path: Path) -> tuple[HexapodGeometry, SensorNoise, dict]:
+    if not json_path.exists():
+        raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
+    try:
+        side = json.loads(json_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{json_path}: not valid JSON: {exc}") from exc
+    if not isinstance(side, dict):
+        raise RecordingError(f"{json_path}: top level must be an object")
+    if side.get("robot") != "hexapod":
+        raise RecordingError(f"{json_path}: field 'robot' must be 'hexapod', got {side.get('robot')!r}")
+    units = side.get("units")
+    if units != UNITS:
+        raise RecordingError(f"{json_path}: field 'units' must be {UNITS}, got {units!r}")
+    for key in ("nominal_geometry", "declared_noise"):
+        if key not in side:
+            raise RecordingError(f"{json_path}: missing field {key!r}")
+    try:
+        geometry = HexapodGeometry.from_dict(side["nominal_geometry"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise RecordingError(f"{json_path}: field 'nominal_geometry': {exc}") from exc
+    try:
+        noise = SensorNoise(**side["declared_noise"])
+    except (TypeError, ValueError) as exc:
+        raise RecordingError(f"{json_path}: field 'declared_noise': {exc}") from exc
+    return geometry, noise, side.get("meta", {})
+
+
+def read_recording(csv_path: str | Path) -> Recording:
+    """Read and validate a recording (CSV + JSON sidecar).
+
+    Raises:
+        RecordingError: naming the file, the row (1-based data row, with its line number) and
+            the column of the first problem found.
+    """
+    csv_path = Path(csv_path)
+    if not csv_path.exists():
+        raise RecordingError(f"{csv_path}: file not found")
+    geometry, noise, meta = _read_sidecar(sidecar_path(csv_path))
+    with csv_path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(COLUMNS)})")
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise RecordingError(f"{csv_path}: header lacks column(s) {', '.join(missing)}; got {', '.join(header)}")
+    unknown = [h for h in header if h not in COLUMNS + ("set",)]
+    if unknown:
+        raise RecordingError(f"{csv_path}: unknown column(s) {', '.join(unknown)}")
+    idx = {h: i for i, h in enumerate(header)}
+    data = rows[1:]
+    if not data:
+        raise RecordingError(f"{csv_path}: no data rows")
+    values = np.empty((len(data), len(COLUMNS)))
+    sets = np.empty(len(data), dtype=object)
+    for r, row in enumerate(data, start=1):
+        where = f"{csv_path}: row {r} (line {r + 1})"
+        if len(row) != len(header):
+            raise RecordingError(f"{where}: expected {len(header)} fields, got {len(row)}")
+        for c, name in enumerate(COLUMNS):
+            cell = row[idx[name]].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                raise RecordingError(f"{where}, column {name!r}: {cell!r} is not a number") from None
+            if not np.isfinite(v):
+                raise RecordingError(f"{where}, column {name!r}: {cell!r} is not finite")
+            values[r - 1, c] = v
+        s = row[idx["set"]].strip() if "set" in idx else "calibration"
+        if s not in SETS:
+            raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
+        sets[r - 1] = s
+        if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
+            raise RecordingError(f"{where}, column 't_s': time goes backwards "
+                                 f"({values[r - 1, 0]!r} after {values[r - 2, 0]!r}); rows must be in the order taken")
+    sets = sets.astype(str)
+    return Recording(geometry=geometry, noise=noise, t_s=values[:, 0], commanded=values[:, 1:7],
+                     measured=values[:, 7:13], sets=sets, meta=meta)
