@@ -179,3 +179,15 @@ def hexapod_xml(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOpt
 def build_hexapod(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOptions()) -> mujoco.MjModel:
     """Compiled MuJoCo model of the hexapod (see :func:`hexapod_xml`)."""
     return mujoco.MjModel.from_xml_string(hexapod_xml(hexapod, options))
+
+
+def save_default_xml(path: Path = DEFAULT_XML) -> Path:
+    """Write the paper's machine (Table 2 + Table 3, default options) for MuJoCo's viewer."""
+    from calib.hexapod import paper_hexapod
+
+    path.write_text(hexapod_xml(paper_hexapod(with_table3_errors=True), name="hexapod_paper_actual"))
+    return path
+
+
+if __name__ == "__main__":  # python -m mjcf.hexapod regenerates the saved default model
+    print(save_default_xml())

@@ -28,7 +28,7 @@ from calib.hexapod import HexapodGeometry
 from calib.noise import SensorNoise
 
 __all__ = ["COLUMNS", "RecordingError", "Recording", "write_recording", "read_recording",
-           "atomic_write", "sidecar_path"]
+           "atomic_write", "publish", "sidecar_path"]
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad")
 LENGTH_COLUMNS = tuple(f"l{i}_mm" for i in range(1, 7))
@@ -75,6 +75,14 @@ def sidecar_path(csv_path: str | Path) -> Path:
     return Path(csv_path).with_suffix(".json")
 
 
+def publish(tmp: str | Path, path: str | Path) -> None:
+    """Give a finished temporary file ordinary permissions and rename it into place."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
+    os.replace(tmp, path)
+
+
 def atomic_write(path: str | Path, text: str, *, overwrite: bool = False) -> Path:
     """Write ``text`` to ``path`` atomically; refuse to replace an existing file unless asked.
 
@@ -89,7 +97,7 @@ def atomic_write(path: str | Path, text: str, *, overwrite: bool = False) -> Pat
     try:
         with os.fdopen(fd, "w", newline="") as f:
             f.write(text)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -1,0 +1,103 @@
+import json
+
+import numpy as np
+import pytest
+
+from calib import paper
+from pipeline.rerun_log import rrd_entities
+from pipeline.run import main, run
+
+EXPECTED_ENTITIES = {
+    "/machine/nominal/legs", "/machine/actual/legs", "/machine/calibrated/legs", "/machine/actual/platform",
+    "/machine/error_x1000", "/calibration/max_dqint", "/heldout/position_error_um/before",
+    "/heldout/position_error_um/after", "/heldout/orientation_error_urad/after",
+    "/parameters/injected", "/parameters/identified", "/parameters/difference", "/summary",
+}
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    res = run(["--out", str(out), "--summary-json", str(out / "summary.json"), "--quiet"])
+    return out, res
+
+
+def test_default_scenario_improves_heldout_error_30x(default_run):
+    out, res = default_run
+    s = json.loads((out / "summary.json").read_text())
+    h = s["heldout_position_error_mm"]
+    assert h["before"] / h["after"] >= 30
+    assert s["heldout_orientation_error_rad"]["after"] < s["heldout_orientation_error_rad"]["before"]
+    for key in ("injected_errors", "identified_errors", "iterations", "max_dqint_history",
+                "heldout_position_error_mm", "heldout_orientation_error_rad", "flagged_poses", "wall_time_s", "rrd"):
+        assert key in s
+    assert np.array(s["identified_errors"]).shape == (6, 7)
+    np.testing.assert_array_equal(s["injected_errors"], paper.TABLE3_ERRORS)
+    assert s["flagged_poses"] == []
+
+
+def test_default_run_writes_the_three_files_and_a_laid_out_rrd(default_run):
+    out, _ = default_run
+    for ext in ("rrd", "csv", "json"):
+        assert (out / f"hexapod_paper.{ext}").stat().st_size > 0
+    assert EXPECTED_ENTITIES <= rrd_entities(out / "hexapod_paper.rrd")
+    from rerun.chunk import RrdReader
+    assert RrdReader(str(out / "hexapod_paper.rrd")).blueprints()  # opens laid out
+
+
+def test_real_on_the_pipelines_own_csv_gives_the_same_errors(default_run, tmp_path):
+    out, res = default_run
+    real = run(["--real", str(out / "hexapod_paper.csv"), "--out", str(tmp_path), "--quiet"])
+    np.testing.assert_array_equal(real.result.errors, res.result.errors)
+    assert real.summary["heldout_poses"] == 50
+    assert real.summary["heldout_position_error_mm"]["before"] > 10 * real.summary["heldout_position_error_mm"]["after"]
+
+
+def test_noise_free_through_mujoco_recovers_table3(tmp_path):
+    for method in ("paper", "forward"):
+        res = run(["--noise-mm", "0", "--heldout", "0", "--method", method, "--out", str(tmp_path),
+                   "--name", method, "--quiet"])
+        assert np.abs(res.result.errors - paper.TABLE3_ERRORS).max() < 1e-5
+
+
+def test_default_name_is_numbered_and_explicit_names_are_never_overwritten(tmp_path, capsys):
+    args = ["--heldout", "0", "--out", str(tmp_path), "--quiet"]
+    run(args)
+    second = run(args)
+    assert second.paths["rrd"].endswith("hexapod_paper_2.rrd")
+    before = (tmp_path / "hexapod_paper.csv").read_text()
+    assert main(args + ["--name", "hexapod_paper"]) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert (tmp_path / "hexapod_paper.csv").read_text() == before
+
+
+def test_paper_row_a2_style_outlier_is_flagged(tmp_path):
+    from pipeline.recording import read_recording, write_recording
+    res = run(["--heldout", "0", "--out", str(tmp_path), "--name", "clean", "--quiet"])
+    rec = read_recording(tmp_path / "clean.csv")
+    bad = rec.measured.copy()
+    bad[1, :3] += [0.02, -0.02, 0.0]  # like row A2: tens of micrometres off
+    from dataclasses import replace
+    write_recording(tmp_path / "bad.csv", replace(rec, measured=bad))
+    out = run(["--real", str(tmp_path / "bad.csv"), "--out", str(tmp_path), "--name", "bad_run", "--quiet"])
+    assert out.summary["flagged_poses"] == [1]
+    assert res.summary["flagged_poses"] == []
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--poses", "5"], "--poses must be 'paper' or an integer >= 7"),
+    (["--poses", "many"], "--poses must be 'paper' or an integer >= 7"),
+    (["--heldout", "-1"], "--heldout must be >= 0"),
+])
+def test_bad_arguments(argv, match, tmp_path):
+    with pytest.raises(SystemExit, match=match):
+        run(argv + ["--out", str(tmp_path)])
+
+
+def test_help_explains_options(capsys):
+    with pytest.raises(SystemExit):
+        run(["--help"])
+    text = capsys.readouterr().out
+    for opt in ("--poses", "--heldout", "--noise-mm", "--noise-rad", "--seed", "--method", "--gravity",
+                "--payload-kg", "--out", "--summary-json", "--real"):
+        assert opt in text
