@@ -202,18 +202,26 @@ def forward_kinematics(
         p = poses[active]
         r = _commanded(hexapod, p) - lengths[active]
         J = _pose_jacobian(hexapod, p)
-        cond = np.linalg.cond(J * scale)
-        singular = ~(cond < _SINGULAR_COND)
-        if np.any(singular):
-            k = int(active[np.argmax(singular)])
-            raise KinematicsError(
-                f"forward kinematics met a singular configuration at row {k} (scaled condition "
-                f"number of the pose Jacobian {cond[np.argmax(singular)]:.3g})", k)
         done = np.max(np.abs(r), axis=1) <= tol
+        # Singularity is checked where a row converges (an SVD per row, so only once); on the
+        # way there a near-singular Jacobian shows up as divergence or non-convergence.
+        if np.any(done):
+            cond = np.linalg.cond(J[done] * scale)
+            singular = ~(cond < _SINGULAR_COND)
+            if np.any(singular):
+                k = int(active[done][np.argmax(singular)])
+                raise KinematicsError(
+                    f"forward kinematics met a singular configuration at row {k} (scaled condition "
+                    f"number of the pose Jacobian {cond[np.argmax(singular)]:.3g})", k)
         active, p, r, J = active[~done], p[~done], r[~done], J[~done]
         if active.size == 0:
             return poses
-        poses[active] = p - np.linalg.solve(J, r[..., None])[..., 0]
+        try:
+            poses[active] = p - np.linalg.solve(J, r[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            bad = np.linalg.matrix_rank(J * scale) < 6
+            k = int(active[np.argmax(bad)])
+            raise KinematicsError(f"forward kinematics met a singular configuration at row {k}", k) from None
         if not np.all(np.isfinite(poses[active])):
             k = int(active[np.argmax(~np.all(np.isfinite(poses[active]), axis=1))])
             raise KinematicsError(f"forward kinematics diverged at row {k}", k)

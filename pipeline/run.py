@@ -21,7 +21,7 @@ import numpy as np
 from calib import paper
 from calib.hexapod import Hexapod, paper_hexapod
 from calib.identification import IdentificationResult, identify_forward, identify_paper
-from calib.kinematics import forward_kinematics, inverse_kinematics
+from calib.kinematics import KinematicsError, forward_kinematics, inverse_kinematics
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
 from calib.workspace import random_poses
@@ -248,6 +248,27 @@ def run(argv: list[str] | None = None) -> RunOutput:
         scenario = sim["scenario"]
     split["simulate"] = time.perf_counter() - t0
 
+    # The measurements are written before any analysis, so that nothing is lost if it fails.
+    out = args.out
+    name = _free_name(out, args.name, args.overwrite)
+    paths = {}
+    if sim is not None:
+        cal, val = sim["cal"], sim["val"]
+        parts = [cal] + ([val] if val is not None else [])
+        sim_meta = {"gravity": args.gravity, "payload_kg": args.payload_kg,
+                    "stiffness_n_per_m": args.stiffness, "friction_n": args.friction}
+        recording = Recording(
+            geometry=nominal.geometry, noise=noise,
+            t_s=np.concatenate([p.t_s for p in parts]),
+            commanded=np.vstack([p.commanded for p in parts]),
+            measured=np.vstack([p.measured for p in parts]),
+            sets=np.array(["calibration"] * len(cal.t_s) + (["validation"] * len(val.t_s) if val is not None else [])),
+            meta={"scenario": scenario, "seed": args.seed,
+                  "simulation": {"injected_errors": actual.errors.tolist(), **sim_meta}},
+        )
+        csv_path, json_path = write_recording(out / f"{name}.csv", recording, overwrite=args.overwrite)
+        paths.update(csv=str(csv_path), json=str(json_path))
+
     t1 = time.perf_counter()
     result = _identify(args.method, nominal, commanded, measured, noise)
     flagged = list(find_outliers(nominal, commanded, measured, noise).flagged) if len(measured) >= 8 else []
@@ -260,7 +281,14 @@ def run(argv: list[str] | None = None) -> RunOutput:
     if sim is not None and sim["val"] is not None:
         t2 = time.perf_counter()
         bed, heldout = sim["bed"], sim["heldout"]
-        after = bed.measure(inverse_kinematics(result.hexapod, heldout),
+        try:
+            compensated = inverse_kinematics(result.hexapod, heldout)
+        except KinematicsError as exc:
+            raise KinematicsError(
+                f"the identified model cannot command the held-out poses ({exc}); its geometry is "
+                "implausible: the measurements carry effects the geometric model lacks (gravity, "
+                "payload, compliance; see python -m pipeline.discover)", exc.index) from exc
+        after = bed.measure(compensated,
                             progress=lambda d, t: report("measuring held-out poses (compensated commands)", d, t))
         heldout_before = sim["val"].true_poses - heldout
         heldout_after = after.true_poses - heldout
@@ -303,28 +331,17 @@ def run(argv: list[str] | None = None) -> RunOutput:
         summary.update(_heldout_block(heldout_before, heldout_after))
     if sim is not None:
         summary["settle_steps_per_pose"] = {"mean": float(sim["cal"].steps.mean()), "max": int(sim["cal"].steps.max())}
-        summary["simulation"] = {"gravity": args.gravity, "payload_kg": args.payload_kg,
-                                 "stiffness_n_per_m": args.stiffness, "friction_n": args.friction}
+        summary["simulation"] = sim_meta
+        # How far the settled machine departs from its own kinematics (load, compliance...).
+        dep = sim["cal"].true_poses - forward_kinematics(actual, commanded, initial=sim["cal"].true_poses)
+        summary["kinematic_departure"] = {
+            "position_mm": {"mean": float(np.linalg.norm(dep[:, :3], axis=1).mean()),
+                            "max": float(np.linalg.norm(dep[:, :3], axis=1).max())},
+            "orientation_rad": {"mean": float(np.linalg.norm(dep[:, 3:], axis=1).mean()),
+                                "max": float(np.linalg.norm(dep[:, 3:], axis=1).max())},
+        }
 
     t3 = time.perf_counter()
-    out = args.out
-    name = _free_name(out, args.name, args.overwrite)
-    paths = {}
-    if sim is not None:
-        cal, val = sim["cal"], sim["val"]
-        parts = [cal] + ([val] if val is not None else [])
-        recording = Recording(
-            geometry=nominal.geometry, noise=noise,
-            t_s=np.concatenate([p.t_s for p in parts]),
-            commanded=np.vstack([p.commanded for p in parts]),
-            measured=np.vstack([p.measured for p in parts]),
-            sets=np.array(["calibration"] * len(cal.t_s) + (["validation"] * len(val.t_s) if val is not None else [])),
-            meta={"scenario": scenario, "seed": args.seed,
-                  "simulation": {"injected_errors": actual.errors.tolist(), **summary["simulation"]}},
-        )
-        csv_path, json_path = write_recording(out / f"{name}.csv", recording, overwrite=args.overwrite)
-        paths.update(csv=str(csv_path), json=str(json_path))
-
     from pipeline.rerun_log import log_calibration_run, save_recording
 
     def log(rec):
