@@ -45,7 +45,12 @@ class HexapodModelOptions:
         actuator_stiffness: position servo stiffness of each leg, N/m (finite: the leg deflects
             under load by force / stiffness).
         actuator_damping: servo damping, N s/m; None chooses near-critical damping.
-        joint_friction: friction loss on each prismatic joint, N.
+        joint_friction: Coulomb friction of each prismatic joint, N. Written to the model as
+            MuJoCo's ``frictionloss`` (for the viewer and dynamics); MuJoCo's friction loss is a soft
+            constraint that creeps to the servo target, so the testbed adds the quasi-static
+            friction force itself (see :mod:`pipeline.testbed`).
+        transmission_scale: (6,) stroke scale error of each leg's transmission: the slide moves
+            ``(1 + s_i)`` times the commanded stroke (actuator gear ``1 / (1 + s_i)``).
         platform_mass_kg, leg_mass_kg: masses of the platform and of each leg half, kg.
         timestep: integration step, s.
     """
@@ -59,8 +64,13 @@ class HexapodModelOptions:
     platform_mass_kg: float = 2.0
     leg_mass_kg: float = 0.3
     timestep: float = 1e-3
+    transmission_scale: tuple = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
+        ts = tuple(float(v) for v in self.transmission_scale)
+        if len(ts) != 6 or not all(-0.5 < v < 0.5 for v in ts):
+            raise ValueError(f"transmission_scale must be 6 numbers in (-0.5, 0.5), got {self.transmission_scale!r}")
+        object.__setattr__(self, "transmission_scale", ts)
         for name in ("payload_kg", "joint_friction"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
@@ -134,8 +144,11 @@ def hexapod_xml(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOpt
     </body>""")
         eqs.append(f'    <connect name="leg{i + 1}_close" site1="leg{i + 1}_tip" site2="P{i + 1}" '
                    f'solref="0.002 1" solimp="0.99 0.999 0.0001"/>')
-        acts.append(f'    <position name="leg{i + 1}" joint="leg{i + 1}_slide" kp="{o.actuator_stiffness:.17g}" '
-                    f'kv="{o.damping:.17g}"/>')
+        # gear g: the servo acts on g q, so it holds the slide at ctrl / g; its stiffness seen by
+        # the slide is kp g^2, hence kp / g^2 keeps the leg's stiffness at actuator_stiffness.
+        g = 1.0 / (1.0 + o.transmission_scale[i])
+        acts.append(f'    <position name="leg{i + 1}" joint="leg{i + 1}_slide" gear="{g:.17g}" '
+                    f'kp="{o.actuator_stiffness / g**2:.17g}" kv="{o.damping / g**2:.17g}"/>')
     payload = ""
     if o.payload_kg > 0:
         payload = f"""
