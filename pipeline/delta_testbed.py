@@ -73,6 +73,7 @@ class DeltaMeasurements:
     Attributes:
         t_s: Simulated time at which each configuration was read, shape (N,), s.
         q_cmd: Commanded joint readings, shape (N, 3), rad.
+        q_true: Settled (noise-free) joint readings, shape (N, 3), rad.
         q_meas: Measured joint readings (settled joint + noise), shape (N, 3), rad.
         positions_meas: Measured plate-centre positions (+ noise), shape (N, 3), mm, base frame.
         positions_true: Noise-free settled plate-centre positions, shape (N, 3), mm.
@@ -84,6 +85,7 @@ class DeltaMeasurements:
 
     t_s: np.ndarray
     q_cmd: np.ndarray
+    q_true: np.ndarray
     q_meas: np.ndarray
     positions_meas: np.ndarray
     positions_true: np.ndarray
@@ -182,4 +184,4 @@ class DeltaTestbed:
         shoulders = np.stack([d.body(f"arm{i + 1}").xpos for i in range(3)]) / M_PER_MM
         q_meas = q_true + self._rng.normal(0.0, 1.0, (n, 3)) * self.noise_rad
         x_meas = x_true + self._rng.normal(0.0, 1.0, (n, 3)) * self.noise_mm
-        return DeltaMeasurements(t, q_cmd, q_meas, x_meas, x_true, steps, elbows, shoulders, attach)
+        return DeltaMeasurements(t, q_cmd, q_true, q_meas, x_meas, x_true, steps, elbows, shoulders, attach)
