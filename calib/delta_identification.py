@@ -191,6 +191,12 @@ def _solve(
     return _SolveOut(x, r, j, it, False, f"did not converge in {max_iter} iterations")
 
 
+def _covariance(j: np.ndarray) -> np.ndarray:
+    """``(J^T J)^+`` of whitened residuals, symmetrised."""
+    c = np.linalg.pinv(j.T @ j, hermitian=True)
+    return 0.5 * (c + c.T)
+
+
 # --------------------------------------------------------------------------- validation
 
 
@@ -292,7 +298,7 @@ def identify_fkm(
         free_names=free,
         residuals=res,
         weighted_residuals=out.r,
-        covariance=np.linalg.pinv(out.jac.T @ out.jac),
+        covariance=_covariance(out.jac),
         iterations=out.iterations,
         success=out.success,
         message=out.message,
@@ -372,7 +378,7 @@ def identify_ikm(
         out = _solve(fun, jac, base[idx], solver, max_iter, xtol, ftol)
         est[idx] = out.x
         pos = [free.index(nm) for nm in names_i]
-        cov[np.ix_(pos, pos)] = np.linalg.pinv(out.jac.T @ out.jac)
+        cov[np.ix_(pos, pos)] = _covariance(out.jac)
         wres.append(out.r)
         iters += out.iterations
         oks.append(out.success)
