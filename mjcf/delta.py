@@ -172,7 +172,6 @@ def build_delta_xml(
         xf /= np.linalg.norm(xf)
         yf = np.cross(zf, xf)
         rf = np.stack([xf, yf, zf], axis=1)  # forearm frame in arm frame
-        la = float(np.linalg.norm(geom.arm[i]))
         lb = float(geom.forearm[i])
         bodies.append(
             f"""
@@ -195,7 +194,6 @@ def build_delta_xml(
             f'    <position name="motor{k}" joint="arm{k}_hinge" kp="{kp!r}" kv="{kv!r}"/>'
         )
         home_qpos += [float(geom.home_q[i]), 0.0, 0.0]
-    del la
     plate_sites = "\n".join(
         f'      <site name="plate_c{i + 1}" pos="{_fmt(geom.plate_attach[i])}" size="0.008"/>' for i in range(3)
     )
