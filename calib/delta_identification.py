@@ -52,6 +52,7 @@ __all__ = [
     "identify_fkm",
     "identify_ikm",
     "make_dataset",
+    "null_space_combinations",
     "perturb_params",
     "random_workspace_positions",
 ]
@@ -399,6 +400,50 @@ def identify_ikm(
         solver=solver,
         cost=float(w @ w),
     )
+
+
+# --------------------------------------------------------------------------- identifiability
+
+
+def null_space_combinations(params: DeltaParams, q, *, rel_tol: float = 1e-9) -> list[dict[str, float]]:
+    """Parameter combinations that position measurements cannot identify (FKM Jacobian SVD).
+
+    The 24 columns are made comparable first (angles scaled by the nominal arm length, i.e.
+    expressed as mm at the arm tip); singular values below ``rel_tol`` times the largest
+    give the null space.
+
+    Args:
+        params: Parameters at which the Jacobian is evaluated.
+        q: Joint readings of the configurations, shape (N, 3), rad (N >= 8).
+        rel_tol: Relative singular-value threshold.
+
+    Returns:
+        One ``{name: coefficient}`` dict per chain whose parameters appear in the null space
+        (each chain's closure involves only its own parameters, so the null space splits
+        chain by chain; the dominant direction of each chain's block is returned),
+        coefficients below 1e-6 dropped, normalised so that the largest is +1; units: mm
+        for lengths, rad for angles.
+    """
+    _check_params(params)
+    q = _as_array(q, "q", (-1, 3))
+    if q.shape[0] < 8:
+        raise ValueError(f"q must have at least 8 configurations, got {q.shape[0]}")
+    if not (np.isfinite(rel_tol) and 0 < rel_tol < 1):
+        raise ValueError(f"rel_tol must be in (0, 1), got {rel_tol}")
+    scale = np.array([1.0 if u == "mm" else float(np.mean(np.hypot(params.Lax, params.Lay))) for u in PARAMETER_UNITS])
+    jac = fk_jacobian_params(params, q).reshape(-1, 24) / scale
+    _, s, vt = np.linalg.svd(jac)
+    null = vt[s < rel_tol * s[0]] / scale  # back to mm / rad coordinates
+    out = []
+    for i in range(3):  # one basis vector per chain: project the null space onto each chain
+        block = null[:, 8 * i : 8 * i + 8]
+        if not np.any(np.abs(block) > 1e-9):
+            continue
+        u, _, _ = np.linalg.svd(block.T, full_matrices=False)
+        v = u[:, 0]
+        v = v / v[np.argmax(np.abs(v))]
+        out.append({PARAMETER_NAMES[8 * i + k]: float(c) for k, c in enumerate(v) if abs(c) > 1e-6})
+    return out
 
 
 # --------------------------------------------------------------------------- gain G

@@ -48,6 +48,7 @@ from calib.delta_identification import (
     calibration_gain,
     identify_fkm,
     identify_ikm,
+    null_space_combinations,
     perturb_params,
     random_workspace_positions,
 )
@@ -107,8 +108,14 @@ def _write_atomic(path: Path, write, overwrite: bool) -> None:
         if overwrite:
             os.replace(tmp, path)
         else:
-            os.link(tmp, path)
-            os.unlink(tmp)
+            try:
+                os.link(tmp, path)  # atomic, fails if path exists
+            except FileExistsError:
+                raise
+            except OSError:  # file system without hard links
+                if path.exists():
+                    raise FileExistsError(str(path)) from None
+                os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -274,6 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         "fixed_parameters": [n for n in PARAMETER_NAMES if n not in DEFAULT_FREE],
         "non_identifiable": "per chain, arm direction (Lax_i, Lay_i) vs joint offset alpha_i; Lay_i held at 0, "
         "estimates compared with the canonical (Lay=0) equivalent of the injected parameters",
+        "null_space_at_nominal": null_space_combinations(nominal, meas.q_meas[cal]),
         "gain_G": {m: g.as_dict() for m, g in gains.items()},
         "identified_params": chosen.estimate.to_dict(),
         "identified_params_by_method": {m: r.estimate.to_dict() for m, r in results.items()},

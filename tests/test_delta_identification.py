@@ -21,6 +21,7 @@ from calib.delta_identification import (
     identify_fkm,
     identify_ikm,
     make_dataset,
+    null_space_combinations,
     perturb_params,
     random_workspace_positions,
 )
@@ -67,6 +68,31 @@ def test_svd_null_space_is_arm_direction_vs_offset():
     assert np.sum(s > 1e-9 * s[0]) == 21
     s21 = np.linalg.svd(jf[:, FREE_IDX], compute_uv=False)
     assert s21[-1] > 1e-6 * s21[0]
+
+
+def test_null_space_combinations_names_alpha_and_lay():
+    d = make_dataset(NOM, NOM, 20, 0)
+    combos = null_space_combinations(NOM, d.q_cmd)
+    assert len(combos) == 3
+    for i, c in enumerate(combos, start=1):
+        assert set(c) == {f"alpha{i}", f"Lay{i}"}
+        assert c[f"Lay{i}"] == pytest.approx(1.0)
+        assert c[f"alpha{i}"] == pytest.approx(1.0 / 260.0, rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"q": np.zeros((7, 3))}, "q must have at least 8 configurations, got 7"),
+        ({"rel_tol": 0.0}, r"rel_tol must be in \(0, 1\), got 0.0"),
+        ({"params": "x"}, "params must be a DeltaParams, got str"),
+    ],
+)
+def test_null_space_validation(kwargs, match):
+    args = {"params": NOM, "q": make_dataset(NOM, NOM, 8, 0).q_cmd}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        null_space_combinations(args.pop("params"), args.pop("q"), **args)
 
 
 # --------------------------------------------------------------------------- noise-free recovery

@@ -63,6 +63,7 @@ def test_summary_noise_free(run_dir):
     h = s["heldout_position_error_mm"]
     assert h["after"] < 1e-6 < 0.1 < h["before"] and h["max_after"] >= h["after"]
     assert s["fixed_parameters"] == ["Lay1", "Lay2", "Lay3"]
+    assert [sorted(c) for c in s["null_space_at_nominal"]] == [[f"Lay{i}", f"alpha{i}"] for i in (1, 2, 3)]
     assert s["wall_time_s"] > 0 and s["rrd"].endswith("t.rrd")
 
 
