@@ -46,7 +46,7 @@ def test_default_free_excludes_lay():
 
 
 def test_svd_null_space_is_arm_direction_vs_offset():
-    """Per chain exactly one null direction: (alpha_i, Lay_i) with dalpha = dLay / Lax."""
+    """Per chain exactly one null direction: (dalpha, dLax, dLay) = (1/Lax, -Lay/Lax, 1)."""
     true = perturb_params(NOM, 1.0, np.deg2rad(1.0), 4)
     d = make_dataset(true, NOM, 30, 5)
     jac = constraint_jacobian_params(true, d.q_cmd, d.positions_true)
@@ -56,12 +56,13 @@ def test_svd_null_space_is_arm_direction_vs_offset():
         null = vt[-1] / vt[-1][6]  # normalise on Lay
         expected = np.zeros(8)
         expected[6] = 1.0
-        # d(elbow) = 0 when the arm vector turns by dLay/|La| and alpha follows (rotation sign:
-        # the arm angle in the chain plane is atan2(Lay, Lax) - phi).
+        # Turning the arm vector (Lax, Lay) by d in the chain plane, (dLax, dLay) = d (-Lay, Lax),
+        # and adding d to alpha leaves every elbow unchanged (the arm angle in the chain plane
+        # is atan2(Lay, Lax) - phi).
         lax, lay = true.Lax[i], true.Lay[i]
-        expected[4] = lax / (lax**2 + lay**2)
+        expected[4] = 1.0 / lax
         expected[5] = -lay / lax
-        np.testing.assert_allclose(null, expected, atol=1e-6)
+        np.testing.assert_allclose(null, expected, atol=1e-8)
     # Forward method: rank 21 of 24; with Lay fixed the 21 columns have full rank.
     jf = fk_jacobian_params(true, d.q_cmd).reshape(-1, 24)
     s = np.linalg.svd(jf, compute_uv=False)
