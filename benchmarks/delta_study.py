@@ -7,8 +7,10 @@ to about 1e-10 mm, see tests/test_mjcf_delta.py), so the study takes seconds.
 
 Run::
 
-    python -m benchmarks.delta_study                      # defaults below
-    python -m benchmarks.delta_study --seeds 50 --error-mm 1.0 --solver gn
+    python -m benchmarks.delta_study                      # 20 seeds, 1 mm / 1 deg, r = 250 mm
+    python -m benchmarks.delta_study --seeds 50 --configs 8 20 40 50 60 100 150
+    python -m benchmarks.delta_study --seeds 50 --error-mm 0.1 --weighting position --solver gn
+    python -m benchmarks.delta_study --convergence --configs 8 --seeds 50
 
 For every seed: real robot = nominal + uniform errors (half-width ``--error-mm`` on lengths,
 ``--error-deg`` on angles), configurations = nominal IK of uniform workspace targets, data =
@@ -41,13 +43,13 @@ def run_study(
     seeds: int = 20,
     noise_mm: float = 1e-3,
     noise_deg: float = 0.01,
-    error_mm: float = 0.1,
+    error_mm: float = 1.0,
     error_deg: float | None = None,
     solver: str = "lm",
     heldout: int = 50,
     base_seed: int = 0,
-    radius_mm: float = 150.0,
-    z_range_mm: tuple[float, float] = (-500.0, -330.0),
+    radius_mm: float = 250.0,
+    z_range_mm: tuple[float, float] = (-600.0, -300.0),
     weighting: str = "declared",
 ) -> list[dict]:
     """Run the study; returns one dict per (method, N) with the aggregated figures.
@@ -168,13 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, default=20)
     p.add_argument("--noise-mm", type=float, default=1e-3)
     p.add_argument("--noise-deg", type=float, default=0.01)
-    p.add_argument("--error-mm", type=float, default=0.1, help="initial length error half-width, mm")
+    p.add_argument("--error-mm", type=float, default=1.0, help="initial length error half-width, mm (default 1)")
     p.add_argument("--error-deg", type=float, default=None, help="initial angle error half-width, deg (default = error-mm)")
     p.add_argument("--solver", choices=("lm", "gn"), default="lm")
     p.add_argument("--heldout", type=int, default=50)
     p.add_argument("--base-seed", type=int, default=0)
-    p.add_argument("--radius-mm", type=float, default=150.0, help="workspace cylinder radius, mm")
-    p.add_argument("--z-range-mm", type=float, nargs=2, default=[-500.0, -330.0], help="workspace cylinder z range, mm")
+    p.add_argument("--radius-mm", type=float, default=250.0, help="workspace cylinder radius, mm (default 250)")
+    p.add_argument("--z-range-mm", type=float, nargs=2, default=[-600.0, -300.0], help="workspace cylinder z range, mm (default -600 -300)")
     p.add_argument("--weighting", choices=("declared", "position"), default="declared")
     p.add_argument("--convergence", action="store_true", help="noise-free radius-of-convergence table instead")
     a = p.parse_args(argv)
