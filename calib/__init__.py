@@ -42,6 +42,15 @@ from .rotation import (
     rotation_matrix,
 )
 from .workspace import random_poses
+from . import delta
+from .delta import DeltaParams, canonical_params
+from .delta_identification import (
+    DeltaIdentificationResult,
+    GainReport,
+    calibration_gain,
+    identify_fkm,
+    identify_ikm,
+)
 
 __all__ = [
     "paper", "ERROR_COLUMNS", "N_PARAMETERS", "Hexapod", "HexapodGeometry", "paper_geometry",
@@ -52,4 +61,6 @@ __all__ = [
     "evaluate_compensation", "integrated_error", "SensorNoise", "euler_from_matrix",
     "euler_from_quaternion", "matrix_from_quaternion", "quaternion_from_euler",
     "rotation_matrix", "random_poses", "OutlierReport", "find_outliers",
+    "delta", "DeltaParams", "canonical_params", "DeltaIdentificationResult", "GainReport",
+    "calibration_gain", "identify_fkm", "identify_ikm",
 ]

@@ -1,7 +1,8 @@
 """MJCF models of the robots, built from ``calib`` parameter sets (MuJoCo in SI metres)."""
 
 from .hexapod import DEFAULT_XML, HexapodModelOptions, build_hexapod, hexapod_xml
+from .delta import DeltaMjcfGeometry, build_delta_model, build_delta_xml
 from .units import M_PER_MM, m_to_mm, mm_to_m
 
-__all__ = ["DEFAULT_XML", "HexapodModelOptions", "build_hexapod", "hexapod_xml", "M_PER_MM",
+__all__ = ["DeltaMjcfGeometry", "build_delta_model", "build_delta_xml", "DEFAULT_XML", "HexapodModelOptions", "build_hexapod", "hexapod_xml", "M_PER_MM",
            "m_to_mm", "mm_to_m"]

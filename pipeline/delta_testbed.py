@@ -18,7 +18,7 @@ from mjcf.delta import ACTUATORS, ARM_JOINTS, PLATE_SENSOR, DeltaMjcfGeometry, b
 __all__ = ["M_PER_MM", "DeltaMeasurements", "DeltaTestbed", "delta_geometry_si"]
 
 #: Metres per millimetre: the only unit conversion of the Delta pipeline.
-M_PER_MM = 1e-3
+from mjcf.units import M_PER_MM  # the one place units meet MuJoCo
 
 #: Plate-centre target used for the home pose, mm, base frame.
 HOME_TARGET_MM = (0.0, 0.0, -420.0)

@@ -101,3 +101,12 @@ def test_help_explains_options(capsys):
     for opt in ("--poses", "--heldout", "--noise-mm", "--noise-rad", "--seed", "--method", "--gravity",
                 "--payload-kg", "--out", "--summary-json", "--real"):
         assert opt in text
+
+
+def test_robot_delta_dispatches_to_the_delta_loop(tmp_path):
+    summary = tmp_path / "delta.json"
+    assert main(["--robot", "delta", "--configs", "8", "--heldout", "5", "--out", str(tmp_path),
+                 "--summary-json", str(summary)]) == 0
+    s = json.loads(summary.read_text())
+    assert s["robot"] == "delta" and "gain_G" in s
+    assert (tmp_path / "delta.rrd").exists()
