@@ -104,7 +104,7 @@ def test_help_explains_options(capsys):
 
 
 def test_robot_delta_dispatches_to_the_delta_loop(tmp_path):
-    summary = tmp_path / "delta.json"
+    summary = tmp_path / "summary.json"
     assert main(["--robot", "delta", "--configs", "8", "--heldout", "5", "--out", str(tmp_path),
                  "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
