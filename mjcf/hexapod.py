@@ -52,7 +52,8 @@ class HexapodModelOptions:
         transmission_scale: (6,) stroke scale error of each leg's transmission: the slide moves
             ``(1 + s_i)`` times the commanded stroke (actuator gear ``1 / (1 + s_i)``).
         platform_mass_kg, leg_mass_kg: masses of the platform and of each leg half, kg.
-        timestep: integration step, s.
+        timestep: integration step, s; capped at 0.3 / omega with omega = sqrt(stiffness / leg
+            mass), since the servo's stiffness is integrated explicitly (see :attr:`step`).
     """
 
     gravity: bool = False
@@ -77,6 +78,12 @@ class HexapodModelOptions:
         for name in ("actuator_stiffness", "platform_mass_kg", "leg_mass_kg", "timestep"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+
+    @property
+    def step(self) -> float:
+        """The integration step used: ``timestep`` capped for the stability of a stiff servo."""
+        omega = np.sqrt(self.actuator_stiffness / self.leg_mass_kg)
+        return float(min(self.timestep, 0.3 / omega))
 
     @property
     def damping(self) -> float:
@@ -142,8 +149,10 @@ def hexapod_xml(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOpt
         <site name="leg{i + 1}_tip" pos="0 0 {rest[i]:.17g}" size="0.005"/>
       </body>
     </body>""")
+        # The closure's time constant follows the step (two steps, MuJoCo's stable minimum) so
+        # that its own compliance stays well below the servo's, also for stiff servos.
         eqs.append(f'    <connect name="leg{i + 1}_close" site1="leg{i + 1}_tip" site2="P{i + 1}" '
-                   f'solref="0.002 1" solimp="0.99 0.999 0.0001"/>')
+                   f'solref="{2 * o.step:.17g} 1" solimp="0.99 0.999 0.0001"/>')
         # gear g: the servo acts on g q, so it holds the slide at ctrl / g; its stiffness seen by
         # the slide is kp g^2, hence kp / g^2 keeps the leg's stiffness at actuator_stiffness.
         g = 1.0 / (1.0 + o.transmission_scale[i])
@@ -158,7 +167,7 @@ def hexapod_xml(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOpt
     psites = "\n".join(f'      <site name="P{i + 1}" pos="{_f(P[i])}" size="0.006" rgba="1 1 0 1"/>' for i in range(6))
     return f"""<mujoco model="{name}">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{o.timestep:.17g}" gravity="{gravity}" integrator="implicitfast">
+  <option timestep="{o.step:.17g}" gravity="{gravity}" integrator="implicitfast">
     <flag contact="disable"/>
   </option>
   <default>

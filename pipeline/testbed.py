@@ -132,11 +132,13 @@ class HexapodTestbed:
         quat = s[self._quat.adr[0]:self._quat.adr[0] + 4]
         return np.r_[m_to_mm(pos), euler_from_quaternion(quat)]
 
-    def settle(self, lengths_mm: np.ndarray) -> tuple[np.ndarray, int]:
+    def settle(self, lengths_mm: np.ndarray, at_time_s: float | None = None) -> tuple[np.ndarray, int]:
         """Command one set of leg lengths and step until at rest.
 
         Args:
             lengths_mm: (6,) commanded leg lengths, mm.
+            at_time_s: the (lab) time of this measurement for time-dependent effects; default
+                the simulated time.
 
         Returns:
             ``(pose, steps)``: (6,) settled true pose (mm, rad) and steps taken.
@@ -155,7 +157,8 @@ class HexapodTestbed:
         d.qfrc_applied[self._slide_dof] = -self.options.joint_friction * self._direction
         # Thermal growth is slow next to settling: the legs take their length at the time the
         # move starts and keep it while the machine settles.
-        m.site_pos[self._tip, 2] = self._tip_z0 + mm_to_m(fx.leg_growth_mm_per_s * d.time)
+        t = d.time if at_time_s is None else at_time_s
+        m.site_pos[self._tip, 2] = self._tip_z0 + mm_to_m(fx.leg_growth_mm_per_s * t)
         for step in range(1, self.max_steps + 1):
             mujoco.mj_step(m, d)
             if step > 5 and np.max(np.abs(d.qvel)) < self.settle_velocity:
@@ -166,21 +169,25 @@ class HexapodTestbed:
             f"{np.array2string(np.asarray(lengths_mm), precision=4)} mm: max joint speed "
             f"{np.max(np.abs(d.qvel)):.3g} > {self.settle_velocity:g}")
 
-    def measure(self, commanded: np.ndarray, progress=None) -> Measurements:
+    def measure(self, commanded: np.ndarray, progress=None, times_s: np.ndarray | None = None) -> Measurements:
         """Command each row of leg lengths in turn, settle, read the sensors, add noise.
 
         Args:
             commanded: (N, 6) commanded leg lengths, mm.
             progress: optional callable ``progress(done, total)``.
+            times_s: (N,) lab times of the measurements (to replay a recording's time axis);
+                default the simulated time.
         """
         commanded = as_array(commanded, "commanded", (-1, 6))
+        if times_s is not None:
+            times_s = as_array(times_s, "times_s", (commanded.shape[0],))
         n = commanded.shape[0]
         true = np.empty((n, 6))
         t = np.empty(n)
         steps = np.empty(n, dtype=int)
         for k in range(n):
-            true[k], steps[k] = self.settle(commanded[k])
-            t[k] = self.data.time
+            true[k], steps[k] = self.settle(commanded[k], None if times_s is None else times_s[k])
+            t[k] = self.data.time if times_s is None else times_s[k]
             if progress is not None:
                 progress(k + 1, n)
         measured = true + self.noise.sample(n, self._rng)
