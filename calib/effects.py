@@ -16,8 +16,7 @@ Candidates (regressors derived from physics, not curve fits):
 * ``none``: geometry only.
 * ``leg_compliance``: each leg shortens by its axial compression over its stiffness. The axial
   forces follow from the static equilibrium of the platform under the weight of platform and
-  payload (unknown magnitude and height of the centre of mass: two coefficients) plus the
-  share of each leg's own weight along its axis (one coefficient).
+  payload (unknown magnitude and height of the centre of mass: two coefficients).
 * ``joint_friction``: a dead band: each leg stops short of its target by ``delta`` against the
   direction in which it last moved (hysteresis).
 * ``thermal_drift``: every leg grows at a constant rate with time.
@@ -102,8 +101,12 @@ class EffectData:
 
 
 def _compliance_regressors(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
-    """(N, 6, 3): leg shortening per unit coefficient for load at the platform origin, per
-    100 mm of centre-of-mass height, and for the legs' own weight along their axes."""
+    """(N, 6, 2): leg shortening per unit coefficient for a load at the platform origin and per
+    100 mm of height of its centre of mass.
+
+    (A leg's own weight along its axis, ``-u_z``, would be a third regressor, but it is exactly
+    the derivative of the leg length with respect to the height of its base joint: the
+    geometric errors absorb it completely, so it is left out.)"""
     R = rotation_matrix(poses[:, 3:6])
     a = np.einsum("nij,lj->nli", R, hexapod.platform_joints) + poses[:, None, 0:3]  # joints, base frame
     L = a - hexapod.base_joints[None]
@@ -117,8 +120,8 @@ def _compliance_regressors(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
     b1 = -np.concatenate([np.zeros_like(c0), np.cross(ez, W)], axis=-1)
     f0 = np.linalg.solve(A, b0[..., None])[..., 0]
     f1 = np.linalg.solve(A, b1[..., None])[..., 0]
-    # Compression shortens the leg; a leg's own weight compresses it by its axial component.
-    return -np.stack([f0, f1, u[..., 2]], axis=-1)
+    # Compression shortens the leg.
+    return -np.stack([f0, f1], axis=-1)
 
 
 def effect_regressors(effect: str, hexapod: Hexapod, data: EffectData, pitch_mm: float | None = None) -> np.ndarray:
@@ -158,8 +161,7 @@ def effect_parameter_names(effect: str) -> list[tuple[str, str]]:
     """``[(name, unit), ...]`` of an effect's coefficients."""
     return {
         "none": [],
-        "leg_compliance": [("weight_over_stiffness", "mm"), ("weight_x_com_height_over_stiffness", "mm x 100 mm"),
-                           ("leg_weight_over_stiffness", "mm")],
+        "leg_compliance": [("weight_over_stiffness", "mm"), ("weight_x_com_height_over_stiffness", "mm x 100 mm")],
         "joint_friction": [("dead_band", "mm")],
         "thermal_drift": [("growth_rate", "mm/s")],
         "actuator_scale": [(f"scale{i + 1}", "1") for i in range(6)],

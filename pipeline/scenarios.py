@@ -12,7 +12,7 @@ import numpy as np
 
 from calib.effects import _compliance_regressors
 from calib.hexapod import Hexapod, paper_hexapod
-from calib.kinematics import inverse_kinematics
+from calib.kinematics import inverse_kinematics, leg_vectors
 from calib.noise import SensorNoise
 from calib.workspace import random_poses
 from mjcf.hexapod import HexapodModelOptions
@@ -23,8 +23,9 @@ from .testbed import HexapodTestbed, MachineEffects
 
 __all__ = ["DISCOVERY_WORKSPACE", "DISCOVERY_NOISE", "effect_recording", "GRAVITY"]
 
-#: Workspace of the discovery recordings: +-25 mm, z 190..215 mm, +-0.1 rad tilt, +-0.15 rad yaw.
-DISCOVERY_WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
+#: Workspace of the discovery recordings about the geometry's home pose: +-25 mm in x and y,
+#: -10..+15 mm in z, +-0.1 rad tilt, +-0.15 rad yaw (for the paper's machine z is 190..215 mm).
+DISCOVERY_WORKSPACE = np.array([[-25, 25], [-25, 25], [-10, 15], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
 GRAVITY = 9.81
@@ -56,7 +57,7 @@ def effect_recording(effect: str, seed: int, *, nominal: Hexapod | None = None, 
     actual = nominal.with_errors(errors if errors is not None else paper_hexapod(with_table3_errors=True).errors)
     n = int(n_poses) if n_poses is not None else int(rng.integers(60, 121))
     mag = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * noise.std[0]
-    targets = random_poses(n, rng, DISCOVERY_WORKSPACE)
+    targets = nominal.geometry.home_pose + random_poses(n, rng, DISCOVERY_WORKSPACE)
     commanded = inverse_kinematics(nominal, targets)
     stroke = commanded - nominal.geometry.home_lengths
     opts: dict = {}
@@ -70,8 +71,10 @@ def effect_recording(effect: str, seed: int, *, nominal: Hexapod | None = None, 
         # Axial forces at the targets (platform + payload at its height, legs' own weight).
         X = _compliance_regressors(actual, targets)
         h = base.payload_height_m / M_PER_MM / 100.0 * payload / (platform_kg + payload)
-        leg_w = base.leg_mass_kg * GRAVITY
-        force = -(W * (X[..., 0] + h * X[..., 1]) + leg_w * X[..., 2])  # N, compression positive
+        # Legs' own weight along their axes (-u_z per unit weight) adds to their compression.
+        legs = leg_vectors(actual, targets)
+        uz = legs[..., 2] / np.linalg.norm(legs, axis=-1)
+        force = -W * (X[..., 0] + h * X[..., 1]) + base.leg_mass_kg * GRAVITY * uz  # N, compression positive
         k = float(np.abs(force).max() / (mag * M_PER_MM))
         opts = dict(gravity=True, payload_kg=payload, actuator_stiffness=k)
         truth.update(payload_kg=payload, stiffness_n_per_m=k)
