@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import sys
 import tempfile
@@ -60,6 +61,7 @@ from pipeline.design import atomic_write_bytes, read_command_file
 __all__ = ["METHODS", "trial_noise", "run_trials", "monte_carlo", "main"]
 
 METHODS = ("forward", "paper")
+_BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 NAMES = [n for n, _, _ in parameter_table()]
 
 
@@ -153,7 +155,9 @@ def monte_carlo(
         seed: master seed.
         methods: subset of :data:`METHODS`.
         heldout: (H, 6) held-out target poses, mm and rad, or None.
-        workers: processes (default ``os.cpu_count()``); 1 runs in this process.
+        workers: processes (default ``os.cpu_count()``); 1 runs in this process (set
+            ``OPENBLAS_NUM_THREADS=1`` for speed), more run in spawned processes with one BLAS
+            thread each.
         progress: callable ``(done, total)`` or None.
 
     Returns:
@@ -181,13 +185,27 @@ def monte_carlo(
             if progress:
                 progress(done, trials)
     else:
-        with ProcessPoolExecutor(max_workers=workers) as ex:
-            futs = [ex.submit(run_trials, {**base, "trials": c}) for c in chunks]
-            for f in as_completed(futs):
-                parts.append(f.result())
-                done += len(parts[-1]["trials"])
-                if progress:
-                    progress(done, trials)
+        # Worker processes are spawned with one BLAS thread each: the per-trial algebra is on
+        # small matrices, and several multithreaded BLAS pools on few cores slow each other
+        # down several-fold. The environment is restored afterwards.
+        from pipeline.study import run_trials as entry  # importable by name in the workers
+
+        saved = {k: os.environ.get(k) for k in _BLAS_THREAD_VARS}
+        os.environ.update({k: "1" for k in _BLAS_THREAD_VARS})
+        try:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
+                futs = [ex.submit(entry, {**base, "trials": c}) for c in chunks]
+                for f in as_completed(futs):
+                    parts.append(f.result())
+                    done += len(parts[-1]["trials"])
+                    if progress:
+                        progress(done, trials)
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
     return _merge(parts, methods)
 
 
