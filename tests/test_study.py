@@ -44,7 +44,7 @@ def test_results_independent_of_worker_count():
 def test_forward_method_is_efficient_and_paper_method_is_not():
     """With Gaussian noise, e^T F e ~ chi-square(42) per trial for an efficient estimator."""
     trials = 60
-    r = monte_carlo(TRUE, COMMANDED, NOISE, trials, 11, methods=("forward", "paper"), workers=1)
+    r = monte_carlo(TRUE, COMMANDED, NOISE, trials, 11, methods=("forward", "paper"), workers=2)
     reached = forward_kinematics(TRUE, COMMANDED)
     F = analyze_observability(TRUE, reached, NOISE).fisher
     lo, hi = chi2.ppf([0.0005, 0.9995], 42 * trials) / trials
