@@ -41,7 +41,7 @@ import numpy as np
 
 from ._validate import as_array, as_poses
 from .hexapod import N_PARAMETERS, Hexapod
-from .kinematics import _commanded, _leg_vectors, _pose_jacobian
+from .kinematics import DEFAULT_STROKE_MM, _commanded, _leg_vectors, _pose_jacobian
 from .noise import SensorNoise
 from .observability import identification_jacobian
 from .workspace import PAPER_WORKSPACE
@@ -92,7 +92,7 @@ class Workspace:
     """
 
     bounds: np.ndarray = field(default_factory=lambda: FULL_WORKSPACE_BOUNDS.copy())
-    stroke_mm: float = 50.0
+    stroke_mm: float = DEFAULT_STROKE_MM
     cone_limit_rad: float = float(np.deg2rad(45.0))
     max_condition: float = 10.0
     name: str = "custom"
