@@ -85,8 +85,9 @@ def run_trials(job: dict) -> dict:
 
     Returns:
         ``trials`` and per method ``{method: {"errors": (T, 42) mm estimate - truth,
-        "success": (T,) bool, "heldout_position_mm": (T,), "heldout_orientation_rad": (T,)}}``
-        (held-out figures are means over the held-out poses of the per-pose error norms).
+        "success": (T,) bool, "heldout_position_mm": (T,), "heldout_position_rms_mm": (T,),
+        "heldout_orientation_rad": (T,)}}`` (held-out figures: mean, and RMS, over the held-out
+        poses of the per-pose error norms; NaN where the identified model cannot reach them).
     """
     geometry = HexapodGeometry.from_dict(job["geometry"])
     nominal = Hexapod(geometry)
@@ -104,6 +105,7 @@ def run_trials(job: dict) -> dict:
         errs = np.empty((trials.size, 42))
         ok = np.empty(trials.size, bool)
         hp = np.full(trials.size, np.nan)
+        hr = np.full(trials.size, np.nan)
         ho = np.full(trials.size, np.nan)
         for t in range(trials.size):
             if method == "forward":
@@ -116,11 +118,12 @@ def run_trials(job: dict) -> dict:
                 try:
                     ev = evaluate_compensation(true, res.hexapod, heldout)
                     hp[t] = ev.position_after.mean()
+                    hr[t] = np.sqrt(np.mean(ev.position_after ** 2))
                     ho[t] = ev.orientation_after.mean()
                 except ValueError:  # a wild estimate can leave the stroke: counted as NaN
                     pass
         out[method] = {"errors": errs, "success": ok, "heldout_position_mm": hp,
-                       "heldout_orientation_rad": ho}
+                       "heldout_position_rms_mm": hr, "heldout_orientation_rad": ho}
     return out
 
 
@@ -162,7 +165,7 @@ def monte_carlo(
 
     Returns:
         ``{method: {"errors": (T, 42), "success": (T,), "heldout_position_mm": (T,),
-        "heldout_orientation_rad": (T,)}}``.
+        "heldout_position_rms_mm": (T,), "heldout_orientation_rad": (T,)}}``.
     """
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
         raise ValueError(f"trials must be a positive integer, got {trials!r}")
@@ -209,7 +212,7 @@ def monte_carlo(
     return _merge(parts, methods)
 
 
-def summarize(results: dict, crb_var: np.ndarray, trials: int, predicted_heldout_mm: float | None) -> dict:
+def summarize(results: dict, crb_var: np.ndarray, trials: int) -> dict:
     """Per-method figures: MSE/CRB per parameter, RMS errors, bias and held-out errors (mm)."""
     out = {}
     # Under efficiency and unbiasedness, T * MSE / CRB ~ chi-square with T degrees of freedom.
@@ -237,12 +240,11 @@ def summarize(results: dict, crb_var: np.ndarray, trials: int, predicted_heldout
             "max_abs_bias_over_standard_error": float(np.nanmax(np.abs(bias) / se)),
             "heldout_position_mm": None if np.all(np.isnan(hp)) else {
                 "mean": float(np.nanmean(hp)), "median": float(np.nanmedian(hp)),
+                "rms": float(np.sqrt(np.nanmean(r["heldout_position_rms_mm"] ** 2))),
                 "p95": float(np.nanpercentile(hp, 95)), "failed_trials": int(np.isnan(hp).sum())},
             "heldout_orientation_rad": None if np.all(np.isnan(hp)) else {
                 "mean": float(np.nanmean(r["heldout_orientation_rad"]))},
         }
-    if predicted_heldout_mm is not None:
-        out["predicted_heldout_position_rms_mm_at_crb"] = predicted_heldout_mm
     return out
 
 
@@ -320,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
     results = monte_carlo(true, commanded, noise, args.trials, args.seed, methods=methods, heldout=heldout,
                           workers=args.workers, progress=progress)
     print(file=sys.stderr)
-    figures = summarize(results, crb_var, args.trials, predicted)
+    figures = summarize(results, crb_var, args.trials)
     summary = {
         "command": "pipeline.study",
         "trials": args.trials, "seed": args.seed, "noise": noise.to_dict(),
@@ -331,6 +333,7 @@ def main(argv: list[str] | None = None) -> int:
         "observability": analysis.summary(),
         "crb_std_mm": {n: float(v) for n, v in zip(NAMES, analysis.crb_std)},
         "crb_rms_mm": analysis.crb_rms,
+        "predicted_heldout_position_rms_mm_at_crb": predicted,
         "methods": figures,
         "elapsed_s": time.perf_counter() - t0,
     }
@@ -345,7 +348,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{m}: parameter error RMS {f['parameter_error_rms_mm']:.4g} mm (CRB {analysis.crb_rms:.4g} mm); "
               f"MSE/CRB per parameter {f['mse_over_crb_min']:.3f}..{f['mse_over_crb_max']:.3f} "
               f"(mean {f['mse_over_crb_mean']:.3f})"
-              + (f"; held-out position error mean {held['mean'] * 1e3:.4g} um" if held else ""),
+              + (f"; held-out position error mean {held['mean'] * 1e3:.4g} um, RMS {held['rms'] * 1e3:.4g} um"
+                 + (f" (predicted at the CRB {predicted * 1e3:.4g} um)" if predicted is not None else "")
+                 if held else ""),
               file=sys.stderr)
     return 0
 
@@ -356,15 +361,16 @@ def _markdown(summary: dict) -> str:
              f"({summary['workspace']['name']} workspace), Gaussian noise std {summary['noise']['position_mm']:g} mm, "
              f"{summary['noise']['orientation_rad']:g} rad. Machine: {summary['simulated_machine']}.", "",
              f"CRB parameter RMS: {summary['crb_rms_mm']:.4g} mm", "",
-             "| method | param. error RMS (mm) | MSE/CRB min | mean | max (param) | held-out position mean (um) |",
+             "| method | param. error RMS (mm) | MSE/CRB min | mean | max (param) | held-out position mean / RMS (um) |",
              "|---|---|---|---|---|---|"]
     for m, f in summary["methods"].items():
-        if not isinstance(f, dict):
-            continue
         h = f["heldout_position_mm"]
         lines.append(f"| {m} | {f['parameter_error_rms_mm']:.4g} | {f['mse_over_crb_min']:.3f} | "
                      f"{f['mse_over_crb_mean']:.3f} | {f['mse_over_crb_max']:.3f} ({f['mse_over_crb_max_parameter']}) | "
-                     f"{(h['mean'] * 1e3) if h else float('nan'):.4g} |")
+                     + (f"{h['mean'] * 1e3:.4g} / {h['rms'] * 1e3:.4g} |" if h else "- |"))
+    if summary["predicted_heldout_position_rms_mm_at_crb"] is not None:
+        lines += ["", f"Held-out position error RMS predicted at the CRB: "
+                      f"{summary['predicted_heldout_position_rms_mm_at_crb'] * 1e3:.4g} um"]
     return "\n".join(lines) + "\n"
 
 

@@ -141,3 +141,29 @@ def test_optimal_poses_validation():
         optimal_poses(NOMINAL, 10)
     with pytest.raises(ValueError, match="workspace must be 'full' or 'paper'"):
         optimal_poses(paper_geometry(), 10, workspace="moon")
+
+
+def test_cli_e_optimal_paper_workspace(tmp_path):
+    out = tmp_path / "e.csv"
+    assert main(["--poses", "8", "--criterion", "e", "--workspace", "paper", "--candidates", "200",
+                 "--out", str(out)]) == 0
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["criterion"] == "e" and side["workspace"]["name"] == "paper"
+    poses, _ = read_command_file(out)
+    assert feasibility(NOMINAL, poses, paper_workspace())["feasible"].all()
+
+
+def test_observability_markdown_and_type_check():
+    import rerun as rr
+
+    from calib import paper
+    from calib.noise import SensorNoise
+    from calib.observability import analyze_observability
+    from pipeline.obs_log import log_observability, observability_markdown
+
+    a = analyze_observability(NOMINAL, paper.TABLE4_NOMINAL_POSES, SensorNoise(1e-3, 1e-6, "normal"))
+    md = observability_markdown(a, title="Paper poses")
+    assert md.startswith("# Paper poses") and "| dZP6 |" in md and "O4 (noise amplification)" in md
+    assert a.weakest_combinations(1)[0]["combination"] in md
+    with pytest.raises(TypeError, match="analysis must be an ObservabilityAnalysis, got dict"):
+        log_observability(rr.RecordingStream("t"), {}, "x")

@@ -74,7 +74,8 @@ def test_cli_writes_summary_and_rrd(tmp_path, capsys):
     assert s["n_poses"] == 10 and s["trials"] == 4 and set(s["methods"]) >= {"forward", "paper"}
     f = s["methods"]["forward"]
     assert set(f["mse_over_crb"]) == set(s["crb_std_mm"]) and len(f["mse_over_crb"]) == 42
-    assert f["heldout_position_mm"]["mean"] > 0
+    assert 0 < f["heldout_position_mm"]["mean"] <= f["heldout_position_mm"]["rms"]
+    assert s["predicted_heldout_position_rms_mm_at_crb"] > 0
     assert s["observability"]["scaled_condition_number"] > 1e3  # the paper's poses
     from rerun.chunk import RrdReader
     ents = {str(c.entity_path) for c in RrdReader(rrd).stream().to_chunks()}
@@ -96,6 +97,14 @@ def test_cli_reads_a_command_file(tmp_path):
                  "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
     assert s["n_poses"] == 10 and s["methods"]["forward"]["heldout_position_mm"] is None
+
+
+def test_cli_random_poses_and_random_errors(tmp_path):
+    summary = tmp_path / "s.json"
+    assert main(["--trials", "3", "--poses", "random", "--n-poses", "8", "--workspace", "paper", "--errors", "random",
+                 "--heldout", "3", "--workers", "1", "--summary-json", str(summary)]) == 0
+    s = json.loads(summary.read_text())
+    assert s["n_poses"] == 8 and s["true_errors"] == "random" and s["criterion"] is None
 
 
 @pytest.mark.parametrize("argv, match", [
