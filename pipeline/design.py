@@ -33,11 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.design import CRITERIA, Workspace, design_poses, workspace_by_name
+from calib.design import CRITERIA, Workspace, design_poses, sample_feasible_poses, workspace_by_name
 from calib.hexapod import Hexapod, HexapodGeometry, paper_geometry
 from calib.kinematics import inverse_kinematics
 from calib.noise import SensorNoise
-from calib.observability import analyze_observability
+from calib.observability import analyze_observability, pose_uncertainty
 from calib import paper
 
 __all__ = [
@@ -255,6 +255,17 @@ def main(argv: list[str] | None = None) -> int:
     analysis = analyze_observability(nominal, res.poses, noise)
     reference = analyze_observability(nominal, paper.TABLE4_NOMINAL_POSES, noise) \
         if args.geometry is None else None
+    # Predicted pose uncertainty after calibration with these poses, anywhere in the workspace
+    # (200 seeded feasible poses), for a controller compensating with the identified errors.
+    probe = sample_feasible_poses(nominal, ws, 200, [args.seed, 1])
+    pu = pose_uncertainty(nominal, probe, analysis.crb)
+    uncertainty = {
+        "probe_poses": int(probe.shape[0]),
+        "position_rms_um": {"mean": float(pu.position_rms_mm.mean() * 1e3),
+                            "max": float(pu.position_rms_mm.max() * 1e3)},
+        "orientation_rms_urad": {"mean": float(pu.orientation_rms_rad.mean() * 1e6),
+                                 "max": float(pu.orientation_rms_rad.max() * 1e6)},
+    }
     meta = {
         "kind": "hexapod calibration command file",
         "columns": list(COMMAND_COLUMNS),
@@ -278,6 +289,7 @@ def main(argv: list[str] | None = None) -> int:
         "seed": args.seed,
         "noise": noise.to_dict(),
         "observability": analysis.summary(),
+        "predicted_pose_uncertainty": uncertainty,
     }
     if reference is not None:
         summary["paper_poses_observability"] = reference.summary()
@@ -290,15 +302,17 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_bytes(args.summary_json, (json.dumps(summary, indent=2) + "\n").encode(),
                            overwrite=args.overwrite)
     if args.rrd:
-        _write_rrd(args.rrd, analysis, reference, res.poses, args.overwrite)
+        _write_rrd(args.rrd, analysis, reference, res.poses, (probe, pu.position_rms_mm), args.overwrite)
+    gain = (f" ({summary['crb_rms_gain_vs_paper_poses']:.3g}x lower than with the paper's 10 poses)"
+            if reference is not None else "")
     print(f"wrote {csv_path} and {side}: condition number {analysis.scaled_condition_number:.4g} "
-          f"(column-scaled), CRB parameter RMS {analysis.crb_rms:.4g} mm"
-          + (f" ({summary['crb_rms_gain_vs_paper_poses']:.3g}x lower than the paper's 10 poses)"
-             if reference is not None else ""), file=sys.stderr)
+          f"(column-scaled), CRB parameter RMS {analysis.crb_rms:.4g} mm{gain}; predicted position error "
+          f"after calibration {uncertainty['position_rms_um']['mean']:.3g} um RMS (mean over the workspace)",
+          file=sys.stderr)
     return 0
 
 
-def _write_rrd(path: str, analysis, reference, poses: np.ndarray, overwrite: bool) -> None:
+def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwrite: bool) -> None:
     import rerun as rr
     import rerun.blueprint as rrb
 
@@ -308,7 +322,11 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, overwrite: boo
     if reference is not None:
         views.append(observability_views("paper_poses/observability", "Paper's poses"))
     bp = rrb.Blueprint(rrb.Vertical(
-        rrb.Spatial3DView(origin="design/poses", name="Designed pose positions (mm)"), *views))
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="design/poses", name="Designed pose positions (mm)"),
+            rrb.Spatial3DView(origin="design/pose_uncertainty",
+                              name="Predicted position error RMS after calibration (radius, um)"),
+        ), *views))
     target = Path(path)
     if target.exists() and not overwrite:
         raise SystemExit(f"{target} exists; pass --overwrite to replace it")
@@ -317,6 +335,10 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, overwrite: boo
     rec = rr.RecordingStream("parallel-calib-design")
     rec.save(tmp, default_blueprint=bp)
     rec.log("design/poses", rr.Points3D(poses[:, :3], radii=2.0), static=True)
+    probe_poses, pos_rms = probe
+    # Radius in mm drawn as the predicted RMS position error in um (1 um -> 1 mm sphere).
+    rec.log("design/pose_uncertainty", rr.Points3D(probe_poses[:, :3], radii=pos_rms * 1e3,
+                                                  labels=[f"{v * 1e3:.2f} um" for v in pos_rms]), static=True)
     log_observability(rec, analysis, "design/observability", title="Designed poses")
     if reference is not None:
         log_observability(rec, reference, "paper_poses/observability", title="Paper's 10 poses")

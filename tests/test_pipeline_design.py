@@ -54,9 +54,12 @@ def test_cli_writes_command_file_sidecar_summary_and_rrd(tmp_path):
     s = json.loads(summary.read_text())
     assert s["observability"]["rank"] == 42 and len(s["observability"]["singular_values"]) == 42
     assert s["crb_rms_gain_vs_paper_poses"] > 1.0
+    u = s["predicted_pose_uncertainty"]
+    assert 0 < u["position_rms_um"]["mean"] <= u["position_rms_um"]["max"]
     ents = _entities(rrd)
     for e in ("/design/observability/singular_values", "/design/observability/crb_std_mm",
-              "/design/observability/report", "/paper_poses/observability/singular_values", "/design/poses"):
+              "/design/observability/report", "/paper_poses/observability/singular_values", "/design/poses",
+              "/design/pose_uncertainty"):
         assert e in ents, e
     np.testing.assert_allclose(bar_values(ents["/design/observability/crb_std_mm"]),
                                [s["observability"]["crb_std_mm"][n] for n in s["observability"]["crb_std_mm"]])
