@@ -411,8 +411,9 @@ def select_poses(
     idx = np.array(chosen, dtype=int)
     F = np.einsum("cki,ckj->ij", A[idx], A[idx])
     sign, ld = np.linalg.slogdet(F)
+    idx.setflags(write=False)
     return DesignResult(
-        poses=candidates[idx].copy(), indices=idx, criterion=criterion,
+        poses=_frozen(candidates[idx]), indices=idx, criterion=criterion,
         log_det=float(ld) if sign > 0 else float("-inf"),
         lambda_min=float(np.linalg.eigvalsh(F)[0]), exchanges=ex, n_candidates=candidates.shape[0],
     )

@@ -55,6 +55,12 @@ __all__ = [
 PARAMETER_NAMES = tuple(name for name, _, _ in parameter_table())
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
 def _check_hexapod(hexapod) -> None:
     if not isinstance(hexapod, Hexapod):
         raise TypeError(f"hexapod must be a Hexapod, got {type(hexapod).__name__}")
@@ -265,11 +271,11 @@ def analyze_observability(
         o1 = float(np.exp(logs.mean()) / np.sqrt(m)) if rank == N_PARAMETERS else 0.0
     smin = float(s[-1]) if rank == N_PARAMETERS else 0.0
     return ObservabilityAnalysis(
-        n_poses=m // 6, noise=noise, jacobian=A, singular_values=s, right_singular_vectors=Vt,
-        rank=rank, condition_number=cond, scaled_condition_number=scond,
-        o1=o1, o2=smin / float(s[0]) if s[0] > 0 else 0.0, o3=smin,
+        n_poses=m // 6, noise=noise, jacobian=_frozen(A), singular_values=_frozen(s),
+        right_singular_vectors=_frozen(Vt), rank=rank, condition_number=cond,
+        scaled_condition_number=scond, o1=o1, o2=smin / float(s[0]) if s[0] > 0 else 0.0, o3=smin,
         o4=smin ** 2 / float(s[0]) if s[0] > 0 else 0.0,
-        fisher=A.T @ A, crb=crb, crb_std=np.sqrt(var),
+        fisher=_frozen(A.T @ A), crb=_frozen(crb), crb_std=_frozen(np.sqrt(var)),
     )
 
 
@@ -319,4 +325,5 @@ def pose_uncertainty(hexapod: Hexapod, targets: np.ndarray, parameter_covariance
     cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
     pos = np.sqrt(np.clip(np.trace(cov[:, :3, :3], axis1=1, axis2=2), 0.0, None))
     ori = np.sqrt(np.clip(np.trace(cov[:, 3:, 3:], axis1=1, axis2=2), 0.0, None))
-    return PoseUncertainty(targets=targets, covariance=cov, position_rms_mm=pos, orientation_rms_rad=ori)
+    return PoseUncertainty(targets=_frozen(targets), covariance=_frozen(cov), position_rms_mm=_frozen(pos),
+                           orientation_rms_rad=_frozen(ori))

@@ -107,6 +107,15 @@ def test_describe_combination_names_parameters():
     assert describe_combination(w, n_terms=2).endswith(" + ...")
 
 
+def test_results_are_read_only():
+    a = analyze_observability(NOMINAL, paper.TABLE4_NOMINAL_POSES, NOISE)
+    with pytest.raises(ValueError, match="read-only"):
+        a.crb_std[0] = 0.0
+    pu = pose_uncertainty(NOMINAL, paper.TABLE4_NOMINAL_POSES[:2], a.crb)
+    with pytest.raises(ValueError, match="read-only"):
+        pu.covariance[0, 0, 0] = 0.0
+
+
 def test_summary_is_json_ready():
     import json
 
