@@ -253,7 +253,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--trials", type=int, default=200)
     p.add_argument("--noise-mm", type=float, default=0.001, help="Gaussian position noise std, mm")
     p.add_argument("--noise-rad", type=float, default=1e-6, help="Gaussian angle noise std, rad")
-    p.add_argument("--poses", default="designed", help="designed | paper | random | a command file (CSV)")
+    p.add_argument("--poses", default="designed",
+                   help="designed | paper | random | a command file (CSV; its commanded lengths are used)")
     p.add_argument("--n-poses", type=int, default=10, help="for designed/random poses")
     p.add_argument("--workspace", choices=("full", "paper"), default="full",
                    help="workspace of designed/random poses and of the held-out poses")
