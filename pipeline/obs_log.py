@@ -1,0 +1,101 @@
+"""Rerun logging of observability figures (rerun-sdk 0.41 API).
+
+Reusable by every pipeline command: :func:`log_observability` writes, under ``prefix``:
+
+* ``{prefix}/singular_values`` and ``{prefix}/log10_singular_values``: bar charts of the 42
+  singular values of the noise-weighted identification Jacobian (1/mm), largest first;
+* ``{prefix}/crb_std_mm``: bar chart of the Cramer-Rao standard deviation of each parameter
+  (mm, :func:`~calib.hexapod.parameter_table` order; an undetermined parameter is logged as 0
+  and named in the report);
+* ``{prefix}/report``: a markdown document with the indices, the condition numbers, the weakest
+  parameter combinations and the per-parameter table.
+
+All entities are static (they describe a pose set, not a moment in time).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from calib.hexapod import parameter_table
+from calib.observability import ObservabilityAnalysis
+
+__all__ = ["log_observability", "log_bars", "observability_markdown", "observability_views"]
+
+
+def _fmt(x: float) -> str:
+    return "inf" if not np.isfinite(x) else f"{x:.4g}"
+
+
+def observability_markdown(analysis: ObservabilityAnalysis, *, title: str = "Observability", k: int = 5) -> str:
+    """Markdown report of an :class:`~calib.observability.ObservabilityAnalysis`."""
+    names = [n for n, _, _ in parameter_table()]
+    n = analysis.noise
+    lines = [
+        f"# {title}",
+        "",
+        f"{analysis.n_poses} poses; declared noise ({n.distribution}): position "
+        f"{n.position_mm:g} mm, orientation {n.orientation_rad:g} rad (std "
+        f"{analysis.noise.std[0]:.3g} mm, {analysis.noise.std[3]:.3g} rad).",
+        "",
+        "| figure | value |", "|---|---|",
+        f"| rank | {analysis.rank} / 42 |",
+        f"| condition number (noise-weighted) | {_fmt(analysis.condition_number)} |",
+        f"| condition number (column-scaled) | {_fmt(analysis.scaled_condition_number)} |",
+        f"| O1 (D) | {_fmt(analysis.o1)} 1/mm |",
+        f"| O2 (inverse condition) | {_fmt(analysis.o2)} |",
+        f"| O3 (E, sigma_min) | {_fmt(analysis.o3)} 1/mm |",
+        f"| O4 (noise amplification) | {_fmt(analysis.o4)} 1/mm |",
+        f"| CRB parameter RMS | {_fmt(analysis.crb_rms)} mm |",
+        "",
+        "## Worst-determined parameter combinations",
+        "",
+        "| std (mm) | combination |", "|---|---|",
+    ]
+    for c in analysis.weakest_combinations(k):
+        lines.append(f"| {_fmt(c['std_mm'])} | {c['combination']} |")
+    lines += ["", "## Cramer-Rao standard deviation per parameter (mm)", "",
+              "| parameter | std (mm) |", "|---|---|"]
+    lines += [f"| {nm} | {_fmt(s)} |" for nm, s in zip(names, analysis.crb_std)]
+    return "\n".join(lines) + "\n"
+
+
+def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray) -> None:
+    """A static bar chart of finite values (non-finite entries logged as 0)."""
+    v = np.asarray(values, dtype=float)
+    rec.log(path, rr.BarChart(np.where(np.isfinite(v), v, 0.0)), static=True)
+
+
+def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, prefix: str = "observability",
+                      *, title: str = "Observability") -> None:
+    """Log the singular value spectrum, per-parameter CRB bars and a markdown report.
+
+    Args:
+        rec: an open recording stream.
+        analysis: from :func:`calib.observability.analyze_observability`.
+        prefix: entity path prefix.
+        title: heading of the markdown report.
+    """
+    if not isinstance(analysis, ObservabilityAnalysis):
+        raise TypeError(f"analysis must be an ObservabilityAnalysis, got {type(analysis).__name__}")
+    s = analysis.singular_values
+    log_bars(rec, f"{prefix}/singular_values", s)
+    with np.errstate(divide="ignore"):
+        log_bars(rec, f"{prefix}/log10_singular_values", np.log10(s))
+    log_bars(rec, f"{prefix}/crb_std_mm", analysis.crb_std)
+    rec.log(f"{prefix}/report",
+            rr.TextDocument(observability_markdown(analysis, title=title), media_type=rr.MediaType.MARKDOWN),
+            static=True)
+
+
+def observability_views(prefix: str = "observability", name: str = "Observability") -> rrb.Container:
+    """Blueprint views of what :func:`log_observability` writes."""
+    return rrb.Horizontal(
+        rrb.Vertical(
+            rrb.BarChartView(origin=f"{prefix}/log10_singular_values", name=f"{name}: log10 singular values"),
+            rrb.BarChartView(origin=f"{prefix}/crb_std_mm", name=f"{name}: CRB std per parameter (mm)"),
+        ),
+        rrb.TextDocumentView(origin=f"{prefix}/report", name=f"{name}: report"),
+    )
