@@ -42,6 +42,16 @@ from .rotation import (
     rotation_matrix,
 )
 from .workspace import random_poses
+from .design import DesignResult, Workspace, design_poses, full_workspace, paper_workspace
+from .effects import EFFECTS, Discovery, EffectData, EffectFit, discover_effect, fit_effect
+from .observability import (
+    ObservabilityAnalysis,
+    PoseUncertainty,
+    analyze_observability,
+    fisher_information,
+    identification_jacobian,
+    pose_uncertainty,
+)
 from . import delta
 from .delta import DeltaParams, canonical_params
 from .delta_identification import (
@@ -63,4 +73,8 @@ __all__ = [
     "rotation_matrix", "random_poses", "OutlierReport", "find_outliers",
     "delta", "DeltaParams", "canonical_params", "DeltaIdentificationResult", "GainReport",
     "calibration_gain", "identify_fkm", "identify_ikm",
+    "DesignResult", "Workspace", "design_poses", "full_workspace", "paper_workspace",
+    "EFFECTS", "Discovery", "EffectData", "EffectFit", "discover_effect", "fit_effect",
+    "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
+    "identification_jacobian", "pose_uncertainty",
 ]

@@ -83,7 +83,9 @@ class HexapodModelOptions:
     def step(self) -> float:
         """The integration step used: ``timestep`` capped for the stability of a stiff servo."""
         omega = np.sqrt(self.actuator_stiffness / self.leg_mass_kg)
-        return float(min(self.timestep, 0.3 / omega))
+        # Explicit stiffness is stable for omega dt < 2; beyond omega dt = 1 the step drops to
+        # 0.3 / omega, which also settled fastest in our trials (the default is not affected).
+        return float(self.timestep if omega * self.timestep <= 1.0 else 0.3 / omega)
 
     @property
     def damping(self) -> float:

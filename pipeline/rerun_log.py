@@ -27,6 +27,7 @@ import rerun.blueprint as rrb
 from calib.hexapod import Hexapod, parameter_table
 from calib.rotation import rotation_matrix
 
+from .obs_log import observability_views
 from .recording import publish
 
 __all__ = ["machine_points", "log_calibration_run", "save_recording", "rrd_entities"]
@@ -68,6 +69,7 @@ def blueprint() -> rrb.Blueprint:
                     rrb.BarChartView(origin="parameters/identified", name="Identified (um)"),
                     rrb.BarChartView(origin="parameters/injected", name="Injected (um)"),
                     rrb.BarChartView(origin="parameters/difference", name="Identified - injected (um)"),
+                    observability_views("observability", "Observability"),
                 ),
                 rrb.TextDocumentView(origin="summary", name="Summary"),
             ),

@@ -43,10 +43,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", choices=["hexapod", "delta"], default="hexapod",
                    help="robot to calibrate; 'delta' runs the Delta loop (see python -m pipeline.delta_run --help)")
     p.add_argument("--poses", default="paper",
-                   help="calibration poses: 'paper' (the 10 poses of Table 4) or a number N of poses "
-                        "drawn at random in the paper's workspace (+-10 mm, z 200..210 mm, +-3 deg)")
+                   help="calibration poses: 'paper' (the 10 poses of Table 4), a number N of poses "
+                        "(see --design), or a command file written by python -m pipeline.design")
     p.add_argument("--design", choices=["random", "optimal"], default="random",
-                   help="with --poses N: draw poses at random, or choose them D-optimally")
+                   help="with --poses N: draw poses at random in the paper's workspace (+-10 mm, z 200..210 mm, "
+                        "+-3 deg), or choose them D-optimally over the machine's whole workspace (calib.design)")
     p.add_argument("--heldout", type=int, default=50, help="held-out validation poses (same workspace)")
     p.add_argument("--noise-mm", type=float, default=paper.PAPER_NOISE_MM,
                    help="sensor noise on each position coordinate, mm (half-width if uniform, std if normal)")
@@ -191,6 +192,10 @@ def _simulate(args, report):
     seeds = np.random.SeedSequence(args.seed).spawn(3)
     if args.poses == "paper":
         targets, scenario = paper.TABLE4_NOMINAL_POSES.copy(), "paper (Table 2 nominal, Table 3 injected, Table 4 poses)"
+    elif args.poses.endswith(".csv"):
+        from pipeline.design import read_command_file
+        targets, _ = read_command_file(args.poses)
+        scenario = f"{len(targets)} poses from {args.poses} (Table 2 nominal, Table 3 injected)"
     else:
         n = int(args.poses)
         if args.design == "optimal":
@@ -219,7 +224,7 @@ def run(argv: list[str] | None = None) -> RunOutput:
     args = build_parser().parse_args(argv)
     if args.heldout < 0:
         raise SystemExit("--heldout must be >= 0")
-    if args.poses != "paper":
+    if args.poses != "paper" and not args.poses.endswith(".csv"):
         try:
             if int(args.poses) < 7:
                 raise ValueError
@@ -344,11 +349,19 @@ def run(argv: list[str] | None = None) -> RunOutput:
     t3 = time.perf_counter()
     from pipeline.rerun_log import log_calibration_run, save_recording
 
+    from calib.observability import analyze_observability
+    from pipeline.obs_log import log_observability
+
+    analysis = analyze_observability(nominal, measured, noise)
+    summary["observability"] = {"condition_number": float(analysis.condition_number),
+                                "crb_std_mm": analysis.crb_std.tolist()}
+
     def log(rec):
         log_calibration_run(rec, nominal=nominal, actual=actual, identified=result.hexapod, targets=targets,
                             measured=measured, predicted=predicted, history=result.history,
                             heldout_before=heldout_before, heldout_after=heldout_after,
                             summary_markdown=_markdown(summary))
+        log_observability(rec, analysis, "observability", title="Observability of the calibration poses")
 
     rrd = save_recording(out / f"{name}.rrd", log, overwrite=args.overwrite)
     paths["rrd"] = str(rrd)
