@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from calib import SensorNoise, forward_kinematics, identify_forward, identify_paper, inverse_kinematics, paper_hexapod, random_poses
 
 

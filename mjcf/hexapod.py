@@ -135,7 +135,7 @@ def hexapod_xml(hexapod: Hexapod, options: HexapodModelOptions = HexapodModelOpt
     rest = mm_to_m(hexapod.geometry.home_lengths + hexapod.leg_offsets)  # tip at q = 0
     radius = float(np.linalg.norm(P, axis=1).mean())
     gravity = "0 0 -9.81" if o.gravity else "0 0 0"
-    legs, eqs, acts, sensors = [], [], [], []
+    legs, eqs, acts = [], [], []
     for i in range(6):
         d = R_home @ P[i] + t_home - B[i]
         d = d / np.linalg.norm(d)

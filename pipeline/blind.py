@@ -11,18 +11,16 @@ against the noise floor. Recordings run in parallel over the cores.
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
 from calib.effects import EFFECTS
 
-__all__ = ["blind_case", "run_blind_suite", "main"]
+from .parallel import spawn_pool
 
-_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+__all__ = ["blind_case", "run_blind_suite", "main"]
 
 
 def blind_case(args: tuple) -> dict:
@@ -57,23 +55,11 @@ def run_blind_suite(effects=EFFECTS, seeds=range(20), *, gross: bool = False, wo
             if progress:
                 progress(k + 1, len(cases))
         return out
-    # One BLAS thread per worker: the problems are small, and several workers each running a
-    # multi-threaded BLAS on two cores thrash (seen here: the same case 0.4 s or 16 s). Spawned
-    # workers read the variables when they import numpy.
-    saved = {k: os.environ.get(k) for k in _BLAS_VARS}
-    os.environ.update({k: "1" for k in _BLAS_VARS})
-    try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            for k, r in enumerate(pool.map(blind_case, cases)):
-                out.append(r)
-                if progress:
-                    progress(k + 1, len(cases))
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    with spawn_pool(workers) as pool:
+        for k, r in enumerate(pool.map(blind_case, cases)):
+            out.append(r)
+            if progress:
+                progress(k + 1, len(cases))
     return out
 
 

@@ -25,9 +25,7 @@ import argparse
 import csv
 import io
 import json
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -53,6 +51,8 @@ from calib.delta_identification import (
     random_workspace_positions,
 )
 from pipeline.delta_testbed import DeltaTestbed
+from pipeline.recording import atomic_write
+from pipeline.rerun_log import save_recording
 
 __all__ = ["main", "build_parser"]
 
@@ -91,38 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
 # --------------------------------------------------------------------------- files
 
 
-def _write_atomic(path: Path, write, overwrite: bool) -> None:
-    """Write via a temporary file in the same folder, then move into place.
-
-    Without ``overwrite`` the move is a hard link, which fails if ``path`` appeared
-    meanwhile: an existing file is never silently replaced.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        if overwrite:
-            os.replace(tmp, path)
-        else:
-            try:
-                os.link(tmp, path)  # atomic, fails if path exists
-            except FileExistsError:
-                raise
-            except OSError:  # file system without hard links
-                if path.exists():
-                    raise FileExistsError(str(path)) from None
-                os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 def _write_text(path: Path, text: str, overwrite: bool) -> None:
-    _write_atomic(path, lambda p: p.write_text(text, encoding="utf-8"), overwrite)
+    atomic_write(path, text, overwrite=overwrite)
 
 
 # --------------------------------------------------------------------------- rerun
@@ -132,7 +102,6 @@ def _write_rrd(path: Path, name: str, meas, gains: dict, before, after, summary_
     import rerun as rr
     import rerun.blueprint as rrb
 
-    rec = rr.RecordingStream(f"parallel_calib_delta_{name}")
     blueprint = rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(origin="delta", name="Delta (mm)"),
@@ -145,8 +114,7 @@ def _write_rrd(path: Path, name: str, meas, gains: dict, before, after, summary_
         )
     )
 
-    def _log(tmp: Path) -> None:
-        rec.save(str(tmp), default_blueprint=blueprint)
+    def _log(rec) -> None:
         rec.log("delta", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         rec.log("delta/shoulders", rr.Points3D(meas.shoulders, radii=4.0), static=True)
         for k in range(meas.t_s.size):
@@ -166,10 +134,8 @@ def _write_rrd(path: Path, name: str, meas, gains: dict, before, after, summary_
             vals = np.nan_to_num(np.asarray(g.per_parameter, dtype=np.float64), nan=0.0)
             rec.log(f"gain/{method}", rr.BarChart(vals), static=True)
         rec.log("summary", rr.TextDocument(summary_md, media_type=rr.MediaType.MARKDOWN), static=True)
-        rec.flush()
-        rec.disconnect()
 
-    _write_atomic(path, _log, overwrite)
+    save_recording(path, _log, application_id=f"parallel_calib_delta_{name}", overwrite=overwrite, bp=blueprint)
 
 
 # --------------------------------------------------------------------------- main

@@ -165,7 +165,7 @@ class DeltaTestbed:
             RuntimeError: Naming the configuration that did not settle within the step cap.
         """
         q_cmd = _as_array(q_cmd, "q_cmd", (-1, 3))
-        m, d = self.model, self.data
+        d = self.data
         n = q_cmd.shape[0]
         t = np.empty(n)
         q_true = np.empty((n, 3))

@@ -28,7 +28,6 @@ import io
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +38,7 @@ from calib.kinematics import inverse_kinematics
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib import paper
+from pipeline.recording import atomic_write
 
 __all__ = [
     "COMMAND_COLUMNS",
@@ -46,7 +46,6 @@ __all__ = [
     "optimal_poses",
     "write_command_file",
     "read_command_file",
-    "atomic_write_bytes",
     "main",
 ]
 
@@ -56,28 +55,6 @@ COMMAND_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad",
 #: Declared noise the designs are weighted with by default: Gaussian, 1 um on positions,
 #: 1e-6 rad on angles (standard deviations).
 DEFAULT_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, overwrite: bool = False) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and ``os.replace``.
-
-    Raises:
-        FileExistsError: ``path`` exists and ``overwrite`` is False.
-    """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass --overwrite (overwrite=True) to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
 
 
 def _workspace(workspace: str | Workspace) -> Workspace:
@@ -156,8 +133,8 @@ def write_command_file(path: str | os.PathLike, poses: np.ndarray, lengths: np.n
     for p in (path, side):
         if p.exists() and not overwrite:
             raise FileExistsError(f"{p} exists; pass --overwrite (overwrite=True) to replace it")
-    atomic_write_bytes(side, (json.dumps(meta, indent=2) + "\n").encode(), overwrite=overwrite)
-    atomic_write_bytes(path, command_csv(poses, lengths).encode(), overwrite=overwrite)
+    atomic_write(side, json.dumps(meta, indent=2) + "\n", overwrite=overwrite)
+    atomic_write(path, command_csv(poses, lengths), overwrite=overwrite)
     return path, side
 
 
@@ -299,8 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
     if args.summary_json:
-        atomic_write_bytes(args.summary_json, (json.dumps(summary, indent=2) + "\n").encode(),
-                           overwrite=args.overwrite)
+        atomic_write(args.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=args.overwrite)
     if args.rrd:
         _write_rrd(args.rrd, analysis, reference, res.poses, (probe, pu.position_rms_mm), args.overwrite)
     gain = (f" ({summary['crb_rms_gain_vs_paper_poses']:.3g}x lower than with the paper's 10 poses)"
@@ -317,6 +293,7 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwri
     import rerun.blueprint as rrb
 
     from pipeline.obs_log import log_observability, observability_views
+    from pipeline.rerun_log import save_recording
 
     views = [observability_views("design/observability", "Designed poses")]
     if reference is not None:
@@ -327,25 +304,21 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwri
             rrb.Spatial3DView(origin="design/pose_uncertainty",
                               name="Predicted position error RMS after calibration (radius, um)"),
         ), *views))
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise SystemExit(f"{target} exists; pass --overwrite to replace it")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".rrd", dir=target.parent or ".")
-    os.close(fd)
-    rec = rr.RecordingStream("parallel-calib-design")
-    rec.save(tmp, default_blueprint=bp)
-    rec.log("design/poses", rr.Points3D(poses[:, :3], radii=2.0), static=True)
-    probe_poses, pos_rms = probe
-    # Radius in mm drawn as the predicted RMS position error in um (1 um -> 1 mm sphere).
-    rec.log("design/pose_uncertainty", rr.Points3D(probe_poses[:, :3], radii=pos_rms * 1e3,
-                                                  labels=[f"{v * 1e3:.2f} um" for v in pos_rms]), static=True)
-    log_observability(rec, analysis, "design/observability", title="Designed poses")
-    if reference is not None:
-        log_observability(rec, reference, "paper_poses/observability", title="Paper's 10 poses")
-    rec.flush()
-    rec.disconnect()
-    os.replace(tmp, target)
 
+    def log(rec):
+        rec.log("design/poses", rr.Points3D(poses[:, :3], radii=2.0), static=True)
+        probe_poses, pos_rms = probe
+        # Radius in mm drawn as the predicted RMS position error in um (1 um -> 1 mm sphere).
+        rec.log("design/pose_uncertainty", rr.Points3D(probe_poses[:, :3], radii=pos_rms * 1e3,
+                                                      labels=[f"{v * 1e3:.2f} um" for v in pos_rms]), static=True)
+        log_observability(rec, analysis, "design/observability", title="Designed poses")
+        if reference is not None:
+            log_observability(rec, reference, "paper_poses/observability", title="Paper's 10 poses")
+
+    try:
+        save_recording(path, log, application_id="parallel-calib-design", overwrite=overwrite, bp=bp)
+    except FileExistsError as exc:
+        raise SystemExit(str(exc)) from None
 
 if __name__ == "__main__":
     sys.exit(main())

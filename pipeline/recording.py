@@ -14,6 +14,7 @@ Reading validates everything and names file, row and column on error; writing is
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -28,7 +29,7 @@ from calib.hexapod import HexapodGeometry
 from calib.noise import SensorNoise
 
 __all__ = ["COLUMNS", "RecordingError", "Recording", "write_recording", "read_recording",
-           "atomic_write", "publish", "sidecar_path"]
+           "atomic_write", "publish", "writing", "sidecar_path"]
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad")
 LENGTH_COLUMNS = tuple(f"l{i}_mm" for i in range(1, 7))
@@ -75,34 +76,70 @@ def sidecar_path(csv_path: str | Path) -> Path:
     return Path(csv_path).with_suffix(".json")
 
 
-def publish(tmp: str | Path, path: str | Path) -> None:
-    """Give a finished temporary file ordinary permissions and rename it into place."""
+def _exists_message(path: Path) -> str:
+    return f"{path} exists; pass --overwrite to replace it (refusing to overwrite it silently)"
+
+
+def publish(tmp: str | Path, path: str | Path, *, overwrite: bool = False) -> None:
+    """Move a finished temporary file into place with ordinary permissions.
+
+    Without ``overwrite`` the move is a hard link, which fails if ``path`` appeared in the
+    meantime: an existing file is never silently replaced.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+    """
+    path = Path(path)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
-    os.replace(tmp, path)
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(_exists_message(path)) from None
+    except OSError:  # a file system without hard links
+        if path.exists():
+            raise FileExistsError(_exists_message(path)) from None
+        os.replace(tmp, path)
+    else:
+        os.unlink(tmp)
 
 
-def atomic_write(path: str | Path, text: str, *, overwrite: bool = False) -> Path:
-    """Write ``text`` to ``path`` atomically; refuse to replace an existing file unless asked.
+@contextlib.contextmanager
+def writing(path: str | Path, *, overwrite: bool = False):
+    """Yield a temporary path beside ``path``; when the block succeeds, :func:`publish` it there.
+
+    Nothing is left behind on failure, and an existing file is refused up front.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False.
     """
     path = Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; refusing to overwrite it (choose another name or pass overwrite)")
+        raise FileExistsError(_exists_message(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w", newline="") as f:
-            f.write(text)
-        publish(tmp, path)
-    except BaseException:
+        yield Path(tmp)
+        publish(tmp, path, overwrite=overwrite)
+    finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        raise
-    return path
+
+
+def atomic_write(path: str | Path, data: str | bytes, *, overwrite: bool = False) -> Path:
+    """Write text or bytes to ``path`` atomically (see :func:`writing`).
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+    """
+    with writing(path, overwrite=overwrite) as tmp:
+        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+    return Path(path)
 
 
 def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:
@@ -118,7 +155,7 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
     if not overwrite:
         for p in (csv_path, json_path):
             if p.exists():
-                raise FileExistsError(f"{p} exists; refusing to overwrite it (choose another name or pass overwrite)")
+                raise FileExistsError(_exists_message(p))
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(COLUMNS + ("set",))

@@ -16,8 +16,6 @@ Entities (all lengths in mm):
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +26,7 @@ from calib.hexapod import Hexapod, parameter_table
 from calib.rotation import rotation_matrix
 
 from .obs_log import observability_views
-from .recording import publish
+from .recording import writing
 
 __all__ = ["machine_points", "log_calibration_run", "save_recording", "rrd_entities"]
 
@@ -141,22 +139,12 @@ def save_recording(path: str | Path, log_fn, *, application_id: str = "parallel_
         FileExistsError: ``path`` exists and ``overwrite`` is False.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; refusing to overwrite it (choose another name or pass --overwrite)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
+    with writing(path, overwrite=overwrite) as tmp:
         rec = rr.RecordingStream(application_id)
-        rec.save(tmp, default_blueprint=bp if bp is not None else blueprint())
+        rec.save(str(tmp), default_blueprint=bp if bp is not None else blueprint())
         log_fn(rec)
         rec.flush()
         rec.disconnect()
-        publish(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path
 
 

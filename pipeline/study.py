@@ -31,12 +31,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import sys
-import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +44,6 @@ from calib.design import (
     CRITERIA,
     Workspace,
     design_poses,
-    full_workspace,
     sample_feasible_poses,
     workspace_by_name,
 )
@@ -56,12 +53,13 @@ from calib.kinematics import forward_kinematics, inverse_kinematics
 from calib.metrics import evaluate_compensation
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
-from pipeline.design import atomic_write_bytes, read_command_file
+from pipeline.design import read_command_file
+from pipeline.parallel import spawn_pool
+from pipeline.recording import atomic_write
 
 __all__ = ["METHODS", "trial_noise", "run_trials", "monte_carlo", "main"]
 
 METHODS = ("forward", "paper")
-_BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 NAMES = [n for n, _, _ in parameter_table()]
 
 
@@ -188,27 +186,16 @@ def monte_carlo(
             if progress:
                 progress(done, trials)
     else:
-        # Worker processes are spawned with one BLAS thread each: the per-trial algebra is on
-        # small matrices, and several multithreaded BLAS pools on few cores slow each other
-        # down several-fold. The environment is restored afterwards.
+        # Spawned workers with one BLAS thread each (pipeline.parallel.spawn_pool).
         from pipeline.study import run_trials as entry  # importable by name in the workers
 
-        saved = {k: os.environ.get(k) for k in _BLAS_THREAD_VARS}
-        os.environ.update({k: "1" for k in _BLAS_THREAD_VARS})
-        try:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-                futs = [ex.submit(entry, {**base, "trials": c}) for c in chunks]
-                for f in as_completed(futs):
-                    parts.append(f.result())
-                    done += len(parts[-1]["trials"])
-                    if progress:
-                        progress(done, trials)
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+        with spawn_pool(workers) as ex:
+            futs = [ex.submit(entry, {**base, "trials": c}) for c in chunks]
+            for f in as_completed(futs):
+                parts.append(f.result())
+                done += len(parts[-1]["trials"])
+                if progress:
+                    progress(done, trials)
     return _merge(parts, methods)
 
 
@@ -339,8 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         "elapsed_s": time.perf_counter() - t0,
     }
     if args.summary_json:
-        atomic_write_bytes(args.summary_json, (json.dumps(summary, indent=2) + "\n").encode(),
-                           overwrite=args.overwrite)
+        atomic_write(args.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=args.overwrite)
     if args.rrd:
         _write_rrd(args.rrd, analysis, results, figures, summary, args.overwrite)
     for m in methods:
@@ -380,10 +366,8 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
     import rerun.blueprint as rrb
 
     from pipeline.obs_log import log_bars, log_observability, observability_views
+    from pipeline.rerun_log import save_recording
 
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise SystemExit(f"{target} exists; pass --overwrite to replace it")
     views = [observability_views("study/observability", "Calibration poses")]
     for m in results:
         views.append(rrb.Horizontal(
@@ -392,25 +376,24 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
             rrb.TimeSeriesView(origin=f"study/{m}/heldout_position_um", name=f"{m}: held-out position error (um)"),
         ))
     bp = rrb.Blueprint(rrb.Vertical(rrb.TextDocumentView(origin="study/summary", name="Summary"), *views))
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".rrd", dir=target.parent)
-    os.close(fd)
-    rec = rr.RecordingStream("parallel-calib-study")
-    rec.save(tmp, default_blueprint=bp)
-    log_observability(rec, analysis, "study/observability", title="Calibration poses")
-    rec.log("study/summary", rr.TextDocument(_markdown(summary), media_type=rr.MediaType.MARKDOWN), static=True)
-    for m, r in results.items():
-        f = figures[m]
-        log_bars(rec, f"study/{m}/mse_over_crb", np.array([f["mse_over_crb"][n] for n in NAMES]))
-        log_bars(rec, f"study/{m}/empirical_std_mm", np.array([f["empirical_std_mm"][n] for n in NAMES]))
-        hp = r["heldout_position_mm"]
-        if not np.all(np.isnan(hp)):
-            rec.send_columns(f"study/{m}/heldout_position_um",
-                             indexes=[rr.TimeColumn("trial", sequence=np.arange(hp.size))],
-                             columns=rr.Scalars.columns(scalars=hp * 1e3))
-    rec.flush()
-    rec.disconnect()
-    os.replace(tmp, target)
+
+    def log(rec):
+        log_observability(rec, analysis, "study/observability", title="Calibration poses")
+        rec.log("study/summary", rr.TextDocument(_markdown(summary), media_type=rr.MediaType.MARKDOWN), static=True)
+        for m, r in results.items():
+            f = figures[m]
+            log_bars(rec, f"study/{m}/mse_over_crb", np.array([f["mse_over_crb"][n] for n in NAMES]))
+            log_bars(rec, f"study/{m}/empirical_std_mm", np.array([f["empirical_std_mm"][n] for n in NAMES]))
+            hp = r["heldout_position_mm"]
+            if not np.all(np.isnan(hp)):
+                rec.send_columns(f"study/{m}/heldout_position_um",
+                                 indexes=[rr.TimeColumn("trial", sequence=np.arange(hp.size))],
+                                 columns=rr.Scalars.columns(scalars=hp * 1e3))
+
+    try:
+        save_recording(path, log, application_id="parallel-calib-study", overwrite=overwrite, bp=bp)
+    except FileExistsError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 if __name__ == "__main__":
