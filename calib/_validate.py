@@ -28,3 +28,10 @@ def as_array(value, name: str, shape: tuple, *, finite: bool = True) -> np.ndarr
 def as_poses(value, name: str = "poses") -> np.ndarray:
     """(N, 6) poses; a single (6,) pose is not silently promoted."""
     return as_array(value, name, (-1, 6))
+
+
+def frozen_array(value) -> np.ndarray:
+    """A read-only float64 copy (for the fields of frozen parameter sets)."""
+    a = np.array(value, dtype=float)
+    a.setflags(write=False)
+    return a

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._validate import as_array, as_poses
+from ._validate import as_array, frozen_array, as_poses
 from .hexapod import N_PARAMETERS, Hexapod
 from .kinematics import DEFAULT_STROKE_MM, _commanded, _leg_vectors, _pose_jacobian
 from .noise import SensorNoise
@@ -73,12 +73,6 @@ _BOUNDS_TOL = 1e-6
 CRITERIA = ("d", "e")
 
 
-def _frozen(a) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True, eq=False)
 class Workspace:
     """Feasible calibration poses (see the module docstring).
@@ -102,7 +96,7 @@ class Workspace:
         if np.any(b[:, 0] > b[:, 1]):
             i = int(np.argmax(b[:, 0] > b[:, 1]))
             raise ValueError(f"bounds must have low <= high, got row {i}: {b[i].tolist()}")
-        object.__setattr__(self, "bounds", _frozen(b))
+        object.__setattr__(self, "bounds", frozen_array(b))
         for name, lo, hi in (("stroke_mm", 0.0, np.inf), ("cone_limit_rad", 0.0, np.pi / 2),
                              ("max_condition", 1.0, np.inf)):
             v = getattr(self, name)
@@ -413,7 +407,7 @@ def select_poses(
     sign, ld = np.linalg.slogdet(F)
     idx.setflags(write=False)
     return DesignResult(
-        poses=_frozen(candidates[idx]), indices=idx, criterion=criterion,
+        poses=frozen_array(candidates[idx]), indices=idx, criterion=criterion,
         log_det=float(ld) if sign > 0 else float("-inf"),
         lambda_min=float(np.linalg.eigvalsh(F)[0]), exchanges=ex, n_candidates=candidates.shape[0],
     )

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import paper
-from ._validate import as_array
+from ._validate import as_array, frozen_array
 
 __all__ = [
     "ERROR_COLUMNS",
@@ -60,12 +60,6 @@ def parameter_index(name: str) -> int:
     )
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True, eq=False)
 class HexapodGeometry:
     """Nominal hexapod geometry.
@@ -86,7 +80,7 @@ class HexapodGeometry:
     def __post_init__(self) -> None:
         for name, shape in (("base_joints", (6, 3)), ("platform_joints", (6, 3)),
                             ("home_lengths", (6,)), ("home_pose", (6,))):
-            object.__setattr__(self, name, _frozen(as_array(getattr(self, name), name, shape)))
+            object.__setattr__(self, name, frozen_array(as_array(getattr(self, name), name, shape)))
 
     def to_dict(self) -> dict:
         """JSON-ready dict (lists of floats, mm and rad)."""
@@ -121,7 +115,7 @@ class Hexapod:
     errors: np.ndarray = field(default_factory=lambda: np.zeros((6, 7)))
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "errors", _frozen(as_array(self.errors, "errors", (6, 7))))
+        object.__setattr__(self, "errors", frozen_array(as_array(self.errors, "errors", (6, 7))))
 
     @property
     def base_joints(self) -> np.ndarray:
