@@ -39,7 +39,7 @@ from .noise import SensorNoise
 from .rotation import rotation_matrix
 
 __all__ = ["MIN_DELTA_BIC", "EFFECTS", "EffectData", "EffectFit", "Discovery", "effect_regressors", "fit_effect",
-           "discover_effect", "locate_mismatch", "PITCH_RANGE_MM"]
+           "discover_effect", "locate_mismatch", "joint_noise_std", "PITCH_RANGE_MM"]
 
 EFFECTS = ("none", "leg_compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error")
 #: Search range of the screw pitch, mm.
@@ -235,6 +235,13 @@ def _noise_chol(hexapod: Hexapod, data: EffectData) -> np.ndarray:
     return np.linalg.cholesky(S)
 
 
+def joint_noise_std(hexapod: Hexapod, data: EffectData) -> np.ndarray:
+    """(N, 6) mm, standard deviation of each leg-length residual caused by the sensor noise."""
+    Jp = _pose_jacobian(hexapod, data.measured)
+    var = 1.0 / data.noise.weights() ** 2
+    return np.sqrt(np.einsum("nik,k->ni", Jp ** 2, var))
+
+
 def _whiten(Lc: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Solve L w = v pose by pose; v is (N, 6) or (N, 6, k)."""
     if v.ndim == 2:
@@ -257,7 +264,7 @@ def _solve(A: np.ndarray, b: np.ndarray):
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
-    return x / scale, scale
+    return x / scale
 
 
 def fit_effect(data: EffectData, effect: str, *, pitch_mm: float | None = None, iterations: int = 3,
@@ -287,7 +294,7 @@ def fit_effect(data: EffectData, effect: str, *, pitch_mm: float | None = None, 
         r, D = _design(hx, data, effect, pitch_mm)
         coef = np.zeros(D.shape[-1] - 42) if coef is None else coef
         resid = r + D[..., 42:] @ coef  # D holds -X for the effect columns
-        x, _ = _solve(_whiten(Lc, D).reshape(-1, D.shape[-1]), -_whiten(Lc, resid).ravel())
+        x = _solve(_whiten(Lc, D).reshape(-1, D.shape[-1]), -_whiten(Lc, resid).ravel())
         hx = hx.with_errors(hx.vector + x[:42])
         coef = coef + x[42:]
     r, D = _design(hx, data, effect, pitch_mm)
@@ -465,10 +472,7 @@ def locate_mismatch(data: EffectData, geometry_fit: EffectFit) -> dict:
         JSON-ready dict; ``summary`` holds the findings in words.
     """
     hx = geometry_fit.hexapod
-    Jp = _pose_jacobian(hx, data.measured)
-    var = 1.0 / data.noise.weights() ** 2
-    sd = np.sqrt(np.einsum("nik,k->ni", Jp ** 2, var))
-    z = geometry_fit.residuals / sd  # standardised joint residuals
+    z = geometry_fit.residuals / joint_noise_std(hx, data)  # standardised joint residuals
     per_leg = np.sqrt(np.mean(z ** 2, axis=0))
     pred = forward_kinematics(hx, data.commanded, initial=data.measured, stroke_mm=None)
     task = (data.measured - pred) * data.noise.weights()

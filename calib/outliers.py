@@ -88,7 +88,8 @@ def find_outliers(nominal: Hexapod, commanded: np.ndarray, measured: np.ndarray,
     rows = np.arange(n)
     removed: list[int] = []
     while True:
-        d, stat = _deleted_statistics(nominal, commanded, measured, rows, w)
+        res = [_deleted(nominal, commanded, measured, np.delete(rows, k), rows[k], w) for k in range(rows.size)]
+        stat = np.array([r[1] for r in res])
         worst = int(np.argmax(stat))
         if stat[worst] <= thr or rows.size <= 8:
             break
@@ -96,34 +97,25 @@ def find_outliers(nominal: Hexapod, commanded: np.ndarray, measured: np.ndarray,
         rows = np.delete(rows, worst)
     d_all = np.zeros((n, 6))
     stat_all = np.zeros(n)
-    d_all[rows], stat_all[rows] = d, stat
-    if removed:
-        # Removed rows are judged against the model identified from all the rows kept.
-        for j in removed:
-            dj, sj = _deleted_statistics(nominal, commanded, measured, np.r_[rows, j], w, only_last=True)
-            d_all[j], stat_all[j] = dj[-1], sj[-1]
+    for k, j in enumerate(rows):
+        d_all[j], stat_all[j] = res[k]
+    # Removed rows are judged against the model identified from all the rows kept.
+    for j in removed:
+        d_all[j], stat_all[j] = _deleted(nominal, commanded, measured, rows, j, w)
     flagged = tuple(sorted(int(i) for i in np.flatnonzero(stat_all > thr)))
     return OutlierReport(d_all, stat_all, thr, flagged)
 
 
-def _deleted_statistics(nominal, commanded, measured, rows, w, only_last=False):
-    """Leave-one-out residuals and chi-square statistics of ``rows`` (indices into the data)."""
-    Sigma_noise = np.diag(1.0 / w**2)
-    m = rows.size
-    d = np.zeros((m, 6))
-    stat = np.zeros(m)
-    for k in (range(m - 1, m) if only_last else range(m)):
-        j = rows[k]
-        keep = np.delete(rows, k)
-        fit = identify_paper(nominal, commanded[keep], measured[keep])
-        try:
-            pred = forward_kinematics(fit.hexapod, commanded[j:j + 1], initial=measured[j], stroke_mm=None)
-        except KinematicsError:
-            d[k], stat[k] = np.nan, np.inf
-            continue
-        d[k] = measured[j] - pred[0]
-        cov_theta = _paper_estimator_covariance(fit.hexapod, measured[keep], 1.0 / w**2)
-        Jj = forward_parameter_jacobian(fit.hexapod, pred)[0]
-        S = Sigma_noise + Jj @ cov_theta @ Jj.T
-        stat[k] = float(d[k] @ np.linalg.solve(S, d[k]))
-    return d, stat
+def _deleted(nominal, commanded, measured, keep, j, w) -> tuple[np.ndarray, float]:
+    """Residual of row ``j`` predicted by the model identified from rows ``keep``, and its
+    chi-square statistic."""
+    fit = identify_paper(nominal, commanded[keep], measured[keep])
+    try:
+        pred = forward_kinematics(fit.hexapod, commanded[j:j + 1], initial=measured[j], stroke_mm=None)
+    except KinematicsError:
+        return np.full(6, np.nan), np.inf
+    d = measured[j] - pred[0]
+    cov_theta = _paper_estimator_covariance(fit.hexapod, measured[keep], 1.0 / w**2)
+    Jj = forward_parameter_jacobian(fit.hexapod, pred)[0]
+    S = np.diag(1.0 / w**2) + Jj @ cov_theta @ Jj.T
+    return d, float(d @ np.linalg.solve(S, d))

@@ -19,9 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.effects import EFFECTS, Discovery, EffectData, discover_effect, fit_effect
+from calib.effects import EFFECTS, Discovery, EffectData, discover_effect, fit_effect, joint_noise_std
 from calib.hexapod import Hexapod
-from calib.kinematics import _pose_jacobian
 
 from .recording import Recording, atomic_write, read_recording
 
@@ -45,9 +44,7 @@ def _heldout(data: EffectData, effect: str, heldout_rows: np.ndarray, train_rows
     train, test = data.subset(train_rows), data.subset(heldout_rows)
     before = fit_effect(train, "none").predict(test)[0]
     after = fit_effect(train, effect, pitch_mm=pitch).predict(test)[0] if effect != "none" else before
-    Jp = _pose_jacobian(data.nominal, test.measured)
-    var = 1.0 / data.noise.weights() ** 2
-    floor = float(np.sqrt(np.mean(np.einsum("nik,k->ni", Jp ** 2, var))))
+    floor = float(np.sqrt(np.mean(joint_noise_std(data.nominal, test) ** 2)))
     rms_b = float(np.sqrt(np.mean(before ** 2)))
     rms_a = float(np.sqrt(np.mean(after ** 2)))
     return {"heldout_rms_before_mm": rms_b, "heldout_rms_after_mm": rms_a, "noise_floor_mm": floor,

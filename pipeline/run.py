@@ -22,6 +22,7 @@ from calib import paper
 from calib.hexapod import Hexapod, paper_hexapod
 from calib.identification import IdentificationResult, identify_forward, identify_paper
 from calib.kinematics import KinematicsError, forward_kinematics, inverse_kinematics
+from calib.metrics import integrated_error
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
 from calib.workspace import random_poses
@@ -115,7 +116,7 @@ def _identify(method: str, nominal: Hexapod, commanded, measured, noise: SensorN
     return identify_forward(nominal, commanded, measured, noise)
 
 
-def _errors_stats(err: np.ndarray) -> tuple[dict, dict]:
+def _errors_stats(err: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pos = np.linalg.norm(err[:, :3], axis=1)
     ang = np.linalg.norm(err[:, 3:], axis=1)
     return pos, ang
@@ -327,7 +328,7 @@ def run(argv: list[str] | None = None) -> RunOutput:
         "success": result.success,
         "message": result.message,
         "max_dqint_history": list(result.history) if args.method == "paper" else
-            [float(np.max(np.linalg.norm(result.pose_residuals[:, :3], axis=1) + np.linalg.norm(result.pose_residuals[:, 3:], axis=1)))],
+            [float(integrated_error(result.pose_residuals)[2].max())],
         "condition_numbers": result.condition_numbers.tolist(),
         "flagged_poses": flagged,
         "heldout_basis": heldout_basis,
