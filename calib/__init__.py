@@ -52,8 +52,8 @@ from .observability import (
     identification_jacobian,
     pose_uncertainty,
 )
-from . import delta
-from .delta import DeltaParams, canonical_params
+from .robots import delta
+from .robots.delta import DeltaParams, canonical_params
 from .delta_identification import (
     DeltaIdentificationResult,
     GainReport,

@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from calib.delta import (
+from calib.robots.delta import (
     PARAMETER_NAMES,
     PARAMETER_UNITS,
     DeltaParams,

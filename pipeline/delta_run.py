@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.delta import (
+from calib.robots.delta import (
     NOMINAL_GEOMETRY,
     PARAMETER_NAMES,
     PARAMETER_TABLE,

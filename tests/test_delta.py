@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from calib.delta import (
+from calib.robots.delta import (
     CHAIN_PARAMETER_NAMES,
     NOMINAL_GEOMETRY,
     PARAMETER_NAMES,

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from calib.delta import (
+from calib.robots.delta import (
     PARAMETER_NAMES,
     PARAMETER_UNITS,
     DeltaParams,

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from rerun.chunk import RrdReader
 
-from calib.delta import PARAMETER_NAMES
+from calib.robots.delta import PARAMETER_NAMES
 from calib.delta_identification import DEFAULT_FREE
 from pipeline.delta_run import CSV_COLUMNS, main
 

@@ -1,0 +1,440 @@
+"""The calibration engine: identification of any registered robot's parameters from measured poses.
+
+Two methods, written once over :class:`calib.robot.Robot`:
+
+* :func:`identify_forward`: all free parameters at once, minimising the pose residuals
+  ``QM_j - FK(theta, q_j)`` through the forward kinematics, whitened by the declared noise (pose
+  sensor noise plus joint noise propagated through the manipulator Jacobian), with the analytic
+  Jacobian of the implicit function theorem. Levenberg-Marquardt (scipy's MINPACK) or
+  Gauss-Newton. The Delta paper's FKM; applied to the hexapod, the "forward method".
+* :func:`identify_chainwise`: each chain on its own, from the closure residuals
+  ``F_i(theta_i, q_ij, QM_j)`` at the measured poses (joint space). With Gauss-Newton steps and
+  the forward kinematics of the corrected model after each, stopped by the integrated pose error
+  ``max_j dQint_j <= epsilon`` (hexapod paper, Eqs. 15-17), it is the hexapod paper's per-leg
+  least squares with iterative compensation; with Levenberg-Marquardt per chain and residuals
+  weighted by the declared noise it is the Delta paper's IKM.
+
+Both validate their arguments (naming them) and return an :class:`IdentificationResult`, also
+when they do not converge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ._validate import as_array
+from .noise import SensorNoise
+from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
+
+__all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
+           "SOLVERS", "METHODS", "identify"]
+
+#: Solvers of both methods.
+SOLVERS = ("lm", "gn")
+#: The two identification methods by name.
+METHODS = ("forward", "chainwise")
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationResult:
+    """Outcome of an identification; returned also when it did not converge.
+
+    Attributes:
+        method: ``"forward"`` or ``"chainwise"``.
+        robot: the robot identified.
+        theta: (P,) identified parameter vector (fixed parameters keep their start value).
+        start: (P,) the start (usually the nominal vector).
+        free_names: names of the identified parameters.
+        residuals: chain-wise: (N, C) closure residuals at the measured poses, mm; forward:
+            (N, D) pose residuals ``measured - FK``.
+        pose_residuals: (N, D) measured poses minus the poses the identified model predicts at
+            the commanded joints (both methods; the paper's ``dQc``); NaN if the forward
+            kinematics failed.
+        covariance: (P, P) parameter covariance, zero rows/columns for fixed parameters.
+            Weighted fits: implied by the declared noise, ``(J^T W J)^-1``. The unweighted
+            chain-wise fit (the hexapod paper's): estimated from each chain's residuals,
+            ``s^2 (J^T J)^-1``. NaN where no degree of freedom is left.
+        chi2: sum of squared whitened residuals (declared noise) at the solution.
+        dof: degrees of freedom of ``chi2`` (residuals minus free parameters).
+        iterations: outer iterations (Gauss-Newton) or Jacobian evaluations (LM, summed).
+        history: max dQint after each iteration (chain-wise GN), or cost per evaluation.
+        success: whether a stopping criterion was met.
+        message: which criterion stopped it, in words.
+        condition_numbers: column-scaled condition numbers of the identification Jacobian:
+            (C,) one per chain (chain-wise) or (1,) (forward).
+    """
+
+    method: str
+    robot: Robot
+    theta: np.ndarray
+    start: np.ndarray
+    free_names: tuple
+    residuals: np.ndarray
+    pose_residuals: np.ndarray
+    covariance: np.ndarray
+    chi2: float
+    dof: int
+    iterations: int
+    history: tuple
+    success: bool
+    message: str
+    condition_numbers: np.ndarray
+
+    @property
+    def errors(self) -> np.ndarray:
+        """(P,) identified parameters minus the robot's nominal ones."""
+        return self.theta - self.robot.table.nominal
+
+    @property
+    def std(self) -> np.ndarray:
+        """(P,) standard uncertainty of each parameter (0 for fixed ones)."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def reduced_chi2(self) -> float:
+        """``chi2 / dof``: about 1 when the model explains the data to the declared noise."""
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    def errors_by_name(self) -> dict[str, float]:
+        """``{name: identified - nominal}`` of every parameter."""
+        return self.robot.table.to_dict(self.errors)
+
+
+def integrated_error(robot: Robot, dQ: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The hexapod paper's position, orientation and integrated errors for any robot.
+
+    Args:
+        robot: the robot (its pose units say which coordinates are positions and angles).
+        dQ: (N, D) pose errors.
+
+    Returns:
+        ``(dQ1, dQ2, dQint)``, each (N,): norm of the position errors (mm, Eq. 15), norm of the
+        angle errors (rad, Eq. 16, zero for a translating platform) and their plain sum (Eq. 17,
+        mixing units as the paper does; used only for its stopping rule).
+    """
+    angle = robot.angle_pose_mask
+    dQ1 = np.linalg.norm(dQ[:, ~angle], axis=1)
+    dQ2 = np.linalg.norm(dQ[:, angle], axis=1)
+    return dQ1, dQ2, dQ1 + dQ2
+
+
+# --------------------------------------------------------------------------- front end
+
+
+def _check(robot, joints, measured, noise, free, start, solver):
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
+    if not isinstance(noise, SensorNoise):
+        raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    measured = as_array(measured, "measured", (-1, robot.pose_dim))
+    if joints.shape[0] != measured.shape[0]:
+        raise ValueError(f"joints and measured must have the same number of rows, got "
+                         f"{joints.shape[0]} and {measured.shape[0]}")
+    free = robot.free_default if free is None else tuple(free)
+    if not free or len(set(free)) != len(free):
+        raise ValueError(f"free must be a non-empty list of distinct parameter names, got {free}")
+    idx = robot.table.indices(free)  # KeyError names an unknown one
+    start = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    return joints, measured, free, np.sort(idx), start
+
+
+def _whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
+    """(N, D, D) whitening ``L^-1`` of each pose's measurement covariance
+    ``S_pose + Jq S_joint Jq^T`` (pose sensor plus joint noise through the manipulator Jacobian)."""
+    n, d = poses.shape
+    std = noise.pose_std(robot.pose_units)
+    cov = np.broadcast_to(np.diag(std ** 2), (n, d, d)).copy()
+    if noise.joint_std > 0:
+        jq = pose_jacobian_of_joints(robot, theta, joints, poses)
+        cov += noise.joint_std ** 2 * jq @ np.swapaxes(jq, 1, 2)
+        return np.linalg.inv(np.linalg.cholesky(cov))
+    return np.broadcast_to(np.diag(1.0 / std), (n, d, d)).copy()
+
+
+def _closure_std(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
+    """(N, C) standard deviation of each closure residual from the declared noise."""
+    jac = robot.closure_jacobians(theta, joints, poses)
+    std = noise.pose_std(robot.pose_units)
+    var = np.einsum("ncd,d->nc", jac.pose ** 2, std ** 2)
+    var += noise.joint_std ** 2 * np.einsum("ncq->nc", jac.joints ** 2)
+    return np.sqrt(var)
+
+
+def _column_scaled_cond(A: np.ndarray) -> float:
+    norms = np.linalg.norm(A, axis=0)
+    if A.size == 0 or np.any(norms == 0):
+        return float("inf")
+    return float(np.linalg.cond(A / norms))
+
+
+def _gauss_newton(fun, jac, x0, max_iter, xtol):
+    """Plain Gauss-Newton with a relative step test; returns (x, r, J, iterations, success, message)."""
+    x = x0.copy()
+    for it in range(1, max_iter + 1):
+        r, J = fun(x), jac(x)
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        x = x + step
+        if not np.all(np.isfinite(x)):
+            return x - step, r, J, it, False, "Gauss-Newton diverged (non-finite step)"
+        if np.linalg.norm(step) <= xtol * (xtol + np.linalg.norm(x)):
+            return x, fun(x), jac(x), it, True, f"Gauss-Newton step below xtol = {xtol:g}"
+    return x, fun(x), jac(x), max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
+
+
+def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
+    """Run a solver; returns (x, r, J, iterations, success, message); never raises on a
+    kinematics failure (returns the start then)."""
+    def logged(x):
+        f = fun(x)
+        history.append(0.5 * float(f @ f))
+        return f
+    try:
+        if solver == "gn":
+            return _gauss_newton(logged, jac, x0, max_iter, xtol)
+        sol = least_squares(logged, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
+                            max_nfev=max_iter * (x0.size + 1), x_scale="jac")
+        return sol.x, sol.fun, sol.jac, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
+    except (KinematicsError, np.linalg.LinAlgError) as exc:
+        return x0, fun(x0) if solver == "gn" else np.full(0, np.nan), None, 0, False, \
+            f"the fit left the workspace: {exc}"
+
+
+def _predicted(robot, theta, joints, measured) -> np.ndarray:
+    try:
+        return robot.forward_kinematics(theta, joints, initial=measured)
+    except KinematicsError:
+        return np.full(measured.shape, np.nan)
+
+
+# --------------------------------------------------------------------------- forward
+
+
+def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free=None, start=None,
+                     solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
+                     ftol: float = 1e-15) -> IdentificationResult:
+    """Forward identification: all free parameters at once through the forward kinematics.
+
+    Minimises ``sum_j |W_j (QM_j - FK(theta, q_j))|^2``, ``W_j`` the whitening of pose j's
+    declared measurement covariance (pose noise, plus joint noise through the manipulator
+    Jacobian), evaluated once at the start. The Jacobian is analytic:
+    ``d FK / d theta = -(dF/dpose)^-1 dF/dtheta``.
+
+    Args:
+        robot: the robot; its nominal vector is the default start.
+        joints: (N, C) commanded (or read) joint values.
+        measured: (N, D) measured poses.
+        noise: declared noise (weights; a declared zero is floored, see :class:`SensorNoise`).
+        free: names to identify; default ``robot.free_default``.
+        start: (P,) start vector; default the nominal one. Fixed parameters keep its values.
+        solver: ``"lm"`` (Levenberg-Marquardt, MINPACK) or ``"gn"`` (Gauss-Newton).
+        max_iter, xtol, ftol: stopping controls.
+    """
+    joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
+    n, d = measured.shape
+    if n * d < idx.size:
+        raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
+                         f"{idx.size} parameters, got {n}")
+    try:
+        start_poses = robot.forward_kinematics(theta0, joints, initial=measured)
+    except KinematicsError as exc:
+        raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
+    winv = _whitening(robot, theta0, joints, start_poses, noise)
+    state = {"poses": start_poses}
+
+    def full(x):
+        th = theta0.copy()
+        th[idx] = x
+        return th
+
+    def reached(th):
+        # Warm start from the last solution: each evaluation is a small perturbation.
+        state["poses"] = robot.forward_kinematics(th, joints, initial=state["poses"])
+        return state["poses"]
+
+    def fun(x):
+        return np.einsum("nij,nj->ni", winv, measured - reached(full(x))).ravel()
+
+    def jac(x):
+        th = full(x)
+        jp = pose_jacobian_of_parameters(robot, th, joints, reached(th))[:, :, idx]
+        return -np.einsum("nij,njk->nik", winv, jp).reshape(n * d, idx.size)
+
+    history: list[float] = []
+    x, _, _, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, history)
+    theta = full(x)
+    predicted = _predicted(robot, theta, joints, measured)
+    res = measured - predicted
+    cov = np.zeros((robot.n_parameters,) * 2)
+    if np.all(np.isfinite(res)):
+        state["poses"] = predicted
+        J = jac(x)
+        r = np.einsum("nij,nj->ni", winv, res).ravel()
+        chi2, cond = float(r @ r), np.array([_column_scaled_cond(J)])
+        cov[np.ix_(idx, idx)] = np.linalg.pinv(J.T @ J, hermitian=True)
+    else:
+        chi2, cond = float("nan"), np.array([np.nan])
+        cov[np.ix_(idx, idx)] = np.nan
+    if ok and n * d > idx.size and np.isfinite(chi2):
+        msg = f"{msg}; {noise_verdict(chi2, n * d - idx.size)}"
+    return IdentificationResult(
+        method="forward", robot=robot, theta=theta, start=theta0, free_names=free, residuals=res,
+        pose_residuals=res, covariance=cov, chi2=chi2, dof=n * d - idx.size, iterations=iters,
+        history=tuple(history), success=ok, message=msg, condition_numbers=cond)
+
+
+# --------------------------------------------------------------------------- chain-wise
+
+
+def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None = None, *, free=None,
+                       start=None, solver: str = "gn", weighted: bool = False, epsilon: float = 1e-6,
+                       step_tol: float = 1e-10, max_iter: int = 20, xtol: float = 1e-12,
+                       ftol: float = 1e-14) -> IdentificationResult:
+    """Chain-wise identification from the closure residuals at the measured poses.
+
+    ``solver="gn"`` (the hexapod paper's method, Sections 2, 3 and 5): each iteration solves, for
+    every chain i, ``J_i d(theta_i) = -r_i`` by linear least squares (``r_i`` (N,) the closure
+    residual at the measured poses, ``J_i`` its derivative with respect to chain i's free
+    parameters; the paper writes the right-hand side to first order as ``(df/dQ) dQ``, Eq. 9,
+    we evaluate it exactly: the same to first order, fewer iterations), corrects the parameters,
+    computes the corrected poses ``QC`` by forward kinematics and stops when
+    ``max_j dQint_j <= epsilon``. With noisy data ``dQint`` never falls below the noise and the
+    iteration stops when the largest update falls below ``step_tol``; ``message`` says which rule
+    stopped it and whether the residual is at the declared noise.
+
+    ``solver="lm"`` (the Delta paper's IKM): each chain fitted to convergence by
+    Levenberg-Marquardt.
+
+    Args:
+        robot, joints, measured, free, start: as :func:`identify_forward`.
+        noise: declared noise; weights the residuals when ``weighted`` and judges the final
+            residual (chi-square) always. Default: none declared (no judgement).
+        solver: ``"gn"`` or ``"lm"``.
+        weighted: whiten each closure residual by its declared standard deviation (pose and joint
+            noise propagated); the paper's hexapod method is unweighted.
+        epsilon: the paper's tolerance on max dQint (mm + rad, Eq. 17).
+        step_tol: tolerance on the largest parameter update (GN).
+        max_iter: outer iterations (GN) or iterations per chain (LM).
+    """
+    noise_given = noise is not None
+    noise = SensorNoise() if noise is None else noise
+    joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
+    n = measured.shape[0]
+    chains = [idx[robot.table.chains[idx] == c] for c in range(robot.n_chains)]
+    most = max(len(c) for c in chains)
+    if n < most:
+        raise ValueError(f"measured must have at least {most} rows ({most} unknowns in one "
+                         f"{robot.chain_word}), got {n}")
+    sigma = _closure_std(robot, theta0, joints, measured, noise)
+    w = 1.0 / np.maximum(sigma, 1e-12) if weighted else np.ones_like(sigma)
+    theta = theta0.copy()
+    history: list[float] = []
+    cond = np.full(robot.n_chains, np.nan)
+    iterations, success = 0, False
+    message = f"no stopping rule met in {max_iter} iterations"
+    corrected = measured.copy()
+    if solver == "gn":
+        for iterations in range(1, max_iter + 1):
+            r = robot.closure(theta, joints, measured)
+            J = robot.closure_jacobians(theta, joints, measured).parameters
+            step = np.zeros_like(theta)
+            for c, ix in enumerate(chains):
+                if ix.size:
+                    A = J[:, c, ix] * w[:, c, None]
+                    step[ix] = np.linalg.lstsq(A, -r[:, c] * w[:, c], rcond=None)[0]
+                    cond[c] = _column_scaled_cond(A)
+            theta = theta + step
+            try:
+                corrected = robot.forward_kinematics(theta, joints, initial=measured)
+            except KinematicsError as exc:
+                message = f"forward kinematics of the corrected model failed: {exc}"
+                break
+            history.append(float(integrated_error(robot, measured - corrected)[2].max()))
+            if history[-1] <= epsilon:
+                success = True
+                message = f"paper's criterion met: max dQint = {history[-1]:.3g} <= epsilon = {epsilon:g}"
+                break
+            if np.max(np.abs(step)) <= step_tol:
+                success = True
+                message = (f"parameter update {np.max(np.abs(step)):.3g} <= step_tol = {step_tol:g}; the "
+                           f"paper's criterion is not reachable: max dQint stays at {history[-1]:.3g} "
+                           f"(> epsilon = {epsilon:g})")
+                break
+    else:
+        messages, oks = [], []
+        for c, ix in enumerate(chains):
+            if not ix.size:
+                continue
+
+            def full(x, ix=ix):
+                th = theta.copy()
+                th[ix] = x
+                return th
+
+            def fun(x, c=c, full=full):
+                return robot.closure(full(x), joints, measured)[:, c] * w[:, c]
+
+            def jac(x, c=c, ix=ix, full=full):
+                return robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix] * w[:, c, None]
+
+            x, _, J, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
+            theta[ix] = x
+            cond[c] = _column_scaled_cond(jac(x))
+            iterations += it
+            oks.append(ok)
+            messages.append(f"{robot.chain_word} {c + 1}: {msg}")
+        success, message = all(oks), "; ".join(messages)
+        corrected = _predicted(robot, theta, joints, measured)
+    r = robot.closure(theta, joints, measured)
+    J = robot.closure_jacobians(theta, joints, measured).parameters
+    cov = np.zeros((robot.n_parameters,) * 2)
+    for c, ix in enumerate(chains):
+        if not ix.size:
+            continue
+        A = J[:, c, ix] * w[:, c, None]
+        dof = n - ix.size
+        if weighted:
+            cov[np.ix_(ix, ix)] = np.linalg.pinv(A.T @ A, hermitian=True)
+        elif dof > 0:
+            rc = r[:, c]
+            cov[np.ix_(ix, ix)] = float(rc @ rc) / dof * np.linalg.pinv(A.T @ A, hermitian=True)
+        else:
+            cov[np.ix_(ix, ix)] = np.nan
+    white = r / np.maximum(_closure_std(robot, theta, joints, measured, noise), 1e-12)
+    chi2 = float(np.sum(white ** 2)) if noise_given else float("nan")
+    dof_total = n * robot.n_chains - idx.size
+    if noise_given and success and dof_total > 0:
+        message += "; " + noise_verdict(chi2, dof_total)
+    return IdentificationResult(
+        method="chainwise", robot=robot, theta=theta, start=theta0, free_names=free, residuals=r,
+        pose_residuals=measured - corrected, covariance=cov, chi2=chi2, dof=dof_total,
+        iterations=iterations, history=tuple(history), success=success, message=message,
+        condition_numbers=cond)
+
+
+def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
+    """Whether a chi-square of whitened residuals is at the declared noise, in words."""
+    from scipy.stats import chi2 as chi2_dist
+
+    limit = float(chi2_dist.ppf(1.0 - alpha, dof))
+    ratio = np.sqrt(chi2 / dof)
+    if chi2 <= limit:
+        return (f"the residual is at the declared noise (chi-square {chi2:.4g} on {dof} degrees of "
+                f"freedom, {ratio:.2f} times the declared noise)")
+    return (f"the model does not fit to the declared noise: the residual is {ratio:.3g} times the "
+            f"declared noise (chi-square {chi2:.4g} on {dof} degrees of freedom, limit {limit:.4g})")
+
+
+def identify(robot: Robot, joints, measured, noise: SensorNoise, *, method: str = "forward",
+             **options) -> IdentificationResult:
+    """Either method by name: ``"forward"`` or ``"chainwise"`` (options passed on)."""
+    if method == "forward":
+        return identify_forward(robot, joints, measured, noise, **options)
+    if method == "chainwise":
+        return identify_chainwise(robot, joints, measured, noise, **options)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")

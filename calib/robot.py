@@ -1,0 +1,356 @@
+"""The robot description interface: what the calibration engine needs to know of a parallel robot.
+
+A robot is described by a :class:`Robot` object (the *model*: its nominal geometry, its named
+parameter table, its kinematics) and a flat parameter vector ``theta`` (the *data*: the values
+of every geometric parameter of one particular machine, nominal or identified), in the spirit of
+Pinocchio's ``Model`` / ``Data`` split. The engine (:mod:`calib.identification`,
+:mod:`calib.observability`, :mod:`calib.design`, :mod:`calib.effects`) only ever calls the
+methods below; it never asks which robot it has.
+
+Every robot of this package is a closed-chain mechanism with one actuated joint per chain and as
+many chains as its platform has degrees of freedom. Chain ``i`` closes through one scalar
+equation ``closure_i(theta, joints, pose) = 0`` (mm) that involves only chain ``i``'s joint and
+parameters, e.g. a leg length ``|R P_i + t - B_i| - dl_i - l_i`` for the hexapod. The joint-space
+("chain-wise") identification works on these residuals, the forward one on poses through the
+forward kinematics; both use the closure's analytic Jacobians (implicit function theorem).
+
+Units: mm and rad everywhere. Poses are ``(N, pose_dim)`` float64 in the robot's pose coordinates
+(:attr:`Robot.pose_names`), joints ``(N, n_chains)`` in :attr:`Robot.joint_unit`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar, Iterator, Sequence
+
+import numpy as np
+
+from ._validate import as_array, frozen_array
+
+__all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
+           "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
+           "check_joint_limits", "SINGULAR_CONDITION"]
+
+#: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
+SINGULAR_CONDITION = 1e5
+
+
+class KinematicsError(ValueError):
+    """A pose or set of joint values the machine cannot reach, or a singular configuration.
+
+    Attributes:
+        index: index of the first offending row.
+    """
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message)
+        self.index = index
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One named geometric parameter.
+
+    Attributes:
+        name: e.g. ``"B3.y"`` (a point's coordinate) or ``"dl4"`` (a scalar of chain 4).
+        unit: ``"mm"`` or ``"rad"``.
+        nominal: nominal value, in ``unit``.
+        chain: 0-based chain the parameter belongs to.
+    """
+
+    name: str
+    unit: str
+    nominal: float
+    chain: int
+
+
+class ParameterTable:
+    """The ordered table of a robot's parameters: names, units, nominal values, chains.
+
+    The flat parameter vector ``theta`` of a robot is indexed in this order.
+    """
+
+    def __init__(self, parameters: Sequence[Parameter]):
+        self.parameters = tuple(parameters)
+        self.names = tuple(p.name for p in self.parameters)
+        if len(set(self.names)) != len(self.names):
+            raise ValueError("parameter names must be unique")
+        self.units = tuple(p.unit for p in self.parameters)
+        self.nominal = frozen_array([p.nominal for p in self.parameters])
+        self.chains = np.array([p.chain for p in self.parameters], dtype=int)
+        self.chains.setflags(write=False)
+        self._index = {n: k for k, n in enumerate(self.names)}
+
+    def __len__(self) -> int:
+        return len(self.parameters)
+
+    def __iter__(self) -> Iterator[Parameter]:
+        return iter(self.parameters)
+
+    def index(self, name: str) -> int:
+        """Flat index of a parameter name.
+
+        Raises:
+            KeyError: the name is unknown (the message shows a few valid names).
+        """
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(f"unknown parameter {name!r}: expected a name such as "
+                           f"{', '.join(self.names[:4])}, ... (see the robot's parameter table)") from None
+
+    def indices(self, names: Sequence[str]) -> np.ndarray:
+        """Flat indices of several names, in the order given."""
+        return np.array([self.index(n) for n in names], dtype=int)
+
+    def chain_indices(self, chain: int) -> np.ndarray:
+        """Flat indices of chain ``chain``'s parameters (0-based chain)."""
+        return np.flatnonzero(self.chains == chain)
+
+    def to_dict(self, theta: np.ndarray) -> dict[str, float]:
+        """``{name: value}`` of a flat vector."""
+        return {n: float(v) for n, v in zip(self.names, np.asarray(theta, dtype=float))}
+
+    def vector(self, values: dict, base: np.ndarray | None = None) -> np.ndarray:
+        """A flat vector from ``{name: value}``; names not given keep ``base`` (default nominal)."""
+        v = np.array(self.nominal if base is None else base, dtype=float)
+        for name, value in values.items():
+            v[self.index(name)] = float(value)
+        return v
+
+    def angle_mask(self) -> np.ndarray:
+        """(P,) bool, True for parameters in rad."""
+        return np.array([u == "rad" for u in self.units])
+
+
+@dataclass(frozen=True, eq=False)
+class ClosureJacobians:
+    """Derivatives of the closure residuals ``F`` (N, C) at N configurations.
+
+    Attributes:
+        pose: (N, C, D) ``dF_i / d pose_k``; mm/mm for positions, mm/rad for angles.
+        joints: (N, C, C) ``dF_i / d q_k`` (diagonal for these mechanisms), mm per joint unit.
+        parameters: (N, C, P) ``dF_i / d theta_k``, mm per parameter unit.
+    """
+
+    pose: np.ndarray
+    joints: np.ndarray
+    parameters: np.ndarray
+
+
+class Robot(ABC):
+    """A parallel robot: nominal geometry, parameter table and kinematics.
+
+    Subclasses set the class attributes and implement the abstract methods; the methods are
+    back ends that trust their input (the engine's front ends validate). A robot instance is
+    immutable.
+
+    Class attributes:
+        name: registry key, e.g. ``"hexapod"``.
+        pose_names: names of the pose coordinates, e.g. ``("x", "y", "z")``.
+        pose_units: unit of each pose coordinate (``"mm"`` or ``"rad"``).
+        joint_unit: unit of the actuated joints (``"mm"`` for a leg length, ``"rad"`` for a motor).
+        joint_symbol: column prefix of the joints in recordings (``"l"``, ``"q"``).
+        chain_word: what a chain is called in messages (``"leg"``, ``"chain"``).
+    """
+
+    name: ClassVar[str]
+    pose_names: ClassVar[tuple[str, ...]]
+    pose_units: ClassVar[tuple[str, ...]]
+    joint_unit: ClassVar[str]
+    joint_symbol: ClassVar[str]
+    chain_word: ClassVar[str] = "chain"
+
+    #: The parameter table; ``table.nominal`` is the nominal geometry as a flat vector.
+    table: ParameterTable
+    #: Parameters held at their start value by default because pose data cannot identify them
+    #: (a gauge choice), e.g. the Delta's ``Lay1..3``.
+    gauge_fixed: tuple[str, ...] = ()
+
+    # -- description ----------------------------------------------------------------------
+    @property
+    def n_chains(self) -> int:
+        """Number of chains (= actuated joints = pose coordinates)."""
+        return len(self.pose_names)
+
+    @property
+    def pose_dim(self) -> int:
+        return len(self.pose_names)
+
+    @property
+    def n_parameters(self) -> int:
+        return len(self.table)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """``("l1", ..., "l6")`` or ``("q1", "q2", "q3")``."""
+        return tuple(f"{self.joint_symbol}{i + 1}" for i in range(self.n_chains))
+
+    @property
+    def free_default(self) -> tuple[str, ...]:
+        """Names identified by default: every parameter not in :attr:`gauge_fixed`."""
+        return tuple(n for n in self.table.names if n not in self.gauge_fixed)
+
+    @property
+    def angle_pose_mask(self) -> np.ndarray:
+        """(D,) bool, True for pose coordinates in rad."""
+        return np.array([u == "rad" for u in self.pose_units])
+
+    @property
+    @abstractmethod
+    def home_pose(self) -> np.ndarray:
+        """(D,) the home pose: the start of the forward kinematics' Newton iteration."""
+
+    @property
+    @abstractmethod
+    def length_scale_mm(self) -> float:
+        """A characteristic size of the machine, mm (turns angles into lengths for scaling)."""
+
+    @abstractmethod
+    def workspace_bounds(self) -> np.ndarray:
+        """(D, 2) low/high of each pose coordinate of the default calibration workspace."""
+
+    @abstractmethod
+    def joint_limits(self) -> np.ndarray:
+        """(C, 2) low/high of each commanded joint value the machine accepts."""
+
+    @abstractmethod
+    def description(self) -> dict:
+        """JSON-ready nominal geometry (mm, rad), the inverse of :meth:`from_description`."""
+
+    @classmethod
+    @abstractmethod
+    def from_description(cls, description: dict) -> "Robot":
+        """The robot of a :meth:`description` (raises ``KeyError``/``ValueError`` naming the key)."""
+
+    # -- kinematics -----------------------------------------------------------------------
+    @abstractmethod
+    def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, C) mm, closure residuals; zero when ``joints`` bring a machine ``theta`` to ``poses``."""
+
+    @abstractmethod
+    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+        """Analytic derivatives of :meth:`closure` (see :class:`ClosureJacobians`)."""
+
+    @abstractmethod
+    def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, C) joint values that bring the machine ``theta`` to ``poses``.
+
+        Raises:
+            KinematicsError: a pose the machine cannot reach (names the row and the chain).
+        """
+
+    def forward_kinematics(self, theta: np.ndarray, joints: np.ndarray, *,
+                           initial: np.ndarray | None = None) -> np.ndarray:
+        """(N, D) poses reached when ``joints`` are commanded (default: Newton on the closure).
+
+        Args:
+            theta: (P,) parameter vector.
+            joints: (N, C) joint values.
+            initial: (N, D) or (D,) start of the iteration; default :attr:`home_pose`.
+
+        Raises:
+            KinematicsError: singular configuration or no convergence (names the row).
+        """
+        return newton_forward_kinematics(self, theta, joints, initial=initial)
+
+    def pose_scale(self) -> np.ndarray:
+        """(D,) multiplies pose coordinates to make them comparable: 1 for mm, the machine's
+        size for rad."""
+        return np.where(self.angle_pose_mask, self.length_scale_mm, 1.0)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}: {self.n_parameters} parameters, {self.n_chains} chains>"
+
+
+def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarray, *,
+                              initial: np.ndarray | None = None, tol: float = 1e-11,
+                              max_iter: int = 50) -> np.ndarray:
+    """Forward kinematics by Newton's method on the closure, vectorised over rows.
+
+    Args:
+        robot: the robot.
+        theta: (P,) parameter vector.
+        joints: (N, C) joint values.
+        initial: (N, D) or (D,) start; default the robot's home pose. Newton's method finds the
+            assembly mode nearest the start.
+        tol: converged when every closure residual is below ``tol`` mm.
+        max_iter: iterations before giving up.
+
+    Returns:
+        (N, D) poses.
+
+    Raises:
+        KinematicsError: singular configuration met, divergence or no convergence; names the row.
+    """
+    joints = np.asarray(joints, dtype=float)
+    n, d = joints.shape[0], robot.pose_dim
+    if initial is None:
+        poses = np.tile(robot.home_pose, (n, 1))
+    else:
+        init = np.asarray(initial, dtype=float)
+        poses = np.tile(as_array(init, "initial", (d,)), (n, 1)) if init.ndim == 1 else \
+            as_array(init, "initial", (n, d)).copy()
+    # Singularity is judged with the angle columns scaled to lengths, so that the threshold
+    # does not depend on the units of the pose coordinates.
+    scale = 1.0 / robot.pose_scale()
+    active = np.arange(n)
+    for _ in range(max_iter):
+        p, q = poses[active], joints[active]
+        r = robot.closure(theta, q, p)
+        J = robot.closure_jacobians(theta, q, p).pose
+        done = np.max(np.abs(r), axis=1) <= tol
+        if np.any(done):
+            cond = np.linalg.cond(J[done] * scale)
+            singular = ~(cond < SINGULAR_CONDITION)
+            if np.any(singular):
+                k = int(active[done][np.argmax(singular)])
+                raise KinematicsError(
+                    f"forward kinematics met a singular configuration at row {k} (scaled condition "
+                    f"number of the pose Jacobian {cond[np.argmax(singular)]:.3g})", k)
+        active, p, r, J = active[~done], p[~done], r[~done], J[~done]
+        if active.size == 0:
+            return poses
+        try:
+            poses[active] = p - np.linalg.solve(J, r[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            bad = np.linalg.matrix_rank(J * scale) < d
+            k = int(active[np.argmax(bad)])
+            raise KinematicsError(f"forward kinematics met a singular configuration at row {k}", k) from None
+        finite = np.all(np.isfinite(poses[active]), axis=1)
+        if not np.all(finite):
+            k = int(active[np.argmax(~finite)])
+            raise KinematicsError(f"forward kinematics diverged at row {k}", k)
+    k = int(active[0])
+    raise KinematicsError(
+        f"forward kinematics did not converge for row {k} in {max_iter} iterations "
+        f"(joints {np.array2string(joints[k], precision=4)}): no assembly near the start pose", k)
+
+
+def pose_jacobian_of_joints(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(N, D, C) ``d pose / d joints`` at consistent ``(joints, poses)`` (implicit function theorem)."""
+    jac = robot.closure_jacobians(theta, joints, poses)
+    return -np.linalg.solve(jac.pose, jac.joints)
+
+
+def pose_jacobian_of_parameters(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(N, D, P) ``d pose / d theta`` at fixed joints, at consistent ``(joints, poses)``.
+
+    By the implicit function theorem on ``closure(theta, joints, pose) = 0``:
+    ``d pose / d theta = -(dF / d pose)^-1 dF / d theta``.
+    """
+    jac = robot.closure_jacobians(theta, joints, poses)
+    return -np.linalg.solve(jac.pose, jac.parameters)
+
+
+def check_joint_limits(robot: Robot, joints: np.ndarray, what: str = "row") -> None:
+    """Raise :class:`KinematicsError` naming the first row and chain outside :meth:`Robot.joint_limits`."""
+    limits = robot.joint_limits()
+    bad = np.argwhere((joints < limits[:, 0]) | (joints > limits[:, 1]) | ~np.isfinite(joints))
+    if bad.size:
+        n, c = (int(v) for v in bad[0])
+        raise KinematicsError(
+            f"{what} {n} is unreachable: {robot.chain_word} {c + 1} needs {joints[n, c]:.6f} "
+            f"{robot.joint_unit}, outside its range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] "
+            f"{robot.joint_unit}", n)

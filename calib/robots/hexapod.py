@@ -1,0 +1,146 @@
+"""The hexapod (6-UPS Stewart-Gough platform): six legs of actuated length between base and platform.
+
+Parameters (42, seven per leg, the hexapod paper's Table 3 order): ``B{i}.x B{i}.y B{i}.z`` the
+base joint centre (mm, base frame), ``dl{i}`` the leg-length offset (mm: commanding length ``l``
+makes the leg ``l + dl`` long), ``P{i}.x P{i}.y P{i}.z`` the platform joint centre (mm, platform
+frame). Pose ``[x, y, z, alpha, beta, gamma]``, ``R = Rz(gamma) Ry(beta) Rx(alpha)``. Joints: the
+commanded leg lengths ``l1..l6`` (mm). Closure of leg i (paper Eq. 1):
+``F_i = |R P_i + t - B_i| - dl_i - l_i``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import paper
+from .._validate import as_array
+from ..robot import ClosureJacobians, Parameter, ParameterTable, Robot
+from ..rotation import rotation_matrix, rotation_matrix_derivatives
+
+__all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS"]
+
+#: Names of a leg's seven parameters, before the leg number (``B.x`` -> ``B3.x``).
+LEG_PARAMETERS = ("B.x", "B.y", "B.z", "dl", "P.x", "P.y", "P.z")
+#: Default stroke of each leg about its home length, mm.
+DEFAULT_STROKE_MM = 50.0
+#: The paper's Table 4 workspace about the home pose: x, y within +-10 mm, z from 0 to +10 mm,
+#: angles within +-3 degrees ((6, 2) low/high offsets, mm and rad).
+PAPER_WORKSPACE_HALF_WIDTHS = np.array([
+    [-10.0, 10.0], [-10.0, 10.0], [0.0, 10.0],
+    [-np.deg2rad(3.0), np.deg2rad(3.0)], [-np.deg2rad(3.0), np.deg2rad(3.0)],
+    [-np.deg2rad(3.0), np.deg2rad(3.0)],
+])
+
+
+def _leg_name(template: str, leg: int) -> str:
+    head, _, tail = template.partition(".")
+    return f"{head}{leg + 1}" + (f".{tail}" if tail else "")
+
+
+class Hexapod(Robot):
+    """A hexapod's nominal geometry.
+
+    Args:
+        base_joints: (6, 3) mm, nominal base joint centres, base frame.
+        platform_joints: (6, 3) mm, nominal platform joint centres, platform frame.
+        home_lengths: (6,) mm, leg lengths at ``home_pose``.
+        home_pose: (6,) the pose the home lengths refer to; start of the forward kinematics.
+        stroke_mm: each leg accepts ``home length +- stroke_mm``.
+    """
+
+    name = "hexapod"
+    pose_names = ("x", "y", "z", "alpha", "beta", "gamma")
+    pose_units = ("mm", "mm", "mm", "rad", "rad", "rad")
+    joint_unit = "mm"
+    joint_symbol = "l"
+    chain_word = "leg"
+
+    def __init__(self, base_joints, platform_joints, home_lengths, home_pose=paper.TABLE2_HOME_POSE,
+                 stroke_mm: float = DEFAULT_STROKE_MM):
+        self.base_joints = as_array(base_joints, "base_joints", (6, 3))
+        self.platform_joints = as_array(platform_joints, "platform_joints", (6, 3))
+        self.home_lengths = as_array(home_lengths, "home_lengths", (6,))
+        self._home_pose = as_array(home_pose, "home_pose", (6,))
+        if not (np.isfinite(stroke_mm) and stroke_mm > 0):
+            raise ValueError(f"stroke_mm must be > 0, got {stroke_mm!r}")
+        self.stroke_mm = float(stroke_mm)
+        for a in (self.base_joints, self.platform_joints, self.home_lengths, self._home_pose):
+            a.setflags(write=False)
+        nominal = np.concatenate([self.base_joints, np.zeros((6, 1)), self.platform_joints], axis=1)
+        self.table = ParameterTable([
+            Parameter(_leg_name(t, leg), "mm", float(nominal[leg, k]), leg)
+            for leg in range(6) for k, t in enumerate(LEG_PARAMETERS)])
+
+    # -- description ----------------------------------------------------------------------
+    @property
+    def home_pose(self) -> np.ndarray:
+        return self._home_pose
+
+    @property
+    def length_scale_mm(self) -> float:
+        return float(np.linalg.norm(self.platform_joints, axis=1).mean())
+
+    def workspace_bounds(self) -> np.ndarray:
+        return self._home_pose[:, None] + PAPER_WORKSPACE_HALF_WIDTHS
+
+    def joint_limits(self) -> np.ndarray:
+        return np.stack([self.home_lengths - self.stroke_mm, self.home_lengths + self.stroke_mm], axis=1)
+
+    def description(self) -> dict:
+        return {"base_joints_mm": self.base_joints.tolist(), "platform_joints_mm": self.platform_joints.tolist(),
+                "home_lengths_mm": self.home_lengths.tolist(), "home_pose": self._home_pose.tolist(),
+                "stroke_mm": self.stroke_mm}
+
+    @classmethod
+    def from_description(cls, description: dict) -> "Hexapod":
+        return cls(description["base_joints_mm"], description["platform_joints_mm"],
+                   description["home_lengths_mm"], description.get("home_pose", paper.TABLE2_HOME_POSE),
+                   description.get("stroke_mm", DEFAULT_STROKE_MM))
+
+    # -- parameter layout -----------------------------------------------------------------
+    @staticmethod
+    def legs(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(B, dl, P)``: (6, 3) base joints, (6,) offsets, (6, 3) platform joints of ``theta``."""
+        t = np.asarray(theta, dtype=float).reshape(6, 7)
+        return t[:, 0:3], t[:, 3], t[:, 4:7]
+
+    def leg_vectors(self, theta: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(L, R)``: (N, 6, 3) leg vectors ``R P_i + t - B_i`` (mm, base frame), (N, 3, 3) rotations."""
+        B, _, P = self.legs(theta)
+        R = rotation_matrix(poses[:, 3:6])
+        L = np.einsum("nij,lj->nli", R, P) + poses[:, None, 0:3] - B[None]
+        return L, R
+
+    # -- kinematics -----------------------------------------------------------------------
+    def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        L, _ = self.leg_vectors(theta, poses)
+        return np.linalg.norm(L, axis=-1) - self.legs(theta)[1][None]
+
+    def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        return self.inverse_kinematics(theta, poses) - joints
+
+    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+        _, _, P = self.legs(theta)
+        L, R = self.leg_vectors(theta, poses)
+        u = L / np.linalg.norm(L, axis=-1, keepdims=True)
+        n = poses.shape[0]
+        dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
+        dP = np.einsum("nkij,lj->nlki", dR, P)  # (N, 6 legs, 3 angles, 3)
+        Jpose = np.empty((n, 6, 6))
+        Jpose[:, :, 0:3] = u
+        Jpose[:, :, 3:6] = np.einsum("nli,nlki->nlk", u, dP)
+        Jleg = np.empty((n, 6, 7))
+        Jleg[:, :, 0:3] = -u
+        Jleg[:, :, 3] = -1.0
+        Jleg[:, :, 4:7] = np.einsum("nji,nlj->nli", R, u)  # R^T u
+        Jtheta = np.zeros((n, 6, 6, 7))
+        idx = np.arange(6)
+        Jtheta[:, idx, idx] = Jleg
+        return ClosureJacobians(pose=Jpose, joints=np.broadcast_to(-np.eye(6), (n, 6, 6)).copy(),
+                                parameters=Jtheta.reshape(n, 6, 42))
+
+
+def paper_hexapod() -> Hexapod:
+    """The hexapod of the paper's Table 2 (its Table 3 errors: :data:`calib.paper.TABLE3_ERRORS`)."""
+    return Hexapod(paper.TABLE2_BASE_JOINTS_MM, paper.TABLE2_PLATFORM_JOINTS_MM,
+                   paper.TABLE2_HOME_LENGTHS_MM, paper.TABLE2_HOME_POSE)
