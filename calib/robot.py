@@ -241,6 +241,11 @@ class Robot(ABC):
             KinematicsError: a pose the machine cannot reach (names the row and the chain).
         """
 
+    @abstractmethod
+    def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, C, K, 3) mm, base frame: each chain drawn as a polyline of K points from its base
+        joint to its platform joint (for pictures; e.g. the hexapod's ``B_i, R P_i + t``)."""
+
     def forward_kinematics(self, theta: np.ndarray, joints: np.ndarray, *,
                            initial: np.ndarray | None = None) -> np.ndarray:
         """(N, D) poses reached when ``joints`` are commanded (default: Newton on the closure).

@@ -664,6 +664,16 @@ class Delta(Robot):
         """The structured :class:`DeltaParams` view of a flat parameter vector."""
         return DeltaParams.from_vector(theta)
 
+    def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Physical points: actuated joint, elbow, plate attachment (the reduced model shifted by
+        each chain's plate attachment of radius ``rn_mm``)."""
+        p = self.params(theta)
+        attach = self.rn_mm * np.stack([np.cos(p.theta), np.sin(p.theta), np.zeros(3)], axis=1)
+        elbow = elbow_positions(p, joints) + attach[None]
+        shoulder = np.broadcast_to(p.shoulders() + attach, elbow.shape)
+        plate = poses[:, None, :] + attach[None]
+        return np.stack([shoulder, elbow, plate], axis=2)
+
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         try:
             return inverse_kinematics(self.params(theta), poses)

@@ -111,6 +111,12 @@ class Hexapod(Robot):
         L = np.einsum("nij,lj->nli", R, P) + poses[:, None, 0:3] - B[None]
         return L, R
 
+    def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        B, _, _ = self.legs(theta)
+        L, _ = self.leg_vectors(theta, poses)
+        base = np.broadcast_to(B, L.shape)
+        return np.stack([base, base + L], axis=2)
+
     # -- kinematics -----------------------------------------------------------------------
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         L, _ = self.leg_vectors(theta, poses)

@@ -1,0 +1,137 @@
+"""A compiled MuJoCo machine of one robot parameter set, and the physical options it is built with.
+
+Every robot's builder module (``mjcf/<robot>.py``) exposes
+``build_machine(robot, theta, options) -> Machine``: it composes the machine with
+``mujoco.MjSpec`` from the parameter vector ``theta`` (mm, rad; errors are injected by building
+from perturbed parameters, never by editing a compiled model), converting to SI through
+:mod:`mjcf.units`. The :class:`Machine` it returns carries the one unit boundary the testbed
+needs: joint values to actuator controls, sensors to poses.
+
+Conventions every builder follows:
+
+* one position actuator per chain, in chain order, acting on the chain's actuated joint;
+  ``ctrl = (joint - joint_offset) * joint_scale`` (SI); reading back
+  ``joint = qpos / joint_scale + joint_offset``;
+* a site ``platform`` on the moving platform at the pose's origin, with a ``framepos`` sensor
+  ``platform_pos`` and (6-DOF platforms) a ``framequat`` sensor ``platform_quat``;
+* contacts off; a keyframe ``home`` in which the machine is assembled at its home pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from calib.robot import Robot
+from calib.rotation import euler_from_quaternion
+
+from .units import m_to_mm
+
+__all__ = ["MachineOptions", "Machine", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
+
+#: Name of the platform site whose frame is the pose.
+PLATFORM_SITE = "platform"
+#: Name of the platform position sensor (framepos).
+SENSOR_POS = "platform_pos"
+#: Name of the platform orientation sensor (framequat), 6-DOF platforms only.
+SENSOR_QUAT = "platform_quat"
+#: Name of the keyframe at the home pose.
+HOME_KEY = "home"
+#: Standard gravity, m/s^2 (the one place it is named).
+GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class MachineOptions:
+    """Physical options of a simulated machine (SI: they describe MuJoCo physics).
+
+    Attributes:
+        gravity: gravity on (-9.81 m/s^2 along base z) or off.
+        payload_kg: extra mass carried by the platform, kg, ``payload_height_m`` above it.
+        payload_height_m: height of the payload's centre of mass over the platform frame, m.
+        actuator_stiffness: position-servo stiffness of each actuator (N/m for a prismatic
+            joint, N m/rad for a revolute one); None: the builder's default.
+        actuator_damping: servo damping; None: the builder's choice (near-critical).
+        joint_friction: Coulomb friction of each actuated joint (N or N m), applied by the testbed
+            in its quasi-static limit.
+        transmission_scale: per-chain stroke scale error ``s_i`` (the joint moves ``1 + s_i`` times
+            the command), or None.
+        platform_mass_kg: mass of the moving platform, kg; None: the builder's default.
+        timestep: integration step, s (a builder may lower it for the stability of a stiff servo).
+    """
+
+    gravity: bool = False
+    payload_kg: float = 0.0
+    payload_height_m: float = 0.05
+    actuator_stiffness: float | None = None
+    actuator_damping: float | None = None
+    joint_friction: float = 0.0
+    transmission_scale: tuple | None = None
+    platform_mass_kg: float | None = None
+    timestep: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name in ("payload_kg", "joint_friction", "payload_height_m"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        for name in ("actuator_stiffness", "actuator_damping", "platform_mass_kg"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+        if not self.timestep > 0:
+            raise ValueError(f"timestep must be > 0, got {self.timestep!r}")
+        if self.transmission_scale is not None:
+            ts = tuple(float(v) for v in self.transmission_scale)
+            if not all(-0.5 < v < 0.5 for v in ts):
+                raise ValueError(f"transmission_scale must be numbers in (-0.5, 0.5), got {ts!r}")
+            object.__setattr__(self, "transmission_scale", ts)
+
+
+class Machine:
+    """A compiled machine and its unit boundary (see the module docstring).
+
+    Args:
+        robot: the robot it was built for.
+        theta: (P,) the parameter vector it was built from.
+        model: the compiled model.
+        joint_offset: (C,) joint value (robot unit) at actuated-joint ``qpos = 0``.
+        joint_scale: (C,) SI per robot joint unit (``1e-3`` for mm, 1 for rad).
+        actuated_joints: (C,) names of the actuated joints, chain order.
+    """
+
+    def __init__(self, robot: Robot, theta: np.ndarray, model: mujoco.MjModel, joint_offset, joint_scale,
+                 actuated_joints: tuple[str, ...]):
+        self.robot = robot
+        self.theta = np.array(theta, dtype=float)
+        self.model = model
+        self.joint_offset = np.asarray(joint_offset, dtype=float)
+        self.joint_scale = np.asarray(joint_scale, dtype=float)
+        self.actuated_joints = tuple(actuated_joints)
+        self.qpos_index = np.array([model.joint(n).qposadr[0] for n in actuated_joints])
+        self.dof_index = np.array([model.joint(n).dofadr[0] for n in actuated_joints])
+        self._pos = model.sensor(SENSOR_POS).adr[0]
+        self._quat = model.sensor(SENSOR_QUAT).adr[0] if robot.pose_dim == 6 else None
+
+    def ctrl(self, joints: np.ndarray) -> np.ndarray:
+        """(C,) SI actuator controls for joint values in the robot's units."""
+        return (np.asarray(joints, dtype=float) - self.joint_offset) * self.joint_scale
+
+    def read_joints(self, data: mujoco.MjData) -> np.ndarray:
+        """(C,) actuated joint values in the robot's units."""
+        return data.qpos[self.qpos_index] / self.joint_scale + self.joint_offset
+
+    def read_pose(self, data: mujoco.MjData) -> np.ndarray:
+        """(D,) the platform pose from the sensors, mm and rad."""
+        s = data.sensordata
+        pos = m_to_mm(s[self._pos:self._pos + 3])
+        if self._quat is None:
+            return pos
+        return np.r_[pos, euler_from_quaternion(s[self._quat:self._quat + 4])]
+
+    def reset(self, data: mujoco.MjData) -> None:
+        """Put ``data`` at the home keyframe and compute its derived quantities."""
+        mujoco.mj_resetDataKeyframe(self.model, data, self.model.key(HOME_KEY).id)
+        mujoco.mj_forward(self.model, data)
+
