@@ -29,7 +29,7 @@ from calib.rotation import euler_from_quaternion
 
 from .units import m_to_mm
 
-__all__ = ["MachineOptions", "Machine", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
+__all__ = ["MachineOptions", "MachineEffects", "Machine", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
 
 #: Name of the platform site whose frame is the pose.
 PLATFORM_SITE = "platform"
@@ -87,6 +87,39 @@ class MachineOptions:
             if not all(-0.5 < v < 0.5 for v in ts):
                 raise ValueError(f"transmission_scale must be numbers in (-0.5, 0.5), got {ts!r}")
             object.__setattr__(self, "transmission_scale", ts)
+
+
+@dataclass(frozen=True)
+class MachineEffects:
+    """Non-geometric effects the testbed adds in joint space (robot units: mm or rad per chain).
+
+    Attributes:
+        joint_drift_per_s: every actuated chain's effective length drifts at this rate with
+            time (thermal growth of a leg; joint unit per s); it enters the servo reference at the
+            start of each move.
+        screw_amplitude: (C,) amplitude of each chain's periodic transmission error (lead screw),
+            joint unit: the joint sits ``A_i sin(2 pi stroke / pitch + phase_i)`` from where
+            its encoder says, ``stroke`` the command minus the home joint value.
+        screw_phase_rad: (C,) phase of each chain's periodic error, rad.
+        screw_pitch: period of the error in stroke, joint unit.
+    """
+
+    joint_drift_per_s: float = 0.0
+    screw_amplitude: tuple = ()
+    screw_phase_rad: tuple = ()
+    screw_pitch: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("screw_amplitude", "screw_phase_rad"):
+            object.__setattr__(self, name, tuple(float(x) for x in getattr(self, name)))
+        if len(self.screw_amplitude) != len(self.screw_phase_rad):
+            raise ValueError("screw_amplitude and screw_phase_rad must have the same length")
+        if not self.screw_pitch > 0:
+            raise ValueError(f"screw_pitch must be > 0, got {self.screw_pitch!r}")
+
+    def to_dict(self) -> dict:
+        return {"joint_drift_per_s": self.joint_drift_per_s, "screw_amplitude": list(self.screw_amplitude),
+                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch}
 
 
 class Machine:
