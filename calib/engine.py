@@ -30,7 +30,7 @@ from .noise import SensorNoise
 from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
-           "SOLVERS", "METHODS", "identify"]
+           "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative"]
 
 #: Solvers of both methods.
 SOLVERS = ("lm", "gn")
@@ -438,3 +438,37 @@ def identify(robot: Robot, joints, measured, noise: SensorNoise, *, method: str 
     if method == "chainwise":
         return identify_chainwise(robot, joints, measured, noise, **options)
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+
+def gauge_representative(robot: Robot, theta: np.ndarray, start: np.ndarray | None = None, *,
+                         poses: int = 60, seed: int = 0) -> np.ndarray:
+    """The parameter vector, in the identification's gauge, that moves exactly like ``theta``.
+
+    Pose data cannot tell apart parameter vectors that differ along an unidentifiable direction
+    (the Delta's joint offset and arm direction); the identification holds the robot's
+    ``gauge_fixed`` parameters at their start values. To compare an identified vector with a
+    machine's true one, the true one is first mapped to that gauge: the vector with the gauge
+    parameters of ``start`` whose kinematics match ``theta``'s over ``poses`` workspace poses
+    (a noise-free forward fit, exact to numerical precision).
+
+    Args:
+        robot: the robot.
+        theta: (P,) the machine's parameters.
+        start: (P,) whose gauge parameters to take; default the nominal vector.
+        poses, seed: the workspace poses of the fit.
+
+    Returns:
+        (P,) ``theta`` itself when the robot has no gauge parameters.
+    """
+    from .workspace import reachable_poses
+
+    if not robot.gauge_fixed:
+        return np.array(theta, dtype=float)
+    start = robot.table.nominal if start is None else start
+    gauge = robot.table.indices(robot.gauge_fixed)
+    begin = np.array(theta, dtype=float)
+    begin[gauge] = start[gauge]
+    targets = reachable_poses(robot, poses, seed, theta=theta)
+    joints = robot.inverse_kinematics(theta, targets)
+    fit = identify_forward(robot, joints, targets, SensorNoise(1.0, 1.0), start=begin)
+    return fit.theta
