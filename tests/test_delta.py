@@ -26,17 +26,19 @@ from calib.robots.delta import (
     inverse_kinematics,
     parameter_index,
 )
-from calib.delta_identification import perturb_params, random_workspace_positions
+from calib.robots import Delta, uniform_errors
+from calib.workspace import reachable_poses
 
 NOM = DeltaParams.nominal()
 
 
 def _perturbed(seed, e_mm=2.0, e_deg=2.0):
-    return perturb_params(NOM, e_mm, np.deg2rad(e_deg), seed)
+    robot = Delta(NOM)
+    return DeltaParams.from_vector(robot.table.nominal + uniform_errors(robot, seed, e_mm, np.deg2rad(e_deg)))
 
 
 def _configs(params, n, seed):
-    x = random_workspace_positions(n, seed)
+    x = reachable_poses(Delta(NOM), n, seed, theta=params.to_vector())
     return inverse_kinematics(params, x), x
 
 
