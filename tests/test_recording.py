@@ -76,7 +76,7 @@ def test_bad_csv_names_file_row_and_column(tmp_path, edit, match):
 
 
 @pytest.mark.parametrize("edit,match", [
-    (lambda s: s.update(robot="delta"), "field 'robot' must be one of"),
+    (lambda s: s.update(robot="tripod"), "field 'robot' must be one of"),
     (lambda s: s.update(units={"length": "m", "angle": "rad", "time": "s"}), "field 'units' must be"),
     (lambda s: s.pop("declared_noise"), "missing field 'declared_noise'"),
     (lambda s: s["nominal_geometry"].update(base_joints_mm=[[0, 0, 0]]), r"field 'nominal_geometry': base_joints must have shape \(6, 3\)"),
