@@ -9,13 +9,15 @@ from __future__ import annotations
 from ..robot import Robot
 from .delta import Delta
 from .hexapod import Hexapod, paper_hexapod
+from .rus import RotaryHexapod, default_rotary_hexapod
 
-__all__ = ["ROBOTS", "robot_class", "default_robot", "robot_from_description", "Hexapod", "Delta"]
+__all__ = ["ROBOTS", "robot_class", "default_robot", "robot_from_description", "Hexapod", "Delta", "RotaryHexapod"]
 
 #: name -> (robot class, factory of its default instance).
 ROBOTS: dict[str, tuple[type[Robot], object]] = {
     Hexapod.name: (Hexapod, paper_hexapod),
     Delta.name: (Delta, Delta),
+    RotaryHexapod.name: (RotaryHexapod, default_rotary_hexapod),
 }
 
 
