@@ -3,6 +3,10 @@
 from .hexapod import DEFAULT_XML, HexapodModelOptions, build_hexapod, hexapod_xml
 from .delta import DeltaMjcfGeometry, build_delta_model, build_delta_xml
 from .units import M_PER_MM, m_to_mm, mm_to_m
+from . import rus
 
-__all__ = ["DeltaMjcfGeometry", "build_delta_model", "build_delta_xml", "DEFAULT_XML", "HexapodModelOptions", "build_hexapod", "hexapod_xml", "M_PER_MM",
+#: Robot name -> its builder ``build_machine(robot, theta, options) -> Machine`` (see :mod:`mjcf.machine`).
+MACHINES = {"rus": rus.build_machine}
+
+__all__ = ["MACHINES", "DeltaMjcfGeometry", "build_delta_model", "build_delta_xml", "DEFAULT_XML", "HexapodModelOptions", "build_hexapod", "hexapod_xml", "M_PER_MM",
            "m_to_mm", "mm_to_m"]
