@@ -1,8 +1,10 @@
-"""MJCF models of the robots, built from ``calib`` parameter sets (MuJoCo in SI metres)."""
+"""MuJoCo machines of the robots, built from ``calib`` parameter sets (MuJoCo in SI metres)."""
 
-from .hexapod import DEFAULT_XML, HexapodModelOptions, build_hexapod, hexapod_xml
-from .delta import DeltaMjcfGeometry, build_delta_model, build_delta_xml
+from . import rus
+from .machine import Machine, MachineEffects, MachineOptions
 from .units import M_PER_MM, m_to_mm, mm_to_m
 
-__all__ = ["DeltaMjcfGeometry", "build_delta_model", "build_delta_xml", "DEFAULT_XML", "HexapodModelOptions", "build_hexapod", "hexapod_xml", "M_PER_MM",
-           "m_to_mm", "mm_to_m"]
+#: Robot name -> its builder ``build_machine(robot, theta, options) -> Machine`` (see :mod:`mjcf.machine`).
+MACHINES = {"rus": rus.build_machine}
+
+__all__ = ["MACHINES", "Machine", "MachineEffects", "MachineOptions", "M_PER_MM", "m_to_mm", "mm_to_m"]

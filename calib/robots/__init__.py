@@ -15,9 +15,10 @@ from .. import paper
 from ..robot import Robot
 from .delta import Delta
 from .hexapod import Hexapod, paper_hexapod
+from .rus import RotaryHexapod, default_rotary_hexapod
 
 __all__ = ["ROBOTS", "RobotEntry", "robot_class", "default_robot", "robot_from_description",
-           "reference_errors", "reference_poses", "uniform_errors", "Hexapod", "Delta"]
+           "reference_errors", "reference_poses", "uniform_errors", "Hexapod", "Delta", "RotaryHexapod"]
 
 
 def uniform_errors(robot: Robot, seed, error_mm: float, error_rad: float) -> np.ndarray:
@@ -49,6 +50,8 @@ ROBOTS: dict[str, RobotEntry] = {
     Hexapod.name: RobotEntry(Hexapod, paper_hexapod, lambda r, s: paper.TABLE3_ERRORS.ravel().copy(),
                              paper.TABLE4_NOMINAL_POSES),
     Delta.name: RobotEntry(Delta, Delta, lambda r, s: uniform_errors(r, s, 1.0, np.deg2rad(1.0))),
+    RotaryHexapod.name: RobotEntry(RotaryHexapod, default_rotary_hexapod,
+                                   lambda r, s: uniform_errors(r, s, 0.5, np.deg2rad(0.5))),
 }
 
 

@@ -1,0 +1,242 @@
+"""The rotary hexapod (6-RUS Stewart platform): six base motors, each turning a crank whose tip
+drives a rod with spherical joints at both ends up to the platform (motion simulators, small
+hexapod kits).
+
+Parameters (66, eleven per chain i = 1..6, :data:`CHAIN_PARAMETERS` order):
+
+* ``M{i}.x M{i}.y M{i}.z`` (mm, base frame): the motor's crank-circle centre;
+* ``a{i}.az a{i}.el`` (rad): the motor axis ``a = (cos el cos az, cos el sin az, sin el)``;
+* ``r{i}`` (mm): crank length; ``q0_{i}`` (rad): motor zero offset; ``s{i}`` (mm): rod length;
+* ``P{i}.x P{i}.y P{i}.z`` (mm, platform frame): the rod's platform joint centre.
+
+Crank frame: ``u = da/daz / cos(el) = (-sin az, cos az, 0)``, ``v = da/del =
+(-sin el cos az, -sin el sin az, cos el)``; ``(u, v, a)`` is right-handed and orthonormal, a
+smooth function of the axis angles (singular only for a vertical axis, ``cos el = 0``). The
+crank tip is ``C_i = M_i + r_i (cos phi_i u_i + sin phi_i v_i)``, ``phi_i = q_i + q0_i``: a
+positive ``q_i`` turns the crank positively about ``a_i``. Closure of chain i (mm):
+``F_i = |R P_i + t - C_i| - s_i``. Pose ``[x, y, z, alpha, beta, gamma]`` (mm, rad),
+``R = Rz(gamma) Ry(beta) Rx(alpha)``; joints the motor angles ``q1..q6`` (rad).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validate import as_array
+from ..robot import ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot
+from ..rotation import rotation_matrix, rotation_matrix_derivatives
+
+__all__ = ["RotaryHexapod", "CHAIN_PARAMETERS", "CHAIN_UNITS", "WORKSPACE_HALF_WIDTHS",
+           "JOINT_RANGE_RAD", "crank_frames", "default_rotary_hexapod"]
+
+#: Names of a chain's eleven parameters; ``{i}`` is the 1-based chain number.
+CHAIN_PARAMETERS = ("M{i}.x", "M{i}.y", "M{i}.z", "a{i}.az", "a{i}.el", "r{i}", "q0_{i}", "s{i}",
+                    "P{i}.x", "P{i}.y", "P{i}.z")
+#: Unit of each of :data:`CHAIN_PARAMETERS`.
+CHAIN_UNITS = ("mm", "mm", "mm", "rad", "rad", "mm", "rad", "mm", "mm", "mm", "mm")
+#: Default calibration workspace about the home pose, (6, 2) low/high offsets (mm, rad); every
+#: corner of it is reachable by the default machine with motor angles within +-43 degrees.
+WORKSPACE_HALF_WIDTHS = np.array([[-12.0, 12.0], [-12.0, 12.0], [-8.0, 8.0],
+                                  [-np.deg2rad(4.0), np.deg2rad(4.0)], [-np.deg2rad(4.0), np.deg2rad(4.0)],
+                                  [-np.deg2rad(4.0), np.deg2rad(4.0)]])
+#: Default range of every motor angle, rad (low, high).
+JOINT_RANGE_RAD = (-np.deg2rad(80.0), np.deg2rad(80.0))
+
+
+def crank_frames(az: np.ndarray, el: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, v, a)``, each (..., 3): the crank frame of motor axes given by angles (rad)."""
+    ca, sa, ce, se = np.cos(az), np.sin(az), np.cos(el), np.sin(el)
+    z = np.zeros_like(ca)
+    return (np.stack([-sa, ca, z], -1), np.stack([-se * ca, -se * sa, ce], -1),
+            np.stack([ce * ca, ce * sa, se], -1))
+
+
+class RotaryHexapod(Robot):
+    """A 6-RUS rotary hexapod's nominal geometry.
+
+    Args:
+        chains: (6, 11) nominal parameters, one row per chain in :data:`CHAIN_PARAMETERS`
+            order (mm, rad).
+        home_pose: (6,) the home pose, start of the forward kinematics.
+        workspace_half_widths: (6, 2) calibration workspace about the home pose (mm, rad).
+        joint_range_rad: (2,) accepted range of every motor angle, rad.
+    """
+
+    name = "rus"
+    pose_names = ("x", "y", "z", "alpha", "beta", "gamma")
+    pose_units = ("mm", "mm", "mm", "rad", "rad", "rad")
+    joint_unit = "rad"
+    joint_symbol = "q"
+    chain_word = "chain"
+
+    def __init__(self, chains, home_pose, workspace_half_widths=WORKSPACE_HALF_WIDTHS,
+                 joint_range_rad=JOINT_RANGE_RAD):
+        self.chains = as_array(chains, "chains", (6, len(CHAIN_PARAMETERS)))
+        self._home_pose = as_array(home_pose, "home_pose", (6,))
+        self.workspace_half_widths = as_array(workspace_half_widths, "workspace_half_widths", (6, 2))
+        self.joint_range_rad = as_array(joint_range_rad, "joint_range_rad", (2,))
+        if not np.all(self.chains[:, [5, 7]] > 0):
+            raise ValueError("chains: crank lengths r and rod lengths s must be > 0")
+        if not self.joint_range_rad[0] < self.joint_range_rad[1]:
+            raise ValueError(f"joint_range_rad must be (low, high) with low < high, got {self.joint_range_rad}")
+        for a in (self.chains, self._home_pose, self.workspace_half_widths, self.joint_range_rad):
+            a.setflags(write=False)
+        self.table = ParameterTable([
+            Parameter(t.format(i=c + 1), CHAIN_UNITS[k], float(self.chains[c, k]), c)
+            for c in range(6) for k, t in enumerate(CHAIN_PARAMETERS)])
+
+    # -- description ----------------------------------------------------------------------
+    @property
+    def home_pose(self) -> np.ndarray:
+        return self._home_pose
+
+    @property
+    def length_scale_mm(self) -> float:
+        return float(np.linalg.norm(self.chains[:, 8:11], axis=1).mean())
+
+    def workspace_bounds(self) -> np.ndarray:
+        return self._home_pose[:, None] + self.workspace_half_widths
+
+    def joint_limits(self) -> np.ndarray:
+        return np.tile(self.joint_range_rad, (6, 1))
+
+    def description(self) -> dict:
+        return {"parameters": self.table.to_dict(self.table.nominal), "home_pose": self._home_pose.tolist(),
+                "workspace_half_widths": self.workspace_half_widths.tolist(),
+                "joint_range_rad": self.joint_range_rad.tolist()}
+
+    @classmethod
+    def from_description(cls, description: dict) -> "RotaryHexapod":
+        values = description["parameters"]
+        names = [t.format(i=c + 1) for c in range(6) for t in CHAIN_PARAMETERS]
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise KeyError(f"parameters: missing {', '.join(missing)}")
+        return cls(np.reshape([values[n] for n in names], (6, len(CHAIN_PARAMETERS))), description["home_pose"],
+                   description.get("workspace_half_widths", WORKSPACE_HALF_WIDTHS),
+                   description.get("joint_range_rad", JOINT_RANGE_RAD))
+
+    # -- parameter layout -----------------------------------------------------------------
+    @staticmethod
+    def split(theta: np.ndarray) -> dict[str, np.ndarray]:
+        """Named views of ``theta``: ``M`` (6, 3), ``az el r q0 s`` (6,), ``P`` (6, 3), mm/rad."""
+        t = np.asarray(theta, dtype=float).reshape(6, len(CHAIN_PARAMETERS))
+        return {"M": t[:, 0:3], "az": t[:, 3], "el": t[:, 4], "r": t[:, 5], "q0": t[:, 6], "s": t[:, 7],
+                "P": t[:, 8:11]}
+
+    def _geometry(self, theta, joints, poses):
+        """Crank tips C (N, 6, 3), rod vectors D = R P + t - C (N, 6, 3), R (N, 3, 3), crank
+        directions e and tangents w (N, 6, 3), the frames (u, v, a) (6, 3) and the parts."""
+        p = self.split(theta)
+        u, v, a = crank_frames(p["az"], p["el"])
+        phi = joints + p["q0"][None]
+        c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+        e = c * u[None] + s * v[None]
+        w = -s * u[None] + c * v[None]
+        C = p["M"][None] + p["r"][None, :, None] * e
+        R = rotation_matrix(poses[:, 3:6])
+        D = np.einsum("nij,lj->nli", R, p["P"]) + poses[:, None, 0:3] - C
+        return C, D, R, e, w, phi, (u, v, a), p
+
+    def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, 6, 3, 3) mm: motor centre ``M_i``, crank tip ``C_i``, platform joint ``R P_i + t``."""
+        C, D, *_ , p = self._geometry(theta, joints, poses)
+        return np.stack([np.broadcast_to(p["M"], C.shape), C, C + D], axis=2)
+
+    # -- kinematics -----------------------------------------------------------------------
+    def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        _, D, *_, p = self._geometry(theta, joints, poses)
+        return np.linalg.norm(D, axis=-1) - p["s"][None]
+
+    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+        _, D, R, e, w, phi, (u, v, a), p = self._geometry(theta, joints, poses)
+        n_rows = joints.shape[0]
+        n = D / np.linalg.norm(D, axis=-1, keepdims=True)  # (N, 6, 3) unit rod directions
+        dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
+        Jpose = np.empty((n_rows, 6, 6))
+        Jpose[:, :, 0:3] = n
+        Jpose[:, :, 3:6] = np.einsum("nli,nkij,lj->nlk", n, dR, p["P"])
+        r = p["r"][None]
+        dq = -r * np.einsum("nli,nli->nl", n, w)  # dF/dq = dF/dq0
+        ca, sa = np.cos(p["az"]), np.sin(p["az"])
+        se, ce = np.sin(p["el"]), np.cos(p["el"])
+        du_daz = np.stack([-ca, -sa, np.zeros(6)], -1)
+        dv_daz = np.stack([se * sa, -se * ca, np.zeros(6)], -1)
+        c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+        Jc = np.empty((n_rows, 6, len(CHAIN_PARAMETERS)))
+        Jc[..., 0:3] = -n
+        Jc[..., 3] = -r * np.einsum("nli,nli->nl", n, c * du_daz[None] + s * dv_daz[None])
+        Jc[..., 4] = r * np.sin(phi) * np.einsum("nli,li->nl", n, a)  # dv/del = -a, du/del = 0
+        Jc[..., 5] = -np.einsum("nli,nli->nl", n, e)
+        Jc[..., 6] = dq
+        Jc[..., 7] = -1.0
+        Jc[..., 8:11] = np.einsum("nji,nlj->nli", R, n)  # R^T n
+        Jtheta = np.zeros((n_rows, 6, 6, len(CHAIN_PARAMETERS)))
+        idx = np.arange(6)
+        Jtheta[:, idx, idx] = Jc
+        return ClosureJacobians(pose=Jpose, joints=dq[:, :, None] * np.eye(6)[None],
+                                parameters=Jtheta.reshape(n_rows, 6, -1))
+
+    def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, 6) motor angles, rad, wrapped to (-pi, pi].
+
+        Per chain, with ``d = R P + t - M``, the closure squared reads ``K cos phi + L sin phi =
+        N`` with ``K = 2 r d.u``, ``L = 2 r d.v``, ``N = |d|^2 + r^2 - s^2``. Branch:
+        ``phi = atan2(L, K) - arccos(N / hypot(K, L))``, the crank turned negatively about
+        ``a`` from the direction of the platform joint (seen along ``a``), which is the
+        assembly of :func:`default_rotary_hexapod` (cranks pointing away from their pair partner).
+
+        Raises:
+            KinematicsError: the rod cannot reach (``|N| > hypot(K, L)``) or crank and rod are
+                aligned (serial singularity); names the row and the chain.
+        """
+        p = self.split(theta)
+        u, v, _ = crank_frames(p["az"], p["el"])
+        R = rotation_matrix(poses[:, 3:6])
+        d = np.einsum("nij,lj->nli", R, p["P"]) + poses[:, None, 0:3] - p["M"][None]
+        r, s = p["r"][None], p["s"][None]
+        K = 2.0 * r * np.einsum("nli,li->nl", d, u)
+        L = 2.0 * r * np.einsum("nli,li->nl", d, v)
+        N = np.einsum("nli,nli->nl", d, d) + r ** 2 - s ** 2
+        rho = np.hypot(K, L)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = N / rho
+        bad = ~(np.abs(ratio) < 1.0 - 1e-12)
+        if np.any(bad):
+            row, chain = (int(x) for x in np.argwhere(bad)[0])
+            why = "cannot reach" if not np.abs(ratio[row, chain]) <= 1.0 else "is aligned with its crank (singular)"
+            raise KinematicsError(f"row {row} is unreachable: the rod of {self.chain_word} {chain + 1} {why} "
+                                  f"(pose {np.array2string(poses[row], precision=4)})", row)
+        q = np.arctan2(L, K) - np.arccos(ratio) - p["q0"][None]
+        return np.angle(np.exp(1j * q))
+
+
+def default_rotary_hexapod(base_radius_mm: float = 150.0, platform_radius_mm: float = 100.0,
+                           crank_mm: float = 40.0, rod_mm: float = 200.0, base_half_angle_deg: float = 20.0,
+                           platform_half_angle_deg: float = 10.0) -> RotaryHexapod:
+    """A nominal rotary hexapod with motors and platform joints in pairs (not singular).
+
+    Motors sit in three pairs at ``120 k +- base_half_angle_deg`` on the base circle (z = 0),
+    axes horizontal and radial, each crank pointing tangentially away from its partner at
+    ``q = 0`` (``q0 = 0``). Platform joints pair at ``60 + 120 k -+ platform_half_angle_deg``,
+    each joined to the nearer motor of the neighbouring pair. The home pose puts the platform
+    level at the height where every rod is ``rod_mm`` long with the cranks horizontal
+    (home joints all zero).
+    """
+    rows, tips, plat = [], [], []
+    for k in range(3):
+        for sign in (-1.0, 1.0):
+            ang = np.deg2rad(120.0 * k + sign * base_half_angle_deg)
+            # sign +1: axis outward (u = +tangent, counter-clockwise); -1: inward (u clockwise).
+            az = ang if sign > 0 else ang + np.pi
+            M = base_radius_mm * np.array([np.cos(ang), np.sin(ang), 0.0])
+            u, _, _ = crank_frames(np.array(az), np.array(0.0))
+            tips.append(M + crank_mm * u)
+            pa = np.deg2rad(120.0 * k + sign * (60.0 - platform_half_angle_deg))
+            plat.append(platform_radius_mm * np.array([np.cos(pa), np.sin(pa), 0.0]))
+            rows.append([*M, np.angle(np.exp(1j * az)), 0.0, crank_mm, 0.0, rod_mm, *plat[-1]])
+    horizontal = np.linalg.norm(np.array(plat)[:, :2] - np.array(tips)[:, :2], axis=1)
+    if not np.all(horizontal < rod_mm):
+        raise ValueError(f"rod_mm = {rod_mm} is too short to reach the platform")
+    height = float(np.sqrt(rod_mm ** 2 - horizontal[0] ** 2))
+    return RotaryHexapod(np.array(rows), [0.0, 0.0, height, 0.0, 0.0, 0.0])
