@@ -182,7 +182,7 @@ def _gauss_newton(fun, jac, x0, max_iter, xtol):
         x = x + step
         if not np.all(np.isfinite(x)):
             return x - step, r, J, it, False, "Gauss-Newton diverged (non-finite step)"
-        if np.linalg.norm(step) <= xtol * (xtol + np.linalg.norm(x)):
+        if np.linalg.norm(step) <= max(xtol, 1e-12) * (1e-12 + np.linalg.norm(x)):
             return x, fun(x), jac(x), it, True, f"Gauss-Newton step below xtol = {xtol:g}"
     return x, fun(x), jac(x), max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
 
