@@ -23,6 +23,7 @@ __all__ = [
     "parameter_index",
     "paper_geometry",
     "paper_hexapod",
+    "robot_and_theta",
 ]
 
 #: Column order of a (6, 7) hexapod error array (Table 3 of the paper).
@@ -168,3 +169,17 @@ def paper_hexapod(with_table3_errors: bool = False) -> Hexapod:
     """Table 2 nominal hexapod, optionally carrying Table 3's errors (the paper's machine)."""
     errors = paper.TABLE3_ERRORS if with_table3_errors else np.zeros((6, 7))
     return Hexapod(paper_geometry(), errors)
+
+
+def robot_and_theta(hexapod: Hexapod):
+    """The robot-interface view of an old-style parameter set (temporary: goes with this class).
+
+    Returns:
+        ``(robot, theta)``: the :class:`calib.robots.Hexapod` of ``hexapod.geometry`` and its
+        (42,) parameter vector ``robot.table.nominal + hexapod.errors.ravel()``, mm.
+    """
+    from .robots.hexapod import Hexapod as HexapodRobot
+
+    g = hexapod.geometry
+    robot = HexapodRobot(g.base_joints, g.platform_joints, g.home_lengths, g.home_pose)
+    return robot, robot.table.nominal + hexapod.errors.ravel()

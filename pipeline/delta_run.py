@@ -50,7 +50,9 @@ from calib.delta_identification import (
     perturb_params,
     random_workspace_positions,
 )
-from pipeline.delta_testbed import DeltaTestbed
+from calib.noise import SensorNoise
+from calib.robots.delta import Delta
+from pipeline.testbed import Testbed
 from pipeline.recording import atomic_write
 from pipeline.rerun_log import save_recording
 
@@ -98,7 +100,9 @@ def _write_text(path: Path, text: str, overwrite: bool) -> None:
 # --------------------------------------------------------------------------- rerun
 
 
-def _write_rrd(path: Path, name: str, meas, gains: dict, before, after, summary_md: str, overwrite: bool) -> None:
+def _write_rrd(path: Path, name: str, meas, points, gains: dict, before, after, summary_md: str, overwrite: bool) -> None:
+    """``points``: (N, 3, 3, 3) mm, per configuration and chain the shoulder, elbow and plate
+    attachment (:meth:`calib.robots.Delta.chain_points`)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
@@ -116,16 +120,16 @@ def _write_rrd(path: Path, name: str, meas, gains: dict, before, after, summary_
 
     def _log(rec) -> None:
         rec.log("delta", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("delta/shoulders", rr.Points3D(meas.shoulders, radii=4.0), static=True)
+        rec.log("delta/shoulders", rr.Points3D(points[0, :, 0], radii=4.0), static=True)
         for k in range(meas.t_s.size):
             rec.set_time("config", sequence=k)
             rec.set_time("sim_time", duration=float(meas.t_s[k]))
-            arms = [np.stack([meas.shoulders[i], meas.elbows[k, i]]) for i in range(3)]
-            fores = [np.stack([meas.elbows[k, i], meas.plate_attach[k, i]]) for i in range(3)]
+            arms = [points[k, i, 0:2] for i in range(3)]
+            fores = [points[k, i, 1:3] for i in range(3)]
             rec.log("delta/arms", rr.LineStrips3D(arms, radii=3.0, colors=[50, 100, 200]))
             rec.log("delta/forearms", rr.LineStrips3D(fores, radii=2.0, colors=[200, 120, 50]))
-            rec.log("delta/plate", rr.Points3D(meas.positions_meas[k : k + 1], radii=5.0, colors=[60, 180, 60]))
-            rec.log("delta/plate_attach", rr.LineStrips3D([np.vstack([meas.plate_attach[k], meas.plate_attach[k, :1]])], radii=1.5))
+            rec.log("delta/plate", rr.Points3D(meas.measured[k : k + 1], radii=5.0, colors=[60, 180, 60]))
+            rec.log("delta/plate_attach", rr.LineStrips3D([np.vstack([points[k, :, 2], points[k, :1, 2]])], radii=1.5))
         for j in range(before.size):
             rec.set_time("heldout_index", sequence=j)
             rec.log("heldout/before", rr.Scalars(float(before[j])))
@@ -191,7 +195,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         x_target = random_workspace_positions(n_cal + n_val, seed_cfg)
         q_cmd = inverse_kinematics(nominal, x_target)
-        bed = DeltaTestbed(true, noise_mm=args.noise_mm, noise_rad=args.noise_rad, seed=seed_noise)
+        robot = Delta(nominal)
+        noise = SensorNoise(position_mm=args.noise_mm, distribution="normal", joint=args.noise_rad)
+        bed = Testbed(robot, true.to_vector(), noise=noise, seed=seed_noise)
         meas = bed.measure(q_cmd)
     except (ValueError, RuntimeError) as exc:
         print(f"error: simulation failed: {exc}", file=sys.stderr)
@@ -204,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     for method, fn in (("ikm", identify_ikm), ("fkm", identify_fkm)):
         t1 = time.perf_counter()
         try:
-            res = fn(nominal, meas.q_meas[cal], meas.positions_meas[cal], solver=args.solver, sigma_mm=sig_mm, sigma_rad=sig_rad)
+            res = fn(nominal, meas.joints[cal], meas.measured[cal], solver=args.solver, sigma_mm=sig_mm, sigma_rad=sig_rad)
         except ValueError as exc:
             print(f"error: {method} identification failed: {exc}", file=sys.stderr)
             return 1
@@ -213,11 +219,12 @@ def main(argv: list[str] | None = None) -> int:
         gains[method] = calibration_gain(true, nominal, res.estimate)
 
     def heldout_err(params: DeltaParams) -> np.ndarray:
+        # The model's prediction at the commanded joints against the settled plate.
         try:
-            pred = forward_kinematics(params, meas.q_true[val])
+            pred = forward_kinematics(params, meas.commanded[val])
         except ValueError:
             return np.full(n_val, np.nan)
-        return np.linalg.norm(pred - meas.positions_true[val], axis=1)
+        return np.linalg.norm(pred - meas.true_poses[val], axis=1)
 
     before = heldout_err(nominal)
     after_by = {m: heldout_err(r.estimate) for m, r in results.items()}
@@ -247,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         "fixed_parameters": [n for n in PARAMETER_NAMES if n not in DEFAULT_FREE],
         "non_identifiable": "per chain, arm direction (Lax_i, Lay_i) vs joint offset alpha_i; Lay_i held at 0, "
         "estimates compared with the canonical (Lay=0) equivalent of the injected parameters",
-        "null_space_at_nominal": null_space_combinations(nominal, meas.q_meas[cal]),
+        "null_space_at_nominal": null_space_combinations(nominal, meas.joints[cal]),
         "gain_G": {m: g.as_dict() for m, g in gains.items()},
         "identified_params": chosen.estimate.to_dict(),
         "identified_params_by_method": {m: r.estimate.to_dict() for m, r in results.items()},
@@ -305,11 +312,12 @@ def main(argv: list[str] | None = None) -> int:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(CSV_COLUMNS)
     for k in range(meas.t_s.size):
-        w.writerow([repr(float(meas.t_s[k]))] + [repr(float(v)) for v in meas.q_meas[k]] + [repr(float(v)) for v in meas.positions_meas[k]])
+        w.writerow([repr(float(meas.t_s[k]))] + [repr(float(v)) for v in meas.joints[k]] + [repr(float(v)) for v in meas.measured[k]])
     try:
         _write_text(paths["csv"], buf.getvalue(), args.overwrite)
         _write_text(paths["json"], json.dumps(sidecar, indent=2) + "\n", args.overwrite)
-        _write_rrd(paths["rrd"], args.name, meas, gains, before, after, summary_md, args.overwrite)
+        points = robot.chain_points(true.to_vector(), meas.commanded, meas.true_poses)
+        _write_rrd(paths["rrd"], args.name, meas, points, gains, before, after, summary_md, args.overwrite)
         summary["wall_time_s"] = time.perf_counter() - t0
         if summary_path:
             _write_text(summary_path, json.dumps(summary, indent=2) + "\n", args.overwrite)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from calib import paper
-from calib.hexapod import Hexapod, paper_hexapod
+from calib.hexapod import Hexapod, paper_hexapod, robot_and_theta
 from calib.identification import IdentificationResult, identify_forward, identify_paper
 from calib.kinematics import KinematicsError, forward_kinematics, inverse_kinematics
 from calib.metrics import integrated_error
@@ -186,8 +186,8 @@ def _print_summary(s: dict) -> None:
 
 
 def _simulate(args, report):
-    from mjcf.hexapod import HexapodModelOptions
-    from pipeline.testbed import HexapodTestbed
+    from mjcf.machine import MachineOptions
+    from pipeline.testbed import Testbed
 
     nominal, actual = paper_hexapod(), paper_hexapod(with_table3_errors=True)
     seeds = np.random.SeedSequence(args.seed).spawn(3)
@@ -207,9 +207,10 @@ def _simulate(args, report):
         scenario = f"{n} {args.design} poses (Table 2 nominal, Table 3 injected)"
     heldout = random_poses(args.heldout, np.random.default_rng(seeds[1]))
     noise = SensorNoise(args.noise_mm, args.noise_rad, args.noise_dist)
-    options = HexapodModelOptions(gravity=args.gravity, payload_kg=args.payload_kg,
-                                  actuator_stiffness=args.stiffness, joint_friction=args.friction)
-    bed = HexapodTestbed(actual, options, noise, seed=int(seeds[2].generate_state(1)[0]))
+    options = MachineOptions(gravity=args.gravity, payload_kg=args.payload_kg,
+                             actuator_stiffness=args.stiffness, joint_friction=args.friction)
+    robot, theta = robot_and_theta(actual)
+    bed = Testbed(robot, theta, options=options, noise=noise, seed=int(seeds[2].generate_state(1)[0]))
     commanded = inverse_kinematics(nominal, targets)
     cal = bed.measure(commanded, progress=lambda d, t: report("measuring calibration poses", d, t))
     val = None
