@@ -5,6 +5,8 @@ Adding a robot: write its builder module (``build_machine(robot, theta, options)
 contract of :mod:`mjcf.machine`) and add one line to :data:`MACHINES`.
 """
 
+from calib.robot import Robot
+
 from . import delta, hexapod
 from .machine import GRAVITY_M_S2, Machine, MachineEffects, MachineOptions
 from .units import M_PER_MM, m_to_mm, mm_to_m
@@ -19,7 +21,7 @@ MACHINES = {
 }
 
 
-def build_machine(robot, theta, options: MachineOptions = MachineOptions()) -> Machine:
+def build_machine(robot: Robot, theta, options: MachineOptions = MachineOptions()) -> Machine:
     """The compiled machine of ``robot`` (a :class:`calib.robot.Robot`) with parameters ``theta``
     ((P,), mm and rad), built by the builder registered under ``robot.name``.
 

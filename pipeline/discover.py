@@ -62,7 +62,7 @@ def _physics(effect: str, fit, meta: dict) -> tuple[dict, dict]:
     moving = float(meta.get("moving_mass_kg", DEFAULT_PLATFORM_KG))
     if effect == "leg_compliance":
         weight = moving * GRAVITY_M_S2
-        k = weight / max(c[0] * 1e-3, 1e-12)
+        k = weight / max(c[0] * M_PER_MM, 1e-12)
         opts = dict(gravity=True, payload_kg=max(moving - DEFAULT_PLATFORM_KG, 0.0), actuator_stiffness=k)
     elif effect == "joint_friction":
         opts = dict(joint_friction=max(c[0], 0.0) * M_PER_MM * DEFAULT_STIFFNESS_N_PER_M)
