@@ -3,7 +3,7 @@
 Acceptance point 3 of issue #4 (paper Sections 4.2 and 5): position noise 1 um, joint noise
 0.01 degree, G for 8, 20, 40 and 60 configurations, both methods, averaged over seeds.
 Pure kinematic simulation (calib package; the MuJoCo testbed reproduces the same kinematics
-to about 1e-10 mm, see tests/test_mjcf_delta.py), so the study takes seconds.
+within 1e-8 mm, see tests/test_mjcf_delta.py), so the study takes seconds.
 
 Run::
 

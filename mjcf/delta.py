@@ -1,109 +1,59 @@
-"""MJCF model of a Delta robot built from a Model-24 parameter set (SI units).
+"""The MuJoCo Delta robot, composed with ``mujoco.MjSpec`` from a Model-24 parameter vector.
 
-Modelling choices (documented in docs/delta.md):
+Modelling choices (see docs/delta.md):
 
-* Each parallelogram forearm is modelled as ONE bar with a universal joint at the elbow
-  (two hinges: one parallel to the actuated axis, one perpendicular) and a ball joint at the
-  plate, the latter being an equality ``connect`` constraint between the bar's end site and
-  the plate's attachment site. The plate carries three slide joints (x, y, z) and no
-  rotation, which is exactly what the three parallelograms enforce; with the orientation
-  held, a single bar is kinematically equivalent to the parallelogram for the plate
-  position. The universal joint (instead of a ball) removes the bar's free spin.
-* The plate attachment of chain ``i`` is at ``plate_attach[i]`` in the plate frame and the
-  actuated joint at ``shoulder_physical[i] = shoulder_reduced[i] + plate_attach[i]``, so the
-  closure is ``||X + c_i - (D_i + c_i + arm_i)|| = ||X - D_i - arm_i|| = Lb_i``: exactly the
-  reduced Model 24 of :mod:`calib.delta`, with a physically sized base (radius Rb) and plate
-  (radius Rn).
-* Arm ``i``: body frame ``R_z(theta_i) R_y(alpha_i)`` at the physical shoulder, a hinge about
-  its local ``y`` (so the hinge position IS the joint reading ``q_i``), elbow site at
-  ``(Lax_i, 0, Lay_i)``; driven by a stiff, damped position actuator.
-* Contacts off, gravity off, implicit-fast integrator: at rest there is no load, so the
-  actuated joints sit exactly at their targets and the soft equality constraints are
-  exactly satisfied; the settled plate position is the kinematic one.
-* Sensor ``plate_pos``: ``framepos`` of site ``plate_center`` (the plate centre X, world
-  frame, metres).
-
-This module never converts units: every length it receives and writes is in metres (the
-pipeline's testbed converts from the calib package's millimetres).
+* Each parallelogram forearm is ONE bar with a universal joint at the elbow (two hinges: one
+  parallel to the actuated axis, one perpendicular) and a ball joint at the plate, a
+  ``connect`` equality between the bar's end site and the plate's attachment site. The plate
+  carries three slides (x, y, z) and no rotation, which is what the three parallelograms
+  enforce; with the orientation held, a single bar is kinematically equivalent to the
+  parallelogram for the plate position. The universal joint (instead of a ball) removes the
+  bar's free spin.
+* Chain ``i`` is attached to the plate at ``c_i = rn (cos theta_i, sin theta_i, 0)`` (plate
+  frame; ``rn`` = :attr:`calib.robots.Delta.rn_mm`) and its actuated joint sits at
+  ``D_i + c_i``, so the closure is ``||X + c_i - (D_i + c_i + arm_i)|| = ||X - D_i - arm_i|| = Lb_i``:
+  exactly the reduced Model 24 of :mod:`calib.robots.delta`, with a physically sized base and
+  plate.
+* Arm ``i``: body frame ``R_z(theta_i) R_y(alpha_i)`` at the physical shoulder, a hinge about its
+  local ``y``, so that the hinge position IS the joint reading ``q_i`` (``joint_offset`` 0,
+  ``joint_scale`` 1); elbow site at ``(Lax_i, 0, Lay_i)``; driven by a stiff, damped position
+  servo (gear ``1 / (1 + s_i)`` for a transmission scale ``s_i``, gains divided by the gear
+  squared). Joint friction is written as the hinges' ``frictionloss``; the testbed adds its
+  quasi-static limit.
+* Contacts off; the keyframe ``home`` is the machine assembled at the joint readings that reach
+  the robot's home position (plate slides at 0, the plate body placed there).
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import mujoco
 import numpy as np
 
-__all__ = [
-    "DeltaMjcfGeometry",
-    "build_delta_model",
-    "build_delta_xml",
-    "ARM_JOINTS",
-    "ACTUATORS",
-    "PLATE_SENSOR",
-]
+from calib.robots.delta import Delta
+
+from .machine import GRAVITY_M_S2, HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions
+from .units import mm_to_m
+
+__all__ = ["build_machine", "build_spec", "integration_step", "ARM_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD",
+           "DEFAULT_DAMPING_NMS_PER_RAD", "DEFAULT_PLATFORM_MASS_KG"]
 
 #: Names of the actuated (arm) hinge joints, chain order.
 ARM_JOINTS: tuple[str, ...] = ("arm1_hinge", "arm2_hinge", "arm3_hinge")
-#: Names of the position actuators, chain order.
-ACTUATORS: tuple[str, ...] = ("motor1", "motor2", "motor3")
-#: Name of the plate position sensor (framepos of site ``plate_center``).
-PLATE_SENSOR = "plate_pos"
-
-
-def _arr(value, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    arr = np.array(value, dtype=np.float64)
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite")
-    arr.setflags(write=False)
-    return arr
-
-
-@dataclasses.dataclass(frozen=True)
-class DeltaMjcfGeometry:
-    """Geometry of the simulated Delta, SI units (metres, radians).
-
-    Attributes:
-        shoulder: Reduced shoulder points ``D_i`` (Model 24), shape (3, 3), m, world frame.
-        theta: Chain-plane rotations about z, shape (3,), rad.
-        alpha: Actuated joint offsets, shape (3,), rad.
-        arm: Arm vectors ``(Lax_i, Lay_i)`` at zero arm angle, shape (3, 2), m.
-        forearm: Forearm lengths ``Lb_i``, shape (3,), m.
-        plate_attach: Forearm attachment points in the plate frame, shape (3, 3), m.
-        home_q: Initial joint readings, shape (3,), rad.
-        home_plate: Plate-centre position consistent with ``home_q``, shape (3,), m, world.
-    """
-
-    shoulder: np.ndarray
-    theta: np.ndarray
-    alpha: np.ndarray
-    arm: np.ndarray
-    forearm: np.ndarray
-    plate_attach: np.ndarray
-    home_q: np.ndarray
-    home_plate: np.ndarray
-
-    def __post_init__(self) -> None:
-        shapes = {
-            "shoulder": (3, 3),
-            "theta": (3,),
-            "alpha": (3,),
-            "arm": (3, 2),
-            "forearm": (3,),
-            "plate_attach": (3, 3),
-            "home_q": (3,),
-            "home_plate": (3,),
-        }
-        for f, shp in shapes.items():
-            object.__setattr__(self, f, _arr(getattr(self, f), f, shp))
-        if np.any(self.forearm <= 0):
-            raise ValueError(f"forearm must be positive, got {self.forearm.tolist()}")
-        if np.any(np.linalg.norm(self.arm, axis=1) <= 0):
-            raise ValueError("arm vectors must be non-zero")
-        if np.max(np.abs(self.forearm)) > 100.0:
-            raise ValueError(f"forearm must be in metres (expected < 100), got {self.forearm.tolist()}")
+#: Default servo stiffness of each arm, N m/rad.
+DEFAULT_STIFFNESS_NM_PER_RAD = 2000.0
+#: Default servo damping of each arm, N m s/rad.
+DEFAULT_DAMPING_NMS_PER_RAD = 40.0
+#: Default mass of the travelling plate, kg.
+DEFAULT_PLATFORM_MASS_KG = 0.3
+#: Arm mass, kg, and its inertia about its centre (diagonal), kg m^2.
+ARM_MASS_KG, ARM_INERTIA = 0.3, 0.002
+#: Forearm (bar) mass, kg.
+FOREARM_MASS_KG = 0.1
+#: Damping of the actuated hinge (N m s/rad) and of the passive joints (forearm hinges
+#: N m s/rad, plate slides N s/m).
+ARM_DAMPING, PASSIVE_DAMPING = 0.1, 2.0
+#: Time constant of the closures' soft constraint, s.
+CLOSURE_TIME_CONSTANT_S = 0.005
 
 
 def _rz(t: float) -> np.ndarray:
@@ -122,125 +72,119 @@ def _quat(r: np.ndarray) -> np.ndarray:
     return q
 
 
-def _fmt(v) -> str:
-    return " ".join(repr(float(x)) for x in np.ravel(v))
+def _stiffness(options: MachineOptions) -> float:
+    return DEFAULT_STIFFNESS_NM_PER_RAD if options.actuator_stiffness is None else options.actuator_stiffness
 
 
-def build_delta_xml(
-    geom: DeltaMjcfGeometry,
-    *,
-    timestep: float = 1e-3,
-    kp: float = 2000.0,
-    kv: float = 40.0,
-    passive_damping: float = 2.0,
-) -> str:
-    """MJCF XML of the Delta.
+def integration_step(options: MachineOptions, arm_m: float) -> float:
+    """The integration step, s: ``options.timestep`` capped at ``0.3 / omega`` when
+    ``omega dt > 1``, ``omega = sqrt(stiffness / arm inertia about its hinge)`` (the servo's
+    stiffness is integrated explicitly). ``arm_m``: arm length, m."""
+    inertia = ARM_INERTIA + ARM_MASS_KG * (arm_m / 2) ** 2
+    omega = np.sqrt(_stiffness(options) / inertia)
+    return float(options.timestep if omega * options.timestep <= 1.0 else 0.3 / omega)
+
+
+def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = MachineOptions(),
+               name: str = "delta") -> mujoco.MjSpec:
+    """The Delta machine ``theta`` as an uncompiled ``MjSpec`` (see the module docstring).
 
     Args:
-        geom: Geometry in metres / radians.
-        timestep: Simulation step, s.
-        kp: Position-actuator stiffness, N.m/rad.
-        kv: Position-actuator damping, N.m.s/rad.
-        passive_damping: Damping of the passive joints (forearm hinges N.m.s/rad, plate
-            slides N.s/m).
-
-    Returns:
-        The MJCF document as a string (bodies ``plate``, ``arm{i}``, ``forearm{i}``; joints
-        :data:`ARM_JOINTS`; actuators :data:`ACTUATORS`; sensor :data:`PLATE_SENSOR`;
-        keyframe ``home``).
+        robot: the Delta (plate radius ``rn_mm``, home position).
+        theta: (24,) Model-24 parameter vector, mm and rad.
+        options: physical options.
+        name: model name.
     """
-    if not isinstance(geom, DeltaMjcfGeometry):
-        raise ValueError(f"geom must be a DeltaMjcfGeometry, got {type(geom).__name__}")
-    for name, val in (("timestep", timestep), ("kp", kp), ("kv", kv), ("passive_damping", passive_damping)):
-        if not (np.isfinite(val) and val > 0):
-            raise ValueError(f"{name} must be positive, got {val}")
-    bodies, eqs, acts = [], [], []
-    home_qpos = [0.0, 0.0, 0.0]  # plate slides (plate body placed at home_plate)
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (robot.n_parameters,):
+        raise ValueError(f"theta must have shape ({robot.n_parameters},), got {theta.shape}")
+    p = robot.params(theta)
+    scale = np.zeros(3) if options.transmission_scale is None else np.asarray(options.transmission_scale, dtype=float)
+    if scale.shape != (3,):
+        raise ValueError(f"transmission_scale must have 3 values (one per chain), got {scale.size}")
+    home_q = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
+    home_plate = mm_to_m(robot.forward_kinematics(theta, home_q[None])[0])
+    attach = mm_to_m(robot.rn_mm * np.stack([np.cos(p.theta), np.sin(p.theta), np.zeros(3)], axis=1))
+    shoulders = mm_to_m(p.shoulders()) + attach
+    arms = mm_to_m(np.stack([p.Lax, np.zeros(3), p.Lay], axis=1))
+    forearms = mm_to_m(p.Lb)
+    step = integration_step(options, float(np.linalg.norm(arms, axis=1).max()))
+    kp = _stiffness(options)
+    kv = DEFAULT_DAMPING_NMS_PER_RAD if options.actuator_damping is None else options.actuator_damping
+    platform_kg = DEFAULT_PLATFORM_MASS_KG if options.platform_mass_kg is None else options.platform_mass_kg
+
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.degree = False
+    spec.option.timestep = step
+    spec.option.gravity = [0.0, 0.0, -GRAVITY_M_S2 if options.gravity else 0.0]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec.default.geom.contype = 0
+    spec.default.geom.conaffinity = 0
+    world = spec.worldbody
+    world.add_geom(name="base", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0.0, 0.0, 0.01],
+                   size=[float(np.linalg.norm(shoulders, axis=1).max()) + 0.02, 0.01, 0.0], rgba=[0.5, 0.5, 0.5, 0.5])
+    plate = world.add_body(name="plate", pos=home_plate)
+    for axis, label in (([1.0, 0.0, 0.0], "x"), ([0.0, 1.0, 0.0], "y"), ([0.0, 0.0, 1.0], "z")):
+        plate.add_joint(name=f"plate_{label}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis, damping=PASSIVE_DAMPING)
+    plate.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[float(np.linalg.norm(attach, axis=1).max()) + 0.01, 0.005, 0],
+                   mass=platform_kg, rgba=[0.3, 0.7, 0.3, 1.0])
+    plate.add_site(name=PLATFORM_SITE, size=[0.01, 0, 0])
+    for i in range(3):
+        plate.add_site(name=f"plate_c{i + 1}", pos=attach[i], size=[0.008, 0, 0])
+    if options.payload_kg > 0:
+        payload = plate.add_body(name="payload", pos=[0.0, 0.0, options.payload_height_m])
+        payload.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.01, 0.0], mass=options.payload_kg,
+                         rgba=[0.6, 0.2, 0.2, 1.0])
+    home_qpos = [0.0, 0.0, 0.0]
     for i in range(3):
         k = i + 1
-        rarm = _rz(geom.theta[i]) @ _ry(geom.alpha[i])  # arm frame at q = 0
-        shoulder = geom.shoulder[i] + geom.plate_attach[i]
-        elbow_local = np.array([geom.arm[i, 0], 0.0, geom.arm[i, 1]])
-        # Forearm frame: z along the bar at home, x along the actuated axis (orthogonalised).
-        r_home = rarm @ _ry(geom.home_q[i])
-        elbow_world = shoulder + r_home @ elbow_local
-        target = geom.home_plate + geom.plate_attach[i]
-        zf = r_home.T @ (target - elbow_world)
+        r_arm = _rz(p.theta[i]) @ _ry(p.alpha[i])  # arm frame at q = 0
+        elbow = arms[i]
+        # Forearm frame at home: z along the bar, x along the actuated axis (orthogonalised).
+        r_home = r_arm @ _ry(home_q[i])
+        zf = r_home.T @ (home_plate + attach[i] - shoulders[i] - r_home @ elbow)
         zf /= np.linalg.norm(zf)
         ey = np.array([0.0, 1.0, 0.0])
         xf = ey - (ey @ zf) * zf
         xf /= np.linalg.norm(xf)
-        yf = np.cross(zf, xf)
-        rf = np.stack([xf, yf, zf], axis=1)  # forearm frame in arm frame
-        lb = float(geom.forearm[i])
-        bodies.append(
-            f"""
-    <body name="arm{k}" pos="{_fmt(shoulder)}" quat="{_fmt(_quat(rarm))}">
-      <joint name="arm{k}_hinge" type="hinge" axis="0 1 0" damping="0.1"/>
-      <inertial pos="{_fmt(elbow_local / 2)}" mass="0.3" diaginertia="0.002 0.002 0.002"/>
-      <geom type="capsule" fromto="0 0 0 {_fmt(elbow_local)}" size="0.012" rgba="0.2 0.4 0.8 1"/>
-      <site name="elbow{k}" pos="{_fmt(elbow_local)}" size="0.01"/>
-      <body name="forearm{k}" pos="{_fmt(elbow_local)}" quat="{_fmt(_quat(rf))}">
-        <joint name="fa{k}_u1" type="hinge" axis="1 0 0" damping="{passive_damping}"/>
-        <joint name="fa{k}_u2" type="hinge" axis="0 1 0" damping="{passive_damping}"/>
-        <inertial pos="0 0 {lb / 2!r}" mass="0.1" diaginertia="0.002 0.002 0.0002"/>
-        <geom type="capsule" fromto="0 0 0 0 0 {lb!r}" size="0.006" rgba="0.8 0.5 0.2 1"/>
-        <site name="fa{k}_end" pos="0 0 {lb!r}" size="0.008"/>
-      </body>
-    </body>"""
-        )
-        eqs.append(f'    <connect name="close{k}" site1="fa{k}_end" site2="plate_c{k}"/>')
-        acts.append(
-            f'    <position name="motor{k}" joint="arm{k}_hinge" kp="{kp!r}" kv="{kv!r}"/>'
-        )
-        home_qpos += [float(geom.home_q[i]), 0.0, 0.0]
-    plate_sites = "\n".join(
-        f'      <site name="plate_c{i + 1}" pos="{_fmt(geom.plate_attach[i])}" size="0.008"/>' for i in range(3)
-    )
-    rn = float(np.max(np.linalg.norm(geom.plate_attach, axis=1))) or 0.03
-    return f"""<mujoco model="delta">
-  <compiler angle="radian" autolimits="true"/>
-  <option timestep="{timestep!r}" gravity="0 0 0" integrator="implicitfast"/>
-  <default>
-    <geom contype="0" conaffinity="0"/>
-    <equality solref="0.005 1"/>
-  </default>
-  <worldbody>
-    <geom name="base" type="cylinder" pos="0 0 0.01" size="{float(np.max(np.linalg.norm(geom.shoulder + geom.plate_attach, axis=1))) + 0.02!r} 0.01" rgba="0.5 0.5 0.5 0.5"/>
-    <body name="plate" pos="{_fmt(geom.home_plate)}">
-      <joint name="plate_x" type="slide" axis="1 0 0" damping="{passive_damping}"/>
-      <joint name="plate_y" type="slide" axis="0 1 0" damping="{passive_damping}"/>
-      <joint name="plate_z" type="slide" axis="0 0 1" damping="{passive_damping}"/>
-      <inertial pos="0 0 0" mass="0.3" diaginertia="0.001 0.001 0.001"/>
-      <geom type="cylinder" size="{rn + 0.01!r} 0.005" rgba="0.3 0.7 0.3 1"/>
-      <site name="plate_center" pos="0 0 0" size="0.01"/>
-{plate_sites}
-    </body>{''.join(bodies)}
-  </worldbody>
-  <equality>
-{chr(10).join(eqs)}
-  </equality>
-  <actuator>
-{chr(10).join(acts)}
-  </actuator>
-  <sensor>
-    <framepos name="{PLATE_SENSOR}" objtype="site" objname="plate_center"/>
-  </sensor>
-  <keyframe>
-    <key name="home" qpos="{_fmt(home_qpos)}" ctrl="{_fmt(geom.home_q)}"/>
-  </keyframe>
-</mujoco>
-"""
+        r_fore = np.stack([xf, np.cross(zf, xf), zf], axis=1)  # forearm frame in the arm frame
+        arm = world.add_body(name=f"arm{k}", pos=shoulders[i], quat=_quat(r_arm))
+        arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
+                      damping=ARM_DAMPING, frictionloss=options.joint_friction)
+        arm.explicitinertial = True
+        arm.ipos, arm.mass, arm.inertia = elbow / 2, ARM_MASS_KG, [ARM_INERTIA] * 3
+        arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.r_[np.zeros(3), elbow], size=[0.012, 0, 0],
+                     rgba=[0.2, 0.4, 0.8, 1.0])
+        arm.add_site(name=f"elbow{k}", pos=elbow, size=[0.01, 0, 0])
+        fore = arm.add_body(name=f"forearm{k}", pos=elbow, quat=_quat(r_fore))
+        for axis, label in (([1.0, 0.0, 0.0], "u1"), ([0.0, 1.0, 0.0], "u2")):
+            fore.add_joint(name=f"fa{k}_{label}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=PASSIVE_DAMPING)
+        lb = float(forearms[i])
+        fore.explicitinertial = True
+        fore.ipos, fore.mass, fore.inertia = [0.0, 0.0, lb / 2], FOREARM_MASS_KG, [0.002, 0.002, 0.0002]
+        fore.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, lb], size=[0.006, 0, 0],
+                      rgba=[0.8, 0.5, 0.2, 1.0])
+        fore.add_site(name=f"fa{k}_end", pos=[0.0, 0.0, lb], size=[0.008, 0, 0])
+        spec.add_equality(name=f"close{k}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                          name1=f"fa{k}_end", name2=f"plate_c{k}", solref=[CLOSURE_TIME_CONSTANT_S, 1.0])
+        g = 1.0 / (1.0 + scale[i])
+        act = spec.add_actuator(name=f"motor{k}", target=ARM_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                                gear=[g, 0, 0, 0, 0, 0])
+        act.set_to_position(kp=kp / g**2, kv=kv / g**2)
+        home_qpos += [float(home_q[i]), 0.0, 0.0]
+    spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                    objname=PLATFORM_SITE)
+    # The servo holds the hinge at ctrl / g.
+    spec.add_key(name=HOME_KEY, qpos=home_qpos, ctrl=home_q / (1.0 + scale))
+    return spec
 
 
-def build_delta_model(geom: DeltaMjcfGeometry, **kwargs) -> mujoco.MjModel:
-    """Compile the Delta MJCF (see :func:`build_delta_xml` for keyword arguments).
+def build_machine(robot: Delta, theta: np.ndarray, options: MachineOptions = MachineOptions()) -> Machine:
+    """The compiled Delta machine ``theta`` (the builder contract of :mod:`mjcf.machine`).
 
-    Args:
-        geom: Geometry in metres / radians.
-        **kwargs: Passed to :func:`build_delta_xml`.
-
-    Returns:
-        The compiled ``mujoco.MjModel``.
+    Joint values are the arm angles read at the hinges, rad: ``ctrl = q``.
     """
-    return mujoco.MjModel.from_xml_string(build_delta_xml(geom, **kwargs))
+    model = build_spec(robot, theta, options).compile()
+    return Machine(robot, theta, model, joint_offset=np.zeros(3), joint_scale=np.ones(3), actuated_joints=ARM_JOINTS)

@@ -20,13 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from calib.effects import EFFECTS, Discovery, EffectData, discover_effect, fit_effect, joint_noise_std
-from calib.hexapod import Hexapod
+from calib.hexapod import Hexapod, robot_and_theta
+from mjcf.hexapod import DEFAULT_STIFFNESS_N_PER_M
+from mjcf.machine import GRAVITY_M_S2
+from mjcf.units import M_PER_MM
 
 from .recording import Recording, atomic_write, read_recording
 
 __all__ = ["discover", "DiscoveryReport", "resimulate", "main"]
 
-GRAVITY = 9.81
 DEFAULT_PLATFORM_KG = 2.0
 
 
@@ -59,36 +61,37 @@ def _physics(effect: str, fit, meta: dict) -> tuple[dict, dict]:
     c = fit.coefficients
     moving = float(meta.get("moving_mass_kg", DEFAULT_PLATFORM_KG))
     if effect == "leg_compliance":
-        weight = moving * GRAVITY
-        k = weight / max(c[0] * 1e-3, 1e-12)
+        weight = moving * GRAVITY_M_S2
+        k = weight / max(c[0] * M_PER_MM, 1e-12)
         opts = dict(gravity=True, payload_kg=max(moving - DEFAULT_PLATFORM_KG, 0.0), actuator_stiffness=k)
     elif effect == "joint_friction":
-        opts = dict(joint_friction=max(c[0], 0.0) * 1e-3 * 2e5)
+        opts = dict(joint_friction=max(c[0], 0.0) * M_PER_MM * DEFAULT_STIFFNESS_N_PER_M)
     elif effect == "thermal_drift":
-        fx = dict(leg_growth_mm_per_s=float(c[0]))
+        fx = dict(joint_drift_per_s=float(c[0]))
     elif effect == "actuator_scale":
         opts = dict(transmission_scale=tuple(float(v) for v in c))
     elif effect == "periodic_screw_error":
         a, b = c[0::2], c[1::2]
-        fx = dict(screw_amplitude_mm=tuple(np.hypot(a, b)), screw_phase_rad=tuple(np.arctan2(b, a)),
-                  screw_pitch_mm=float(fit.pitch_mm))
+        fx = dict(screw_amplitude=tuple(np.hypot(a, b)), screw_phase_rad=tuple(np.arctan2(b, a)),
+                  screw_pitch=float(fit.pitch_mm))
     return opts, fx
 
 
 # The one physical parameter re-fitted in MuJoCo through mujoco.sysid, per effect.
 _SYSID_PARAMETER = {"leg_compliance": ("actuator_stiffness", "N/m"), "joint_friction": ("joint_friction", "N"),
-                    "thermal_drift": ("leg_growth_mm_per_s", "mm/s")}
+                    "thermal_drift": ("joint_drift_per_s", "mm/s")}
 
 
 def _simulate(hexapod: Hexapod, rec: Recording, rows: np.ndarray, opts: dict, fx: dict, *,
               history: bool = True) -> np.ndarray:
-    from mjcf.hexapod import HexapodModelOptions
-    from pipeline.testbed import HexapodTestbed, MachineEffects
+    from mjcf.machine import MachineEffects, MachineOptions
+    from pipeline.testbed import Testbed
 
-    o = HexapodModelOptions(platform_mass_kg=DEFAULT_PLATFORM_KG, **opts)
+    o = MachineOptions(platform_mass_kg=DEFAULT_PLATFORM_KG, **opts)
+    robot, theta = robot_and_theta(hexapod)
     # At rest to 1e-7 m/s is ample for micrometre comparisons (the settled pose is then within
     # about 1e-10 m), and several times faster than the testbed's default.
-    bed = HexapodTestbed(hexapod, o, effects=MachineEffects(**fx), settle_velocity=1e-7)
+    bed = Testbed(robot, theta, options=o, effects=MachineEffects(**fx), settle_velocity=1e-7)
     if not history:
         return bed.measure(rec.commanded[rows], times_s=rec.t_s[rows]).true_poses
     # Replay the whole record in order (friction depends on the motion history), keep rows.

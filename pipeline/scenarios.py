@@ -11,24 +11,24 @@ from __future__ import annotations
 import numpy as np
 
 from calib.effects import _compliance_regressors
-from calib.hexapod import Hexapod, paper_hexapod
+from calib.hexapod import Hexapod, paper_hexapod, robot_and_theta
 from calib.kinematics import inverse_kinematics, leg_vectors
 from calib.noise import SensorNoise
 from calib.workspace import random_poses
-from mjcf.hexapod import HexapodModelOptions
+from mjcf.hexapod import DEFAULT_STIFFNESS_N_PER_M, LEG_MASS_KG
+from mjcf.machine import GRAVITY_M_S2, MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
 
 from .recording import Recording
-from .testbed import HexapodTestbed, MachineEffects
+from .testbed import Testbed
 
-__all__ = ["DISCOVERY_WORKSPACE", "DISCOVERY_NOISE", "effect_recording", "GRAVITY"]
+__all__ = ["DISCOVERY_WORKSPACE", "DISCOVERY_NOISE", "effect_recording"]
 
 #: Workspace of the discovery recordings about the geometry's home pose: +-25 mm in x and y,
 #: -10..+15 mm in z, +-0.1 rad tilt, +-0.15 rad yaw (for the paper's machine z is 190..215 mm).
 DISCOVERY_WORKSPACE = np.array([[-25, 25], [-25, 25], [-10, 15], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
-GRAVITY = 9.81
 # Mean simulated time a pose takes to settle, s (used to size the thermal drift beforehand).
 _SETTLE_S = 0.35
 
@@ -64,27 +64,27 @@ def effect_recording(effect: str, seed: int, *, nominal: Hexapod | None = None, 
     fx: dict = {}
     truth: dict = {"effect": effect, "largest_contribution_mm": mag}
     platform_kg = 2.0
-    base = HexapodModelOptions()
+    base = MachineOptions()
     if effect == "leg_compliance":
         payload = float(rng.uniform(0.0, 5.0))
-        W = (platform_kg + payload) * GRAVITY
+        W = (platform_kg + payload) * GRAVITY_M_S2
         # Axial forces at the targets (platform + payload at its height, legs' own weight).
         X = _compliance_regressors(actual, targets)
         h = base.payload_height_m / M_PER_MM / 100.0 * payload / (platform_kg + payload)
         # Legs' own weight along their axes (-u_z per unit weight) adds to their compression.
         legs = leg_vectors(actual, targets)
         uz = legs[..., 2] / np.linalg.norm(legs, axis=-1)
-        force = -W * (X[..., 0] + h * X[..., 1]) + base.leg_mass_kg * GRAVITY * uz  # N, compression positive
+        force = -W * (X[..., 0] + h * X[..., 1]) + LEG_MASS_KG * GRAVITY_M_S2 * uz  # N, compression positive
         k = float(np.abs(force).max() / (mag * M_PER_MM))
         opts = dict(gravity=True, payload_kg=payload, actuator_stiffness=k)
         truth.update(payload_kg=payload, stiffness_n_per_m=k)
     elif effect == "joint_friction":
-        F = mag * M_PER_MM * base.actuator_stiffness
+        F = mag * M_PER_MM * DEFAULT_STIFFNESS_N_PER_M
         opts = dict(joint_friction=F)
         truth.update(friction_n=F, dead_band_mm=mag)
     elif effect == "thermal_drift":
         rate = mag / (n * _SETTLE_S)
-        fx = dict(leg_growth_mm_per_s=rate)
+        fx = dict(joint_drift_per_s=rate)
         truth.update(growth_rate_mm_per_s=rate)
     elif effect == "actuator_scale":
         u = rng.uniform(0.3, 1.0, 6) * rng.choice([-1.0, 1.0], 6)
@@ -97,12 +97,14 @@ def effect_recording(effect: str, seed: int, *, nominal: Hexapod | None = None, 
         amp = rng.uniform(0.5, 1.0, 6)
         amp *= mag / amp.max()
         phase = rng.uniform(0, 2 * np.pi, 6)
-        fx = dict(screw_amplitude_mm=tuple(amp), screw_phase_rad=tuple(phase), screw_pitch_mm=pitch)
+        fx = dict(screw_amplitude=tuple(amp), screw_phase_rad=tuple(phase), screw_pitch=pitch)
         truth.update(pitch_mm=pitch, amplitude_mm=amp.tolist(), phase_rad=phase.tolist())
     elif effect != "none":
         raise ValueError(f"unknown effect {effect!r}")
-    options = HexapodModelOptions(platform_mass_kg=platform_kg, **opts)
-    bed = HexapodTestbed(actual, options, noise, seed=int(rng.integers(2**31)), effects=MachineEffects(**fx))
+    options = MachineOptions(platform_mass_kg=platform_kg, **opts)
+    robot, theta = robot_and_theta(actual)
+    bed = Testbed(robot, theta, options=options, effects=MachineEffects(**fx), noise=noise,
+                  seed=int(rng.integers(2**31)))
     m = bed.measure(commanded)
     return Recording(
         geometry=nominal.geometry, noise=noise, t_s=m.t_s, commanded=m.commanded, measured=m.measured,

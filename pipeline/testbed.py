@@ -1,25 +1,24 @@
-"""The simulated testbed: command leg lengths, let the MuJoCo machine settle, read the
-platform pose sensors, add seeded sensor noise.
+"""The simulated testbed of any robot: command joint values, let the MuJoCo machine settle, read
+the platform pose sensors, add seeded sensor noise.
 
-This is the boundary between the project's units (mm, rad) and MuJoCo's (m): conversions go
-through :mod:`mjcf.units` and happen here only.
+The machine is built by :func:`mjcf.build_machine` from the robot and its true parameter vector;
+the conversion between the project's units (mm, rad) and MuJoCo's SI happens in the
+:class:`mjcf.machine.Machine` it returns (through :mod:`mjcf.units`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
-from calib._validate import as_array
-from calib.hexapod import Hexapod
 from calib.noise import SensorNoise
-from calib.rotation import euler_from_quaternion
-from mjcf.hexapod import SENSOR_POS, SENSOR_QUAT, HexapodModelOptions, build_hexapod
-from mjcf.units import m_to_mm, mm_to_m
+from calib.robot import Robot
+from mjcf import build_machine
+from mjcf.machine import MachineEffects, MachineOptions
 
-__all__ = ["SettleError", "Measurements", "MachineEffects", "HexapodTestbed"]
+__all__ = ["SettleError", "Measurements", "Testbed"]
 
 
 class SettleError(RuntimeError):
@@ -28,167 +27,161 @@ class SettleError(RuntimeError):
 
 @dataclass(frozen=True, eq=False)
 class Measurements:
-    """What the testbed returns for N commanded leg-length sets.
+    """What the testbed returns for N commanded joint sets (C chains, D pose coordinates).
 
     Attributes:
-        t_s: (N,) simulated time at each measurement, s.
-        commanded: (N, 6) commanded leg lengths, mm.
-        true_poses: (N, 6) settled platform poses before sensor noise, mm and rad.
-        measured: (N, 6) measured poses (true + seeded noise), mm and rad.
+        t_s: (N,) time of each measurement, s (simulated, or the ``times_s`` given).
+        commanded: (N, C) commanded joint values, robot joint unit (mm or rad).
+        joints: (N, C) joint values the machine reports: the settled actuated joints (its
+            encoders) plus seeded joint noise, robot joint unit.
+        true_poses: (N, D) settled platform poses before sensor noise, mm and rad, base frame.
+        measured: (N, D) measured poses (true + seeded noise), mm and rad, base frame.
         steps: (N,) simulation steps each pose took to settle.
     """
 
     t_s: np.ndarray
     commanded: np.ndarray
+    joints: np.ndarray
     true_poses: np.ndarray
     measured: np.ndarray
     steps: np.ndarray
 
 
-@dataclass(frozen=True)
-class MachineEffects:
-    """Non-geometric effects of the simulated machine beyond those of the MJCF options.
-
-    (Gravity, payload, servo stiffness, joint friction and transmission scale are options of
-    the model, :class:`mjcf.hexapod.HexapodModelOptions`.)
-
-    Attributes:
-        leg_growth_mm_per_s: every leg's body grows at this rate over the simulated time (a
-            thermal drift), mm/s; the leg tip in the model moves out by rate x time at the start of
-            each move.
-        screw_amplitude_mm: (6,) amplitude of each leg's lead-screw error, mm: the nut sits
-            ``A_i sin(2 pi stroke / pitch + phase_i)`` from where the encoder says. MuJoCo has no
-            periodic transmission element, so the error enters the leg's servo reference.
-        screw_phase_rad: (6,) phase of each screw's error, rad.
-        screw_pitch_mm: period of the screw error in stroke, mm.
-    """
-
-    leg_growth_mm_per_s: float = 0.0
-    screw_amplitude_mm: tuple = (0.0,) * 6
-    screw_phase_rad: tuple = (0.0,) * 6
-    screw_pitch_mm: float = 5.0
-
-    def __post_init__(self) -> None:
-        for name in ("screw_amplitude_mm", "screw_phase_rad"):
-            v = tuple(float(x) for x in getattr(self, name))
-            if len(v) != 6:
-                raise ValueError(f"{name} must have 6 values, got {len(v)}")
-            object.__setattr__(self, name, v)
-        if not self.screw_pitch_mm > 0:
-            raise ValueError(f"screw_pitch_mm must be > 0, got {self.screw_pitch_mm!r}")
-
-    def to_dict(self) -> dict:
-        return {"leg_growth_mm_per_s": self.leg_growth_mm_per_s, "screw_amplitude_mm": list(self.screw_amplitude_mm),
-                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch_mm": self.screw_pitch_mm}
-
-
-@dataclass
-class HexapodTestbed:
-    """A perturbed hexapod simulated in MuJoCo, measured like a metrology lab would.
+class Testbed:
+    """A robot with true parameters ``theta`` simulated in MuJoCo, measured like a metrology lab.
 
     Args:
-        actual: the machine's true parameter set (nominal geometry + errors), mm.
-        options: MuJoCo physics options (gravity, payload, stiffness, friction).
-        noise: sensor noise added to the measured poses.
+        robot: the robot (:class:`calib.robot.Robot`).
+        theta: (P,) its true parameter vector (nominal + errors), mm and rad.
+        options: physical options of the machine (gravity, payload, servo, friction,
+            transmission scale).
+        effects: joint-space effects the testbed adds (thermal drift, periodic screw error).
+        noise: sensor noise added to the measured poses (and to the joint readings).
         seed: seed of the sensor noise; the same seed gives the same numbers.
         settle_velocity: at rest when every joint speed is below this, m/s or rad/s.
         max_steps: step cap per pose; beyond it :class:`SettleError` is raised.
-        effects: further non-geometric effects (thermal growth, screw error).
 
-    Joint friction is simulated in its quasi-static limit: while a leg moves to a new command
-    the Coulomb friction force ``options.joint_friction`` opposes its motion, and a leg
-    approached monotonically comes to rest where its servo force equals that friction, short
-    of the target by friction / stiffness: a dead band whose sign is the direction in which the
-    leg last moved (hysteresis). The force is applied as a joint force in MuJoCo. (MuJoCo's own
-    ``frictionloss`` is a soft constraint: it creeps to the target and leaves no dead band.)
+    Each measurement commands the servo references ``machine.ctrl(joints + effects)`` and steps
+    until at rest. The effects, per actuated chain, in the robot's joint unit:
+
+    * thermal drift: ``effects.joint_drift_per_s * t`` with ``t`` the time of the measurement
+      (``times_s``, default the simulated time) at the start of the move; drift is slow next to
+      settling, so the chain keeps that length while the machine settles;
+    * periodic screw error: ``A_i sin(2 pi stroke_i / pitch + phase_i)``, ``stroke`` the command
+      minus the joint value of the home keyframe (MuJoCo has no periodic transmission element);
+    * transmission scale: built into the actuator's gear by the builder;
+    * Coulomb friction ``options.joint_friction`` (N or N m) in its quasi-static limit: while a
+      chain moves to a new command the friction force opposes its motion, and a chain approached
+      monotonically comes to rest where its servo force equals the friction, short of the target
+      by friction / stiffness: a dead band whose sign is the direction in which the chain last
+      moved (hysteresis). It is applied as a joint force on the actuated dof. MuJoCo's own
+      ``frictionloss`` (which the builders write, for the viewer and the dynamics) is a soft
+      constraint: it creeps to the target and leaves no dead band.
+
+    Noise: pose noise ``noise.sample`` is drawn after the poses settle, then joint noise
+    ``noise.sample_joints`` from the same stream (not drawn at all when ``noise.joint`` is 0).
     """
 
-    actual: Hexapod
-    options: HexapodModelOptions = field(default_factory=HexapodModelOptions)
-    noise: SensorNoise = field(default_factory=SensorNoise)
-    seed: int = 0
-    settle_velocity: float = 1e-9
-    max_steps: int = 20000
-    effects: MachineEffects = field(default_factory=MachineEffects)
+    __test__ = False  # a name pytest would otherwise try to collect
 
-    def __post_init__(self) -> None:
-        self.model = build_hexapod(self.actual, self.options)
+    def __init__(self, robot: Robot, theta, *, options: MachineOptions = MachineOptions(),
+                 effects: MachineEffects = MachineEffects(), noise: SensorNoise = SensorNoise(), seed=0,
+                 settle_velocity: float = 1e-9, max_steps: int = 20000):
+        if not (np.isfinite(settle_velocity) and settle_velocity > 0):
+            raise ValueError(f"settle_velocity must be > 0, got {settle_velocity!r}")
+        if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
+            raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+        c = robot.n_chains
+        if len(effects.screw_amplitude) not in (0, c):
+            raise ValueError(f"effects.screw_amplitude must have {c} values (one per {robot.chain_word}), "
+                             f"got {len(effects.screw_amplitude)}")
+        self.robot, self.options, self.effects, self.noise = robot, options, effects, noise
+        self.settle_velocity, self.max_steps = float(settle_velocity), int(max_steps)
+        self.machine = build_machine(robot, theta, options)
+        self.model = self.machine.model
         self.data = mujoco.MjData(self.model)
-        self._rng = np.random.default_rng(self.seed)
-        self._home = self.actual.geometry.home_lengths
-        self._pos = self.model.sensor(SENSOR_POS)
-        self._quat = self.model.sensor(SENSOR_QUAT)
-        m = self.model
-        self._slide_dof = np.array([m.joint(f"leg{i + 1}_slide").dofadr[0] for i in range(6)])
-        self._tip = np.array([m.site(f"leg{i + 1}_tip").id for i in range(6)])
-        self._tip_z0 = m.site_pos[self._tip, 2].copy()
-        self._last_ctrl = np.zeros(6)
-        self._direction = np.zeros(6)
-        mujoco.mj_forward(self.model, self.data)
+        self.machine.reset(self.data)
+        #: (C,) joint values at the home keyframe (origin of the screw error's stroke).
+        self.home_joints = self.machine.read_joints(self.data)
+        self._rng = np.random.default_rng(seed)
+        self._screw_amplitude = np.asarray(effects.screw_amplitude) if effects.screw_amplitude else np.zeros(c)
+        self._screw_phase = np.asarray(effects.screw_phase_rad) if effects.screw_phase_rad else np.zeros(c)
+        self._last_ctrl = self.data.ctrl.copy()
+        self._direction = np.zeros(c)
 
-    def _read_pose(self) -> np.ndarray:
-        s = self.data.sensordata
-        pos = s[self._pos.adr[0]:self._pos.adr[0] + 3]
-        quat = s[self._quat.adr[0]:self._quat.adr[0] + 4]
-        return np.r_[m_to_mm(pos), euler_from_quaternion(quat)]
+    def servo_reference(self, joints: np.ndarray, time_s: float) -> np.ndarray:
+        """(C,) the joint values the servos are sent for commanded ``joints`` at ``time_s``:
+        the command plus thermal drift and screw error (robot joint unit)."""
+        fx = self.effects
+        screw = self._screw_amplitude * np.sin(2 * np.pi * (joints - self.home_joints) / fx.screw_pitch
+                                               + self._screw_phase)
+        return joints + screw + fx.joint_drift_per_s * time_s
 
-    def settle(self, lengths_mm: np.ndarray, at_time_s: float | None = None) -> tuple[np.ndarray, int]:
-        """Command one set of leg lengths and step until at rest.
+    def settle(self, joints: np.ndarray, at_time_s: float | None = None) -> tuple[np.ndarray, int]:
+        """Command one set of joint values and step until at rest.
 
         Args:
-            lengths_mm: (6,) commanded leg lengths, mm.
+            joints: (C,) commanded joint values, robot joint unit.
             at_time_s: the (lab) time of this measurement for time-dependent effects; default
                 the simulated time.
 
         Returns:
-            ``(pose, steps)``: (6,) settled true pose (mm, rad) and steps taken.
+            ``(pose, steps)``: (D,) settled true pose (mm, rad) and steps taken.
 
         Raises:
             SettleError: not at rest after ``max_steps`` steps.
         """
-        m, d, fx = self.model, self.data, self.effects
-        stroke = np.asarray(lengths_mm, dtype=float) - self._home
-        screw = np.asarray(fx.screw_amplitude_mm) * np.sin(
-            2 * np.pi * stroke / fx.screw_pitch_mm + np.asarray(fx.screw_phase_rad))
-        d.ctrl[:] = mm_to_m(stroke + screw)
+        m, d, mc = self.model, self.data, self.machine
+        t = d.time if at_time_s is None else at_time_s
+        d.ctrl[:] = mc.ctrl(self.servo_reference(np.asarray(joints, dtype=float), t))
         move = np.sign(d.ctrl - self._last_ctrl)
         self._direction = np.where(move != 0, move, self._direction)
         self._last_ctrl = d.ctrl.copy()
-        d.qfrc_applied[self._slide_dof] = -self.options.joint_friction * self._direction
-        # Thermal growth is slow next to settling: the legs take their length at the time the
-        # move starts and keep it while the machine settles.
-        t = d.time if at_time_s is None else at_time_s
-        m.site_pos[self._tip, 2] = self._tip_z0 + mm_to_m(fx.leg_growth_mm_per_s * t)
+        d.qfrc_applied[mc.dof_index] = -self.options.joint_friction * self._direction
+        qvel, v = d.qvel, self.settle_velocity
+        # max |qvel| < v needs qvel . qvel < nv v^2: the cheap test rules out most steps.
+        bound = qvel.size * v * v
         for step in range(1, self.max_steps + 1):
             mujoco.mj_step(m, d)
-            if step > 5 and np.max(np.abs(d.qvel)) < self.settle_velocity:
-                return self._read_pose(), step
+            if step > 5 and qvel @ qvel < bound and np.max(np.abs(qvel)) < v:
+                return mc.read_pose(d), step
         raise SettleError(
             f"the machine did not settle within {self.max_steps} steps "
-            f"({self.max_steps * m.opt.timestep:g} s) for commanded lengths "
-            f"{np.array2string(np.asarray(lengths_mm), precision=4)} mm: max joint speed "
+            f"({self.max_steps * m.opt.timestep:g} s) for commanded joints "
+            f"{np.array2string(np.asarray(joints), precision=4)} {self.robot.joint_unit}: max joint speed "
             f"{np.max(np.abs(d.qvel)):.3g} > {self.settle_velocity:g}")
 
-    def measure(self, commanded: np.ndarray, progress=None, times_s: np.ndarray | None = None) -> Measurements:
-        """Command each row of leg lengths in turn, settle, read the sensors, add noise.
+    def measure(self, joints: np.ndarray, *, times_s: np.ndarray | None = None, progress=None) -> Measurements:
+        """Command each row of joint values in turn, settle, read the sensors, add noise.
 
         Args:
-            commanded: (N, 6) commanded leg lengths, mm.
-            progress: optional callable ``progress(done, total)``.
+            joints: (N, C) commanded joint values, robot joint unit.
             times_s: (N,) lab times of the measurements (to replay a recording's time axis);
                 default the simulated time.
+            progress: optional callable ``progress(done, total)``.
         """
-        commanded = as_array(commanded, "commanded", (-1, 6))
+        c = self.robot.n_chains
+        joints = np.asarray(joints, dtype=float)
+        if joints.ndim != 2 or joints.shape[1] != c:
+            raise ValueError(f"joints must have shape (N, {c}), got {joints.shape}")
+        if not np.all(np.isfinite(joints)):
+            raise ValueError("joints must be finite")
+        n = joints.shape[0]
         if times_s is not None:
-            times_s = as_array(times_s, "times_s", (commanded.shape[0],))
-        n = commanded.shape[0]
-        true = np.empty((n, 6))
+            times_s = np.asarray(times_s, dtype=float)
+            if times_s.shape != (n,):
+                raise ValueError(f"times_s must have shape ({n},), got {times_s.shape}")
+        true = np.empty((n, self.robot.pose_dim))
+        read = np.empty((n, c))
         t = np.empty(n)
         steps = np.empty(n, dtype=int)
         for k in range(n):
-            true[k], steps[k] = self.settle(commanded[k], None if times_s is None else times_s[k])
+            true[k], steps[k] = self.settle(joints[k], None if times_s is None else times_s[k])
+            read[k] = self.machine.read_joints(self.data)
             t[k] = self.data.time if times_s is None else times_s[k]
             if progress is not None:
                 progress(k + 1, n)
-        measured = true + self.noise.sample(n, self._rng)
-        return Measurements(t, commanded.copy(), true, measured, steps)
+        measured = true + self.noise.sample(n, self._rng, self.robot.pose_units)
+        if self.noise.joint > 0:
+            read = read + self.noise.sample_joints(n, c, self._rng)
+        return Measurements(t, joints.copy(), read, true, measured, steps)

@@ -1,139 +1,150 @@
-"""Tests of mjcf.delta (the MJCF Delta) and pipeline.delta_testbed (measuring it)."""
-
-import dataclasses
+"""The MuJoCo Delta (mjcf.delta) and measuring it through the one testbed (pipeline.testbed)."""
 
 import mujoco
 import numpy as np
 import pytest
 
-from calib.robots.delta import PARAMETER_NAMES, PARAMETER_UNITS, DeltaParams, canonical_params, forward_kinematics, inverse_kinematics
-from calib.delta_identification import DEFAULT_FREE, calibration_gain, identify_fkm, identify_ikm, perturb_params, random_workspace_positions
-from mjcf.delta import ACTUATORS, ARM_JOINTS, PLATE_SENSOR, DeltaMjcfGeometry, build_delta_model, build_delta_xml
-from pipeline.delta_testbed import M_PER_MM, DeltaTestbed, delta_geometry_si
+from calib.engine import identify_chainwise, identify_forward
+from calib.noise import SensorNoise
+from calib.robots.delta import Delta, canonical_params
+from mjcf import build_machine
+from mjcf.delta import ARM_JOINTS, DEFAULT_STIFFNESS_NM_PER_RAD, build_spec
+from mjcf.machine import GRAVITY_M_S2, PLATFORM_SITE, SENSOR_POS, MachineOptions
+from mjcf.units import m_to_mm
+from pipeline.testbed import SettleError, Testbed
 
-NOM = DeltaParams.nominal()
-TRUE = perturb_params(NOM, 1.0, np.deg2rad(1.0), 42)
-FREE_IDX = np.array([PARAMETER_NAMES.index(n) for n in DEFAULT_FREE])
-IS_MM = np.array([u == "mm" for u in PARAMETER_UNITS])[FREE_IDX]
+ROBOT = Delta()
+NOMINAL = ROBOT.table.nominal
+# 1 mm / 1 degree uniform errors, seeded (the Delta paper's "1 mm" scenario).
+TRUE = NOMINAL + np.random.default_rng(42).uniform(-1, 1, 24) * np.where(ROBOT.table.angle_mask(), np.deg2rad(1.0), 1.0)
+
+
+def commands(n: int, seed: int) -> np.ndarray:
+    """(n, 3) nominal inverse kinematics of plate positions drawn in the workspace box, rad."""
+    b = ROBOT.workspace_bounds()
+    x = b[:, 0] + np.random.default_rng(seed).uniform(size=(n, 3)) * (b[:, 1] - b[:, 0])
+    return ROBOT.inverse_kinematics(NOMINAL, x)
 
 
 @pytest.fixture(scope="module")
 def measured():
-    """Noise-free MuJoCo measurements of TRUE at 12 nominal-IK configurations."""
-    q = inverse_kinematics(NOM, random_workspace_positions(12, 3))
-    return DeltaTestbed(TRUE).measure(q)
-
-
-def test_geometry_conversion_is_metres():
-    g = delta_geometry_si(TRUE, rn_mm=30.0)
-    np.testing.assert_allclose(g.shoulder, TRUE.shoulders() * 1e-3)
-    np.testing.assert_allclose(g.forearm, TRUE.Lb * M_PER_MM)
-    np.testing.assert_allclose(g.arm[:, 0], TRUE.Lax * 1e-3)
-    np.testing.assert_allclose(np.linalg.norm(g.plate_attach, axis=1), 0.030)
-    np.testing.assert_allclose(g.home_plate * 1e3, forward_kinematics(TRUE, g.home_q[None])[0])
+    """Noise-free MuJoCo measurements of TRUE at 30 nominal-IK configurations."""
+    return Testbed(ROBOT, TRUE).measure(commands(30, 3))
 
 
 def test_model_structure():
-    m = build_delta_model(delta_geometry_si(TRUE))
+    m = build_machine(ROBOT, TRUE).model
     assert (m.nq, m.nv, m.nu, m.neq) == (12, 12, 3, 3)
     assert all(m.eq_type[k] == mujoco.mjtEq.mjEQ_CONNECT for k in range(m.neq))
-    assert np.all(m.geom_contype == 0) and np.all(m.geom_conaffinity == 0)
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
     assert np.all(m.opt.gravity == 0.0)
-    for name in ARM_JOINTS:
+    for k, name in enumerate(ARM_JOINTS):
         assert m.joint(name).type[0] == mujoco.mjtJoint.mjJNT_HINGE
-    for name in ACTUATORS:
-        assert m.actuator(name).id >= 0
-    assert m.sensor(PLATE_SENSOR).type[0] == mujoco.mjtSensor.mjSENS_FRAMEPOS
+        assert m.actuator_trnid[k, 0] == m.joint(name).id  # one actuator per chain, chain order
+    assert m.sensor(SENSOR_POS).type[0] == mujoco.mjtSensor.mjSENS_FRAMEPOS
     # The plate only translates.
     plate_joints = [m.joint(j) for j in range(m.njnt) if m.jnt_bodyid[j] == m.body("plate").id]
     assert [int(j.type[0]) for j in plate_joints] == [int(mujoco.mjtJoint.mjJNT_SLIDE)] * 3
+    np.testing.assert_allclose(m.actuator_gainprm[:, 0], DEFAULT_STIFFNESS_NM_PER_RAD)
 
 
-def test_home_keyframe_closes_the_chains():
-    g = delta_geometry_si(TRUE)
-    m = build_delta_model(g)
+def test_geometry_is_the_reduced_model_with_a_physical_plate():
+    m = build_machine(ROBOT, TRUE).model
     d = mujoco.MjData(m)
-    mujoco.mj_resetDataKeyframe(m, d, 0)
     mujoco.mj_forward(m, d)
+    p = ROBOT.params(TRUE)
+    attach = ROBOT.rn_mm * np.stack([np.cos(p.theta), np.sin(p.theta), np.zeros(3)], axis=1)
     for i in range(3):
-        np.testing.assert_allclose(d.site(f"fa{i + 1}_end").xpos, d.site(f"plate_c{i + 1}").xpos, atol=1e-12)
-    np.testing.assert_allclose(d.sensor(PLATE_SENSOR).data, g.home_plate, atol=1e-12)
-    np.testing.assert_allclose(d.qpos[[m.joint(n).qposadr[0] for n in ARM_JOINTS]], g.home_q)
+        np.testing.assert_allclose(m_to_mm(d.body(f"arm{i + 1}").xpos), p.shoulders()[i] + attach[i], atol=1e-9)
+        np.testing.assert_allclose(m_to_mm(m.site(f"plate_c{i + 1}").pos), attach[i], atol=1e-9)
+        np.testing.assert_allclose(m_to_mm(m.site(f"fa{i + 1}_end").pos[2]), p.Lb[i], atol=1e-9)
+    assert np.linalg.norm(m_to_mm(m.site("plate_c1").pos)) == pytest.approx(30.0)
 
 
-def test_settled_plate_matches_kinematics(measured):
-    """MuJoCo vs calib forward kinematics of the injected parameters (mm)."""
-    np.testing.assert_allclose(measured.q_true, measured.q_cmd, atol=1e-10)
-    np.testing.assert_allclose(measured.positions_true, forward_kinematics(TRUE, measured.q_true), atol=1e-8)
-    np.testing.assert_array_equal(measured.positions_meas, measured.positions_true)  # noise-free
+def test_home_keyframe_closes_the_chains_at_the_home_position():
+    machine = build_machine(ROBOT, TRUE)
+    d = mujoco.MjData(machine.model)
+    machine.reset(d)
+    for i in range(3):
+        np.testing.assert_allclose(d.site(f"fa{i + 1}_end").xpos, d.site(f"plate_c{i + 1}").xpos, atol=1e-14)
+    np.testing.assert_allclose(machine.read_pose(d), ROBOT.home_pose, atol=1e-9)
+    np.testing.assert_allclose(machine.read_joints(d), ROBOT.inverse_kinematics(TRUE, ROBOT.home_pose[None])[0],
+                               atol=1e-14)
+    # The hinge position is the joint reading: offset 0, scale 1.
+    np.testing.assert_array_equal(machine.ctrl(np.array([0.1, -0.2, 0.3])), [0.1, -0.2, 0.3])
+    assert np.allclose(d.site(PLATFORM_SITE).xpos, d.body("plate").xpos)
+
+
+def test_settled_plate_matches_the_forward_kinematics(measured):
+    """MuJoCo against calib's forward kinematics of the injected parameters (mm)."""
+    np.testing.assert_allclose(measured.joints, measured.commanded, atol=1e-10)
+    fk = ROBOT.forward_kinematics(TRUE, measured.commanded)
+    assert np.abs(measured.true_poses - fk).max() <= 1e-6
+    np.testing.assert_array_equal(measured.measured, measured.true_poses)  # noise-free
     assert np.all(np.diff(measured.t_s) > 0) and measured.steps.max() < 20000
 
 
-@pytest.mark.parametrize("fn", [identify_fkm, identify_ikm])
-def test_identification_through_mujoco_noise_free(measured, fn):
-    """Acceptance 4: identified = injected (canonical, Lay fixed) to 1e-5 mm / 1e-7 rad."""
-    res = fn(NOM, measured.q_meas, measured.positions_meas)
+@pytest.mark.parametrize("method", ["forward", "chainwise"])
+def test_identification_through_mujoco_noise_free(measured, method):
+    """Identified = injected (canonical: Lay held at 0) to 1e-5 mm / 1e-7 rad."""
+    noise = SensorNoise(position_mm=1e-3, distribution="normal")
+    if method == "forward":
+        res = identify_forward(ROBOT, measured.joints, measured.measured, noise)
+    else:
+        res = identify_chainwise(ROBOT, measured.joints, measured.measured, noise, solver="lm")
     assert res.success, res.message
-    err = np.abs(res.estimate.to_vector() - canonical_params(TRUE).to_vector())[FREE_IDX]
-    assert err[IS_MM].max() < 1e-5
-    assert err[~IS_MM].max() < 1e-7
-    assert calibration_gain(TRUE, NOM, res.estimate).mean > 99.99
+    truth = canonical_params(ROBOT.params(TRUE)).to_vector()
+    err = np.abs(res.theta - truth)
+    angle = ROBOT.table.angle_mask()
+    assert err[~angle].max() < 1e-5 and err[angle].max() < 1e-7
 
 
 def test_noise_is_seeded():
-    q = inverse_kinematics(NOM, random_workspace_positions(3, 5))
-    a = DeltaTestbed(TRUE, noise_mm=1e-3, noise_rad=1e-4, seed=9).measure(q)
-    b = DeltaTestbed(TRUE, noise_mm=1e-3, noise_rad=1e-4, seed=9).measure(q)
-    c = DeltaTestbed(TRUE, noise_mm=1e-3, noise_rad=1e-4, seed=10).measure(q)
-    np.testing.assert_array_equal(a.positions_meas, b.positions_meas)
-    np.testing.assert_array_equal(a.q_meas, b.q_meas)
-    assert not np.array_equal(a.positions_meas, c.positions_meas)
-    assert 0 < np.abs(a.positions_meas - a.positions_true).max() < 1e-2
-    assert 0 < np.abs(a.q_meas - a.q_true).max() < 1e-3
+    q = commands(3, 5)
+    noise = SensorNoise(position_mm=1e-3, distribution="normal", joint=1e-4)
+    a = Testbed(ROBOT, TRUE, noise=noise, seed=9).measure(q)
+    b = Testbed(ROBOT, TRUE, noise=noise, seed=9).measure(q)
+    c = Testbed(ROBOT, TRUE, noise=noise, seed=10).measure(q)
+    np.testing.assert_array_equal(a.measured, b.measured)
+    np.testing.assert_array_equal(a.joints, b.joints)
+    assert not np.array_equal(a.measured, c.measured)
+    rng = np.random.default_rng(9)
+    np.testing.assert_allclose(a.measured - a.true_poses, noise.sample(3, rng, ROBOT.pose_units), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.joints - q, noise.sample_joints(3, 3, rng), rtol=0, atol=1e-9)
+
+
+def test_friction_dead_band_and_transmission_scale_on_the_arms():
+    q = commands(2, 8)
+    friction = 0.5  # N m against 2000 N m/rad: 2.5e-4 rad
+    m = Testbed(ROBOT, TRUE, options=MachineOptions(joint_friction=friction)).measure(q)
+    home = ROBOT.inverse_kinematics(TRUE, ROBOT.home_pose[None])[0]
+    direction = np.sign(np.diff(np.vstack([home, q]), axis=0))
+    np.testing.assert_allclose(q - m.joints, direction * friction / DEFAULT_STIFFNESS_NM_PER_RAD, atol=1e-9)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.joints), atol=1e-6)
+    s = np.array([1e-3, -2e-3, 5e-4])
+    m = Testbed(ROBOT, TRUE, options=MachineOptions(transmission_scale=tuple(s))).measure(q)
+    np.testing.assert_allclose(m.joints, (1 + s) * q, atol=1e-10)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.joints), atol=1e-6)
+
+
+def test_gravity_and_payload_pull_the_plate_down():
+    q = commands(2, 9)
+    m = Testbed(ROBOT, TRUE, options=MachineOptions(gravity=True, payload_kg=1.0)).measure(q)
+    assert build_machine(ROBOT, TRUE, MachineOptions(gravity=True)).model.opt.gravity[2] == pytest.approx(-GRAVITY_M_S2)
+    sag = m.true_poses[:, 2] - ROBOT.forward_kinematics(TRUE, q)[:, 2]
+    assert np.all(sag < -1e-3) and np.all(sag > -1.0)  # compliant servos: micrometres to a millimetre
 
 
 def test_step_cap_raises():
-    bed = DeltaTestbed(TRUE, max_steps=10)
-    q = inverse_kinematics(NOM, np.array([[50.0, 0.0, -400.0]]))
-    with pytest.raises(RuntimeError, match="configuration 0: the Delta did not settle within max_steps=10 steps"):
-        bed.measure(q)
+    bed = Testbed(ROBOT, TRUE, max_steps=10)
+    with pytest.raises(SettleError, match=r"did not settle within 10 steps .* rad: max joint speed"):
+        bed.measure(commands(1, 0))
 
 
-@pytest.mark.parametrize(
-    "kwargs, match",
-    [
-        ({"noise_mm": -1.0}, "noise_mm must be finite and >= 0, got -1.0"),
-        ({"noise_rad": np.nan}, "noise_rad must be finite and >= 0"),
-        ({"max_steps": 0}, "max_steps must be a positive integer, got 0"),
-        ({"vel_tol": 0.0}, "vel_tol must be positive, got 0.0"),
-        ({"rn_mm": -3.0}, "rn_mm must be finite and >= 0, got -3.0"),
-    ],
-)
-def test_testbed_validation(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        DeltaTestbed(TRUE, **kwargs)
-
-
-def test_measure_validation():
-    bed = DeltaTestbed(NOM)
-    with pytest.raises(ValueError, match=r"q_cmd must have shape \(N, 3\), got \(3,\)"):
-        bed.measure(np.zeros(3))
-
-
-def test_geometry_validation():
-    g = delta_geometry_si(NOM)
-    with pytest.raises(ValueError, match=r"theta must have shape \(3,\), got \(2,\)"):
-        dataclasses.replace(g, theta=np.zeros(2))
-    with pytest.raises(ValueError, match="forearm must be in metres"):
-        dataclasses.replace(g, forearm=np.full(3, 480.0))
-    with pytest.raises(ValueError, match="forearm must be positive"):
-        dataclasses.replace(g, forearm=np.zeros(3))
-    with pytest.raises(ValueError, match="shoulder must be finite"):
-        dataclasses.replace(g, shoulder=np.full((3, 3), np.nan))
-    with pytest.raises(ValueError, match="timestep must be positive, got 0.0"):
-        build_delta_xml(g, timestep=0.0)
-    with pytest.raises(ValueError, match="geom must be a DeltaMjcfGeometry, got DeltaParams"):
-        build_delta_xml(NOM)
-    with pytest.raises(ValueError, match="params must be a DeltaParams, got DeltaMjcfGeometry"):
-        delta_geometry_si(g)
-    assert isinstance(g, DeltaMjcfGeometry)
+def test_validation():
+    with pytest.raises(ValueError, match=r"joints must have shape \(N, 3\), got \(3,\)"):
+        Testbed(ROBOT, NOMINAL).measure(np.zeros(3))
+    with pytest.raises(ValueError, match=r"theta must have shape \(24,\), got \(23,\)"):
+        build_spec(ROBOT, NOMINAL[:23])
+    with pytest.raises(ValueError, match=r"transmission_scale must have 3 values \(one per chain\), got 6"):
+        build_spec(ROBOT, NOMINAL, MachineOptions(transmission_scale=(0.0,) * 6))

@@ -1,55 +1,123 @@
+"""The one MuJoCo testbed, on the hexapod (the Delta through it: tests/test_mjcf_delta.py)."""
+
 import numpy as np
 import pytest
 
-from calib.hexapod import paper_hexapod
-from calib.kinematics import forward_kinematics, inverse_kinematics
 from calib.noise import SensorNoise
-from calib.workspace import random_poses
-from mjcf.hexapod import HexapodModelOptions
-from pipeline.testbed import HexapodTestbed, SettleError
+from calib.paper import TABLE3_ERRORS
+from calib.robots.hexapod import paper_hexapod
+from mjcf.machine import MachineEffects, MachineOptions
+from mjcf.units import M_PER_MM
+from pipeline.testbed import SettleError, Testbed
 
-NOMINAL = paper_hexapod()
-ACTUAL = paper_hexapod(with_table3_errors=True)
+ROBOT = paper_hexapod()
+NOMINAL = ROBOT.table.nominal
+ACTUAL = NOMINAL + TABLE3_ERRORS.ravel()
+
+
+def commands(n: int, seed: int) -> np.ndarray:
+    """(n, 6) nominal inverse kinematics of poses drawn in the robot's workspace, mm."""
+    b = ROBOT.workspace_bounds()
+    poses = b[:, 0] + np.random.default_rng(seed).uniform(size=(n, 6)) * (b[:, 1] - b[:, 0])
+    return ROBOT.inverse_kinematics(NOMINAL, poses)
 
 
 def test_gravity_off_settled_pose_equals_forward_kinematics_on_100_poses():
-    commanded = inverse_kinematics(NOMINAL, random_poses(100, 42))
-    m = HexapodTestbed(ACTUAL).measure(commanded)
-    fk = forward_kinematics(ACTUAL, commanded)
-    assert np.abs(m.true_poses[:, :3] - fk[:, :3]).max() < 1e-6  # mm
-    assert np.abs(m.true_poses[:, 3:] - fk[:, 3:]).max() < 1e-9  # rad
+    commanded = commands(100, 42)
+    m = Testbed(ROBOT, ACTUAL).measure(commanded)
+    fk = ROBOT.forward_kinematics(ACTUAL, commanded)
+    assert np.abs(m.true_poses[:, :3] - fk[:, :3]).max() <= 1e-6  # mm
+    assert np.abs(m.true_poses[:, 3:] - fk[:, 3:]).max() <= 1e-9  # rad
     np.testing.assert_array_equal(m.measured, m.true_poses)  # no noise declared
-    assert np.all(np.diff(m.t_s) > 0)
+    np.testing.assert_allclose(m.joints, commanded, atol=1e-6)  # unloaded servos sit at their command
+    np.testing.assert_array_equal(m.commanded, commanded)
+    assert np.all(np.diff(m.t_s) > 0) and m.steps.min() > 5
 
 
-def test_noise_is_seeded_and_added_to_the_true_pose():
-    commanded = inverse_kinematics(NOMINAL, random_poses(5, 1))
+def test_noise_is_seeded_and_is_the_declared_stream():
+    commanded = commands(5, 1)
     noise = SensorNoise(0.001, 1e-6)
-    a = HexapodTestbed(ACTUAL, noise=noise, seed=7).measure(commanded)
-    b = HexapodTestbed(ACTUAL, noise=noise, seed=7).measure(commanded)
-    c = HexapodTestbed(ACTUAL, noise=noise, seed=8).measure(commanded)
+    a = Testbed(ROBOT, ACTUAL, noise=noise, seed=7).measure(commanded)
+    b = Testbed(ROBOT, ACTUAL, noise=noise, seed=7).measure(commanded)
+    c = Testbed(ROBOT, ACTUAL, noise=noise, seed=8).measure(commanded)
     np.testing.assert_array_equal(a.measured, b.measured)
     assert not np.array_equal(a.measured, c.measured)
-    d = a.measured - a.true_poses
-    assert np.abs(d[:, :3]).max() <= 0.001 and np.abs(d[:, 3:]).max() <= 1e-6
-    assert np.abs(d[:, :3]).max() > 0
+    # The pose noise is the seed's first draw (as the hexapod testbed has always drawn it).
+    np.testing.assert_allclose(a.measured - a.true_poses, noise.sample(5, np.random.default_rng(7), ROBOT.pose_units),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(a.joints, b.joints)  # no joint noise declared: none drawn
+    # Joint noise comes after the pose noise, from the same stream.
+    jn = SensorNoise(0.001, 1e-6, joint=1e-4)
+    d = Testbed(ROBOT, ACTUAL, noise=jn, seed=7).measure(commanded)
+    rng = np.random.default_rng(7)
+    np.testing.assert_allclose(d.measured - d.true_poses, jn.sample(5, rng, ROBOT.pose_units), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.joints - a.joints, jn.sample_joints(5, 6, rng), rtol=0, atol=1e-12)
+    assert 0 < np.abs(d.joints - a.joints).max() <= 1e-4
 
 
 def test_gravity_and_payload_make_the_platform_sag():
-    commanded = inverse_kinematics(NOMINAL, random_poses(3, 2))
-    m = HexapodTestbed(ACTUAL, HexapodModelOptions(gravity=True, payload_kg=5.0)).measure(commanded)
-    sag = m.true_poses[:, 2] - forward_kinematics(ACTUAL, commanded)[:, 2]
+    commanded = commands(3, 2)
+    m = Testbed(ROBOT, ACTUAL, options=MachineOptions(gravity=True, payload_kg=5.0)).measure(commanded)
+    sag = m.true_poses[:, 2] - ROBOT.forward_kinematics(ACTUAL, commanded)[:, 2]
     # 5 kg + 2 kg platform on six legs of 2e5 N/m: of order 0.1 mm down.
     assert np.all(sag < -0.03) and np.all(sag > -0.3)
+    # The legs are compressed: they read shorter than commanded.
+    assert np.all(m.joints < m.commanded)
+
+
+def test_friction_leaves_a_dead_band_of_friction_over_stiffness_against_the_last_move():
+    friction, stiffness = 1.0, 2e5  # N, N/m: dead band 5 um
+    band_mm = friction / stiffness / M_PER_MM
+    home = ROBOT.home_lengths
+    # Out, further out (same direction), back in, then legs 1-3 out and 4-6 in.
+    steps = np.array([[2.0] * 6, [3.0] * 6, [1.0] * 6, [1.5] * 3 + [0.5] * 3])
+    direction = np.array([[1.0] * 6, [1.0] * 6, [-1.0] * 6, [1.0] * 3 + [-1.0] * 3])
+    bed = Testbed(ROBOT, ACTUAL, options=MachineOptions(actuator_stiffness=stiffness, joint_friction=friction))
+    m = bed.measure(home + steps)
+    np.testing.assert_allclose(m.commanded - m.joints, direction * band_mm, atol=1e-7)
+    # The platform is where the kinematics of the legs' actual lengths put it.
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
+
+
+def test_thermal_drift_and_screw_error_enter_the_servo_reference():
+    commanded = commands(4, 5)
+    times = np.array([0.0, 10.0, 20.0, 30.0])
+    drift = Testbed(ROBOT, ACTUAL, effects=MachineEffects(joint_drift_per_s=1e-4)).measure(commanded, times_s=times)
+    np.testing.assert_allclose(drift.joints - commanded, 1e-4 * times[:, None] * np.ones(6), atol=1e-7)
+    np.testing.assert_array_equal(drift.t_s, times)
+    amp, phase, pitch = np.linspace(1e-3, 6e-3, 6), np.linspace(0, 3, 6), 4.0
+    screw = Testbed(ROBOT, ACTUAL, effects=MachineEffects(screw_amplitude=amp, screw_phase_rad=phase,
+                                                          screw_pitch=pitch)).measure(commanded)
+    expected = amp * np.sin(2 * np.pi * (commanded - ROBOT.home_lengths) / pitch + phase)
+    np.testing.assert_allclose(screw.joints - commanded, expected, atol=1e-7)
+    # In both, the pose follows the legs' actual lengths.
+    for m in (drift, screw):
+        np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
+
+
+def test_transmission_scale_moves_the_legs_1_plus_s_times_the_stroke():
+    s = np.array([1e-3, -2e-3, 0.0, 5e-4, 0.0, -1e-3])
+    commanded = commands(3, 6)
+    m = Testbed(ROBOT, ACTUAL, options=MachineOptions(transmission_scale=tuple(s))).measure(commanded)
+    home = ROBOT.home_lengths
+    np.testing.assert_allclose(m.joints - home, (1 + s) * (commanded - home), atol=1e-7)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
 
 
 def test_step_cap_raises_a_clear_error():
-    bed = HexapodTestbed(ACTUAL, max_steps=20)
-    commanded = inverse_kinematics(NOMINAL, random_poses(1, 3))
-    with pytest.raises(SettleError, match="did not settle within 20 steps"):
-        bed.measure(commanded)
+    bed = Testbed(ROBOT, ACTUAL, max_steps=20)
+    with pytest.raises(SettleError, match=r"did not settle within 20 steps .* mm: max joint speed"):
+        bed.measure(commands(1, 3))
 
 
-def test_bad_commanded_shape():
-    with pytest.raises(ValueError, match=r"commanded must have shape \(N, 6\), got \(6,\)"):
-        HexapodTestbed(ACTUAL).measure(np.zeros(6))
+def test_validation():
+    with pytest.raises(ValueError, match=r"joints must have shape \(N, 6\), got \(6,\)"):
+        Testbed(ROBOT, ACTUAL).measure(np.zeros(6))
+    with pytest.raises(ValueError, match=r"times_s must have shape \(2,\), got \(3,\)"):
+        Testbed(ROBOT, ACTUAL).measure(commands(2, 0), times_s=np.zeros(3))
+    with pytest.raises(ValueError, match=r"effects.screw_amplitude must have 6 values \(one per leg\), got 3"):
+        Testbed(ROBOT, ACTUAL, effects=MachineEffects(screw_amplitude=(1, 2, 3), screw_phase_rad=(0, 0, 0)))
+    with pytest.raises(ValueError, match="settle_velocity must be > 0"):
+        Testbed(ROBOT, ACTUAL, settle_velocity=0.0)
+    with pytest.raises(ValueError, match="max_steps must be a positive integer, got 0"):
+        Testbed(ROBOT, ACTUAL, max_steps=0)
