@@ -42,7 +42,7 @@ from .rotation import (
     rotation_matrix,
 )
 from .workspace import random_poses
-from .design import DesignResult, Workspace, design_poses, full_workspace, paper_workspace
+from .design import DesignResult, Workspace, design_poses, robot_workspace
 from .effects import EFFECTS, Discovery, EffectData, EffectFit, discover_effect, fit_effect
 from .observability import (
     ObservabilityAnalysis,
@@ -73,7 +73,7 @@ __all__ = [
     "rotation_matrix", "random_poses", "OutlierReport", "find_outliers",
     "delta", "DeltaParams", "canonical_params", "DeltaIdentificationResult", "GainReport",
     "calibration_gain", "identify_fkm", "identify_ikm",
-    "DesignResult", "Workspace", "design_poses", "full_workspace", "paper_workspace",
+    "DesignResult", "Workspace", "design_poses", "robot_workspace",
     "EFFECTS", "Discovery", "EffectData", "EffectFit", "discover_effect", "fit_effect",
     "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
     "identification_jacobian", "pose_uncertainty",
