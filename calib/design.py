@@ -104,7 +104,8 @@ class Workspace:
         object.__setattr__(self, "bounds", frozen_array(b))
         for name, lo, hi in (("max_condition", 1.0, np.inf), ("passive_joint_limit_rad", 0.0, np.pi)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and lo < v <= hi):
+            number = isinstance(v, (int, float, np.floating)) and not isinstance(v, bool)
+            if not (number and np.isfinite(v) and lo < v <= hi):
                 raise ValueError(f"{name} must be a finite number in ({lo:g}, {hi:g}], got {v!r}")
             object.__setattr__(self, name, float(v))
 

@@ -79,10 +79,9 @@ def trial_noise(robot: Robot, noise: SensorNoise, n_poses: int, seed: int, trial
     pose = np.zeros((len(trials), n_poses, d))
     joint = np.zeros((len(trials), n_poses, c))
     for t, k in enumerate(trials):
-        pose[t] = noise.sample(n_poses, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))),
-                               robot.pose_units)
+        pose[t] = noise.sample(n_poses, np.random.SeedSequence(seed, spawn_key=(k,)), robot.pose_units)
         if noise.joint > 0:
-            joint[t] = noise.sample_joints(n_poses, c, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k, 1))))
+            joint[t] = noise.sample_joints(n_poses, c, np.random.SeedSequence(seed, spawn_key=(k, 1)))
     return pose, joint
 
 
@@ -332,7 +331,8 @@ def _poses(args, robot: Robot, ws, noise: SensorNoise):
             raise SystemExit(f"--poses reference: the {robot.name} has no reference poses")
         return np.asarray(poses, dtype=float), None
     if args.poses == "designed":
-        return design_poses(robot, nominal, args.n_poses, ws, noise, criterion=args.criterion, seed=args.seed).poses, None
+        design = design_poses(robot, nominal, args.n_poses, ws, noise, criterion=args.criterion, seed=args.seed)
+        return design.poses, None
     if args.poses == "random":
         return sample_feasible_poses(robot, nominal, ws, args.n_poses, args.seed), None
     try:
@@ -424,12 +424,14 @@ def _markdown(summary: dict) -> str:
              f"{noise['position_mm']:g} mm, {noise['orientation_rad']:g} rad, joints {noise['joint']:g}. "
              f"Machine: {summary['simulated_machine']}.", "",
              f"CRB parameter RMS: {summary['crb_rms_mm']:.4g} mm", "",
-             "| method | param. error RMS (mm) | MSE/CRB min | mean | max (param) | held-out position mean / RMS (um) |",
+             "| method | param. error RMS (mm) | MSE/CRB min | mean | max (param) "
+             "| held-out position mean / RMS (um) |",
              "|---|---|---|---|---|---|"]
     for m, f in summary["methods"].items():
         h = f["heldout_position_mm"]
         lines.append(f"| {m} | {f['parameter_error_rms_mm']:.4g} | {f['mse_over_crb_min']:.3f} | "
-                     f"{f['mse_over_crb_mean']:.3f} | {f['mse_over_crb_max']:.3f} ({f['mse_over_crb_max_parameter']}) | "
+                     f"{f['mse_over_crb_mean']:.3f} | {f['mse_over_crb_max']:.3f} "
+                     f"({f['mse_over_crb_max_parameter']}) | "
                      + (f"{h['mean'] * 1e3:.4g} / {h['rms'] * 1e3:.4g} |" if h else "- |"))
     if summary["predicted_heldout_position_rms_mm_at_crb"] is not None:
         lines += ["", f"Held-out position error RMS predicted at the CRB: "

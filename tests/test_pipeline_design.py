@@ -167,7 +167,8 @@ HEADER = ",".join(command_columns(HEXAPOD))
     (HEADER + "\n" + ",".join(["1"] * 11) + "\n", None, r"cmd.csv: line 2: expected 12 columns, got 11"),
     (HEADER + "\n" + ",".join(["1"] * 12) + "\n" + ",".join(["1"] * 4 + ["abc"] + ["1"] * 7) + "\n", None,
      r"cmd.csv: line 3, column beta_rad: not a number: 'abc'"),
-    (HEADER + "\n" + ",".join(["1"] * 7 + ["nan"] + ["1"] * 4) + "\n", None, r"cmd.csv: line 2, column l2_mm: not finite"),
+    (HEADER + "\n" + ",".join(["1"] * 7 + ["nan"] + ["1"] * 4) + "\n", None,
+     r"cmd.csv: line 2, column l2_mm: not finite"),
     ("x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad\n1,2,3,4,inf,6\n", None, r"line 2, column q2_rad: not finite"),
     (HEADER + "\n", None, r"cmd.csv: no data rows"),
 ])
