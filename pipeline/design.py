@@ -186,8 +186,9 @@ def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tu
         raise FileNotFoundError(f"command file {path} not found")
     rows = list(csv.reader(path.read_text().splitlines()))
     if not rows:
+        kinds = [robot] if robot is not None else [default_robot(name) for name in sorted(ROBOTS)]
         raise ValueError(f"{path}: empty command file, expected a header such as "
-                         f"{','.join(command_columns(robot or default_robot('hexapod')))}")
+                         f"{'; '.join(','.join(command_columns(r)) for r in kinds)}")
     header = tuple(h.strip() for h in rows[0])
     if robot is None:
         robot = _robot_of_header(path, header)

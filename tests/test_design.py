@@ -248,8 +248,9 @@ def test_e_optimal_improves_lambda_min_over_d(name):
 def test_design_is_seeded_and_feasible(name, criterion):
     robot = default_robot(name)
     ws = robot_workspace(robot, "full")
-    a = design_poses(robot, robot.table.nominal, 10, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
-    b = design_poses(robot, robot.table.nominal, 10, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
+    n = max(10, minimum_poses(robot))
+    a = design_poses(robot, robot.table.nominal, n, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
+    b = design_poses(robot, robot.table.nominal, n, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
     np.testing.assert_array_equal(a.poses, b.poses)
     assert feasibility(robot, robot.table.nominal, a.poses, ws)["feasible"].all()
 

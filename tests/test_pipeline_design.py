@@ -5,7 +5,7 @@ import pytest
 
 import calib.robots
 from calib import paper
-from calib.design import feasibility, robot_workspace
+from calib.design import feasibility, minimum_poses, robot_workspace
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability
 from calib.robots import default_robot, robot_from_description
@@ -55,16 +55,17 @@ def test_command_columns_come_from_the_robot():
 def test_cli_writes_command_file_sidecar_summary_and_rrd(tmp_path, name):
     robot = default_robot(name)
     out, summary, rrd = tmp_path / "poses.csv", tmp_path / "summary.json", tmp_path / "design.rrd"
-    argv = ["--robot", name, "--poses", "8", "--seed", "3", "--candidates", "300", "--out", str(out),
+    n = max(8, minimum_poses(robot))
+    argv = ["--robot", name, "--poses", str(n), "--seed", "3", "--candidates", "300", "--out", str(out),
             "--summary-json", str(summary), "--rrd", str(rrd)]
     assert main(argv) == 0
     assert out.read_text().splitlines()[0] == ",".join(command_columns(robot))
     poses, joints = read_command_file(out)  # the robot is found from the header
     np.testing.assert_array_equal((poses, joints), read_command_file(out, robot))
-    assert poses.shape == (8, robot.pose_dim) and joints.shape == (8, robot.n_chains)
+    assert poses.shape == (n, robot.pose_dim) and joints.shape == (n, robot.n_chains)
     np.testing.assert_allclose(joints, robot.inverse_kinematics(robot.table.nominal, poses), rtol=0, atol=1e-12)
     assert feasibility(robot, robot.table.nominal, poses, robot_workspace(robot, "full"))["feasible"].all()
-    np.testing.assert_array_equal(poses, optimal_poses(robot, 8, "d", "full", 3, n_candidates=300))
+    np.testing.assert_array_equal(poses, optimal_poses(robot, n, "d", "full", 3, n_candidates=300))
     side = json.loads(out.with_suffix(".json").read_text())
     assert side["robot"] == name and side["criterion"] == "d" and side["seed"] == 3
     assert side["workspace"]["name"] == "full" and side["columns"] == list(command_columns(robot))
@@ -205,8 +206,9 @@ def test_optimal_poses_validation():
 def test_cli_e_optimal_default_workspace(tmp_path, name):
     robot = default_robot(name)
     out = tmp_path / "e.csv"
-    assert main(["--robot", name, "--poses", "8", "--criterion", "e", "--workspace", "default", "--candidates", "200",
-                 "--out", str(out)]) == 0
+    n = max(8, minimum_poses(robot))
+    assert main(["--robot", name, "--poses", str(n), "--criterion", "e", "--workspace", "default",
+                 "--candidates", "200", "--out", str(out)]) == 0
     side = json.loads(out.with_suffix(".json").read_text())
     assert side["criterion"] == "e" and side["workspace"]["name"] == "default"
     poses, _ = read_command_file(out, robot)

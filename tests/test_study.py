@@ -5,7 +5,7 @@ import pytest
 from scipy.stats import chi2
 
 import calib.robots
-from calib.design import design_poses, robot_workspace
+from calib.design import design_poses, minimum_poses, robot_workspace
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, free_indices
 from calib.robot import KinematicsError
@@ -22,8 +22,8 @@ def setup(name):
     robot = default_robot(name)
     kind = "reference" if robot.reference_errors() is not None else "random"
     theta = robot.table.nominal + true_errors(robot, kind, 0)
-    poses = design_poses(robot, robot.table.nominal, 10, robot_workspace(robot, "full"), NOISE, seed=2,
-                         n_candidates=300).poses
+    poses = design_poses(robot, robot.table.nominal, max(10, minimum_poses(robot)), robot_workspace(robot, "full"),
+                         NOISE, seed=2, n_candidates=300).poses
     return robot, theta, poses, robot.inverse_kinematics(robot.table.nominal, poses)
 
 
@@ -184,7 +184,7 @@ def test_cli_reads_a_command_file(tmp_path, name):
     assert main(["--robot", name, "--trials", "2", "--poses", str(cmd), "--heldout", "0", "--workers", "1",
                  "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
-    assert s["n_poses"] == 10 and s["methods"]["forward"]["heldout_position_mm"] is None
+    assert s["n_poses"] == len(poses) and s["methods"]["forward"]["heldout_position_mm"] is None
     other = "delta" if name != "delta" else "hexapod"
     with pytest.raises(SystemExit, match=f"--poses: .*header must be .*the {other}'s"):
         main(["--robot", other, "--trials", "2", "--poses", str(cmd), "--workers", "1"])
