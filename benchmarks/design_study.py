@@ -1,19 +1,22 @@
-"""Figures for issue #6 (observability, efficiency, optimal poses); prints markdown tables.
+"""Figures of docs/observability.md (observability, efficiency, optimal poses); prints markdown tables.
 
 Usage::
 
-    python benchmarks/design_study.py [--trials 1000] [--seed 0] [--workers 2] [--out FILE.json] [--overwrite]
+    python benchmarks/design_study.py [--robot hexapod] [--trials 1000] [--seed 0] [--workers 2]
+        [--out FILE.json] [--overwrite]
 
 Noise: Gaussian, standard deviation 0.001 mm on each position coordinate and 1e-6 rad on each
-angle (declared = simulated). Machine: the paper's Table 2 geometry with Table 3 errors,
-simulated by :mod:`calib.kinematics` forward kinematics (no MuJoCo).
+angle (declared = simulated). Machine: the robot's default machine with its reference errors
+(the hexapod paper's Table 2 geometry with Table 3 errors) or, for a robot without any, random
+errors (:func:`pipeline.study.true_errors`), simulated by the robot's forward kinematics (no
+MuJoCo).
 
-1. Efficiency: Monte Carlo of the forward (ML) and the paper's per-leg method; per-parameter
-   MSE / CRB (CRB at the true parameters and reached poses).
-2. 10 poses: paper's Table 4 poses vs D-/E-optimal designs in the full and in the paper's
-   workspace: CRB parameter RMS (linearised, noise-free computation), Monte Carlo parameter
-   error RMS and held-out position error (noisy, measured), held-out poses drawn in both
-   workspaces.
+1. Efficiency: Monte Carlo of the forward (ML) and the chain-wise method (the hexapod paper's
+   per-leg least squares); per-parameter MSE / CRB (CRB at the true parameters and reached poses).
+2. 10 poses: the robot's reference poses (the hexapod paper's Table 4) vs D-/E-optimal designs
+   in the full and in the default workspace: CRB parameter RMS (linearised, noise-free
+   computation), Monte Carlo parameter error RMS and held-out position error (noisy, measured),
+   held-out poses drawn in both workspaces.
 3. Number of poses for a held-out position error RMS of 1 um (and 0.5 um): designed vs random
    feasible poses in the same workspace (linearised prediction from the CRB, checked by Monte
    Carlo at the reported N).
@@ -31,18 +34,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calib import paper  # noqa: E402
-from calib.design import design_poses, sample_feasible_poses, workspace_by_name  # noqa: E402
-from calib.hexapod import paper_hexapod  # noqa: E402
-from calib.kinematics import forward_kinematics, inverse_kinematics  # noqa: E402
-from calib.metrics import evaluate_compensation  # noqa: E402
+from calib.design import design_poses, minimum_poses, robot_workspace, sample_feasible_poses, select_poses  # noqa: E402
 from calib.noise import SensorNoise  # noqa: E402
-from calib.observability import analyze_observability, pose_uncertainty  # noqa: E402
-from pipeline.design import atomic_write_bytes  # noqa: E402
-from pipeline.study import monte_carlo  # noqa: E402
+from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
+from calib.robots import default_robot  # noqa: E402
+from pipeline.recording import atomic_write  # noqa: E402
+from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
 
-NOMINAL = paper_hexapod()
-TRUE = paper_hexapod(with_table3_errors=True)
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
 
 
@@ -50,35 +48,48 @@ def log(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
-def heldout_errors(errors: np.ndarray, heldout: np.ndarray) -> dict:
-    """Exact (nonlinear) held-out position errors of the compensated machine, per trial."""
-    rms, mean = [], []
-    for e in errors:
-        ev = evaluate_compensation(TRUE, TRUE.with_errors(TRUE.vector + e), heldout)
-        rms.append(np.sqrt(np.mean(ev.position_after ** 2)))
-        mean.append(ev.position_after.mean())
-    rms, mean = np.array(rms), np.array(mean)
-    return {"rms_um": float(np.sqrt(np.mean(rms ** 2)) * 1e3), "mean_um": float(mean.mean() * 1e3)}
+class Bench:
+    """The robot, its true parameters and the figures of one pose set."""
 
+    def __init__(self, name: str, seed: int):
+        self.robot = default_robot(name)
+        self.nominal = self.robot.table.nominal
+        kind = "reference" if self.robot.reference_errors() is not None else "random"
+        self.theta = self.nominal + true_errors(self.robot, kind, seed)
 
-def predicted_heldout_rms_um(poses: np.ndarray, heldout: np.ndarray) -> float:
-    """Linearised held-out position error RMS at the CRB of a pose set, um."""
-    a = analyze_observability(NOMINAL, poses, NOISE)
-    pu = pose_uncertainty(NOMINAL, heldout, a.crb)
-    return float(np.sqrt(np.mean(pu.position_rms_mm ** 2)) * 1e3)
+    def heldout_errors(self, errors: np.ndarray, heldout: np.ndarray) -> dict:
+        """Exact (nonlinear) held-out position errors of the compensated machine, per trial
+        (``errors``: (T, F) identified minus true free parameters)."""
+        idx = self.robot.table.indices(self.robot.free_default)
+        rms, mean = [], []
+        for e in errors:
+            identified = self.theta.copy()
+            identified[idx] += e
+            pos, _ = compensation_errors(self.robot, self.theta, identified, heldout)
+            rms.append(np.sqrt(np.mean(pos ** 2)))
+            mean.append(pos.mean())
+        rms, mean = np.array(rms), np.array(mean)
+        return {"rms_um": float(np.sqrt(np.mean(rms ** 2)) * 1e3), "mean_um": float(mean.mean() * 1e3)}
 
+    def predicted_heldout_rms_um(self, poses: np.ndarray, heldout: np.ndarray) -> float:
+        """Linearised held-out position error RMS at the CRB of a pose set, um."""
+        a = analyze_observability(self.robot, self.nominal, poses, NOISE)
+        pu = pose_uncertainty(self.robot, self.nominal, heldout, a.parameter_covariance())
+        return float(np.sqrt(np.mean(pu.position_rms_mm ** 2)) * 1e3)
 
-def run_mc(poses, trials, seed, workers, methods):
-    commanded = inverse_kinematics(NOMINAL, poses, stroke_mm=None)
-    reached = forward_kinematics(TRUE, commanded, stroke_mm=None)
-    crb = analyze_observability(TRUE, reached, NOISE)
-    t0 = time.perf_counter()
-    r = monte_carlo(TRUE, commanded, NOISE, trials, seed, methods=methods, workers=workers)
-    return r, crb, time.perf_counter() - t0
+    def run_mc(self, poses, trials, seed, workers, methods):
+        commanded = self.robot.inverse_kinematics(self.nominal, poses)
+        reached = self.robot.forward_kinematics(self.theta, commanded, initial=poses)
+        crb = analyze_observability(self.robot, self.theta, reached, NOISE, joints=commanded)
+        t0 = time.perf_counter()
+        r = monte_carlo(self.robot, self.theta, commanded, NOISE, trials, seed, methods=methods, workers=workers,
+                        initial=poses)
+        return r, crb, time.perf_counter() - t0
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default="hexapod")
     p.add_argument("--trials", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None)
@@ -87,26 +98,30 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.out and Path(args.out).exists() and not args.overwrite:
         raise SystemExit(f"{args.out} exists; pass --overwrite to replace it")
-    full, small = workspace_by_name("full"), workspace_by_name("paper")
-    held = {"full": sample_feasible_poses(NOMINAL, full, 100, [args.seed, 1]),
-            "paper": sample_feasible_poses(NOMINAL, small, 100, [args.seed, 1])}
-    out = {"noise": NOISE.to_dict(), "trials": args.trials, "seed": args.seed}
+    bench = Bench(args.robot, args.seed)
+    robot, nominal = bench.robot, bench.nominal
+    full, small = robot_workspace(robot, "full"), robot_workspace(robot, "default")
+    held = {"full": sample_feasible_poses(robot, nominal, full, 100, [args.seed, 1]),
+            "default": sample_feasible_poses(robot, nominal, small, 100, [args.seed, 1])}
+    out = {"robot": robot.name, "noise": NOISE.to_dict(), "trials": args.trials, "seed": args.seed}
+    scale = parameter_scale(robot)[robot.table.indices(robot.free_default)]
 
     # ---- designs with 10 poses -------------------------------------------------------------
-    sets = {"paper Table 4 poses": paper.TABLE4_NOMINAL_POSES}
-    for wsn, ws in (("full", full), ("paper", small)):
+    reference = robot.reference_poses()
+    sets = {} if reference is None else {"reference poses": reference}
+    for wsn, ws in (("full", full), ("default", small)):
         for c in ("d", "e"):
             t0 = time.perf_counter()
-            sets[f"{c.upper()}-optimal, {wsn} workspace"] = design_poses(NOMINAL, 10, ws, NOISE, criterion=c,
+            sets[f"{c.upper()}-optimal, {wsn} workspace"] = design_poses(robot, nominal, 10, ws, NOISE, criterion=c,
                                                                            seed=args.seed).poses
             log(f"design {c} {wsn}: {time.perf_counter() - t0:.1f} s")
-    sets["random, full workspace"] = sample_feasible_poses(NOMINAL, full, 10, [args.seed, 2])
+    sets["random, full workspace"] = sample_feasible_poses(robot, nominal, full, 10, [args.seed, 2])
 
     rows, eff = [], {}
     ref_rms = None
     for name, poses in sets.items():
-        methods = ("forward", "paper") if name in ("paper Table 4 poses", "D-optimal, full workspace") else ("forward",)
-        r, crb, dt = run_mc(poses, args.trials, args.seed, args.workers, methods)
+        methods = ("forward", "chainwise") if name in ("reference poses", "D-optimal, full workspace") else ("forward",)
+        r, crb, dt = bench.run_mc(poses, args.trials, args.seed, args.workers, methods)
         log(f"{name}: {args.trials} trials x {len(methods)} methods in {dt:.1f} s")
         for m in methods:
             e = r[m]["errors"]
@@ -116,57 +131,56 @@ def main(argv=None) -> int:
                 "poses": name, "method": m,
                 "scaled_condition_number": crb.scaled_condition_number,
                 "crb_rms_mm": crb.crb_rms,
-                "mc_param_rms_mm": float(np.sqrt(mse.mean())),
+                "mc_param_rms_mm": float(np.sqrt(np.mean(mse * scale ** 2))),
                 "mse_over_crb_min": float(ratio.min()), "mse_over_crb_mean": float(ratio.mean()),
                 "mse_over_crb_max": float(ratio.max()),
                 "mse_over_crb_max_parameter": crb.names[int(np.argmax(ratio))],
                 "success_rate": float(r[m]["success"].mean()),
             }
             n_eval = min(args.trials, 200)
-            for hw in ("full", "paper"):
-                row[f"heldout_{hw}"] = heldout_errors(e[:n_eval], held[hw])
-                row[f"heldout_{hw}"]["predicted_rms_um"] = predicted_heldout_rms_um(poses, held[hw])
-            if name == "paper Table 4 poses" and m == "forward":
+            for hw in ("full", "default"):
+                row[f"heldout_{hw}"] = bench.heldout_errors(e[:n_eval], held[hw])
+                row[f"heldout_{hw}"]["predicted_rms_um"] = bench.predicted_heldout_rms_um(poses, held[hw])
+            if name == "reference poses" and m == "forward":
                 ref_rms = row
             rows.append(row)
             eff[f"{name} / {m}"] = {nm: float(v) for nm, v in zip(crb.names, ratio)}
     for row in rows:
-        if row["method"] == "forward":
-            row["crb_rms_gain_vs_paper_poses"] = ref_rms["crb_rms_mm"] / row["crb_rms_mm"]
-            row["mc_rms_gain_vs_paper_poses"] = ref_rms["mc_param_rms_mm"] / row["mc_param_rms_mm"]
+        if row["method"] == "forward" and ref_rms is not None:
+            row["crb_rms_gain_vs_reference_poses"] = ref_rms["crb_rms_mm"] / row["crb_rms_mm"]
+            row["mc_rms_gain_vs_reference_poses"] = ref_rms["mc_param_rms_mm"] / row["mc_param_rms_mm"]
     out["ten_poses"] = rows
     out["mse_over_crb_per_parameter"] = eff
 
-    print(f"\n## 10 calibration poses ({args.trials} Monte Carlo trials per row; noise std 1 um, 1e-6 rad)\n")
-    print("| poses | method | cond. (col-scaled) | CRB param RMS (mm) | MC param RMS (mm) | gain vs paper poses (CRB / MC) "
-          "| MSE/CRB min / mean / max (param) | held-out pos. RMS full ws (um, MC / pred.) "
-          "| held-out pos. RMS paper ws (um, MC / pred.) |")
+    print(f"\n## {robot.name}: 10 calibration poses ({args.trials} Monte Carlo trials per row; noise std 1 um, "
+          f"1e-6 rad)\n")
+    print("| poses | method | cond. (col-scaled) | CRB param RMS (mm) | MC param RMS (mm) | gain vs reference poses "
+          "(CRB / MC) | MSE/CRB min / mean / max (param) | held-out pos. RMS full ws (um, MC / pred.) "
+          "| held-out pos. RMS default ws (um, MC / pred.) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r_ in rows:
-        gain = (f"{r_['crb_rms_gain_vs_paper_poses']:.1f}x / {r_['mc_rms_gain_vs_paper_poses']:.1f}x"
-                if "crb_rms_gain_vs_paper_poses" in r_ else "-")
+        gain = (f"{r_['crb_rms_gain_vs_reference_poses']:.1f}x / {r_['mc_rms_gain_vs_reference_poses']:.1f}x"
+                if "crb_rms_gain_vs_reference_poses" in r_ else "-")
         print(f"| {r_['poses']} | {r_['method']} | {r_['scaled_condition_number']:.0f} | {r_['crb_rms_mm']:.4g} | "
               f"{r_['mc_param_rms_mm']:.4g} | {gain} | {r_['mse_over_crb_min']:.2f} / {r_['mse_over_crb_mean']:.2f} / "
               f"{r_['mse_over_crb_max']:.2f} ({r_['mse_over_crb_max_parameter']}) | "
               f"{r_['heldout_full']['rms_um']:.3g} / {r_['heldout_full']['predicted_rms_um']:.3g} | "
-              f"{r_['heldout_paper']['rms_um']:.3g} / {r_['heldout_paper']['predicted_rms_um']:.3g} |")
+              f"{r_['heldout_default']['rms_um']:.3g} / {r_['heldout_default']['predicted_rms_um']:.3g} |")
 
     # ---- poses needed for 1 um -------------------------------------------------------------
-    grid = list(range(7, 31)) + [35, 40, 50, 60, 80, 100, 130, 160, 200, 260, 330, 420, 540, 700]
+    grid = list(range(minimum_poses(robot), 31)) + [35, 40, 50, 60, 80, 100, 130, 160, 200, 260, 330, 420, 540, 700]
     need = {}
     curves = {}
-    for wsn, ws in (("full", full), ("paper", small)):
-        cands = sample_feasible_poses(NOMINAL, ws, 3000, [args.seed, 3])
-        pool = sample_feasible_poses(NOMINAL, ws, max(grid), [args.seed, 4])
+    for wsn, ws in (("full", full), ("default", small)):
+        cands = sample_feasible_poses(robot, nominal, ws, 3000, [args.seed, 3])
         curves[wsn] = {"designed": {}, "random": {}}
         for n in grid:
             if n <= 100:
-                from calib.design import select_poses
-                d = select_poses(NOMINAL, cands, n, NOISE, criterion="d").poses
-                curves[wsn]["designed"][n] = predicted_heldout_rms_um(d, held[wsn])
-            # random: first n of a seeded feasible draw (nested sets), median of 5 draws
-            vals = [predicted_heldout_rms_um(sample_feasible_poses(NOMINAL, ws, n, [args.seed, 5, k]), held[wsn])
-                    for k in range(5)]
+                d = select_poses(robot, nominal, cands, n, NOISE, criterion="d").poses
+                curves[wsn]["designed"][n] = bench.predicted_heldout_rms_um(d, held[wsn])
+            # random: a seeded feasible draw, median of 5 draws
+            vals = [bench.predicted_heldout_rms_um(sample_feasible_poses(robot, nominal, ws, n, [args.seed, 5, k]),
+                                                   held[wsn]) for k in range(5)]
             curves[wsn]["random"][n] = float(np.median(vals))
             log(f"{wsn} N={n}: designed {curves[wsn]['designed'].get(n, float('nan')):.3g} um, "
                 f"random {curves[wsn]['random'][n]:.3g} um")
@@ -179,31 +193,33 @@ def main(argv=None) -> int:
 
     # Monte Carlo check at the reported N (designed and random, 1 um target).
     checks = {}
-    for wsn, ws in (("full", full), ("paper", small)):
+    for wsn, ws in (("full", full), ("default", small)):
         for kind in ("designed", "random"):
             n = need[(wsn, kind, 1.0)]
             if n is None:
                 continue
             if kind == "designed":
-                cands = sample_feasible_poses(NOMINAL, ws, 3000, [args.seed, 3])
-                from calib.design import select_poses
-                poses = select_poses(NOMINAL, cands, n, NOISE, criterion="d").poses
+                cands = sample_feasible_poses(robot, nominal, ws, 3000, [args.seed, 3])
+                poses = select_poses(robot, nominal, cands, n, NOISE, criterion="d").poses
             else:
-                vals = [(predicted_heldout_rms_um(q := sample_feasible_poses(NOMINAL, ws, n, [args.seed, 5, k]),
-                                                  held[wsn]), k, q) for k in range(5)]
+                vals = [(bench.predicted_heldout_rms_um(q := sample_feasible_poses(robot, nominal, ws, n,
+                                                                                   [args.seed, 5, k]), held[wsn]), k, q)
+                        for k in range(5)]
                 poses = sorted(vals, key=lambda v: v[0])[2][2]  # the median draw
             trials = min(args.trials, 200)
-            r, _, _ = run_mc(poses, trials, args.seed + 1, args.workers, ("forward",))
-            checks[f"{wsn}/{kind}"] = {"n": n, "trials": trials, **heldout_errors(r["forward"]["errors"], held[wsn]),
-                                       "predicted_rms_um": predicted_heldout_rms_um(poses, held[wsn])}
+            r, _, _ = bench.run_mc(poses, trials, args.seed + 1, args.workers, ("forward",))
+            checks[f"{wsn}/{kind}"] = {"n": n, "trials": trials,
+                                       **bench.heldout_errors(r["forward"]["errors"], held[wsn]),
+                                       "predicted_rms_um": bench.predicted_heldout_rms_um(poses, held[wsn])}
             log(f"MC check {wsn}/{kind} N={n}: {checks[f'{wsn}/{kind}']}")
     out["poses_needed"] = {f"{w}/{k}/{t}um": v for (w, k, t), v in need.items()}
     out["poses_needed_mc_check"] = checks
 
     print("\n## Poses needed for a held-out position error RMS of 1 um (0.5 um)\n")
-    print("| workspace | designed (D-optimal) | random feasible (median of 5 draws) | MC check at that N, designed / random (um) |")
+    print("| workspace | designed (D-optimal) | random feasible (median of 5 draws) "
+          "| MC check at that N, designed / random (um) |")
     print("|---|---|---|---|")
-    for wsn in ("full", "paper"):
+    for wsn in ("full", "default"):
         def fmt(kind):
             a, b = need[(wsn, kind, 1.0)], need[(wsn, kind, 0.5)]
             return f"{a if a is not None else '>' + str(max(grid))} ({b if b is not None else '>' + str(max(grid))})"
@@ -211,18 +227,18 @@ def main(argv=None) -> int:
         print(f"| {wsn} | {fmt('designed')} | {fmt('random')} | "
               f"{cd['rms_um'] if cd else float('nan'):.3g} / {cr['rms_um'] if cr else float('nan'):.3g} |")
     print("\n## Predicted held-out position error RMS (um) vs number of poses\n")
-    print("| N | " + " | ".join(f"{w} {k}" for w in ("full", "paper") for k in ("designed", "random")) + " |")
+    print("| N | " + " | ".join(f"{w} {k}" for w in ("full", "default") for k in ("designed", "random")) + " |")
     print("|---|" + "---|" * 4)
     for n in grid:
         cells = []
-        for w in ("full", "paper"):
+        for w in ("full", "default"):
             for k in ("designed", "random"):
                 v = curves[w][k].get(n)
                 cells.append(f"{v:.3g}" if v is not None else "-")
         print(f"| {n} | " + " | ".join(cells) + " |")
 
     if args.out:
-        atomic_write_bytes(args.out, (json.dumps(out, indent=2) + "\n").encode(), overwrite=args.overwrite)
+        atomic_write(args.out, json.dumps(out, indent=2) + "\n", overwrite=args.overwrite)
     return 0
 
 

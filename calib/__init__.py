@@ -37,6 +37,15 @@ from .rotation import (
     rotation_matrix,
 )
 from .workspace import random_poses, reachable_poses
+from .design import DesignResult, Workspace, design_poses, robot_workspace
+from .observability import (
+    ObservabilityAnalysis,
+    PoseUncertainty,
+    analyze_observability,
+    fisher_information,
+    identification_jacobian,
+    pose_uncertainty,
+)
 
 __all__ = [
     "paper", "IdentificationResult", "gauge_representative", "identify", "identify_chainwise",
@@ -46,5 +55,7 @@ __all__ = [
     "KinematicsError", "Parameter", "ParameterTable", "Robot", "ROBOTS", "Delta", "Hexapod",
     "default_robot", "robot_from_description", "euler_from_matrix", "euler_from_quaternion",
     "matrix_from_quaternion", "quaternion_from_euler", "rotation_matrix", "random_poses",
-    "reachable_poses",
+    "reachable_poses", "DesignResult", "Workspace", "design_poses", "robot_workspace",
+    "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
+    "identification_jacobian", "pose_uncertainty",
 ]

@@ -1,76 +1,83 @@
-"""Optimal measurement poses: a feasible workspace and D-/E-optimal pose selection.
+"""Optimal measurement poses for any robot: a feasible workspace and D-/E-optimal pose selection.
 
-A :class:`Workspace` is the set of poses the machine may be sent to during calibration:
+Written once over :class:`calib.robot.Robot`. A :class:`Workspace` is the set of poses the
+machine may be sent to during calibration:
 
-* pose bounds (box in x, y, z, alpha, beta, gamma; mm and rad, base frame);
-* leg stroke: every commanded (nominal inverse-kinematics) leg length within
-  ``home length +- stroke_mm``;
-* joint cone limit: the angle between a leg and the base normal (z of the base frame) at its
-  base joint, and between the leg and the platform normal (z of the platform frame) at its
-  platform joint, at most ``cone_limit_rad`` (what a spherical or universal joint allows);
-* distance to singularity: the condition number of the 6x6 pose Jacobian (d leg lengths /
-  d pose), with its angle columns divided by the mean platform-joint radius (so that it does
-  not depend on units, as in :func:`~calib.kinematics.forward_kinematics`), at most
-  ``max_condition``.
+* pose bounds: a box in the robot's pose coordinates (its units, base frame);
+* reach: the inverse kinematics of the controller's parameter set succeeds;
+* joint limits: every commanded joint within :meth:`Robot.joint_limits` (the hexapod's leg
+  stroke, the Delta's motor range);
+* passive joints: every angle of :meth:`Robot.passive_joint_angles` at most
+  ``passive_joint_limit_rad`` (the hexapod's joint cones: the angle between a leg and the
+  normal of its base or platform joint; robots without such limits report none);
+* distance to singularity: the condition number of the closure's pose Jacobian ``dF / d pose``
+  (C x D), its angle columns multiplied by the machine's size (:meth:`Robot.pose_scale`, as in
+  :func:`calib.robot.newton_forward_kinematics`), at most ``max_condition``.
 
-Defaults (:func:`full_workspace`): x, y within +-80 mm, z in [150, 260] mm, angles within
-+-25 degrees, stroke +-50 mm, cone limit 45 degrees, scaled condition number <= 10 (the paper's
-geometry has 31 degrees and 2.4 at home). :func:`paper_workspace` is the paper's Table 4 box
-(+-10 mm, z 200-210 mm, +-3 degrees) with the same joint limits (which do not bind there).
+Two workspaces are named (:data:`WORKSPACES`), both given by the robot: ``"default"``, its
+calibration workspace :meth:`Robot.workspace_bounds` (the hexapod paper's Table 4 box +-10 mm,
+z 200-210 mm, +-3 degrees; the Delta paper's box), and ``"full"``, the box
+:meth:`Robot.full_workspace_bounds` cut by the checks above (hexapod: x, y within +-80 mm,
+z 150-260 mm, angles within +-25 degrees; stroke +-50 mm, cones 45 degrees, scaled condition
+<= 10, 2.4 at home; for a robot without a wider box, the default one).
 
-Pose selection works on the noise-weighted identification Jacobian of each candidate pose,
-``A_c`` (6, 42), linearised at a given parameter set (the nominal one before calibration):
+Pose selection works on the noise-whitened identification Jacobian of each candidate pose,
+``A_c`` (D, F), columns scaled to mm (:func:`calib.observability.parameter_scale`), linearised at
+a given parameter set (the nominal one before calibration):
 
 * D-optimal: maximise ``log det F`` with ``F = sum_c A_c^T A_c`` (minimises the volume of the
-  Cramer-Rao ellipsoid). Greedy forward selection (a tiny ridge makes ``F`` invertible
-  while fewer than 7 poses are chosen), then Fedorov exchange passes: each chosen pose is
-  swapped for the candidate that most increases ``log det F``, using the determinant lemma
-  ``det(F + A^T A) = det F det(I_6 + A F^-1 A^T)`` evaluated for all candidates at once.
+  Cramer-Rao ellipsoid). Greedy forward selection (a tiny ridge makes ``F`` invertible while
+  too few poses are chosen), then Fedorov exchange passes: each chosen pose is swapped for the
+  candidate that most increases ``log det F``, using the determinant lemma
+  ``det(F + A^T A) = det F det(I_D + A F^-1 A^T)`` evaluated for all candidates at once.
 * E-optimal: maximise ``lambda_min(F)`` (minimises the variance of the worst-determined
-  combination). Exchange passes starting from the D-optimal design; candidates are screened
-  by the first-order gain ``|A_c v_min|^2`` and the best ``screen`` of them evaluated exactly.
+  combination). Exchange passes starting from the D-optimal design; candidates are screened by
+  the first-order gain ``|A_c v_min|^2`` and the best ``screen`` of them evaluated exactly.
 
 Candidate poses are drawn uniformly (seeded) in the bounds and kept when feasible.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, frozen_array, as_poses
-from .hexapod import N_PARAMETERS, Hexapod
-from .kinematics import DEFAULT_STROKE_MM, _commanded, _leg_vectors, _pose_jacobian
+from ._validate import as_array, frozen_array
 from .noise import SensorNoise
-from .observability import identification_jacobian
-from .workspace import PAPER_WORKSPACE
+from .observability import free_indices, identification_jacobian, parameter_scale
+from .robot import KinematicsError, Robot
 
 __all__ = [
     "Workspace",
-    "full_workspace",
-    "paper_workspace",
-    "workspace_by_name",
-    "FULL_WORKSPACE_BOUNDS",
+    "WORKSPACES",
     "CRITERIA",
-    "joint_cone_angles",
+    "DEFAULT_MAX_CONDITION",
+    "DEFAULT_PASSIVE_JOINT_LIMIT_RAD",
+    "robot_workspace",
     "scaled_condition",
+    "reachable_joints",
     "feasibility",
     "sample_feasible_poses",
+    "minimum_poses",
     "DesignResult",
     "select_poses",
     "design_poses",
 ]
 
-#: Pose bounds of the default full workspace, (6, 2) low/high, mm and rad.
-FULL_WORKSPACE_BOUNDS = np.array([
-    [-80.0, 80.0], [-80.0, 80.0], [150.0, 260.0],
-    [-np.deg2rad(25.0), np.deg2rad(25.0)], [-np.deg2rad(25.0), np.deg2rad(25.0)],
-    [-np.deg2rad(25.0), np.deg2rad(25.0)],
-])
-_BOUNDS_TOL = 1e-6
+#: The named workspaces of every robot (see the module docstring).
+WORKSPACES = ("full", "default")
 #: Selection criteria: ``"d"`` (D-optimal) and ``"e"`` (E-optimal).
 CRITERIA = ("d", "e")
+#: Largest scaled condition number of the closure's pose Jacobian in a design workspace.
+DEFAULT_MAX_CONDITION = 10.0
+#: Largest passive-joint angle (what a spherical or universal joint allows), rad.
+DEFAULT_PASSIVE_JOINT_LIMIT_RAD = float(np.deg2rad(45.0))
+# Box bounds are checked with this tolerance (mm or rad), so that poses printed to a few digits
+# on the boundary (the hexapod paper's 0.05236 rad for 3 degrees) stay inside.
+BOUNDS_TOLERANCE = 1e-6
+# Rows per inverse-kinematics call while locating unreachable candidates.
+IK_CHUNK = 256
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,141 +85,165 @@ class Workspace:
     """Feasible calibration poses (see the module docstring).
 
     Attributes:
-        bounds: (6, 2) low/high per pose coordinate, mm and rad, base frame.
-        stroke_mm: allowed leg-length deviation from the home length, mm.
-        cone_limit_rad: largest angle between a leg and the joint's normal, rad.
-        max_condition: largest scaled condition number of the 6x6 pose Jacobian.
+        bounds: (D, 2) low/high per pose coordinate, the robot's pose units, base frame.
+        max_condition: largest scaled condition number of the closure's pose Jacobian.
+        passive_joint_limit_rad: largest passive-joint angle (:meth:`Robot.passive_joint_angles`).
         name: label written to command files and summaries.
     """
 
-    bounds: np.ndarray = field(default_factory=lambda: FULL_WORKSPACE_BOUNDS.copy())
-    stroke_mm: float = DEFAULT_STROKE_MM
-    cone_limit_rad: float = float(np.deg2rad(45.0))
-    max_condition: float = 10.0
+    bounds: np.ndarray
+    max_condition: float = DEFAULT_MAX_CONDITION
+    passive_joint_limit_rad: float = DEFAULT_PASSIVE_JOINT_LIMIT_RAD
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        b = as_array(self.bounds, "bounds", (6, 2))
+        b = as_array(self.bounds, "bounds", (-1, 2))
         if np.any(b[:, 0] > b[:, 1]):
             i = int(np.argmax(b[:, 0] > b[:, 1]))
             raise ValueError(f"bounds must have low <= high, got row {i}: {b[i].tolist()}")
         object.__setattr__(self, "bounds", frozen_array(b))
-        for name, lo, hi in (("stroke_mm", 0.0, np.inf), ("cone_limit_rad", 0.0, np.pi / 2),
-                             ("max_condition", 1.0, np.inf)):
+        for name, lo, hi in (("max_condition", 1.0, np.inf), ("passive_joint_limit_rad", 0.0, np.pi)):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and lo < v <= hi):
+            number = isinstance(v, (int, float, np.floating)) and not isinstance(v, bool)
+            if not (number and np.isfinite(v) and lo < v <= hi):
                 raise ValueError(f"{name} must be a finite number in ({lo:g}, {hi:g}], got {v!r}")
             object.__setattr__(self, name, float(v))
 
     def to_dict(self) -> dict:
-        """JSON-ready dict (mm and rad)."""
-        return {"name": self.name, "bounds": self.bounds.tolist(), "stroke_mm": self.stroke_mm,
-                "cone_limit_rad": self.cone_limit_rad, "max_condition": self.max_condition}
+        """JSON-ready dict (the robot's pose units)."""
+        return {"name": self.name, "bounds": self.bounds.tolist(), "max_condition": self.max_condition,
+                "passive_joint_limit_rad": self.passive_joint_limit_rad}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Workspace":
         """Inverse of :meth:`to_dict`."""
-        return cls(bounds=d["bounds"], stroke_mm=d["stroke_mm"], cone_limit_rad=d["cone_limit_rad"],
-                   max_condition=d["max_condition"], name=d.get("name", "custom"))
+        return cls(bounds=d["bounds"], max_condition=d["max_condition"],
+                   passive_joint_limit_rad=d["passive_joint_limit_rad"], name=d.get("name", "custom"))
 
 
-def full_workspace() -> Workspace:
-    """The machine's whole default workspace (see the module docstring)."""
-    return Workspace(name="full")
+def _check_robot(robot) -> None:
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
 
 
-def paper_workspace() -> Workspace:
-    """The paper's small Table 4 workspace (+-10 mm, z 200-210 mm, +-3 degrees)."""
-    return Workspace(bounds=PAPER_WORKSPACE, name="paper")
-
-
-def workspace_by_name(name: str) -> Workspace:
-    """``"full"`` or ``"paper"``."""
-    if name == "full":
-        return full_workspace()
-    if name == "paper":
-        return paper_workspace()
-    raise ValueError(f"workspace must be 'full' or 'paper', got {name!r}")
-
-
-def _check_hexapod(hexapod) -> None:
-    if not isinstance(hexapod, Hexapod):
-        raise TypeError(f"hexapod must be a Hexapod, got {type(hexapod).__name__}")
-
-
-def _check_workspace(workspace) -> None:
+def _check_workspace(robot: Robot, workspace) -> None:
     if not isinstance(workspace, Workspace):
         raise TypeError(f"workspace must be a Workspace, got {type(workspace).__name__}")
+    if workspace.bounds.shape[0] != robot.pose_dim:
+        raise ValueError(f"workspace bounds must have {robot.pose_dim} rows ({', '.join(robot.pose_names)}) "
+                         f"for the {robot.name}, got {workspace.bounds.shape[0]}")
 
 
-def _cone_angles(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
-    L, R = _leg_vectors(hexapod, poses)
-    u = L / np.linalg.norm(L, axis=-1, keepdims=True)
-    base = np.arccos(np.clip(u[..., 2], -1.0, 1.0))
-    plat = np.arccos(np.clip(np.einsum("nli,ni->nl", u, R[:, :, 2]), -1.0, 1.0))
-    return np.stack([base, plat], axis=-1)
+def robot_workspace(robot: Robot, name: str) -> Workspace:
+    """The robot's ``"full"`` or ``"default"`` workspace (see the module docstring)."""
+    _check_robot(robot)
+    if name == "full":
+        return Workspace(bounds=robot.full_workspace_bounds(), name="full")
+    if name == "default":
+        return Workspace(bounds=robot.workspace_bounds(), name="default")
+    raise ValueError(f"workspace must be one of {', '.join(WORKSPACES)}, got {name!r}")
 
 
-def joint_cone_angles(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
-    """Angles between each leg and the joint normals.
-
-    Args:
-        hexapod: parameter set.
-        poses: (N, 6) poses, mm and rad.
-
-    Returns:
-        (N, 6, 2) rad: ``[..., 0]`` at the base joint (leg vs base z axis), ``[..., 1]`` at the
-        platform joint (leg vs platform z axis).
-    """
-    _check_hexapod(hexapod)
-    return _cone_angles(hexapod, as_poses(poses))
+def _poses(robot: Robot, poses, name: str = "poses") -> np.ndarray:
+    return as_array(poses, name, (-1, robot.pose_dim))
 
 
-def _scaled_condition(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
-    r = np.linalg.norm(hexapod.platform_joints, axis=1).mean()
-    scale = np.r_[np.ones(3), np.full(3, 1.0 / r)]
-    return np.linalg.cond(_pose_jacobian(hexapod, poses) * scale)
+def _theta(robot: Robot, theta) -> np.ndarray:
+    return as_array(theta, "theta", (robot.n_parameters,))
 
 
-def scaled_condition(hexapod: Hexapod, poses: np.ndarray) -> np.ndarray:
-    """Condition number of the 6x6 pose Jacobian, angle columns divided by the platform radius.
+def scaled_condition(robot: Robot, theta, poses, joints=None) -> np.ndarray:
+    """Condition number of the closure's pose Jacobian, angle columns times the machine's size.
 
     Args:
-        hexapod: parameter set.
-        poses: (N, 6) poses, mm and rad.
+        robot: the robot.
+        theta: (P,) parameter vector.
+        poses: (N, D) poses, robot's pose units.
+        joints: (N, C) joints at the poses; default the inverse kinematics.
 
     Returns:
         (N,) dimensionless; large near a singularity (inf at one).
     """
-    _check_hexapod(hexapod)
-    return _scaled_condition(hexapod, as_poses(poses))
+    _check_robot(robot)
+    theta, poses = _theta(robot, theta), _poses(robot, poses)
+    if joints is None:
+        joints = robot.inverse_kinematics(theta, poses)
+    J = robot.closure_jacobians(theta, joints, poses).pose
+    with np.errstate(all="ignore"):
+        return np.linalg.cond(J / robot.pose_scale())
 
 
-def feasibility(hexapod: Hexapod, poses: np.ndarray, workspace: Workspace) -> dict:
+def reachable_joints(robot: Robot, theta, poses) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse kinematics of many poses, skipping the ones out of reach.
+
+    Returns:
+        ``(ok, joints)``: (N,) bool, the poses the machine ``theta`` can reach (finite joints);
+        (N, C) their joints, NaN where unreachable.
+    """
+    _check_robot(robot)
+    theta, poses = _theta(robot, theta), _poses(robot, poses)
+    n = poses.shape[0]
+    joints = np.full((n, robot.n_chains), np.nan)
+    for start in range(0, n, IK_CHUNK):
+        pending = np.arange(start, min(start + IK_CHUNK, n))
+        while pending.size:
+            try:
+                joints[pending] = robot.inverse_kinematics(theta, poses[pending])
+                break
+            except KinematicsError as exc:
+                k = exc.index
+            if not 0 <= k < pending.size:  # no usable row number: one row at a time
+                for r in pending:
+                    try:
+                        joints[r] = robot.inverse_kinematics(theta, poses[r:r + 1])[0]
+                    except KinematicsError:
+                        pass
+                break
+            pending = np.delete(pending, k)  # the first unreachable row; retry the others
+    ok = np.all(np.isfinite(joints), axis=1)
+    return ok, joints
+
+
+def _checks(robot: Robot, theta, poses, workspace: Workspace, every: bool) -> dict:
+    """The checks of :func:`feasibility`; with ``every`` False a pose failing one check is not
+    evaluated by the later, dearer ones (only ``"feasible"`` is then meaningful)."""
+    b = workspace.bounds
+    in_box = np.all((poses >= b[:, 0] - BOUNDS_TOLERANCE) & (poses <= b[:, 1] + BOUNDS_TOLERANCE), axis=1)
+    n = poses.shape[0]
+    reach, joints = np.zeros(n, bool), np.full((n, robot.n_chains), np.nan)
+    todo = np.ones(n, bool) if every else in_box
+    reach[todo], joints[todo] = reachable_joints(robot, theta, poses[todo])
+    limits, passive, sing = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    lim = robot.joint_limits()
+    todo = reach
+    limits[todo] = np.all((joints[todo] >= lim[:, 0]) & (joints[todo] <= lim[:, 1]), axis=1)
+    todo = reach if every else limits
+    if np.any(todo):
+        angles = robot.passive_joint_angles(theta, poses[todo])
+        passive[todo] = np.all(angles <= workspace.passive_joint_limit_rad, axis=1)
+    todo = reach if every else passive
+    if np.any(todo):
+        sing[todo] = scaled_condition(robot, theta, poses[todo], joints[todo]) <= workspace.max_condition
+    return {"bounds": in_box, "reach": reach, "joint_limits": limits, "passive_joints": passive,
+            "singularity": sing, "feasible": in_box & reach & limits & passive & sing}
+
+
+def feasibility(robot: Robot, theta, poses, workspace: Workspace) -> dict:
     """Which workspace limits each pose meets.
 
     Args:
-        hexapod: parameter set the controller uses (nominal before calibration).
-        poses: (N, 6) target poses, mm and rad.
+        robot: the robot.
+        theta: (P,) parameter set the controller uses (nominal before calibration).
+        poses: (N, D) target poses, robot's pose units.
         workspace: the limits.
 
     Returns:
-        ``{"bounds", "stroke", "cone", "singularity", "feasible"}``, each (N,) bool.
+        ``{"bounds", "reach", "joint_limits", "passive_joints", "singularity", "feasible"}``,
+        each (N,) bool; a pose out of reach fails the later checks too.
     """
-    _check_hexapod(hexapod)
-    _check_workspace(workspace)
-    poses = as_poses(poses)
-    b = workspace.bounds
-    # A tolerance of 1e-6 (mm or rad) keeps poses printed to a few digits on the boundary
-    # (the paper's 0.05236 rad for 3 degrees) inside.
-    in_box = np.all((poses >= b[:, 0] - _BOUNDS_TOL) & (poses <= b[:, 1] + _BOUNDS_TOL), axis=1)
-    dev = np.abs(_commanded(hexapod, poses) - hexapod.geometry.home_lengths)
-    stroke = np.all(dev <= workspace.stroke_mm, axis=1)
-    cone = np.all(_cone_angles(hexapod, poses) <= workspace.cone_limit_rad, axis=(1, 2))
-    with np.errstate(all="ignore"):
-        sing = _scaled_condition(hexapod, poses) <= workspace.max_condition
-    return {"bounds": in_box, "stroke": stroke, "cone": cone, "singularity": sing,
-            "feasible": in_box & stroke & cone & sing}
+    _check_robot(robot)
+    _check_workspace(robot, workspace)
+    return _checks(robot, _theta(robot, theta), _poses(robot, poses), workspace, every=True)
 
 
 def _check_count(n, name: str, minimum: int) -> int:
@@ -221,43 +252,49 @@ def _check_count(n, name: str, minimum: int) -> int:
     return int(n)
 
 
-def sample_feasible_poses(
-    hexapod: Hexapod, workspace: Workspace, n: int, seed: int | np.random.Generator,
-    *, max_draws: int = 2_000_000,
-) -> np.ndarray:
+def sample_feasible_poses(robot: Robot, theta, workspace: Workspace, n: int, seed: int | np.random.Generator,
+                          *, max_draws: int = 2_000_000) -> np.ndarray:
     """Poses drawn uniformly in the workspace bounds, keeping the feasible ones.
 
     Args:
-        hexapod: parameter set the controller uses.
+        robot: the robot.
+        theta: (P,) parameter set the controller uses.
         workspace: the limits.
         n: number of poses wanted.
         seed: seed or generator; the same seed gives the same poses.
         max_draws: give up after this many draws.
 
     Returns:
-        (n, 6) feasible poses, mm and rad, in draw order.
+        (n, D) feasible poses, robot's pose units, in draw order.
 
     Raises:
         ValueError: fewer than ``n`` feasible poses in ``max_draws`` draws.
     """
-    _check_hexapod(hexapod)
-    _check_workspace(workspace)
+    _check_robot(robot)
+    _check_workspace(robot, workspace)
+    theta = _theta(robot, theta)
     n = _check_count(n, "n", 0)
     rng = np.random.default_rng(seed)
     b = workspace.bounds
-    out, drawn, got = [], 0, 0
+    d = robot.pose_dim
+    out, drawn, got = [np.zeros((0, d))], 0, 0
     while got < n:
         if drawn >= max_draws:
-            raise ValueError(
-                f"only {got} of {n} feasible poses found in {drawn} draws: the workspace "
-                f"{workspace.name!r} is (nearly) empty")
+            raise ValueError(f"only {got} of {n} feasible poses found in {drawn} draws: the workspace "
+                             f"{workspace.name!r} is (nearly) empty")
         m = int(min(max(4 * (n - got), 1024), max_draws - drawn))
-        p = b[:, 0] + rng.uniform(size=(m, 6)) * (b[:, 1] - b[:, 0])
+        p = b[:, 0] + rng.uniform(size=(m, d)) * (b[:, 1] - b[:, 0])
         drawn += m
-        ok = feasibility(hexapod, p, workspace)["feasible"]
+        ok = _checks(robot, theta, p, workspace, every=False)["feasible"]
         out.append(p[ok])
         got += int(ok.sum())
     return np.concatenate(out)[:n]
+
+
+def minimum_poses(robot: Robot, free=None) -> int:
+    """Fewest poses whose equations can determine the free parameters: ``ceil(F / D)``."""
+    names, _ = free_indices(robot, free)
+    return -(-len(names) // robot.pose_dim)
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,10 +302,11 @@ class DesignResult:
     """A selected pose set.
 
     Attributes:
-        poses: (n, 6) selected poses, mm and rad.
+        poses: (n, D) selected poses, robot's pose units.
         indices: (n,) int, rows of the candidate array they came from.
         criterion: ``"d"`` or ``"e"``.
-        log_det: ``log det F`` of the selected set (F in 1/mm^2; -inf if singular).
+        log_det: ``log det F`` of the selected set (F of the scaled Jacobian, 1/mm^2; -inf if
+            singular).
         lambda_min: smallest eigenvalue of F, 1/mm^2.
         exchanges: number of exchanges made after the initial design.
         n_candidates: number of candidate poses.
@@ -284,19 +322,20 @@ class DesignResult:
 
 
 def _logdet_gain(A: np.ndarray, Finv: np.ndarray) -> np.ndarray:
-    """(C,) log det(I_6 + A_c F^-1 A_c^T) for all candidates (A: (C, 6, 42))."""
+    """(K,) log det(I_D + A_c F^-1 A_c^T) for all candidates (A: (K, D, F))."""
+    d = A.shape[1]
     AF = A @ Finv
     M = np.einsum("cik,cjk->cij", AF, A)
-    M[:, np.arange(6), np.arange(6)] += 1.0
+    M[:, np.arange(d), np.arange(d)] += 1.0
     sign, ld = np.linalg.slogdet(M)
     return np.where(sign > 0, ld, -np.inf)
 
 
 def _d_optimal(A: np.ndarray, n: int, ridge: float, max_passes: int, tol: float):
-    C = A.shape[0]
-    F = ridge * np.eye(N_PARAMETERS)
+    K, _, P = A.shape
+    F = ridge * np.eye(P)
     chosen: list[int] = []
-    used = np.zeros(C, bool)
+    used = np.zeros(K, bool)
     for _ in range(n):
         g = _logdet_gain(A, np.linalg.inv(F))
         g[used] = -np.inf
@@ -327,10 +366,10 @@ def _d_optimal(A: np.ndarray, n: int, ridge: float, max_passes: int, tol: float)
 
 
 def _e_optimal(A: np.ndarray, chosen: list[int], max_passes: int, screen: int, tol: float):
-    C = A.shape[0]
-    used = np.zeros(C, bool)
+    K = A.shape[0]
+    used = np.zeros(K, bool)
     used[chosen] = True
-    G = np.einsum("cki,ckj->cij", A, A)  # (C, 42, 42) per-candidate information
+    G = np.einsum("cki,ckj->cij", A, A)  # (K, F, F) per-candidate information
     F = G[chosen].sum(axis=0)
     exchanges = 0
     for _ in range(max_passes):
@@ -340,10 +379,10 @@ def _e_optimal(A: np.ndarray, chosen: list[int], max_passes: int, screen: int, t
             Fm = F - G[i]
             lam_now = np.linalg.eigvalsh(F)[0]
             w, V = np.linalg.eigh(Fm)
-            # First-order screen: gain of lambda_min along the few weakest directions.
+            # First-order screen: approximate new lambda_min = min_q (w_q + |A_c v_q|^2) over the
+            # three weakest directions q.
             Vw = V[:, :3]
-            # approximate new lambda_min = min_q (w_q + |A_c v_q|^2) over the weakest q
-            proj = np.sum(np.einsum("ckp,pq->ckq", A, Vw) ** 2, axis=1)  # (C, 3)
+            proj = np.sum(np.einsum("ckp,pq->ckq", A, Vw) ** 2, axis=1)  # (K, 3)
             score = np.min(proj + w[:3], axis=1)
             score[used] = -np.inf
             top = np.argsort(-score)[:screen]
@@ -364,23 +403,18 @@ def _e_optimal(A: np.ndarray, chosen: list[int], max_passes: int, screen: int, t
     return chosen, exchanges
 
 
-def select_poses(
-    hexapod: Hexapod,
-    candidates: np.ndarray,
-    n: int,
-    noise: SensorNoise,
-    *,
-    criterion: str = "d",
-    max_passes: int = 20,
-    screen: int = 64,
-) -> DesignResult:
+def select_poses(robot: Robot, theta, candidates, n: int, noise: SensorNoise, *, free=None,
+                 criterion: str = "d", max_passes: int = 20, screen: int = 64) -> DesignResult:
     """Choose ``n`` of the candidate poses maximising a design criterion (module docstring).
 
     Args:
-        hexapod: parameter set at which to linearise (the nominal one before calibration).
-        candidates: (C, 6) feasible candidate poses, mm and rad, C >= n.
-        n: number of poses to choose, >= 7 (the 42 errors need 42 equations).
-        noise: declared sensor noise (weights mm against rad).
+        robot: the robot.
+        theta: (P,) parameter set at which to linearise (the nominal one before calibration).
+        candidates: (K, D) feasible candidate poses, robot's pose units, K >= n.
+        n: number of poses to choose, at least :func:`minimum_poses` (7 for the hexapod's 42
+            parameters and the Delta's 21).
+        noise: declared noise (weights the pose coordinates and joints).
+        free: names of the parameters to determine; default ``robot.free_default``.
         criterion: ``"d"`` (D-optimal) or ``"e"`` (E-optimal).
         max_passes: exchange passes over the design at most.
         screen: E-optimal only, candidates evaluated exactly per exchange.
@@ -388,48 +422,46 @@ def select_poses(
     Returns:
         The :class:`DesignResult`; deterministic for given inputs.
     """
+    _check_robot(robot)
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
-    candidates = as_poses(candidates, "candidates")
-    n = _check_count(n, "n", 7)
+    candidates = _poses(robot, candidates, "candidates")
+    n = _check_count(n, "n", minimum_poses(robot, free))
     if candidates.shape[0] < n:
         raise ValueError(f"candidates must have at least n = {n} rows, got {candidates.shape[0]}")
     max_passes = _check_count(max_passes, "max_passes", 0)
     screen = _check_count(screen, "screen", 1)
-    A = identification_jacobian(hexapod, candidates, noise).reshape(-1, 6, N_PARAMETERS)
-    ridge = 1e-9 * float(np.einsum("cki,cki->", A, A)) / (A.shape[0] * N_PARAMETERS)
+    _, idx = free_indices(robot, free)
+    d = robot.pose_dim
+    A = identification_jacobian(robot, theta, candidates, noise, free=free).reshape(-1, d, idx.size)
+    A = A / parameter_scale(robot)[idx]
+    ridge = 1e-9 * float(np.einsum("cki,cki->", A, A)) / (A.shape[0] * idx.size)
     chosen, ex = _d_optimal(A, n, ridge, max_passes, 1e-10)
     if criterion == "e":
         chosen, ex2 = _e_optimal(A, list(chosen), max_passes, screen, 1e-10)
         ex += ex2
-    idx = np.array(chosen, dtype=int)
-    F = np.einsum("cki,ckj->ij", A[idx], A[idx])
+    chosen_idx = np.array(chosen, dtype=int)
+    F = np.einsum("cki,ckj->ij", A[chosen_idx], A[chosen_idx])
     sign, ld = np.linalg.slogdet(F)
-    idx.setflags(write=False)
+    chosen_idx.setflags(write=False)
     return DesignResult(
-        poses=frozen_array(candidates[idx]), indices=idx, criterion=criterion,
+        poses=frozen_array(candidates[chosen_idx]), indices=chosen_idx, criterion=criterion,
         log_det=float(ld) if sign > 0 else float("-inf"),
         lambda_min=float(np.linalg.eigvalsh(F)[0]), exchanges=ex, n_candidates=candidates.shape[0],
     )
 
 
-def design_poses(
-    hexapod: Hexapod,
-    n: int,
-    workspace: Workspace,
-    noise: SensorNoise,
-    *,
-    criterion: str = "d",
-    seed: int = 0,
-    n_candidates: int = 3000,
-) -> DesignResult:
+def design_poses(robot: Robot, theta, n: int, workspace: Workspace, noise: SensorNoise, *, free=None,
+                 criterion: str = "d", seed: int = 0, n_candidates: int = 3000) -> DesignResult:
     """Sample feasible candidates in ``workspace`` (seeded) and select ``n`` optimal poses.
 
     Args:
-        hexapod: parameter set (nominal before calibration).
-        n: number of poses, >= 7.
+        robot: the robot.
+        theta: (P,) parameter set (nominal before calibration).
+        n: number of poses, at least :func:`minimum_poses`.
         workspace: feasible set.
-        noise: declared sensor noise.
+        noise: declared noise.
+        free: names of the parameters to determine; default ``robot.free_default``.
         criterion: ``"d"`` or ``"e"``.
         seed: seed of the candidate draw.
         n_candidates: number of feasible candidates drawn (>= n).
@@ -437,7 +469,8 @@ def design_poses(
     Returns:
         The :class:`DesignResult` (its poses all satisfy ``workspace``).
     """
-    n = _check_count(n, "n", 7)
+    _check_robot(robot)
+    n = _check_count(n, "n", minimum_poses(robot, free))
     n_candidates = _check_count(n_candidates, "n_candidates", n)
-    cands = sample_feasible_poses(hexapod, workspace, n_candidates, seed)
-    return select_poses(hexapod, cands, n, noise, criterion=criterion)
+    cands = sample_feasible_poses(robot, theta, workspace, n_candidates, seed)
+    return select_poses(robot, theta, cands, n, noise, free=free, criterion=criterion)

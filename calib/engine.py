@@ -30,7 +30,7 @@ from .noise import SensorNoise
 from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
-           "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative"]
+           "pose_whitening", "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative"]
 
 #: Solvers of both methods.
 SOLVERS = ("lm", "gn")
@@ -144,9 +144,13 @@ def _check(robot, joints, measured, noise, free, start, solver):
     return joints, measured, free, np.sort(idx), start
 
 
-def _whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
+def pose_whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
     """(N, D, D) whitening ``L^-1`` of each pose's measurement covariance
-    ``S_pose + Jq S_joint Jq^T`` (pose sensor plus joint noise through the manipulator Jacobian)."""
+    ``S_pose + Jq S_joint Jq^T`` (pose sensor plus joint noise through the manipulator Jacobian).
+
+    ``theta`` (P,), ``joints`` (N, C) and ``poses`` (N, D) consistent (``poses`` reached by the
+    machine ``theta`` at ``joints``); rows of ``L^-1 (measured - predicted)`` are dimensionless.
+    Used by the forward identification and by :mod:`calib.observability`."""
     n, d = poses.shape
     std = noise.pose_std(robot.pose_units)
     cov = np.broadcast_to(np.diag(std ** 2), (n, d, d)).copy()
@@ -244,7 +248,7 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         start_poses = robot.forward_kinematics(theta0, joints, initial=measured)
     except KinematicsError as exc:
         raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
-    winv = _whitening(robot, theta0, joints, start_poses, noise)
+    winv = pose_whitening(robot, theta0, joints, start_poses, noise)
     state = {"poses": start_poses}
 
     def full(x):

@@ -1,24 +1,31 @@
-"""Observability of the 42 hexapod errors from a set of measured poses, and uncertainty.
+"""Observability of a robot's parameters from a set of measured poses, and uncertainty.
 
-The measurement model is that of :func:`~calib.identification.identify_forward`: at pose j
-the controller commands leg lengths ``l_j``, the machine reaches ``FK(theta, l_j)`` and a
-6-D sensor reports it with Gaussian noise of standard deviation ``std`` (mm for positions,
-rad for angles; :class:`~calib.noise.SensorNoise`). Linearised about ``theta``:
+Written once over :class:`calib.robot.Robot`. The measurement model is that of
+:func:`calib.engine.identify_forward`: at pose j the controller commands joints ``q_j``, the
+machine ``theta`` reaches ``FK(theta, q_j)`` and a sensor reports it with Gaussian noise
+(:class:`~calib.noise.SensorNoise`: ``noise.pose_std(robot.pose_units)`` per pose coordinate,
+plus joint-reading noise ``noise.joint_std`` propagated through the manipulator Jacobian).
+Linearised about ``theta``, over the free parameters (default ``robot.free_default``):
 
-* identification Jacobian ``J`` (6N, 42): the stacked
-  :func:`~calib.kinematics.forward_parameter_jacobian` (d pose / d errors at fixed commanded
-  lengths), rows 0-2 of each pose in mm/mm, rows 3-5 in rad/mm;
-* noise-weighted Jacobian ``A = W J`` with ``W = diag(1/std)`` repeated per pose: its rows are
-  dimensionless per mm of parameter, so mm and rad are never mixed raw;
-* Fisher information ``F = A^T A`` (1/mm^2) and Cramer-Rao bound ``CRB = F^-1`` (mm^2): the
-  smallest covariance any unbiased estimator of the 42 errors can reach. The weighted
-  Levenberg-Marquardt fit (``identify_forward``) is the maximum-likelihood estimator for
-  Gaussian noise and reaches it when the linearisation holds.
+* identification Jacobian ``J`` (D N, F): the stacked
+  :func:`~calib.robot.pose_jacobian_of_parameters` (d pose / d theta at fixed joints);
+* noise-whitened Jacobian ``A = W J`` with ``W`` the whitening of each pose's measurement
+  covariance (:func:`calib.engine.pose_whitening`, the weights of ``identify_forward``): its
+  rows are dimensionless per unit of parameter, so mm and rad are never mixed raw;
+* Fisher information ``F = A^T A`` and Cramer-Rao bound ``CRB = F^-1`` (parameter units
+  squared): the smallest covariance of any unbiased estimator of the free parameters. The
+  weighted forward fit is the maximum-likelihood estimator for Gaussian pose noise and reaches
+  it when the linearisation holds.
+
+Singular values, condition numbers, observability indices and parameter combinations are those
+of the *scaled* Jacobian ``A S^-1``: a parameter in rad is expressed as the length it moves at
+the machine's size, ``S = robot.length_scale_mm`` for angles and 1 for lengths
+(:func:`parameter_scale`), so every column is per mm and the combinations are unit vectors in
+mm. For a robot whose parameters are all lengths (the hexapod) ``S = I``.
 
 Observability indices (Sun and Hollerbach, "Observability index selection for robot
-calibration", ICRA 2008), computed on the singular values ``sigma_1 >= ... >= sigma_L``
-(``L = 42``) of the noise-weighted Jacobian ``A`` with ``m = 6N`` rows (all 42 parameters
-are lengths in mm, so no further column scaling is needed for the indices):
+calibration", ICRA 2008) on the singular values ``sigma_1 >= ... >= sigma_L`` (``L = F``) of
+the scaled Jacobian with ``m = D N`` rows:
 
 * ``O1 = (sigma_1 ... sigma_L)^(1/L) / sqrt(m)`` (D-optimality),
 * ``O2 = sigma_L / sigma_1`` (inverse condition number),
@@ -26,8 +33,9 @@ are lengths in mm, so no further column scaling is needed for the indices):
   determined parameter combination),
 * ``O4 = sigma_L^2 / sigma_1`` (noise amplification index).
 
-The condition number is reported twice: of ``A`` (noise-weighted) and of ``A`` with unit-norm
-columns (the column-scaled figure :func:`~calib.identification.identify_forward` reports).
+Exact null directions (combinations no pose set can determine, e.g. the Delta's joint offset
+``alpha_i`` against the direction of its arm vector ``(Lax_i, Lay_i)`` when ``Lay_i`` is free)
+are reported as *not identifiable*, chain by chain, named by parameter.
 """
 
 from __future__ import annotations
@@ -36,34 +44,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, as_poses
-from .hexapod import N_PARAMETERS, Hexapod, parameter_table
-from .kinematics import forward_parameter_jacobian
+from ._validate import as_array, frozen_array
+from .engine import pose_whitening
 from .noise import SensorNoise
+from .robot import Robot, pose_jacobian_of_parameters
 
 __all__ = [
+    "parameter_scale",
+    "free_indices",
     "identification_jacobian",
     "fisher_information",
+    "describe_combination",
     "ObservabilityAnalysis",
     "analyze_observability",
-    "describe_combination",
     "PoseUncertainty",
     "pose_uncertainty",
 ]
 
-#: Parameter names in flat-vector order (``dXB1 .. dZP6``).
-PARAMETER_NAMES = tuple(name for name, _, _ in parameter_table())
+#: Coefficients below this (after normalising the largest to 1) are left out of a
+#: not-identifiable combination.
+NULL_COEFFICIENT_TOL = 1e-6
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
-
-
-def _check_hexapod(hexapod) -> None:
-    if not isinstance(hexapod, Hexapod):
-        raise TypeError(f"hexapod must be a Hexapod, got {type(hexapod).__name__}")
+def _check_robot(robot) -> None:
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
 
 
 def _check_noise(noise) -> None:
@@ -71,63 +76,105 @@ def _check_noise(noise) -> None:
         raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
 
 
-def identification_jacobian(hexapod: Hexapod, poses: np.ndarray, noise: SensorNoise) -> np.ndarray:
-    """Noise-weighted identification Jacobian of pose measurements.
+def parameter_scale(robot: Robot) -> np.ndarray:
+    """(P,) mm per parameter unit: 1 for a length, ``robot.length_scale_mm`` for an angle (the
+    length an angle moves at the machine's size)."""
+    _check_robot(robot)
+    return np.where(robot.table.angle_mask(), robot.length_scale_mm, 1.0)
+
+
+def free_indices(robot: Robot, free=None) -> tuple[tuple[str, ...], np.ndarray]:
+    """The free parameters in table order: ``(names, (F,) flat indices)``.
 
     Args:
-        hexapod: parameter set at which to linearise (the machine, or the nominal one when
-            designing an experiment before the errors are known).
-        poses: (N, 6) poses the machine reaches, mm and rad, base frame.
-        noise: declared sensor noise; ``W = noise.weights()`` (zero components floored).
+        robot: the robot.
+        free: names of the free parameters, any order; default ``robot.free_default``.
+
+    Raises:
+        ValueError: empty or repeated names. KeyError: an unknown name.
+    """
+    _check_robot(robot)
+    names = robot.free_default if free is None else tuple(free)
+    if not names or len(set(names)) != len(names):
+        raise ValueError(f"free must be a non-empty list of distinct parameter names, got {names}")
+    idx = np.sort(robot.table.indices(names))
+    return tuple(robot.table.names[i] for i in idx), idx
+
+
+def _configurations(robot: Robot, theta, poses, joints, name: str = "poses"):
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    poses = as_array(poses, name, (-1, robot.pose_dim))
+    if joints is None:
+        joints = robot.inverse_kinematics(theta, poses)
+    else:
+        joints = as_array(joints, "joints", (poses.shape[0], robot.n_chains))
+    return theta, poses, joints
+
+
+def _whitened_jacobian(robot: Robot, theta, poses, joints, noise, idx) -> np.ndarray:
+    """(N, D, F) ``W d pose / d theta_free``."""
+    winv = pose_whitening(robot, theta, joints, poses, noise)
+    J = pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]
+    return np.einsum("nij,njk->nik", winv, J)
+
+
+def identification_jacobian(robot: Robot, theta, poses, noise: SensorNoise, *, joints=None,
+                            free=None) -> np.ndarray:
+    """Noise-whitened identification Jacobian of pose measurements.
+
+    Args:
+        robot: the robot.
+        theta: (P,) parameter vector at which to linearise (the machine's, or the nominal one
+            when designing an experiment before the errors are known).
+        poses: (N, D) poses the machine ``theta`` reaches, in the robot's pose units.
+        noise: declared sensor noise (pose and joint noise, see :func:`calib.engine.pose_whitening`).
+        joints: (N, C) the joints commanded there; default ``robot.inverse_kinematics(theta, poses)``.
+        free: names of the free parameters; default ``robot.free_default``.
 
     Returns:
-        (6N, 42) ``W d pose / d errors``, 1/mm; row ``6 j + k`` is coordinate k of pose j,
-        columns in :func:`~calib.hexapod.parameter_table` order.
+        (D N, F) ``W d pose / d theta``, 1 per parameter unit; row ``D j + k`` is coordinate k
+        of pose j, columns the free parameters in table order.
     """
-    _check_hexapod(hexapod)
+    _check_robot(robot)
     _check_noise(noise)
-    poses = as_poses(poses)
-    J = forward_parameter_jacobian(hexapod, poses)
-    return (J * noise.weights()[None, :, None]).reshape(-1, N_PARAMETERS)
+    _, idx = free_indices(robot, free)
+    theta, poses, joints = _configurations(robot, theta, poses, joints)
+    return _whitened_jacobian(robot, theta, poses, joints, noise, idx).reshape(-1, idx.size)
 
 
-def fisher_information(hexapod: Hexapod, poses: np.ndarray, noise: SensorNoise) -> np.ndarray:
-    """Fisher information of the 42 errors, ``J^T W^2 J``.
-
-    Args:
-        hexapod: parameter set at which to linearise.
-        poses: (N, 6) poses, mm and rad.
-        noise: declared Gaussian sensor noise.
-
-    Returns:
-        (42, 42) 1/mm^2, symmetric positive semi-definite.
-    """
-    A = identification_jacobian(hexapod, poses, noise)
+def fisher_information(robot: Robot, theta, poses, noise: SensorNoise, *, joints=None, free=None) -> np.ndarray:
+    """(F, F) Fisher information ``A^T A`` of the free parameters, 1 per parameter unit squared."""
+    A = identification_jacobian(robot, theta, poses, noise, joints=joints, free=free)
     return A.T @ A
 
 
-def describe_combination(vector: np.ndarray, *, n_terms: int = 4, min_coefficient: float = 0.05) -> str:
-    """A parameter combination in words, e.g. ``"0.71 dZB1 - 0.70 dl1"``.
+def describe_combination(vector, names, *, n_terms: int = 4, min_coefficient: float = 0.05,
+                         number_format: str = ".2f") -> str:
+    """A parameter combination in words, e.g. ``"0.71 B1.z - 0.70 dl1"``.
 
     Args:
-        vector: (42,) coefficients over the parameters (a unit right singular vector).
+        vector: (K,) coefficients (a unit singular vector, or a direction normalised to 1).
+        names: (K,) parameter names of the coefficients.
         n_terms: at most this many terms, largest magnitude first.
         min_coefficient: drop terms smaller than this in magnitude (at least one is kept).
+        number_format: format of the coefficients.
 
     Returns:
-        The signed sum of the dominant terms, with ``+ ...`` when terms were left out.
+        The signed sum of the dominant terms (sign chosen so that the largest is positive),
+        with ``+ ...`` when terms were left out.
     """
-    v = as_array(vector, "vector", (N_PARAMETERS,))
+    names = tuple(names)
+    v = as_array(vector, "vector", (len(names),))
     if int(n_terms) != n_terms or n_terms < 1:
         raise ValueError(f"n_terms must be a positive integer, got {n_terms!r}")
-    v = v if v[np.argmax(np.abs(v))] >= 0 else -v  # sign of a singular vector is arbitrary
+    v = v if v[np.argmax(np.abs(v))] >= 0 else -v  # the sign of a singular vector is arbitrary
     order = np.argsort(-np.abs(v), kind="stable")
     keep = [i for i in order[:n_terms] if abs(v[i]) >= min_coefficient] or [int(order[0])]
     parts = []
     for k, i in enumerate(keep):
         c = v[i]
         sign = ("-" if c < 0 else "") if k == 0 else (" - " if c < 0 else " + ")
-        parts.append(f"{sign}{abs(c):.2f} {PARAMETER_NAMES[i]}")
+        parts.append(f"{sign}{abs(c):{number_format}} {names[i]}")
     if len(keep) < np.count_nonzero(np.abs(v) >= 1e-12):
         parts.append(" + ...")
     return "".join(parts)
@@ -135,26 +182,43 @@ def describe_combination(vector: np.ndarray, *, n_terms: int = 4, min_coefficien
 
 @dataclass(frozen=True, eq=False)
 class ObservabilityAnalysis:
-    """How well a pose set determines the 42 errors (see the module docstring).
+    """How well a pose set determines the free parameters (see the module docstring).
 
     Attributes:
+        names: (F,) the free parameter names, table order (the columns below).
+        units: (F,) their units (``"mm"``/``"rad"``).
+        indices: (F,) int, their flat indices in the robot's parameter vector.
+        n_parameters: P, the length of the robot's parameter vector.
+        scale: (F,) mm per parameter unit (:func:`parameter_scale`).
         n_poses: number of measured poses N.
-        noise: the declared sensor noise used for weighting.
-        jacobian: (6N, 42) 1/mm, noise-weighted identification Jacobian ``A = W J``.
-        singular_values: (42,) 1/mm, of ``A``, descending.
-        right_singular_vectors: (42, 42) rows are the unit parameter combinations ``v_k``
-            belonging to ``singular_values[k]`` (``v_k . theta`` has standard deviation
-            ``1 / sigma_k`` mm at the Cramer-Rao bound).
-        rank: numerical rank of ``A`` (singular values above ``rank_rtol * sigma_1``).
-        condition_number: ``sigma_1 / sigma_42`` of ``A`` (inf if rank deficient).
-        scaled_condition_number: condition number of ``A`` with unit-norm columns.
-        o1, o2, o3, o4: Sun-Hollerbach observability indices of ``A`` (1/mm, -, 1/mm, 1/mm).
-        fisher: (42, 42) 1/mm^2, ``A^T A``.
-        crb: (42, 42) mm^2, Cramer-Rao bound (pseudo-inverse of ``fisher``; parameters touched
-            by an undetermined combination have infinite variance on the diagonal).
-        crb_std: (42,) mm, square root of the diagonal of ``crb``.
+        noise: the declared noise used for whitening.
+        jacobian: (D N, F) noise-whitened identification Jacobian ``A``, 1 per parameter unit.
+        singular_values: (F,) 1/mm, of the scaled ``A S^-1``, descending (zeros appended when
+            there are fewer rows than parameters).
+        right_singular_vectors: (F, F) rows are the unit combinations ``v_k`` (scaled
+            coordinates, mm) of ``singular_values[k]``: ``v_k . (S theta)`` has standard deviation
+            ``1 / sigma_k`` mm at the Cramer-Rao bound.
+        rank: numerical rank (singular values above ``rank_rtol * sigma_1``).
+        condition_number: ``sigma_1 / sigma_F`` of the scaled Jacobian (inf if rank deficient).
+        scaled_condition_number: condition number of ``A`` with unit-norm columns (the figure
+            :func:`calib.engine.identify_forward` reports).
+        o1, o2, o3, o4: Sun-Hollerbach indices (1/mm, -, 1/mm, 1/mm).
+        fisher: (F, F) ``A^T A``, 1 per parameter unit squared.
+        crb: (F, F) Cramer-Rao bound, parameter units squared (pseudo-inverse of ``fisher``).
+        crb_std: (F,) square root of the diagonal of ``crb``, parameter units; inf for a
+            parameter touched by an undetermined combination.
+        not_identifiable: one dict per exact null direction, chain by chain where the direction
+            lies in one chain's parameters: ``{"chain": 0-based chain or None,
+            "combination": "1 Lay1 + 0.00385 alpha1", "coefficients": {name: coefficient}}``,
+            coefficients in parameter units normalised so that the largest is +1 (a change
+            along it leaves every pose unchanged to first order).
     """
 
+    names: tuple
+    units: tuple
+    indices: np.ndarray
+    n_parameters: int
+    scale: np.ndarray
     n_poses: int
     noise: SensorNoise
     jacobian: np.ndarray
@@ -170,28 +234,42 @@ class ObservabilityAnalysis:
     fisher: np.ndarray
     crb: np.ndarray
     crb_std: np.ndarray
+    not_identifiable: tuple
 
     @property
-    def names(self) -> tuple[str, ...]:
-        """The 42 parameter names in column order."""
-        return PARAMETER_NAMES
+    def n_free(self) -> int:
+        return len(self.names)
+
+    @property
+    def crb_std_mm(self) -> np.ndarray:
+        """(F,) mm, ``crb_std`` scaled (an angle as the length it moves at the machine's size)."""
+        return frozen_array(self.crb_std * self.scale)
 
     @property
     def crb_rms(self) -> float:
-        """mm, ``sqrt(trace(CRB) / 42)``: the RMS parameter error an efficient estimator gets."""
-        return float(np.sqrt(np.mean(self.crb_std ** 2)))
+        """mm, RMS of :attr:`crb_std_mm`: the RMS parameter error an efficient estimator gets."""
+        return float(np.sqrt(np.mean(self.crb_std_mm ** 2)))
+
+    def parameter_covariance(self) -> np.ndarray:
+        """(P, P) the CRB over the whole parameter vector, zero for fixed parameters (the layout
+        of :attr:`calib.engine.IdentificationResult.covariance`)."""
+        cov = np.zeros((self.n_parameters, self.n_parameters))
+        cov[np.ix_(self.indices, self.indices)] = self.crb
+        return cov
 
     def weakest_combinations(self, k: int = 3, *, n_terms: int = 4) -> list[dict]:
         """The ``k`` worst-determined parameter combinations, worst first.
 
         Returns:
             ``[{"sigma": 1/mm, "std_mm": 1/sigma (inf if undetermined), "determined": bool,
-            "combination": "0.71 dZB1 - 0.70 dl1", "coefficients": {name: coef}}, ...]``.
+            "combination": "0.71 B1.z - 0.70 dl1", "coefficients": {name: coefficient}}, ...]``;
+            coefficients of the unit vector in scaled coordinates (mm).
         """
-        if int(k) != k or not 1 <= k <= N_PARAMETERS:
-            raise ValueError(f"k must be an integer in 1..{N_PARAMETERS}, got {k!r}")
+        n = self.n_free
+        if isinstance(k, bool) or int(k) != k or not 1 <= k <= n:
+            raise ValueError(f"k must be an integer in 1..{n}, got {k!r}")
         out = []
-        for j in range(N_PARAMETERS - 1, N_PARAMETERS - 1 - int(k), -1):
+        for j in range(n - 1, n - 1 - int(k), -1):
             v = self.right_singular_vectors[j]
             v = v if v[np.argmax(np.abs(v))] >= 0 else -v
             s = float(self.singular_values[j])
@@ -201,43 +279,98 @@ class ObservabilityAnalysis:
                 "sigma": s,
                 "std_mm": float(1.0 / s) if determined else float("inf"),
                 "determined": bool(determined),
-                "combination": describe_combination(v, n_terms=n_terms),
-                "coefficients": {PARAMETER_NAMES[i]: float(v[i]) for i in idx},
+                "combination": describe_combination(v, self.names, n_terms=n_terms),
+                "coefficients": {self.names[i]: float(v[i]) for i in idx},
             })
         return out
 
     def summary(self, k: int = 5) -> dict:
-        """JSON-ready figures (mm, 1/mm); infinities written as None."""
+        """JSON-ready figures (parameter units, mm, 1/mm); infinities written as None."""
         fin = lambda x: float(x) if np.isfinite(x) else None  # noqa: E731
         return {
             "n_poses": self.n_poses,
             "noise": self.noise.to_dict(),
+            "parameters": list(self.names),
+            "parameter_units": dict(zip(self.names, self.units)),
             "rank": self.rank,
+            "n_free": self.n_free,
             "condition_number": fin(self.condition_number),
             "scaled_condition_number": fin(self.scaled_condition_number),
             "indices": {"O1": fin(self.o1), "O2": fin(self.o2), "O3": fin(self.o3), "O4": fin(self.o4)},
             "singular_values": self.singular_values.tolist(),
-            "crb_std_mm": {n: fin(s) for n, s in zip(PARAMETER_NAMES, self.crb_std)},
+            "crb_std": {n: fin(s) for n, s in zip(self.names, self.crb_std)},
+            "crb_std_mm": {n: fin(s) for n, s in zip(self.names, self.crb_std_mm)},
             "crb_rms_mm": fin(self.crb_rms),
             "weakest_combinations": [
-                {**c, "std_mm": fin(c["std_mm"])} for c in self.weakest_combinations(k)
+                {**c, "std_mm": fin(c["std_mm"])} for c in self.weakest_combinations(min(k, self.n_free))
             ],
+            "not_identifiable": [dict(c) for c in self.not_identifiable],
         }
 
 
-def analyze_observability(
-    hexapod: Hexapod, poses: np.ndarray, noise: SensorNoise, *, rank_rtol: float = 1e-10
-) -> ObservabilityAnalysis:
-    """Singular values, indices and Cramer-Rao bound of the 42 errors for a pose set.
+def _null_combinations(robot: Robot, As: np.ndarray, idx: np.ndarray, names, scale, tol: float,
+                       null_dim: int) -> tuple[np.ndarray, tuple]:
+    """Exact null directions of the scaled Jacobian ``As`` (D N, F), chain by chain first.
+
+    Returns:
+        ``(basis, combinations)``: (null_dim, F) orthonormal basis of the null space in scaled
+        coordinates (within one chain where possible), and their descriptions in parameter units.
+    """
+    if null_dim == 0:
+        return np.zeros((0, len(names))), ()
+    found, chains = [], []
+    for c in range(robot.n_chains):
+        cols = np.flatnonzero(robot.table.chains[idx] == c)
+        if cols.size == 0:
+            continue
+        _, s, vt = np.linalg.svd(As[:, cols], full_matrices=True)
+        s = np.r_[s, np.zeros(cols.size - s.size)]
+        for v in vt[s <= tol]:
+            full = np.zeros(len(names))
+            full[cols] = v
+            found.append(full)
+            chains.append(c)
+    basis = np.array(found).reshape(-1, len(names))[:null_dim]
+    chains = chains[:null_dim]
+    if len(chains) < null_dim:  # directions across chains: the rest of the null space
+        _, s, vt = np.linalg.svd(As, full_matrices=True)
+        null = vt[np.r_[s, np.zeros(len(names) - s.size)] <= tol]
+        if basis.size:
+            q, _ = np.linalg.qr(basis.T)
+            null = null - (null @ q) @ q.T
+        u, sv, _ = np.linalg.svd(null.T, full_matrices=False)
+        extra = u[:, : null_dim - len(chains)].T
+        basis = np.vstack([basis, extra])
+        chains += [None] * extra.shape[0]
+    out = []
+    for v, c in zip(basis, chains):
+        natural = v / scale  # back to parameter units
+        natural = natural / natural[np.argmax(np.abs(natural))]
+        keep = np.abs(natural) > NULL_COEFFICIENT_TOL
+        out.append({
+            "chain": c,
+            "combination": describe_combination(np.where(keep, natural, 0.0), names, n_terms=int(keep.sum()),
+                                                min_coefficient=NULL_COEFFICIENT_TOL, number_format=".3g"),
+            "coefficients": {names[i]: float(natural[i]) for i in np.flatnonzero(keep)},
+        })
+    return basis, tuple(out)
+
+
+def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joints=None, free=None,
+                          rank_rtol: float = 1e-10) -> ObservabilityAnalysis:
+    """Singular values, indices, Cramer-Rao bound and weak or unidentifiable combinations.
 
     To report the uncertainty of an identified parameter set, call it with the identified
-    hexapod and the measured poses (the bound at the estimate); to judge a planned pose set,
-    with the nominal hexapod and the target poses.
+    ``theta`` and the measured poses (the bound at the estimate); to judge a planned pose set,
+    with the nominal ``theta`` and the target poses.
 
     Args:
-        hexapod: parameter set at which to linearise.
-        poses: (N, 6) poses, mm and rad.
-        noise: declared Gaussian sensor noise (standard deviations ``noise.std``).
+        robot: the robot.
+        theta: (P,) parameter vector at which to linearise.
+        poses: (N, D) poses the machine ``theta`` reaches, robot's pose units.
+        noise: declared Gaussian noise.
+        joints: (N, C) commanded joints; default ``robot.inverse_kinematics(theta, poses)``.
+        free: names of the free parameters; default ``robot.free_default``.
         rank_rtol: singular values below ``rank_rtol * sigma_1`` count as zero.
 
     Returns:
@@ -245,37 +378,50 @@ def analyze_observability(
     """
     if not (np.isfinite(rank_rtol) and 0 < rank_rtol < 1):
         raise ValueError(f"rank_rtol must be in (0, 1), got {rank_rtol!r}")
-    A = identification_jacobian(hexapod, poses, noise)
+    _check_robot(robot)
+    _check_noise(noise)
+    names, idx = free_indices(robot, free)
+    theta, poses, joints = _configurations(robot, theta, poses, joints)
+    A = _whitened_jacobian(robot, theta, poses, joints, noise, idx).reshape(-1, idx.size)
+    n_free = idx.size
+    scale = parameter_scale(robot)[idx]
+    As = A / scale
     m = A.shape[0]
-    # A full SVD is needed: with fewer rows than 42 the missing singular vectors are the
+    # A full SVD: with fewer rows than parameters the missing singular vectors are the
     # combinations the poses do not see at all.
-    _, s_thin, Vt = np.linalg.svd(A, full_matrices=True)
-    s = np.zeros(N_PARAMETERS)
+    _, s_thin, Vt = np.linalg.svd(As, full_matrices=True)
+    s = np.zeros(n_free)
     s[: s_thin.size] = s_thin
     tol = rank_rtol * s[0] if s[0] > 0 else 0.0
     rank = int(np.count_nonzero(s > tol)) if s[0] > 0 else 0
+    null_basis, not_identifiable = _null_combinations(robot, As, idx, names, scale, tol, n_free - rank)
+    Vt[rank:] = null_basis  # the same null space, in one chain's parameters where possible
     Vr = Vt[:rank]
-    crb = (Vr.T / s[:rank] ** 2) @ Vr
+    crb_scaled = (Vr.T / s[:rank] ** 2) @ Vr
+    crb = crb_scaled / np.outer(scale, scale)
     var = np.diag(crb).copy()
-    if rank < N_PARAMETERS:
+    if rank < n_free:
         touched = np.max(np.abs(Vt[rank:]), axis=0) > 1e-8
         var[touched] = np.inf
     with np.errstate(divide="ignore"):
         cond = float(s[0] / s[-1]) if s[-1] > tol else float("inf")
         norms = np.linalg.norm(A, axis=0)
-        As = A / np.where(norms > 0, norms, 1.0)
-        ss = np.linalg.svd(As, compute_uv=False)
-        scond = float(ss[0] / ss[-1]) if (ss.size == N_PARAMETERS and ss[-1] > rank_rtol * ss[0]) \
-            else float("inf")
+        An = A / np.where(norms > 0, norms, 1.0)
+        ss = np.linalg.svd(An, compute_uv=False)
+        scond = float(ss[0] / ss[-1]) if (ss.size == n_free and ss[-1] > rank_rtol * ss[0]) else float("inf")
         logs = np.log(np.where(s > 0, s, 1.0))
-        o1 = float(np.exp(logs.mean()) / np.sqrt(m)) if rank == N_PARAMETERS else 0.0
-    smin = float(s[-1]) if rank == N_PARAMETERS else 0.0
+        o1 = float(np.exp(logs.mean()) / np.sqrt(m)) if rank == n_free else 0.0
+    smin = float(s[-1]) if rank == n_free else 0.0
+    indices = np.array(idx)
+    indices.setflags(write=False)
     return ObservabilityAnalysis(
-        n_poses=m // 6, noise=noise, jacobian=_frozen(A), singular_values=_frozen(s),
-        right_singular_vectors=_frozen(Vt), rank=rank, condition_number=cond,
-        scaled_condition_number=scond, o1=o1, o2=smin / float(s[0]) if s[0] > 0 else 0.0, o3=smin,
-        o4=smin ** 2 / float(s[0]) if s[0] > 0 else 0.0,
-        fisher=_frozen(A.T @ A), crb=_frozen(crb), crb_std=_frozen(np.sqrt(var)),
+        names=names, units=tuple(robot.table.units[i] for i in idx), indices=indices,
+        n_parameters=robot.n_parameters, scale=frozen_array(scale), n_poses=poses.shape[0], noise=noise,
+        jacobian=frozen_array(A), singular_values=frozen_array(s), right_singular_vectors=frozen_array(Vt),
+        rank=rank, condition_number=cond, scaled_condition_number=scond, o1=o1,
+        o2=smin / float(s[0]) if s[0] > 0 else 0.0, o3=smin, o4=smin ** 2 / float(s[0]) if s[0] > 0 else 0.0,
+        fisher=frozen_array(A.T @ A), crb=frozen_array(crb), crb_std=frozen_array(np.sqrt(var)),
+        not_identifiable=not_identifiable,
     )
 
 
@@ -284,12 +430,12 @@ class PoseUncertainty:
     """Predicted pose error of a compensated controller at target poses.
 
     Attributes:
-        targets: (N, 6) target poses, mm and rad, base frame.
-        covariance: (N, 6, 6) covariance of ``reached - target``; blocks in mm^2, mm rad and
-            rad^2.
-        position_rms_mm: (N,) mm, ``sqrt(trace)`` of the position block: the RMS length of the
-            position error vector.
-        orientation_rms_rad: (N,) rad, the same for the angles.
+        targets: (N, D) target poses, robot's pose units, base frame.
+        covariance: (N, D, D) covariance of ``reached - target`` (products of the pose units).
+        position_rms_mm: (N,) mm, ``sqrt(trace)`` of the block of the mm coordinates: the RMS
+            length of the position error vector.
+        orientation_rms_rad: (N,) rad, the same for the angle coordinates (0 for a robot whose
+            platform only translates).
     """
 
     targets: np.ndarray
@@ -298,32 +444,36 @@ class PoseUncertainty:
     orientation_rms_rad: np.ndarray
 
 
-def pose_uncertainty(hexapod: Hexapod, targets: np.ndarray, parameter_covariance: np.ndarray) -> PoseUncertainty:
+def pose_uncertainty(robot: Robot, theta, targets, parameter_covariance) -> PoseUncertainty:
     """Uncertainty of the pose reached anywhere in the workspace after compensation.
 
-    The controller commands ``l = IK(theta_hat, target)``; the machine reaches
-    ``FK(theta, l)``. To first order ``reached - target = J_fk (theta - theta_hat)`` with
-    ``J_fk = d pose / d errors`` (:func:`~calib.kinematics.forward_parameter_jacobian`), so
-    ``Cov(reached - target) = J_fk Cov(theta_hat) J_fk^T``.
+    The controller commands ``q = IK(theta_hat, target)``; the machine reaches
+    ``FK(theta, q)``. To first order ``reached - target = -J (theta_hat - theta)`` with
+    ``J = d pose / d theta`` at fixed joints (:func:`calib.robot.pose_jacobian_of_parameters`),
+    so ``Cov(reached - target) = J Cov(theta_hat) J^T``.
 
     Args:
-        hexapod: parameter set at which to linearise (the identified one).
-        targets: (N, 6) target poses, mm and rad.
-        parameter_covariance: (42, 42) mm^2, covariance of the identified errors (e.g.
-            ``ObservabilityAnalysis.crb`` or ``IdentificationResult.covariance``).
+        robot: the robot.
+        theta: (P,) parameter vector at which to linearise (the identified one).
+        targets: (N, D) target poses, robot's pose units.
+        parameter_covariance: (P, P) covariance of the identified parameters (e.g.
+            :meth:`ObservabilityAnalysis.parameter_covariance` or
+            ``IdentificationResult.covariance``), zero for fixed parameters.
 
     Returns:
         The :class:`PoseUncertainty`.
     """
-    _check_hexapod(hexapod)
-    targets = as_poses(targets, "targets")
-    C = as_array(parameter_covariance, "parameter_covariance", (N_PARAMETERS, N_PARAMETERS))
+    _check_robot(robot)
+    theta, targets, joints = _configurations(robot, theta, targets, None, "targets")
+    P = robot.n_parameters
+    C = as_array(parameter_covariance, "parameter_covariance", (P, P))
     if not np.allclose(C, C.T, rtol=1e-8, atol=1e-300):
         raise ValueError("parameter_covariance must be symmetric")
-    J = forward_parameter_jacobian(hexapod, targets)
+    J = pose_jacobian_of_parameters(robot, theta, joints, targets)
     cov = np.einsum("nia,ab,njb->nij", J, C, J)
     cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    pos = np.sqrt(np.clip(np.trace(cov[:, :3, :3], axis1=1, axis2=2), 0.0, None))
-    ori = np.sqrt(np.clip(np.trace(cov[:, 3:, 3:], axis1=1, axis2=2), 0.0, None))
-    return PoseUncertainty(targets=_frozen(targets), covariance=_frozen(cov), position_rms_mm=_frozen(pos),
-                           orientation_rms_rad=_frozen(ori))
+    angle = robot.angle_pose_mask
+    pos = np.sqrt(np.clip(np.trace(cov[:, ~angle][:, :, ~angle], axis1=1, axis2=2), 0.0, None))
+    ori = np.sqrt(np.clip(np.trace(cov[:, angle][:, :, angle], axis1=1, axis2=2), 0.0, None))
+    return PoseUncertainty(targets=frozen_array(targets), covariance=frozen_array(cov),
+                           position_rms_mm=frozen_array(pos), orientation_rms_rad=frozen_array(ori))

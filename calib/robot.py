@@ -224,6 +224,29 @@ class Robot(ABC):
     def from_description(cls, description: dict) -> "Robot":
         """The robot of a :meth:`description` (raises ``KeyError``/``ValueError`` naming the key)."""
 
+    # -- optional: pose design and reference data (defaults: none) -----------------------
+    def full_workspace_bounds(self) -> np.ndarray:
+        """(D, 2) low/high of a box around every pose worth measuring: the "full" design
+        workspace of :mod:`calib.design`, cut there by the feasibility checks (reach, joint
+        limits, passive joints, singularity). Default: :meth:`workspace_bounds`."""
+        return self.workspace_bounds()
+
+    def passive_joint_angles(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, K) rad, deflection of each range-limited passive joint at ``poses`` (e.g. the
+        angle between a leg and the normal of its spherical joint's seat), for the design's
+        passive-joint limit. Default: none (K = 0)."""
+        return np.zeros((np.shape(poses)[0], 0))
+
+    def reference_poses(self) -> np.ndarray | None:
+        """(N, D) a published calibration pose set that designs are compared with (e.g. the
+        hexapod paper's Table 4 poses), or None (the default)."""
+        return None
+
+    def reference_errors(self) -> np.ndarray | None:
+        """(P,) parameter errors ``theta - table.nominal`` of a published example machine (e.g.
+        the hexapod paper's Table 3), or None (the default)."""
+        return None
+
     # -- kinematics -----------------------------------------------------------------------
     @abstractmethod
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:

@@ -1,23 +1,25 @@
-"""Design optimal calibration poses and write them as a command file.
+"""Design optimal calibration poses for any registered robot and write them as a command file.
 
 Usage::
 
-    python -m pipeline.design --poses 10 [--criterion d|e] [--workspace full|paper]
-        [--seed 0] [--out designed_poses.csv] [--noise-mm 0.001] [--noise-rad 1e-6]
-        [--candidates 3000] [--geometry GEOMETRY.json] [--summary-json FILE] [--rrd FILE]
-        [--overwrite]
+    python -m pipeline.design --poses 10 [--robot hexapod|delta|...] [--criterion d|e]
+        [--workspace full|default] [--seed 0] [--out designed_poses.csv] [--noise-mm 0.001]
+        [--noise-rad 1e-6] [--noise-joint 0] [--candidates 3000] [--geometry ROBOT.json]
+        [--summary-json FILE] [--rrd FILE] [--overwrite]
 
-The command file is a CSV with the header
-``x_mm,y_mm,z_mm,alpha_rad,beta_rad,gamma_rad,l1_mm,...,l6_mm``: one row per target pose and
-the leg lengths the nominal controller commands for it (what the testbed or a real machine
-runs). A JSON sidecar (same name, ``.json``) records the geometry, the criterion, the
-workspace, the declared noise, the seed and the observability figures of the design. Files are
-written atomically and never overwrite an existing file unless ``--overwrite`` is given.
+The command file is a CSV whose header comes from the robot: its pose coordinates with their
+units, then its joints with theirs, e.g. ``x_mm,y_mm,z_mm,alpha_rad,beta_rad,gamma_rad,l1_mm,...,
+l6_mm`` (hexapod) or ``x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad`` (Delta): one row per target pose
+and the joints the nominal controller commands for it (what the testbed or a real machine
+runs). A JSON sidecar (same name, ``.json``) records the robot, its description, the criterion,
+the workspace, the declared noise, the seed and the observability figures of the design. Files
+are written atomically and never overwrite an existing file unless ``--overwrite`` is given.
 
-Python use (for ``pipeline.run --design optimal``)::
+Python use (e.g. for ``pipeline.run --design optimal``)::
 
-    from pipeline.design import optimal_poses
-    poses = optimal_poses(geometry, 10, criterion="d", workspace="full", seed=0)  # (10, 6)
+    from pipeline.design import optimal_poses, read_command_file
+    poses = optimal_poses(robot, 10, criterion="d", workspace="full", seed=0)  # (10, D)
+    poses, joints = read_command_file("designed_poses.csv")  # robot found from the header
 """
 
 from __future__ import annotations
@@ -32,86 +34,108 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.design import CRITERIA, Workspace, design_poses, sample_feasible_poses, workspace_by_name
-from calib.hexapod import Hexapod, HexapodGeometry, paper_geometry
-from calib.kinematics import inverse_kinematics
+from calib.design import (CRITERIA, WORKSPACES, Workspace, design_poses, minimum_poses, robot_workspace,
+                          sample_feasible_poses)
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
-from calib import paper
-from pipeline.recording import atomic_write
+from calib.robot import Robot, check_joint_limits
+from calib.robots import ROBOTS, default_robot, robot_from_description
+from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
-    "COMMAND_COLUMNS",
     "DEFAULT_NOISE",
+    "DEFAULT_CANDIDATES",
+    "PROBE_POSES",
+    "command_columns",
+    "command_csv",
     "optimal_poses",
     "write_command_file",
     "read_command_file",
+    "load_robot",
+    "add_noise_arguments",
+    "noise_from_arguments",
+    "position_columns",
     "main",
 ]
 
-#: Header of a command file: target pose (mm, rad) and nominal commanded leg lengths (mm).
-COMMAND_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad",
-                   "l1_mm", "l2_mm", "l3_mm", "l4_mm", "l5_mm", "l6_mm")
 #: Declared noise the designs are weighted with by default: Gaussian, 1 um on positions,
-#: 1e-6 rad on angles (standard deviations).
+#: 1e-6 rad on angles (standard deviations), exact joints.
 DEFAULT_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
+#: Feasible candidate poses drawn for a design by default.
+DEFAULT_CANDIDATES = 3000
+#: Feasible poses drawn over the workspace to predict the pose uncertainty after calibration.
+PROBE_POSES = 200
 
 
-def _workspace(workspace: str | Workspace) -> Workspace:
-    if isinstance(workspace, Workspace):
-        return workspace
-    return workspace_by_name(workspace)
+def command_columns(robot: Robot) -> tuple[str, ...]:
+    """Header of the robot's command file: pose coordinates then joints, each ``name_unit``."""
+    return tuple(f"{n}_{u}" for n, u in zip(robot.pose_names, robot.pose_units)) + \
+        tuple(f"{n}_{robot.joint_unit}" for n in robot.joint_names)
 
 
-def optimal_poses(
-    geometry: HexapodGeometry,
-    n: int,
-    criterion: str = "d",
-    workspace: str | Workspace = "full",
-    seed: int = 0,
-    *,
-    noise: SensorNoise = DEFAULT_NOISE,
-    n_candidates: int = 3000,
-) -> np.ndarray:
-    """``n`` optimal calibration poses for a machine of nominal ``geometry``.
+def _workspace(robot: Robot, workspace: str | Workspace) -> Workspace:
+    return workspace if isinstance(workspace, Workspace) else robot_workspace(robot, workspace)
+
+
+def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | Workspace = "full",
+                  seed: int = 0, *, theta=None, noise: SensorNoise = DEFAULT_NOISE, free=None,
+                  n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+    """``n`` optimal calibration poses for a machine of the robot's nominal geometry.
 
     Args:
-        geometry: nominal geometry (the design is linearised at zero errors).
-        n: number of poses, >= 7.
+        robot: the robot (e.g. ``calib.robots.default_robot("hexapod")``).
+        n: number of poses, at least :func:`calib.design.minimum_poses` (7 for the hexapod and
+            the Delta).
         criterion: ``"d"`` (D-optimal) or ``"e"`` (E-optimal).
-        workspace: ``"full"``, ``"paper"`` or a :class:`~calib.design.Workspace`.
+        workspace: ``"full"``, ``"default"`` or a :class:`~calib.design.Workspace`.
         seed: seed of the candidate draw (same seed, same poses).
-        noise: declared sensor noise weighting mm against rad.
+        theta: (P,) parameter set to linearise at; default the nominal one (the errors are
+            unknown before calibration).
+        noise: declared noise weighting the pose coordinates.
+        free: parameters to determine; default ``robot.free_default``.
         n_candidates: feasible candidates drawn.
 
     Returns:
-        (n, 6) target poses, mm and rad, base frame; all inside ``workspace``.
+        (n, D) target poses, the robot's pose units, base frame; all inside ``workspace``.
     """
-    if not isinstance(geometry, HexapodGeometry):
-        raise TypeError(f"geometry must be a HexapodGeometry, got {type(geometry).__name__}")
-    return design_poses(Hexapod(geometry), n, _workspace(workspace), noise, criterion=criterion,
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
+    theta = robot.table.nominal if theta is None else theta
+    return design_poses(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
                         seed=seed, n_candidates=n_candidates).poses
 
 
-def command_csv(poses: np.ndarray, lengths: np.ndarray) -> str:
+def _check_rows(robot: Robot, poses, joints) -> tuple[np.ndarray, np.ndarray]:
+    poses = np.asarray(poses, dtype=float)
+    joints = np.asarray(joints, dtype=float)
+    if poses.ndim != 2 or poses.shape[1] != robot.pose_dim:
+        raise ValueError(f"poses must have shape (N, {robot.pose_dim}), got {poses.shape}")
+    if joints.shape != (poses.shape[0], robot.n_chains):
+        raise ValueError(f"joints must have shape {(poses.shape[0], robot.n_chains)}, got {joints.shape}")
+    return poses, joints
+
+
+def command_csv(robot: Robot, poses, joints) -> str:
     """CSV text of a command file (full float64 precision)."""
+    poses, joints = _check_rows(robot, poses, joints)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(COMMAND_COLUMNS)
-    for p, l in zip(poses, lengths):
-        w.writerow([repr(float(v)) for v in np.r_[p, l]])
+    w.writerow(command_columns(robot))
+    for p, q in zip(poses, joints):
+        w.writerow([repr(float(v)) for v in np.r_[p, q]])
     return buf.getvalue()
 
 
-def write_command_file(path: str | os.PathLike, poses: np.ndarray, lengths: np.ndarray, meta: dict,
-                       *, overwrite: bool = False) -> tuple[Path, Path]:
+def write_command_file(path: str | os.PathLike, robot: Robot, poses, joints, meta: dict, *,
+                       overwrite: bool = False) -> tuple[Path, Path]:
     """Write the CSV command file and its JSON sidecar (``path`` with suffix ``.json``).
 
     Args:
         path: CSV path.
-        poses: (N, 6) target poses, mm and rad.
-        lengths: (N, 6) commanded leg lengths, mm.
-        meta: JSON-ready metadata for the sidecar.
+        robot: the robot (gives the columns).
+        poses: (N, D) target poses, the robot's pose units.
+        joints: (N, C) commanded joints, the robot's joint unit.
+        meta: JSON-ready metadata for the sidecar (``robot`` is added).
         overwrite: replace existing files.
 
     Returns:
@@ -120,88 +144,124 @@ def write_command_file(path: str | os.PathLike, poses: np.ndarray, lengths: np.n
     Raises:
         FileExistsError: a file exists and ``overwrite`` is False (nothing is written).
     """
-    poses = np.asarray(poses, dtype=float)
-    lengths = np.asarray(lengths, dtype=float)
-    if poses.ndim != 2 or poses.shape[1] != 6:
-        raise ValueError(f"poses must have shape (N, 6), got {poses.shape}")
-    if lengths.shape != poses.shape:
-        raise ValueError(f"lengths must have shape {poses.shape}, got {lengths.shape}")
+    text = command_csv(robot, poses, joints)
     path = Path(path)
-    side = path.with_suffix(".json")
+    side = sidecar_path(path)
     if side == path:
         raise ValueError(f"command file must not have a .json suffix, got {path}")
     for p in (path, side):
         if p.exists() and not overwrite:
             raise FileExistsError(f"{p} exists; pass --overwrite (overwrite=True) to replace it")
-    atomic_write(side, json.dumps(meta, indent=2) + "\n", overwrite=overwrite)
-    atomic_write(path, command_csv(poses, lengths), overwrite=overwrite)
+    atomic_write(side, json.dumps({"robot": robot.name, **meta}, indent=2) + "\n", overwrite=overwrite)
+    atomic_write(path, text, overwrite=overwrite)
     return path, side
 
 
-def read_command_file(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+def _robot_of_header(path: Path, header: tuple) -> Robot:
+    known = {name: default_robot(name) for name in sorted(ROBOTS)}
+    for robot in known.values():
+        if command_columns(robot) == header:
+            return robot
+    expected = "; ".join(f"{name}: {','.join(command_columns(r))}" for name, r in known.items())
+    raise ValueError(f"{path}: line 1: header {','.join(header)} is no registered robot's (expected {expected})")
+
+
+def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Read a command file.
 
     Args:
         path: CSV written by :func:`write_command_file` (or by hand, same header).
+        robot: the robot whose columns the header must have; default: the registered robot
+            whose columns it has.
 
     Returns:
-        ``(poses, lengths)``: (N, 6) target poses in mm and rad, (N, 6) commanded lengths in mm.
+        ``(poses, joints)``: (N, D) target poses, (N, C) commanded joints, the robot's units.
 
     Raises:
         ValueError: naming the file, and the row (line number) and column of a bad value, or
-            the header or the missing columns.
+            the header.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"command file {path} not found")
     rows = list(csv.reader(path.read_text().splitlines()))
     if not rows:
-        raise ValueError(f"{path}: empty command file, expected the header {','.join(COMMAND_COLUMNS)}")
-    header = [h.strip() for h in rows[0]]
-    if tuple(header) != COMMAND_COLUMNS:
-        raise ValueError(f"{path}: line 1: header must be {','.join(COMMAND_COLUMNS)}, got {','.join(header)}")
+        kinds = [robot] if robot is not None else [default_robot(name) for name in sorted(ROBOTS)]
+        raise ValueError(f"{path}: empty command file, expected a header such as "
+                         f"{'; '.join(','.join(command_columns(r)) for r in kinds)}")
+    header = tuple(h.strip() for h in rows[0])
+    if robot is None:
+        robot = _robot_of_header(path, header)
+    columns = command_columns(robot)
+    if header != columns:
+        raise ValueError(f"{path}: line 1: header must be {','.join(columns)} (the {robot.name}'s), "
+                         f"got {','.join(header)}")
     data = []
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
             continue
-        if len(row) != len(COMMAND_COLUMNS):
-            raise ValueError(f"{path}: line {line}: expected {len(COMMAND_COLUMNS)} columns, got {len(row)}")
-        vals = []
-        for col, cell in zip(COMMAND_COLUMNS, row):
+        if len(row) != len(columns):
+            raise ValueError(f"{path}: line {line}: expected {len(columns)} columns, got {len(row)}")
+        values = []
+        for col, cell in zip(columns, row):
             try:
                 v = float(cell)
             except ValueError:
                 raise ValueError(f"{path}: line {line}, column {col}: not a number: {cell!r}") from None
             if not np.isfinite(v):
                 raise ValueError(f"{path}: line {line}, column {col}: not finite: {cell!r}")
-            vals.append(v)
-        data.append(vals)
+            values.append(v)
+        data.append(values)
     if not data:
         raise ValueError(f"{path}: no data rows after the header")
     a = np.array(data, dtype=float)
-    return a[:, :6].copy(), a[:, 6:].copy()
+    d = robot.pose_dim
+    return a[:, :d].copy(), a[:, d:].copy()
 
 
-def _load_geometry(path: str | None) -> HexapodGeometry:
-    if path is None:
-        return paper_geometry()
+def load_robot(name: str, geometry: str | None) -> Robot:
+    """The registered robot ``name``: its default machine, or the nominal geometry of a
+    ``Robot.description()`` JSON file. Raises ``SystemExit`` naming the option at fault."""
+    if name not in ROBOTS:
+        raise SystemExit(f"--robot: unknown robot {name!r}; registered robots are {', '.join(sorted(ROBOTS))}")
+    if geometry is None:
+        return default_robot(name)
     try:
-        return HexapodGeometry.from_dict(json.loads(Path(path).read_text()))
-    except (OSError, KeyError, ValueError) as exc:
-        raise SystemExit(f"--geometry {path}: cannot read a geometry: {exc}") from None
+        return robot_from_description(name, json.loads(Path(geometry).read_text()))
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise SystemExit(f"--geometry {geometry}: cannot read a {name} description: {exc}") from None
+
+
+def add_noise_arguments(p: argparse.ArgumentParser) -> None:
+    """``--noise-mm``, ``--noise-rad``, ``--noise-joint`` (Gaussian standard deviations)."""
+    p.add_argument("--noise-mm", type=float, default=DEFAULT_NOISE.position_mm, help="position noise std, mm")
+    p.add_argument("--noise-rad", type=float, default=DEFAULT_NOISE.orientation_rad,
+                   help="angle noise std, rad (robots with angle coordinates)")
+    p.add_argument("--noise-joint", type=float, default=DEFAULT_NOISE.joint,
+                   help="joint-reading noise std, the robot's joint unit (default 0: exact joints)")
+
+
+def noise_from_arguments(args) -> SensorNoise:
+    """The Gaussian :class:`SensorNoise` of :func:`add_noise_arguments`' options."""
+    try:
+        return SensorNoise(args.noise_mm, args.noise_rad, "normal", args.noise_joint)
+    except ValueError as exc:
+        raise SystemExit(f"--noise-mm/--noise-rad/--noise-joint: {exc}") from None
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m pipeline.design", description=__doc__.split("\n\n")[0])
-    p.add_argument("--poses", type=int, required=True, help="number of poses to design (>= 7)")
+    p.add_argument("--poses", type=int, required=True, help="number of poses to design (7 for hexapod and Delta)")
+    p.add_argument("--robot", default="hexapod", help=f"registered robot: {', '.join(sorted(ROBOTS))}")
     p.add_argument("--criterion", choices=CRITERIA, default="d", help="d: D-optimal, e: E-optimal")
-    p.add_argument("--workspace", choices=("full", "paper"), default="full")
+    p.add_argument("--workspace", choices=WORKSPACES, default="full",
+                   help="full: the robot's whole feasible workspace; default: its calibration workspace")
     p.add_argument("--seed", type=int, default=0, help="seed of the candidate draw")
     p.add_argument("--out", default="designed_poses.csv", help="command file (CSV); sidecar .json beside it")
-    p.add_argument("--noise-mm", type=float, default=DEFAULT_NOISE.position_mm, help="position noise std, mm")
-    p.add_argument("--noise-rad", type=float, default=DEFAULT_NOISE.orientation_rad, help="angle noise std, rad")
-    p.add_argument("--candidates", type=int, default=3000, help="feasible candidate poses drawn")
-    p.add_argument("--geometry", default=None, help="geometry JSON (HexapodGeometry.to_dict); default the paper's")
+    add_noise_arguments(p)
+    p.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help="feasible candidate poses drawn")
+    p.add_argument("--geometry", default=None, help="robot description JSON (Robot.description()); "
+                                                    "default the registered robot's default machine")
     p.add_argument("--summary-json", default=None)
     p.add_argument("--rrd", default=None)
     p.add_argument("--overwrite", action="store_true")
@@ -210,44 +270,45 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    if args.poses < 7:
-        raise SystemExit(f"--poses must be >= 7 (42 parameters, 6 equations per pose), got {args.poses}")
-    outs = [Path(args.out), Path(args.out).with_suffix(".json")]
-    outs += [Path(p) for p in (args.summary_json, args.rrd) if p]
+    robot = load_robot(args.robot, args.geometry)
+    fewest = minimum_poses(robot)
+    if args.poses < fewest:
+        raise SystemExit(f"--poses must be >= {fewest} ({len(robot.free_default)} parameters, "
+                         f"{robot.pose_dim} equations per pose), got {args.poses}")
+    if args.candidates < args.poses:
+        raise SystemExit(f"--candidates must be >= --poses ({args.poses}), got {args.candidates}")
+    outs = [Path(args.out), sidecar_path(args.out)] + [Path(p) for p in (args.summary_json, args.rrd) if p]
     for p in outs:
         if p.exists() and not args.overwrite:
             raise SystemExit(f"{p} exists; pass --overwrite to replace it")
-    try:
-        noise = SensorNoise(args.noise_mm, args.noise_rad, "normal")
-    except ValueError as exc:
-        raise SystemExit(f"--noise-mm/--noise-rad: {exc}") from None
-    geometry = _load_geometry(args.geometry)
-    nominal = Hexapod(geometry)
-    ws = workspace_by_name(args.workspace)
-    print(f"designing {args.poses} {args.criterion.upper()}-optimal poses in the {ws.name} workspace "
-          f"from {args.candidates} candidates (seed {args.seed})...", file=sys.stderr)
-    res = design_poses(nominal, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
+    noise = noise_from_arguments(args)
+    theta = robot.table.nominal
+    ws = robot_workspace(robot, args.workspace)
+    print(f"designing {args.poses} {args.criterion.upper()}-optimal poses for the {robot.name} in its "
+          f"{ws.name} workspace from {args.candidates} candidates (seed {args.seed})...", file=sys.stderr)
+    res = design_poses(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
                        n_candidates=args.candidates)
-    lengths = inverse_kinematics(nominal, res.poses, stroke_mm=ws.stroke_mm)
-    analysis = analyze_observability(nominal, res.poses, noise)
-    reference = analyze_observability(nominal, paper.TABLE4_NOMINAL_POSES, noise) \
-        if args.geometry is None else None
+    joints = robot.inverse_kinematics(theta, res.poses)
+    check_joint_limits(robot, joints, "designed pose")
+    analysis = analyze_observability(robot, theta, res.poses, noise, joints=joints)
+    reference_poses = robot.reference_poses() if args.geometry is None else None
+    reference = analyze_observability(robot, theta, reference_poses, noise) if reference_poses is not None else None
     # Predicted pose uncertainty after calibration with these poses, anywhere in the workspace
-    # (200 seeded feasible poses), for a controller compensating with the identified errors.
-    probe = sample_feasible_poses(nominal, ws, 200, [args.seed, 1])
-    pu = pose_uncertainty(nominal, probe, analysis.crb)
-    uncertainty = {
-        "probe_poses": int(probe.shape[0]),
-        "position_rms_um": {"mean": float(pu.position_rms_mm.mean() * 1e3),
-                            "max": float(pu.position_rms_mm.max() * 1e3)},
-        "orientation_rms_urad": {"mean": float(pu.orientation_rms_rad.mean() * 1e6),
-                                 "max": float(pu.orientation_rms_rad.max() * 1e6)},
-    }
+    # (seeded feasible poses), for a controller compensating with the identified parameters.
+    probe = sample_feasible_poses(robot, theta, ws, PROBE_POSES, [args.seed, 1])
+    pu = pose_uncertainty(robot, theta, probe, analysis.parameter_covariance())
+    uncertainty = {"probe_poses": int(probe.shape[0]),
+                   "position_rms_um": {"mean": float(pu.position_rms_mm.mean() * 1e3),
+                                       "max": float(pu.position_rms_mm.max() * 1e3)}}
+    if robot.angle_pose_mask.any():
+        uncertainty["orientation_rms_urad"] = {"mean": float(pu.orientation_rms_rad.mean() * 1e6),
+                                               "max": float(pu.orientation_rms_rad.max() * 1e6)}
+    columns = command_columns(robot)
     meta = {
-        "kind": "hexapod calibration command file",
-        "columns": list(COMMAND_COLUMNS),
-        "units": "mm and rad; lengths are the nominal controller's commanded leg lengths",
-        "geometry": geometry.to_dict(),
+        "kind": "calibration command file",
+        "columns": list(columns),
+        "units": "pose and joint units in the column names; joints are the nominal controller's commands",
+        "robot_description": robot.description(),
         "criterion": args.criterion,
         "workspace": ws.to_dict(),
         "noise": noise.to_dict(),
@@ -259,6 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     summary = {
         "command": "pipeline.design",
+        "robot": robot.name,
         "out": str(args.out),
         "n_poses": args.poses,
         "criterion": args.criterion,
@@ -269,18 +331,18 @@ def main(argv: list[str] | None = None) -> int:
         "predicted_pose_uncertainty": uncertainty,
     }
     if reference is not None:
-        summary["paper_poses_observability"] = reference.summary()
-        summary["crb_rms_gain_vs_paper_poses"] = reference.crb_rms / analysis.crb_rms
+        summary["reference_poses_observability"] = reference.summary()
+        summary["crb_rms_gain_vs_reference_poses"] = reference.crb_rms / analysis.crb_rms
     try:
-        csv_path, side = write_command_file(args.out, res.poses, lengths, meta, overwrite=args.overwrite)
+        csv_path, side = write_command_file(args.out, robot, res.poses, joints, meta, overwrite=args.overwrite)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
     if args.summary_json:
         atomic_write(args.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=args.overwrite)
     if args.rrd:
-        _write_rrd(args.rrd, analysis, reference, res.poses, (probe, pu.position_rms_mm), args.overwrite)
-    gain = (f" ({summary['crb_rms_gain_vs_paper_poses']:.3g}x lower than with the paper's 10 poses)"
-            if reference is not None else "")
+        _write_rrd(args.rrd, robot, analysis, reference, res.poses, (probe, pu.position_rms_mm), args.overwrite)
+    gain = (f" ({summary['crb_rms_gain_vs_reference_poses']:.3g}x lower than with its "
+            f"{len(reference_poses)} reference poses)" if reference is not None else "")
     print(f"wrote {csv_path} and {side}: condition number {analysis.scaled_condition_number:.4g} "
           f"(column-scaled), CRB parameter RMS {analysis.crb_rms:.4g} mm{gain}; predicted position error "
           f"after calibration {uncertainty['position_rms_um']['mean']:.3g} um RMS (mean over the workspace)",
@@ -288,7 +350,12 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwrite: bool) -> None:
+def position_columns(robot: Robot, poses: np.ndarray) -> np.ndarray:
+    """(N, 3) the position (mm) coordinates of poses, for drawing."""
+    return np.asarray(poses)[:, ~robot.angle_pose_mask][:, :3]
+
+
+def _write_rrd(path: str, robot: Robot, analysis, reference, poses: np.ndarray, probe, overwrite: bool) -> None:
     import rerun as rr
     import rerun.blueprint as rrb
 
@@ -297,7 +364,7 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwri
 
     views = [observability_views("design/observability", "Designed poses")]
     if reference is not None:
-        views.append(observability_views("paper_poses/observability", "Paper's poses"))
+        views.append(observability_views("reference_poses/observability", "Reference poses"))
     bp = rrb.Blueprint(rrb.Vertical(
         rrb.Horizontal(
             rrb.Spatial3DView(origin="design/poses", name="Designed pose positions (mm)"),
@@ -306,19 +373,21 @@ def _write_rrd(path: str, analysis, reference, poses: np.ndarray, probe, overwri
         ), *views))
 
     def log(rec):
-        rec.log("design/poses", rr.Points3D(poses[:, :3], radii=2.0), static=True)
+        rec.log("design/poses", rr.Points3D(position_columns(robot, poses), radii=2.0), static=True)
         probe_poses, pos_rms = probe
         # Radius in mm drawn as the predicted RMS position error in um (1 um -> 1 mm sphere).
-        rec.log("design/pose_uncertainty", rr.Points3D(probe_poses[:, :3], radii=pos_rms * 1e3,
+        rec.log("design/pose_uncertainty", rr.Points3D(position_columns(robot, probe_poses), radii=pos_rms * 1e3,
                                                       labels=[f"{v * 1e3:.2f} um" for v in pos_rms]), static=True)
-        log_observability(rec, analysis, "design/observability", title="Designed poses")
+        log_observability(rec, analysis, "design/observability", title=f"Designed poses ({robot.name})")
         if reference is not None:
-            log_observability(rec, reference, "paper_poses/observability", title="Paper's 10 poses")
+            log_observability(rec, reference, "reference_poses/observability",
+                              title=f"Reference poses ({robot.name})")
 
     try:
         save_recording(path, log, application_id="parallel-calib-design", overwrite=overwrite, bp=bp)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,14 +1,16 @@
-"""Rerun logging of observability figures (rerun-sdk 0.41 API).
+"""Rerun logging of observability figures (rerun-sdk 0.41 API), for any robot.
 
 Reusable by every pipeline command: :func:`log_observability` writes, under ``prefix``:
 
-* ``{prefix}/singular_values`` and ``{prefix}/log10_singular_values``: bar charts of the 42
-  singular values of the noise-weighted identification Jacobian (1/mm), largest first;
-* ``{prefix}/crb_std_mm``: bar chart of the Cramer-Rao standard deviation of each parameter
-  (mm, :func:`~calib.hexapod.parameter_table` order; an undetermined parameter is logged as 0
-  and named in the report);
+* ``{prefix}/singular_values`` and ``{prefix}/log10_singular_values``: bar charts of the
+  singular values of the scaled noise-whitened identification Jacobian (1/mm), largest first;
+* ``{prefix}/crb_std_mm``: bar chart of the Cramer-Rao standard deviation of each free
+  parameter (mm; an angle as the length it moves at the machine's size), table order; an
+  undetermined parameter is logged as 0 and named in the report. Rerun's bar charts carry no
+  per-bar labels, so the entity also holds a ``parameter_names`` component (the bars' names, in
+  order; shown in the viewer's selection panel);
 * ``{prefix}/report``: a markdown document with the indices, the condition numbers, the weakest
-  parameter combinations and the per-parameter table.
+  and the not identifiable parameter combinations and the per-parameter table.
 
 All entities are static (they describe a pose set, not a moment in time).
 """
@@ -19,7 +21,6 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from calib.hexapod import parameter_table
 from calib.observability import ObservabilityAnalysis
 
 __all__ = ["log_observability", "log_bars", "observability_markdown", "observability_views"]
@@ -31,18 +32,16 @@ def _fmt(x: float) -> str:
 
 def observability_markdown(analysis: ObservabilityAnalysis, *, title: str = "Observability", k: int = 5) -> str:
     """Markdown report of an :class:`~calib.observability.ObservabilityAnalysis`."""
-    names = [n for n, _, _ in parameter_table()]
     n = analysis.noise
     lines = [
         f"# {title}",
         "",
-        f"{analysis.n_poses} poses; declared noise ({n.distribution}): position "
-        f"{n.position_mm:g} mm, orientation {n.orientation_rad:g} rad (std "
-        f"{analysis.noise.std[0]:.3g} mm, {analysis.noise.std[3]:.3g} rad).",
+        f"{analysis.n_poses} poses; declared noise ({n.distribution}): position {n.position_mm:g} mm, "
+        f"orientation {n.orientation_rad:g} rad, joints {n.joint:g} (joint unit).",
         "",
         "| figure | value |", "|---|---|",
-        f"| rank | {analysis.rank} / 42 |",
-        f"| condition number (noise-weighted) | {_fmt(analysis.condition_number)} |",
+        f"| rank | {analysis.rank} / {analysis.n_free} |",
+        f"| condition number (noise-whitened, angles scaled to mm) | {_fmt(analysis.condition_number)} |",
         f"| condition number (column-scaled) | {_fmt(analysis.scaled_condition_number)} |",
         f"| O1 (D) | {_fmt(analysis.o1)} 1/mm |",
         f"| O2 (inverse condition) | {_fmt(analysis.o2)} |",
@@ -54,18 +53,31 @@ def observability_markdown(analysis: ObservabilityAnalysis, *, title: str = "Obs
         "",
         "| std (mm) | combination |", "|---|---|",
     ]
-    for c in analysis.weakest_combinations(k):
+    for c in analysis.weakest_combinations(min(k, analysis.n_free)):
         lines.append(f"| {_fmt(c['std_mm'])} | {c['combination']} |")
-    lines += ["", "## Cramer-Rao standard deviation per parameter (mm)", "",
-              "| parameter | std (mm) |", "|---|---|"]
-    lines += [f"| {nm} | {_fmt(s)} |" for nm, s in zip(names, analysis.crb_std)]
+    if analysis.not_identifiable:
+        lines += ["", "## Not identifiable (a change along these leaves every pose unchanged)", "",
+                  "| chain | combination (parameter units) |", "|---|---|"]
+        lines += [f"| {'-' if c['chain'] is None else c['chain'] + 1} | {c['combination']} |"
+                  for c in analysis.not_identifiable]
+    lines += ["", "## Cramer-Rao standard deviation per parameter", "",
+              "| parameter | std | unit | std as mm |", "|---|---|---|---|"]
+    lines += [f"| {nm} | {_fmt(s)} | {u} | {_fmt(m)} |"
+              for nm, s, u, m in zip(analysis.names, analysis.crb_std, analysis.units, analysis.crb_std_mm)]
     return "\n".join(lines) + "\n"
 
 
-def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray) -> None:
-    """A static bar chart of finite values (non-finite entries logged as 0)."""
+def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None) -> None:
+    """A static bar chart of finite values (non-finite entries logged as 0); ``names`` (one per
+    bar) are logged beside it as a ``parameter_names`` component."""
     v = np.asarray(values, dtype=float)
-    rec.log(path, rr.BarChart(np.where(np.isfinite(v), v, 0.0)), static=True)
+    extra = []
+    if names is not None:
+        names = [str(n) for n in names]
+        if len(names) != v.size:
+            raise ValueError(f"names must have one entry per bar ({v.size}), got {len(names)}")
+        extra.append(rr.AnyValues(parameter_names=names))
+    rec.log(path, rr.BarChart(np.where(np.isfinite(v), v, 0.0)), *extra, static=True)
 
 
 def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, prefix: str = "observability",
@@ -84,7 +96,7 @@ def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, 
     log_bars(rec, f"{prefix}/singular_values", s)
     with np.errstate(divide="ignore"):
         log_bars(rec, f"{prefix}/log10_singular_values", np.log10(s))
-    log_bars(rec, f"{prefix}/crb_std_mm", analysis.crb_std)
+    log_bars(rec, f"{prefix}/crb_std_mm", analysis.crb_std_mm, analysis.names)
     rec.log(f"{prefix}/report",
             rr.TextDocument(observability_markdown(analysis, title=title), media_type=rr.MediaType.MARKDOWN),
             static=True)

@@ -3,188 +3,294 @@ import itertools
 import numpy as np
 import pytest
 
+import calib.robots
 from calib import paper
 from calib.design import (
-    FULL_WORKSPACE_BOUNDS,
+    DEFAULT_PASSIVE_JOINT_LIMIT_RAD,
     Workspace,
     design_poses,
     feasibility,
-    full_workspace,
-    joint_cone_angles,
-    paper_workspace,
+    minimum_poses,
+    reachable_joints,
+    robot_workspace,
     sample_feasible_poses,
     scaled_condition,
     select_poses,
-    workspace_by_name,
 )
-from calib.hexapod import paper_hexapod
-from calib.kinematics import inverse_kinematics, pose_jacobian
 from calib.noise import SensorNoise
-from calib.observability import analyze_observability, identification_jacobian
+from calib.observability import analyze_observability, identification_jacobian, parameter_scale
+from calib.robot import check_joint_limits
+from calib.robots import default_robot
+from calib.robots.hexapod import FULL_WORKSPACE_OFFSETS
 
-NOMINAL = paper_hexapod()
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
-HOME = NOMINAL.geometry.home_pose[None]
+ROBOTS = sorted(calib.robots.ROBOTS)
+HEXAPOD = default_robot("hexapod")
+DELTA = default_robot("delta")
+HOME = HEXAPOD.home_pose[None]
 
 
-def test_workspace_defaults_and_round_trip():
-    ws = full_workspace()
-    np.testing.assert_array_equal(ws.bounds, FULL_WORKSPACE_BOUNDS)
-    assert ws.stroke_mm == 50.0 and ws.cone_limit_rad == pytest.approx(np.deg2rad(45.0))
+def test_hexapod_workspaces():
+    full, default = robot_workspace(HEXAPOD, "full"), robot_workspace(HEXAPOD, "default")
+    np.testing.assert_array_equal(full.bounds, [[-80, 80], [-80, 80], [150, 260], [-np.deg2rad(25), np.deg2rad(25)],
+                                                [-np.deg2rad(25), np.deg2rad(25)], [-np.deg2rad(25), np.deg2rad(25)]])
+    np.testing.assert_array_equal(full.bounds, HEXAPOD.home_pose[:, None] + FULL_WORKSPACE_OFFSETS)
+    np.testing.assert_allclose(default.bounds, [[-10, 10], [-10, 10], [200, 210], [-np.deg2rad(3), np.deg2rad(3)],
+                                                [-np.deg2rad(3), np.deg2rad(3)], [-np.deg2rad(3), np.deg2rad(3)]])
+    assert full.passive_joint_limit_rad == pytest.approx(np.deg2rad(45.0)) and full.max_condition == 10.0
+    np.testing.assert_allclose(HEXAPOD.joint_limits(), HEXAPOD.home_lengths[:, None] + [-50.0, 50.0])
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_workspace_round_trip_and_names(name):
+    robot = default_robot(name)
+    ws = robot_workspace(robot, "full")
+    assert ws.name == "full" and ws.bounds.shape == (robot.pose_dim, 2)
+    np.testing.assert_array_equal(robot_workspace(robot, "default").bounds, robot.workspace_bounds())
+    np.testing.assert_array_equal(ws.bounds, robot.full_workspace_bounds())
     back = Workspace.from_dict(ws.to_dict())
     np.testing.assert_array_equal(back.bounds, ws.bounds)
     assert back.to_dict() == ws.to_dict()
-    assert workspace_by_name("paper").to_dict() == paper_workspace().to_dict()
     with pytest.raises(ValueError):
         ws.bounds[0, 0] = 1.0  # frozen array
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"bounds": np.zeros((5, 2))}, r"bounds must have shape \(6, 2\), got \(5, 2\)"),
-    ({"bounds": FULL_WORKSPACE_BOUNDS[:, ::-1]}, "bounds must have low <= high, got row 0"),
-    ({"stroke_mm": 0.0}, "stroke_mm must be a finite number"),
-    ({"cone_limit_rad": 2.0}, "cone_limit_rad must be a finite number"),
-    ({"max_condition": 0.5}, "max_condition must be a finite number"),
-    ({"max_condition": float("nan")}, "max_condition must be a finite number"),
+    ({"bounds": np.zeros(5)}, r"bounds must have shape \(N, 2\), got \(5,\)"),
+    ({"bounds": HEXAPOD.full_workspace_bounds()[:, ::-1]}, "bounds must have low <= high, got row 0"),
+    ({"bounds": np.zeros((3, 2)), "passive_joint_limit_rad": 4.0}, "passive_joint_limit_rad must be a finite number"),
+    ({"bounds": np.zeros((3, 2)), "max_condition": 0.5}, "max_condition must be a finite number"),
+    ({"bounds": np.zeros((3, 2)), "max_condition": float("nan")}, "max_condition must be a finite number"),
 ])
 def test_workspace_validation(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Workspace(**kwargs)
 
 
-def test_workspace_by_name_rejects_unknown():
-    with pytest.raises(ValueError, match="workspace must be 'full' or 'paper', got 'huge'"):
-        workspace_by_name("huge")
+def test_workspace_names_and_dimensions_are_checked():
+    with pytest.raises(ValueError, match="workspace must be one of full, default, got 'huge'"):
+        robot_workspace(HEXAPOD, "huge")
+    with pytest.raises(ValueError, match=r"workspace bounds must have 3 rows \(x, y, z\) for the delta, got 6"):
+        feasibility(DELTA, DELTA.table.nominal, np.zeros((1, 3)), robot_workspace(HEXAPOD, "full"))
 
 
-def test_cone_angles_at_home_match_geometry():
-    g = NOMINAL.geometry
-    d = g.platform_joints + g.home_pose[:3] - g.base_joints
+def test_hexapod_cone_angles_at_home_match_geometry():
+    d = HEXAPOD.platform_joints + HEXAPOD.home_pose[:3] - HEXAPOD.base_joints
     expected = np.arctan2(np.linalg.norm(d[:, :2], axis=1), d[:, 2])
-    a = joint_cone_angles(NOMINAL, HOME)[0]
+    a = HEXAPOD.passive_joint_angles(HEXAPOD.table.nominal, HOME)[0].reshape(6, 2)
     np.testing.assert_allclose(a[:, 0], expected, atol=1e-12)
     np.testing.assert_allclose(a[:, 1], expected, atol=1e-12)  # platform parallel to base
 
 
-def test_platform_cone_angle_follows_tilt():
+def test_hexapod_platform_cone_angle_follows_tilt():
     tilt = 0.1
     pose = HOME.copy()
     pose[0, 4] = tilt
-    a = joint_cone_angles(NOMINAL, pose)[0]
+    a = HEXAPOD.passive_joint_angles(HEXAPOD.table.nominal, pose)[0].reshape(6, 2)
     Ry = np.array([[np.cos(tilt), 0, np.sin(tilt)], [0, 1, 0], [-np.sin(tilt), 0, np.cos(tilt)]])
-    u = NOMINAL.platform_joints @ Ry.T + pose[0, :3] - NOMINAL.base_joints
+    u = HEXAPOD.platform_joints @ Ry.T + pose[0, :3] - HEXAPOD.base_joints
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     normal = np.array([np.sin(tilt), 0.0, np.cos(tilt)])
     np.testing.assert_allclose(a[:, 1], np.arccos(u @ normal), atol=1e-12)
+    np.testing.assert_allclose(a[:, 0], np.arccos(u[:, 2]), atol=1e-12)
 
 
-def test_scaled_condition_uses_platform_radius():
-    poses = paper.TABLE4_NOMINAL_POSES
-    r = np.linalg.norm(NOMINAL.platform_joints, axis=1).mean()
-    expected = np.linalg.cond(pose_jacobian(NOMINAL, poses) * np.r_[1, 1, 1, 1 / r, 1 / r, 1 / r])
-    np.testing.assert_allclose(scaled_condition(NOMINAL, poses), expected)
+def test_robots_without_passive_joint_limits_report_none():
+    assert DELTA.passive_joint_angles(DELTA.table.nominal, DELTA.home_pose[None]).shape == (1, 0)
 
 
-def test_paper_poses_feasible_in_paper_workspace():
-    f = feasibility(NOMINAL, paper.TABLE4_NOMINAL_POSES, paper_workspace())
+@pytest.mark.parametrize("name", ROBOTS)
+def test_scaled_condition_of_the_finite_difference_pose_jacobian(name):
+    robot = default_robot(name)
+    theta = robot.table.nominal
+    poses = sample_feasible_poses(robot, theta, robot_workspace(robot, "default"), 4, 0)
+    q = robot.inverse_kinematics(theta, poses)
+    h = 1e-6
+    J = np.stack([(robot.closure(theta, q, poses + h * e) - robot.closure(theta, q, poses - h * e)) / (2 * h)
+                  for e in np.eye(robot.pose_dim)], axis=-1)
+    scale = np.where(robot.angle_pose_mask, robot.length_scale_mm, 1.0)
+    np.testing.assert_allclose(scaled_condition(robot, theta, poses), np.linalg.cond(J / scale), rtol=1e-6)
+
+
+def test_reference_poses_feasible_in_the_default_workspace():
+    f = feasibility(HEXAPOD, HEXAPOD.table.nominal, paper.TABLE4_NOMINAL_POSES, robot_workspace(HEXAPOD, "default"))
     assert all(v.all() for v in f.values())
+    np.testing.assert_array_equal(HEXAPOD.reference_poses(), paper.TABLE4_NOMINAL_POSES)
 
 
-@pytest.mark.parametrize("pose, failing", [
-    ([0, 0, 200, 0, 0, 0.2], "bounds"),          # outside the paper box
-    ([0, 0, 270, 0, 0, 0], "stroke"),            # legs too long
-    ([60, 0, 170, 0, 0, 0], "cone"),             # legs steeply inclined
+EVERYWHERE = Workspace(bounds=np.c_[np.full(6, -1e3), np.full(6, 1e3)])
+
+
+@pytest.mark.parametrize("pose, failing, workspace", [
+    ([0, 0, 200, 0, 0, 0.2], "bounds", robot_workspace(HEXAPOD, "default")),  # outside the paper's box
+    ([0, 0, 270, 0, 0, 0], "joint_limits", EVERYWHERE),                        # legs too long
+    ([60, 0, 170, 0, 0, 0], "passive_joints", EVERYWHERE),                     # legs steeply inclined
 ])
-def test_feasibility_names_the_limit(pose, failing):
-    ws = paper_workspace() if failing == "bounds" else Workspace(bounds=np.c_[np.full(6, -1e3), np.full(6, 1e3)])
-    f = feasibility(NOMINAL, np.array([pose], float), ws)
+def test_hexapod_feasibility_names_the_limit(pose, failing, workspace):
+    f = feasibility(HEXAPOD, HEXAPOD.table.nominal, np.array([pose], float), workspace)
     assert not f[failing][0] and not f["feasible"][0]
+    assert sum(not v[0] for k, v in f.items() if k != "feasible") == 1
 
 
-def test_singularity_limit():
-    ws = Workspace(bounds=np.c_[np.full(6, -1e3), np.full(6, 1e3)], max_condition=2.0)
-    f = feasibility(NOMINAL, HOME, ws)  # home has a scaled condition number of about 2.4
-    assert scaled_condition(NOMINAL, HOME)[0] > 2.0
-    assert not f["singularity"][0] and f["stroke"][0]
+def test_delta_feasibility_names_reach_and_joint_limits():
+    ws = Workspace(bounds=np.c_[np.full(3, -1e4), np.full(3, 1e4)])
+    poses = np.array([[0, 0, -420.0], [0, 0, -1000.0], [0, 0, 200.0]])
+    f = feasibility(DELTA, DELTA.table.nominal, poses, ws)
+    np.testing.assert_array_equal(f["reach"], [True, False, True])
+    q = DELTA.inverse_kinematics(DELTA.table.nominal, poses[2:])
+    assert np.all(q > DELTA.joint_limits()[:, 1])  # the plate above the base: arms beyond 90 degrees
+    np.testing.assert_array_equal(f["joint_limits"], [True, False, False])
+    np.testing.assert_array_equal(f["feasible"], [True, False, False])
 
 
-@pytest.mark.parametrize("name", ["full", "paper"])
-def test_sampled_poses_feasible_and_seeded(name):
-    ws = workspace_by_name(name)
-    a = sample_feasible_poses(NOMINAL, ws, 50, 3)
-    b = sample_feasible_poses(NOMINAL, ws, 50, 3)
-    c = sample_feasible_poses(NOMINAL, ws, 50, 4)
+def test_reachable_joints_skips_the_unreachable_rows():
+    rng = np.random.default_rng(0)
+    poses = rng.uniform([-300, -300, -900], [300, 300, -200], (700, 3))
+    ok, q = reachable_joints(DELTA, DELTA.table.nominal, poses)
+    assert 0 < ok.sum() < len(ok)
+    for k in range(0, 700, 7):
+        try:
+            np.testing.assert_allclose(q[k], DELTA.inverse_kinematics(DELTA.table.nominal, poses[k:k + 1])[0], atol=0)
+            assert ok[k]
+        except ValueError:
+            assert not ok[k] and np.all(np.isnan(q[k]))
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_singularity_limit(name):
+    robot = default_robot(name)
+    home = robot.home_pose[None]
+    cond = scaled_condition(robot, robot.table.nominal, home)[0]
+    ws = Workspace(bounds=np.c_[np.full(robot.pose_dim, -1e4), np.full(robot.pose_dim, 1e4)],
+                   max_condition=max(1.0 + 1e-9, 0.99 * cond))
+    f = feasibility(robot, robot.table.nominal, home, ws)
+    assert not f["singularity"][0] and f["joint_limits"][0] and f["reach"][0]
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+@pytest.mark.parametrize("workspace", ["full", "default"])
+def test_sampled_poses_feasible_and_seeded(name, workspace):
+    robot = default_robot(name)
+    ws = robot_workspace(robot, workspace)
+    theta = robot.table.nominal
+    a = sample_feasible_poses(robot, theta, ws, 50, 3)
+    b = sample_feasible_poses(robot, theta, ws, 50, 3)
+    c = sample_feasible_poses(robot, theta, ws, 50, 4)
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
-    assert a.shape == (50, 6) and feasibility(NOMINAL, a, ws)["feasible"].all()
-    inverse_kinematics(NOMINAL, a, stroke_mm=ws.stroke_mm)  # within the stroke
+    assert a.shape == (50, robot.pose_dim) and feasibility(robot, theta, a, ws)["feasible"].all()
+    assert np.all((a >= ws.bounds[:, 0]) & (a <= ws.bounds[:, 1]))
+    check_joint_limits(robot, robot.inverse_kinematics(theta, a))
+    assert np.all(robot.passive_joint_angles(theta, a) <= DEFAULT_PASSIVE_JOINT_LIMIT_RAD)
 
 
-def test_empty_workspace_raises():
-    ws = Workspace(bounds=np.array([[0, 0], [0, 0], [400, 410], [0, 0], [0, 0], [0, 0]], float))
+@pytest.mark.parametrize("name", ROBOTS)
+def test_empty_workspace_raises(name):
+    robot = default_robot(name)
+    far = robot.full_workspace_bounds()[:, :1] + 1e4 + np.zeros((robot.pose_dim, 2))
     with pytest.raises(ValueError, match="only 0 of 5 feasible poses"):
-        sample_feasible_poses(NOMINAL, ws, 5, 0, max_draws=5000)
+        sample_feasible_poses(robot, robot.table.nominal, Workspace(bounds=far), 5, 0, max_draws=1500)
 
 
-CANDIDATES = sample_feasible_poses(NOMINAL, full_workspace(), 40, 11)
+CANDIDATES = {name: sample_feasible_poses(default_robot(name), default_robot(name).table.nominal,
+                                          robot_workspace(default_robot(name), "full"), 40, 11) for name in ROBOTS}
 
 
-def _logdet(poses):
-    A = identification_jacobian(NOMINAL, poses, NOISE)
+def _logdet(robot, poses):
+    A = identification_jacobian(robot, robot.table.nominal, poses, NOISE)
     return np.linalg.slogdet(A.T @ A)[1]
 
 
-def test_d_optimal_no_single_exchange_improves():
-    res = select_poses(NOMINAL, CANDIDATES, 8, NOISE, criterion="d")
-    assert res.log_det == pytest.approx(_logdet(res.poses), rel=1e-9)
-    others = [c for c in range(len(CANDIDATES)) if c not in set(res.indices)]
-    for k, c in itertools.product(range(8), others):
+def _n_design(robot):
+    return minimum_poses(robot) + 1
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_d_optimal_no_single_exchange_improves(name):
+    robot, cands = default_robot(name), CANDIDATES[name]
+    n = _n_design(robot)
+    res = select_poses(robot, robot.table.nominal, cands, n, NOISE, criterion="d")
+    # log det of the scaled information = log det of the raw one minus the scale's
+    offset = 2 * np.sum(np.log(parameter_scale(robot)[[robot.table.index(k) for k in robot.free_default]]))
+    assert res.log_det == pytest.approx(_logdet(robot, res.poses) - offset, rel=1e-9)
+    best = _logdet(robot, res.poses)
+    others = [c for c in range(len(cands)) if c not in set(res.indices)]
+    for k, c in itertools.product(range(n), others):
         idx = res.indices.copy()
         idx[k] = c
-        assert _logdet(CANDIDATES[idx]) <= res.log_det + 1e-7
-    assert len(set(res.indices.tolist())) == 8
+        assert _logdet(robot, cands[idx]) <= best + 1e-7
+    assert len(set(res.indices.tolist())) == n
 
 
-def test_d_optimal_beats_random_subsets():
-    res = select_poses(NOMINAL, CANDIDATES, 8, NOISE, criterion="d")
+@pytest.mark.parametrize("name", ROBOTS)
+def test_d_optimal_beats_random_subsets(name):
+    robot, cands = default_robot(name), CANDIDATES[name]
+    n = _n_design(robot)
+    best = _logdet(robot, select_poses(robot, robot.table.nominal, cands, n, NOISE, criterion="d").poses)
     rng = np.random.default_rng(0)
     for _ in range(30):
-        assert _logdet(CANDIDATES[rng.choice(len(CANDIDATES), 8, replace=False)]) < res.log_det
+        assert _logdet(robot, cands[rng.choice(len(cands), n, replace=False)]) < best
 
 
-def test_e_optimal_improves_lambda_min_over_d():
-    d = select_poses(NOMINAL, CANDIDATES, 8, NOISE, criterion="d")
-    e = select_poses(NOMINAL, CANDIDATES, 8, NOISE, criterion="e")
+@pytest.mark.parametrize("name", ROBOTS)
+def test_e_optimal_improves_lambda_min_over_d(name):
+    robot, cands = default_robot(name), CANDIDATES[name]
+    n = _n_design(robot)
+    d = select_poses(robot, robot.table.nominal, cands, n, NOISE, criterion="d")
+    e = select_poses(robot, robot.table.nominal, cands, n, NOISE, criterion="e")
     assert e.lambda_min >= d.lambda_min
-    a = analyze_observability(NOMINAL, e.poses, NOISE)
+    a = analyze_observability(robot, robot.table.nominal, e.poses, NOISE)
     assert a.o3 ** 2 == pytest.approx(e.lambda_min, rel=1e-6)
 
 
+@pytest.mark.parametrize("name", ROBOTS)
 @pytest.mark.parametrize("criterion", ["d", "e"])
-def test_design_is_seeded_and_feasible(criterion):
-    a = design_poses(NOMINAL, 10, full_workspace(), NOISE, criterion=criterion, seed=5, n_candidates=300)
-    b = design_poses(NOMINAL, 10, full_workspace(), NOISE, criterion=criterion, seed=5, n_candidates=300)
+def test_design_is_seeded_and_feasible(name, criterion):
+    robot = default_robot(name)
+    ws = robot_workspace(robot, "full")
+    n = max(10, minimum_poses(robot))
+    a = design_poses(robot, robot.table.nominal, n, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
+    b = design_poses(robot, robot.table.nominal, n, ws, NOISE, criterion=criterion, seed=5, n_candidates=300)
     np.testing.assert_array_equal(a.poses, b.poses)
-    assert feasibility(NOMINAL, a.poses, full_workspace())["feasible"].all()
+    assert feasibility(robot, robot.table.nominal, a.poses, ws)["feasible"].all()
 
 
 def test_full_workspace_design_beats_paper_poses_tenfold():
-    design = design_poses(NOMINAL, 10, full_workspace(), NOISE, seed=0, n_candidates=1000)
-    rms_design = analyze_observability(NOMINAL, design.poses, NOISE).crb_rms
-    rms_paper = analyze_observability(NOMINAL, paper.TABLE4_NOMINAL_POSES, NOISE).crb_rms
+    design = design_poses(HEXAPOD, HEXAPOD.table.nominal, 10, robot_workspace(HEXAPOD, "full"), NOISE, seed=0,
+                          n_candidates=1000)
+    rms_design = analyze_observability(HEXAPOD, HEXAPOD.table.nominal, design.poses, NOISE).crb_rms
+    rms_paper = analyze_observability(HEXAPOD, HEXAPOD.table.nominal, paper.TABLE4_NOMINAL_POSES, NOISE).crb_rms
     assert rms_paper / rms_design >= 10.0
 
 
+def test_delta_full_workspace_design_beats_random_poses():
+    ws = robot_workspace(DELTA, "full")
+    design = design_poses(DELTA, DELTA.table.nominal, 10, ws, NOISE, seed=0, n_candidates=1000)
+    rms_design = analyze_observability(DELTA, DELTA.table.nominal, design.poses, NOISE).crb_rms
+    for seed in range(5):
+        random = sample_feasible_poses(DELTA, DELTA.table.nominal, ws, 10, seed)
+        assert analyze_observability(DELTA, DELTA.table.nominal, random, NOISE).crb_rms > 2 * rms_design
+
+
+NOM = HEXAPOD.table.nominal
+CANDS = CANDIDATES["hexapod"]
+
+
 @pytest.mark.parametrize("call, match", [
-    (lambda: select_poses(NOMINAL, CANDIDATES, 8, NOISE, criterion="a"), "criterion must be one of"),
-    (lambda: select_poses(NOMINAL, CANDIDATES, 6, NOISE), "n must be an integer >= 7, got 6"),
-    (lambda: select_poses(NOMINAL, CANDIDATES, 8.0, NOISE), "n must be an integer >= 7"),
-    (lambda: select_poses(NOMINAL, CANDIDATES[:7], 8, NOISE), "candidates must have at least n = 8 rows, got 7"),
-    (lambda: select_poses(NOMINAL, CANDIDATES[:, :5], 8, NOISE), r"candidates must have shape \(N, 6\)"),
-    (lambda: select_poses(NOMINAL, CANDIDATES, 8, NOISE, screen=0), "screen must be an integer >= 1"),
-    (lambda: design_poses(NOMINAL, 10, full_workspace(), NOISE, n_candidates=5), "n_candidates must be an integer >= 10"),
-    (lambda: sample_feasible_poses(NOMINAL, full_workspace(), -1, 0), "n must be an integer >= 0"),
-    (lambda: feasibility(NOMINAL, np.zeros(6), full_workspace()), r"poses must have shape \(N, 6\), got \(6,\)"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS, 8, NOISE, criterion="a"), "criterion must be one of"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS, 6, NOISE), "n must be an integer >= 7, got 6"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS, 8.0, NOISE), "n must be an integer >= 7"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS[:7], 8, NOISE), "candidates must have at least n = 8 rows, got 7"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS[:, :5], 8, NOISE), r"candidates must have shape \(N, 6\)"),
+    (lambda: select_poses(HEXAPOD, NOM, CANDS, 8, NOISE, screen=0), "screen must be an integer >= 1"),
+    (lambda: select_poses(DELTA, DELTA.table.nominal, CANDIDATES["delta"], 6, NOISE), "n must be an integer >= 7"),
+    (lambda: design_poses(HEXAPOD, NOM, 10, robot_workspace(HEXAPOD, "full"), NOISE, n_candidates=5),
+     "n_candidates must be an integer >= 10"),
+    (lambda: sample_feasible_poses(HEXAPOD, NOM, robot_workspace(HEXAPOD, "full"), -1, 0), "n must be an integer >= 0"),
+    (lambda: feasibility(HEXAPOD, NOM, np.zeros(6), robot_workspace(HEXAPOD, "full")),
+     r"poses must have shape \(N, 6\), got \(6,\)"),
+    (lambda: feasibility(HEXAPOD, np.zeros(24), HOME, robot_workspace(HEXAPOD, "full")),
+     r"theta must have shape \(42,\), got \(24,\)"),
 ])
 def test_selection_validation(call, match):
     with pytest.raises(ValueError, match=match):
@@ -192,10 +298,10 @@ def test_selection_validation(call, match):
 
 
 @pytest.mark.parametrize("call, match", [
-    (lambda: feasibility("hexapod", HOME, full_workspace()), "hexapod must be a Hexapod"),
-    (lambda: feasibility(NOMINAL, HOME, "full"), "workspace must be a Workspace"),
-    (lambda: joint_cone_angles(None, HOME), "hexapod must be a Hexapod"),
-    (lambda: scaled_condition(None, HOME), "hexapod must be a Hexapod"),
+    (lambda: feasibility("hexapod", NOM, HOME, robot_workspace(HEXAPOD, "full")), "robot must be a calib.robot.Robot"),
+    (lambda: feasibility(HEXAPOD, NOM, HOME, "full"), "workspace must be a Workspace"),
+    (lambda: robot_workspace(None, "full"), "robot must be a calib.robot.Robot"),
+    (lambda: scaled_condition(None, NOM, HOME), "robot must be a calib.robot.Robot"),
 ])
 def test_type_validation(call, match):
     with pytest.raises(TypeError, match=match):

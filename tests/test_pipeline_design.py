@@ -3,18 +3,23 @@ import json
 import numpy as np
 import pytest
 
-from calib.design import feasibility, full_workspace, paper_workspace
-from calib.hexapod import HexapodGeometry, paper_geometry, paper_hexapod
-from calib.kinematics import inverse_kinematics
+import calib.robots
+from calib import paper
+from calib.design import feasibility, minimum_poses, robot_workspace
+from calib.noise import SensorNoise
+from calib.observability import analyze_observability
+from calib.robots import default_robot, robot_from_description
 from pipeline.design import (
-    COMMAND_COLUMNS,
+    command_columns,
     main,
     optimal_poses,
     read_command_file,
     write_command_file,
 )
 
-NOMINAL = paper_hexapod()
+ROBOTS = sorted(calib.robots.ROBOTS)
+HEXAPOD = default_robot("hexapod")
+DELTA = default_robot("delta")
 
 
 @pytest.fixture(autouse=True)
@@ -28,46 +33,68 @@ def _entities(path):
     return {str(c.entity_path): c for c in RrdReader(path).stream().to_chunks()}
 
 
+def _column(chunk, prefix):
+    batch = chunk.to_record_batch()
+    col = [n for n in batch.schema.names if n.startswith(prefix)][0]
+    return batch.column(col).to_pylist()[0]
+
+
 def bar_values(chunk):
     """The values of a static BarChart chunk (a tensor: shape + buffer)."""
-    batch = chunk.to_record_batch()
-    col = [n for n in batch.schema.names if n.startswith("BarChart:values")][0]
-    tensor = batch.column(col).to_pylist()[0][0]
+    tensor = _column(chunk, "BarChart:values")[0]
     return np.asarray(tensor["buffer"], dtype=float).reshape(tensor["shape"])
 
 
-def test_cli_writes_command_file_sidecar_summary_and_rrd(tmp_path):
-    out = tmp_path / "poses.csv"
-    summary = tmp_path / "summary.json"
-    rrd = tmp_path / "design.rrd"
-    argv = ["--poses", "8", "--seed", "3", "--candidates", "300", "--out", str(out),
+def test_command_columns_come_from_the_robot():
+    assert ",".join(command_columns(HEXAPOD)) == \
+        "x_mm,y_mm,z_mm,alpha_rad,beta_rad,gamma_rad,l1_mm,l2_mm,l3_mm,l4_mm,l5_mm,l6_mm"
+    assert ",".join(command_columns(DELTA)) == "x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad"
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_cli_writes_command_file_sidecar_summary_and_rrd(tmp_path, name):
+    robot = default_robot(name)
+    out, summary, rrd = tmp_path / "poses.csv", tmp_path / "summary.json", tmp_path / "design.rrd"
+    n = max(8, minimum_poses(robot))
+    argv = ["--robot", name, "--poses", str(n), "--seed", "3", "--candidates", "300", "--out", str(out),
             "--summary-json", str(summary), "--rrd", str(rrd)]
     assert main(argv) == 0
-    poses, lengths = read_command_file(out)
-    assert poses.shape == (8, 6) and lengths.shape == (8, 6)
-    np.testing.assert_allclose(lengths, inverse_kinematics(NOMINAL, poses), rtol=0, atol=1e-12)
-    assert feasibility(NOMINAL, poses, full_workspace())["feasible"].all()
-    np.testing.assert_array_equal(poses, optimal_poses(paper_geometry(), 8, "d", "full", 3, n_candidates=300))
+    assert out.read_text().splitlines()[0] == ",".join(command_columns(robot))
+    poses, joints = read_command_file(out)  # the robot is found from the header
+    np.testing.assert_array_equal((poses, joints), read_command_file(out, robot))
+    assert poses.shape == (n, robot.pose_dim) and joints.shape == (n, robot.n_chains)
+    np.testing.assert_allclose(joints, robot.inverse_kinematics(robot.table.nominal, poses), rtol=0, atol=1e-12)
+    assert feasibility(robot, robot.table.nominal, poses, robot_workspace(robot, "full"))["feasible"].all()
+    np.testing.assert_array_equal(poses, optimal_poses(robot, n, "d", "full", 3, n_candidates=300))
     side = json.loads(out.with_suffix(".json").read_text())
-    assert side["criterion"] == "d" and side["seed"] == 3 and side["workspace"]["name"] == "full"
-    assert HexapodGeometry.from_dict(side["geometry"]).home_lengths.tolist() == NOMINAL.geometry.home_lengths.tolist()
+    assert side["robot"] == name and side["criterion"] == "d" and side["seed"] == 3
+    assert side["workspace"]["name"] == "full" and side["columns"] == list(command_columns(robot))
+    np.testing.assert_array_equal(robot_from_description(name, side["robot_description"]).table.nominal,
+                                  robot.table.nominal)
     s = json.loads(summary.read_text())
-    assert s["observability"]["rank"] == 42 and len(s["observability"]["singular_values"]) == 42
-    assert s["crb_rms_gain_vs_paper_poses"] > 1.0
+    n_free = len(robot.free_default)
+    assert s["robot"] == name
+    assert s["observability"]["rank"] == n_free and len(s["observability"]["singular_values"]) == n_free
     u = s["predicted_pose_uncertainty"]
     assert 0 < u["position_rms_um"]["mean"] <= u["position_rms_um"]["max"]
+    assert ("orientation_rms_urad" in u) == bool(robot.angle_pose_mask.any())
+    has_reference = robot.reference_poses() is not None
+    assert ("crb_rms_gain_vs_reference_poses" in s) == has_reference
+    if has_reference:
+        assert s["crb_rms_gain_vs_reference_poses"] > 1.0
     ents = _entities(rrd)
     for e in ("/design/observability/singular_values", "/design/observability/crb_std_mm",
-              "/design/observability/report", "/paper_poses/observability/singular_values", "/design/poses",
-              "/design/pose_uncertainty"):
+              "/design/observability/report", "/design/poses", "/design/pose_uncertainty"):
         assert e in ents, e
-    np.testing.assert_allclose(bar_values(ents["/design/observability/crb_std_mm"]),
-                               [s["observability"]["crb_std_mm"][n] for n in s["observability"]["crb_std_mm"]])
+    assert ("/reference_poses/observability/singular_values" in ents) == has_reference
+    bars = ents["/design/observability/crb_std_mm"]
+    assert _column(bars, "parameter_names") == list(robot.free_default)
+    np.testing.assert_allclose(bar_values(bars), [s["observability"]["crb_std_mm"][n] for n in robot.free_default])
 
 
 def test_cli_refuses_to_overwrite(tmp_path):
     out = tmp_path / "poses.csv"
-    argv = ["--poses", "7", "--candidates", "100", "--out", str(out), "--workspace", "paper"]
+    argv = ["--poses", "7", "--candidates", "100", "--out", str(out), "--workspace", "default"]
     assert main(argv) == 0
     before = out.read_text()
     with pytest.raises(SystemExit, match="exists; pass --overwrite"):
@@ -76,30 +103,52 @@ def test_cli_refuses_to_overwrite(tmp_path):
     assert main(argv + ["--seed", "1", "--overwrite"]) == 0
     assert out.read_text() != before
     poses, _ = read_command_file(out)
-    assert feasibility(NOMINAL, poses, paper_workspace())["feasible"].all()
+    assert feasibility(HEXAPOD, HEXAPOD.table.nominal, poses, robot_workspace(HEXAPOD, "default"))["feasible"].all()
     assert not list(tmp_path.glob(".*tmp"))
 
 
-def test_cli_rejects_too_few_poses(tmp_path):
-    with pytest.raises(SystemExit, match="--poses must be >= 7"):
-        main(["--poses", "5", "--out", str(tmp_path / "p.csv")])
+@pytest.mark.parametrize("argv, match", [
+    (["--poses", "5"], "--poses must be >= 7"),
+    (["--poses", "6", "--robot", "delta"], r"--poses must be >= 7 \(21 parameters, 3 equations per pose\)"),
+    (["--poses", "8", "--robot", "moon"], "--robot: unknown robot 'moon'; registered robots are"),
+    (["--poses", "8", "--candidates", "7"], "--candidates must be >= --poses"),
+    (["--poses", "8", "--geometry", "missing.json"], "--geometry missing.json: cannot read a hexapod description"),
+])
+def test_cli_rejects_bad_arguments(tmp_path, argv, match):
+    with pytest.raises(SystemExit, match=match):
+        main(argv + ["--out", str(tmp_path / "p.csv")])
+
+
+def test_cli_geometry_file_gives_another_machine(tmp_path):
+    desc = DELTA.description()
+    desc["parameters"] = {k: v * (1.02 if k.startswith("Lb") else 1.0) for k, v in desc["parameters"].items()}
+    geometry = tmp_path / "delta.json"
+    geometry.write_text(json.dumps(desc))
+    out = tmp_path / "p.csv"
+    assert main(["--robot", "delta", "--poses", "7", "--candidates", "100", "--geometry", str(geometry),
+                 "--out", str(out)]) == 0
+    robot = robot_from_description("delta", desc)
+    poses, joints = read_command_file(out, robot)
+    np.testing.assert_allclose(joints, robot.inverse_kinematics(robot.table.nominal, poses), atol=1e-12)
+    assert not np.allclose(joints, DELTA.inverse_kinematics(DELTA.table.nominal, poses), atol=1e-3)
 
 
 def test_write_refuses_existing_sidecar(tmp_path):
     out = tmp_path / "p.csv"
     out.with_suffix(".json").write_text("{}")
     with pytest.raises(FileExistsError, match="p.json exists"):
-        write_command_file(out, np.zeros((1, 6)), np.zeros((1, 6)), {})
+        write_command_file(out, HEXAPOD, np.zeros((1, 6)), np.zeros((1, 6)), {})
     assert not out.exists()
 
 
-@pytest.mark.parametrize("poses, lengths, match", [
-    (np.zeros(6), np.zeros(6), r"poses must have shape \(N, 6\), got \(6,\)"),
-    (np.zeros((2, 6)), np.zeros((3, 6)), r"lengths must have shape \(2, 6\), got \(3, 6\)"),
+@pytest.mark.parametrize("robot, poses, joints, match", [
+    (HEXAPOD, np.zeros(6), np.zeros(6), r"poses must have shape \(N, 6\), got \(6,\)"),
+    (HEXAPOD, np.zeros((2, 6)), np.zeros((3, 6)), r"joints must have shape \(2, 6\), got \(3, 6\)"),
+    (DELTA, np.zeros((2, 6)), np.zeros((2, 3)), r"poses must have shape \(N, 3\), got \(2, 6\)"),
 ])
-def test_write_validation(tmp_path, poses, lengths, match):
+def test_write_validation(tmp_path, robot, poses, joints, match):
     with pytest.raises(ValueError, match=match):
-        write_command_file(tmp_path / "p.csv", poses, lengths, {})
+        write_command_file(tmp_path / "p.csv", robot, poses, joints, {})
 
 
 def _csv(tmp_path, text):
@@ -108,21 +157,25 @@ def _csv(tmp_path, text):
     return p
 
 
-HEADER = ",".join(COMMAND_COLUMNS)
+HEADER = ",".join(command_columns(HEXAPOD))
 
 
-@pytest.mark.parametrize("text, match", [
-    ("", r"cmd.csv: empty command file"),
-    ("x,y\n1,2\n", r"cmd.csv: line 1: header must be x_mm"),
-    (HEADER + "\n" + ",".join(["1"] * 11) + "\n", r"cmd.csv: line 2: expected 12 columns, got 11"),
-    (HEADER + "\n" + ",".join(["1"] * 12) + "\n" + ",".join(["1"] * 4 + ["abc"] + ["1"] * 7) + "\n",
+@pytest.mark.parametrize("text, robot, match", [
+    ("", None, r"cmd.csv: empty command file"),
+    ("x,y\n1,2\n", None, r"cmd.csv: line 1: header x,y is no registered robot's \(expected delta: x_mm"),
+    ("x,y\n1,2\n", HEXAPOD, r"cmd.csv: line 1: header must be x_mm,.*,l6_mm \(the hexapod's\), got x,y"),
+    (HEADER + "\n" + ",".join(["1"] * 12) + "\n", DELTA, r"header must be x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad"),
+    (HEADER + "\n" + ",".join(["1"] * 11) + "\n", None, r"cmd.csv: line 2: expected 12 columns, got 11"),
+    (HEADER + "\n" + ",".join(["1"] * 12) + "\n" + ",".join(["1"] * 4 + ["abc"] + ["1"] * 7) + "\n", None,
      r"cmd.csv: line 3, column beta_rad: not a number: 'abc'"),
-    (HEADER + "\n" + ",".join(["1"] * 7 + ["nan"] + ["1"] * 4) + "\n", r"cmd.csv: line 2, column l2_mm: not finite"),
-    (HEADER + "\n", r"cmd.csv: no data rows"),
+    (HEADER + "\n" + ",".join(["1"] * 7 + ["nan"] + ["1"] * 4) + "\n", None,
+     r"cmd.csv: line 2, column l2_mm: not finite"),
+    ("x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad\n1,2,3,4,inf,6\n", None, r"line 2, column q2_rad: not finite"),
+    (HEADER + "\n", None, r"cmd.csv: no data rows"),
 ])
-def test_read_command_file_validation(tmp_path, text, match):
+def test_read_command_file_validation(tmp_path, text, robot, match):
     with pytest.raises(ValueError, match=match):
-        read_command_file(_csv(tmp_path, text))
+        read_command_file(_csv(tmp_path, text), robot)
 
 
 def test_read_missing_file(tmp_path):
@@ -130,43 +183,58 @@ def test_read_missing_file(tmp_path):
         read_command_file(tmp_path / "nope.csv")
 
 
-def test_round_trip_full_precision(tmp_path):
+@pytest.mark.parametrize("name", ROBOTS)
+def test_round_trip_full_precision(tmp_path, name):
+    robot = default_robot(name)
     rng = np.random.default_rng(0)
-    poses, lengths = rng.standard_normal((5, 6)), rng.standard_normal((5, 6))
-    write_command_file(tmp_path / "c.csv", poses, lengths, {"k": 1})
-    p, l = read_command_file(tmp_path / "c.csv")
+    poses, joints = rng.standard_normal((5, robot.pose_dim)), rng.standard_normal((5, robot.n_chains))
+    write_command_file(tmp_path / "c.csv", robot, poses, joints, {"k": 1})
+    p, q = read_command_file(tmp_path / "c.csv")
     np.testing.assert_array_equal(p, poses)
-    np.testing.assert_array_equal(l, lengths)
+    np.testing.assert_array_equal(q, joints)
+    assert json.loads((tmp_path / "c.json").read_text()) == {"robot": name, "k": 1}
 
 
 def test_optimal_poses_validation():
-    with pytest.raises(TypeError, match="geometry must be a HexapodGeometry"):
-        optimal_poses(NOMINAL, 10)
-    with pytest.raises(ValueError, match="workspace must be 'full' or 'paper'"):
-        optimal_poses(paper_geometry(), 10, workspace="moon")
+    with pytest.raises(TypeError, match="robot must be a calib.robot.Robot, got str"):
+        optimal_poses("hexapod", 10)
+    with pytest.raises(ValueError, match="workspace must be one of full, default, got 'moon'"):
+        optimal_poses(HEXAPOD, 10, workspace="moon")
 
 
-def test_cli_e_optimal_paper_workspace(tmp_path):
+@pytest.mark.parametrize("name", ROBOTS)
+def test_cli_e_optimal_default_workspace(tmp_path, name):
+    robot = default_robot(name)
     out = tmp_path / "e.csv"
-    assert main(["--poses", "8", "--criterion", "e", "--workspace", "paper", "--candidates", "200",
-                 "--out", str(out)]) == 0
+    n = max(8, minimum_poses(robot))
+    assert main(["--robot", name, "--poses", str(n), "--criterion", "e", "--workspace", "default",
+                 "--candidates", "200", "--out", str(out)]) == 0
     side = json.loads(out.with_suffix(".json").read_text())
-    assert side["criterion"] == "e" and side["workspace"]["name"] == "paper"
-    poses, _ = read_command_file(out)
-    assert feasibility(NOMINAL, poses, paper_workspace())["feasible"].all()
+    assert side["criterion"] == "e" and side["workspace"]["name"] == "default"
+    poses, _ = read_command_file(out, robot)
+    assert feasibility(robot, robot.table.nominal, poses, robot_workspace(robot, "default"))["feasible"].all()
 
 
 def test_observability_markdown_and_type_check():
     import rerun as rr
 
-    from calib import paper
-    from calib.noise import SensorNoise
-    from calib.observability import analyze_observability
     from pipeline.obs_log import log_observability, observability_markdown
 
-    a = analyze_observability(NOMINAL, paper.TABLE4_NOMINAL_POSES, SensorNoise(1e-3, 1e-6, "normal"))
+    a = analyze_observability(HEXAPOD, HEXAPOD.table.nominal, paper.TABLE4_NOMINAL_POSES,
+                              SensorNoise(1e-3, 1e-6, "normal"))
     md = observability_markdown(a, title="Paper poses")
-    assert md.startswith("# Paper poses") and "| dZP6 |" in md and "O4 (noise amplification)" in md
-    assert a.weakest_combinations(1)[0]["combination"] in md
+    assert md.startswith("# Paper poses") and "| P6.z |" in md and "O4 (noise amplification)" in md
+    assert a.weakest_combinations(1)[0]["combination"] in md and "Not identifiable" not in md
     with pytest.raises(TypeError, match="analysis must be an ObservabilityAnalysis, got dict"):
         log_observability(rr.RecordingStream("t"), {}, "x")
+
+
+def test_observability_markdown_names_the_delta_null_directions():
+    from pipeline.obs_log import observability_markdown
+
+    poses = optimal_poses(DELTA, 10, n_candidates=100)
+    a = analyze_observability(DELTA, DELTA.table.nominal, poses, SensorNoise(1e-3, 0.0, "normal"),
+                              free=DELTA.table.names)
+    md = observability_markdown(a)
+    assert "## Not identifiable" in md and "| 2 | 1 Lay2 + 0.00385 alpha2 |" in md
+    assert "| rank | 21 / 24 |" in md and "| alpha1 |" in md

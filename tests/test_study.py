@@ -4,19 +4,27 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from calib import paper
-from calib.design import design_poses, full_workspace
-from calib.hexapod import paper_hexapod
-from calib.kinematics import forward_kinematics, inverse_kinematics
+import calib.robots
+from calib.design import design_poses, minimum_poses, robot_workspace
 from calib.noise import SensorNoise
-from calib.observability import analyze_observability
-from pipeline.study import main, monte_carlo, trial_noise
+from calib.observability import analyze_observability, free_indices
+from calib.robot import KinematicsError
+from calib.robots import default_robot
+from pipeline.study import compensation_errors, main, monte_carlo, trial_noise, true_errors
 
-NOMINAL = paper_hexapod()
-TRUE = paper_hexapod(with_table3_errors=True)
+ROBOTS = sorted(calib.robots.ROBOTS)
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
-POSES = design_poses(NOMINAL, 10, full_workspace(), NOISE, seed=2, n_candidates=300).poses
-COMMANDED = inverse_kinematics(NOMINAL, POSES)
+HEXAPOD = default_robot("hexapod")
+
+
+def setup(name):
+    """(robot, true parameters, designed poses, commanded joints) of a robot."""
+    robot = default_robot(name)
+    kind = "reference" if robot.reference_errors() is not None else "random"
+    theta = robot.table.nominal + true_errors(robot, kind, 0)
+    poses = design_poses(robot, robot.table.nominal, max(10, minimum_poses(robot)), robot_workspace(robot, "full"),
+                         NOISE, seed=2, n_candidates=300).poses
+    return robot, theta, poses, robot.inverse_kinematics(robot.table.nominal, poses)
 
 
 @pytest.fixture(autouse=True)
@@ -24,84 +32,167 @@ def _home(tmp_path, monkeypatch):
     monkeypatch.setenv("HOME", str(tmp_path))
 
 
-def test_trial_noise_does_not_depend_on_chunking():
-    whole = trial_noise(NOISE, 10, 7, np.arange(6))
-    parts = np.concatenate([trial_noise(NOISE, 10, 7, np.arange(0, 2)), trial_noise(NOISE, 10, 7, np.arange(2, 6))])
-    np.testing.assert_array_equal(whole, parts)
-    assert not np.array_equal(whole, trial_noise(NOISE, 10, 8, np.arange(6)))
-    assert whole.shape == (6, 10, 6)
+@pytest.mark.parametrize("name", ROBOTS)
+def test_trial_noise_does_not_depend_on_chunking(name):
+    robot = default_robot(name)
+    noise = SensorNoise(1e-3, 1e-6, "normal", joint=1e-4)
+    whole = trial_noise(robot, noise, 10, 7, np.arange(6))
+    parts = [trial_noise(robot, noise, 10, 7, np.arange(0, 2)), trial_noise(robot, noise, 10, 7, np.arange(2, 6))]
+    for k in range(2):
+        np.testing.assert_array_equal(whole[k], np.concatenate([parts[0][k], parts[1][k]]))
+        assert not np.array_equal(whole[k], trial_noise(robot, noise, 10, 8, np.arange(6))[k])
+    assert whole[0].shape == (6, 10, robot.pose_dim) and whole[1].shape == (6, 10, robot.n_chains)
+    # the pose noise stream does not depend on whether joint noise is simulated
+    np.testing.assert_array_equal(whole[0], trial_noise(robot, NOISE, 10, 7, np.arange(6))[0])
+    assert not np.any(trial_noise(robot, NOISE, 10, 7, np.arange(6))[1])
 
 
-def test_results_independent_of_worker_count():
-    held = POSES[:3]
-    a = monte_carlo(TRUE, COMMANDED, NOISE, 6, 5, methods=("forward", "paper"), heldout=held, workers=1)
-    b = monte_carlo(TRUE, COMMANDED, NOISE, 6, 5, methods=("forward", "paper"), heldout=held, workers=2)
-    for m in ("forward", "paper"):
+@pytest.mark.parametrize("name", ROBOTS)
+def test_true_errors(name):
+    robot = default_robot(name)
+    e = true_errors(robot, "random", 3, error_mm=0.05, error_rad=1e-3)
+    _, idx = free_indices(robot)
+    fixed = np.setdiff1d(np.arange(robot.n_parameters), idx)
+    assert np.all(e[fixed] == 0) and np.all(e[idx] != 0)
+    angle = robot.table.angle_mask()
+    assert np.all(np.abs(e[angle]) <= 1e-3) and np.all(np.abs(e[~angle]) <= 0.05)
+    np.testing.assert_array_equal(e, true_errors(robot, "random", 3, error_mm=0.05, error_rad=1e-3))
+    if robot.reference_errors() is None:
+        with pytest.raises(ValueError, match=f"the {name} has no reference errors"):
+            true_errors(robot, "reference", 0)
+    else:
+        np.testing.assert_array_equal(true_errors(robot, "reference", 0), robot.reference_errors())
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_results_independent_of_worker_count(name):
+    robot, theta, poses, commanded = setup(name)
+    held = poses[:3]
+    a = monte_carlo(robot, theta, commanded, NOISE, 6, 5, methods=("forward", "chainwise"), heldout=held,
+                    workers=1, initial=poses)
+    b = monte_carlo(robot, theta, commanded, NOISE, 6, 5, methods=("forward", "chainwise"), heldout=held,
+                    workers=2, initial=poses)
+    for m in ("forward", "chainwise"):
         for k in a[m]:
             np.testing.assert_array_equal(a[m][k], b[m][k])
+        assert a[m]["errors"].shape == (6, len(robot.free_default))
 
 
-def test_forward_method_is_efficient_and_paper_method_is_not():
-    """With Gaussian noise, e^T F e ~ chi-square(42) per trial for an efficient estimator."""
+@pytest.mark.parametrize("name", ROBOTS)
+def test_forward_method_is_efficient(name):
+    """With Gaussian noise, e^T F e ~ chi-square(F) per trial for an efficient estimator; the
+    hexapod paper's per-leg least squares is not efficient (its leg residuals' noise depends on
+    the pose and is shared between legs)."""
+    robot, theta, poses, commanded = setup(name)
     trials = 60
-    r = monte_carlo(TRUE, COMMANDED, NOISE, trials, 11, methods=("forward", "paper"), workers=2)
-    reached = forward_kinematics(TRUE, COMMANDED)
-    F = analyze_observability(TRUE, reached, NOISE).fisher
-    lo, hi = chi2.ppf([0.0005, 0.9995], 42 * trials) / trials
-    q_fwd = np.einsum("ti,ij,tj->t", r["forward"]["errors"], F, r["forward"]["errors"]).mean()
-    q_pap = np.einsum("ti,ij,tj->t", r["paper"]["errors"], F, r["paper"]["errors"]).mean()
-    assert lo < q_fwd < hi
-    assert q_pap > hi
+    r = monte_carlo(robot, theta, commanded, NOISE, trials, 11, methods=("forward", "chainwise"), workers=1,
+                    initial=poses)
+    reached = robot.forward_kinematics(theta, commanded, initial=poses)
+    a = analyze_observability(robot, theta, reached, NOISE, joints=commanded)
+    lo, hi = chi2.ppf([0.0005, 0.9995], a.n_free * trials) / trials
+    q = {m: np.einsum("ti,ij,tj->t", r[m]["errors"], a.fisher, r[m]["errors"]).mean() for m in r}
+    assert lo < q["forward"] < hi
     assert r["forward"]["success"].all()
+    if name == "hexapod":
+        assert q["chainwise"] > hi
+
+
+def test_forward_method_is_efficient_with_joint_noise():
+    robot, theta, poses, commanded = setup("delta")
+    noise = SensorNoise(1e-3, 0.0, "normal", joint=2e-5)
+    trials = 60
+    r = monte_carlo(robot, theta, commanded, noise, trials, 12, workers=1, initial=poses)
+    reached = robot.forward_kinematics(theta, commanded, initial=poses)
+    a = analyze_observability(robot, theta, reached, noise, joints=commanded)
+    b = analyze_observability(robot, theta, reached, NOISE, joints=commanded)
+    assert a.crb_rms > 1.2 * b.crb_rms  # the joint noise counts
+    lo, hi = chi2.ppf([0.0005, 0.9995], a.n_free * trials) / trials
+    assert lo < np.einsum("ti,ij,tj->t", r["forward"]["errors"], a.fisher, r["forward"]["errors"]).mean() < hi
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_compensation_errors(name):
+    robot, theta, poses, _ = setup(name)
+    pos, ori = compensation_errors(robot, theta, theta, poses)
+    assert np.abs(pos).max() < 1e-9 and np.abs(ori).max() < 1e-12
+    pos, _ = compensation_errors(robot, theta, robot.table.nominal, poses)
+    q = robot.inverse_kinematics(robot.table.nominal, poses)
+    expected = robot.forward_kinematics(theta, q, initial=poses) - poses
+    np.testing.assert_allclose(pos, np.linalg.norm(expected[:, ~robot.angle_pose_mask], axis=1), rtol=1e-12)
+    far = robot.full_workspace_bounds()[:, 1] * 10 + 1e3
+    with pytest.raises(KinematicsError):
+        compensation_errors(robot, theta, theta, far[None])
 
 
 def test_monte_carlo_validation():
+    robot, theta, poses, commanded = setup("hexapod")
     with pytest.raises(ValueError, match="trials must be a positive integer, got 0"):
-        monte_carlo(TRUE, COMMANDED, NOISE, 0, 0)
+        monte_carlo(robot, theta, commanded, NOISE, 0, 0)
     with pytest.raises(ValueError, match="methods must be a non-empty subset"):
-        monte_carlo(TRUE, COMMANDED, NOISE, 2, 0, methods=("magic",))
+        monte_carlo(robot, theta, commanded, NOISE, 2, 0, methods=("paper",))
     with pytest.raises(ValueError, match="workers must be >= 1, got -1"):
-        monte_carlo(TRUE, COMMANDED, NOISE, 2, 0, workers=-1)
+        monte_carlo(robot, theta, commanded, NOISE, 2, 0, workers=-1)
+    with pytest.raises(TypeError, match="robot must be a registered calib.robot.Robot"):
+        monte_carlo("hexapod", theta, commanded, NOISE, 2, 0)
 
 
-def test_cli_writes_summary_and_rrd(tmp_path, capsys):
+def _entities(path):
+    from rerun.chunk import RrdReader
+
+    return {str(c.entity_path): c for c in RrdReader(path).stream().to_chunks()}
+
+
+@pytest.mark.parametrize("name, poses", [("hexapod", "reference"), ("delta", "designed")])
+def test_cli_writes_summary_and_rrd(tmp_path, capsys, name, poses):
+    robot = default_robot(name)
     summary, rrd = tmp_path / "s.json", tmp_path / "s.rrd"
-    argv = ["--trials", "4", "--poses", "paper", "--workspace", "paper", "--heldout", "5", "--workers", "1",
-            "--method", "both", "--summary-json", str(summary), "--rrd", str(rrd)]
+    argv = ["--robot", name, "--trials", "4", "--poses", poses, "--workspace", "default", "--heldout", "5",
+            "--workers", "1", "--method", "both", "--summary-json", str(summary), "--rrd", str(rrd)]
+    if poses == "designed":
+        argv += ["--n-poses", "8"]
     assert main(argv) == 0
     assert "study: 4/4 trials" in capsys.readouterr().err
     s = json.loads(summary.read_text())
-    assert s["n_poses"] == 10 and s["trials"] == 4 and set(s["methods"]) >= {"forward", "paper"}
+    assert s["robot"] == name and s["trials"] == 4 and set(s["methods"]) == {"forward", "chainwise"}
+    assert s["n_poses"] == (10 if poses == "reference" else 8)
+    assert s["true_errors"] == ("reference" if name == "hexapod" else "random")
     f = s["methods"]["forward"]
-    assert set(f["mse_over_crb"]) == set(s["crb_std_mm"]) and len(f["mse_over_crb"]) == 42
+    assert list(f["mse_over_crb"]) == list(s["crb_std"]) == list(robot.free_default)
     assert 0 < f["heldout_position_mm"]["mean"] <= f["heldout_position_mm"]["rms"]
     assert s["predicted_heldout_position_rms_mm_at_crb"] > 0
-    assert s["observability"]["scaled_condition_number"] > 1e3  # the paper's poses
-    from rerun.chunk import RrdReader
-    ents = {str(c.entity_path) for c in RrdReader(rrd).stream().to_chunks()}
+    if name == "hexapod":
+        assert s["observability"]["scaled_condition_number"] > 1e3  # the paper's poses
+    ents = _entities(rrd)
     for e in ("/study/observability/singular_values", "/study/observability/crb_std_mm",
-              "/study/forward/mse_over_crb", "/study/paper/empirical_std_mm",
+              "/study/forward/mse_over_crb", "/study/chainwise/empirical_std_mm",
               "/study/forward/heldout_position_um", "/study/summary"):
         assert e in ents, e
+    batch = ents["/study/forward/mse_over_crb"].to_record_batch()
+    assert batch.column("parameter_names").to_pylist()[0] == list(robot.free_default)
     with pytest.raises(SystemExit, match="exists; pass --overwrite"):
         main(argv)
 
 
-def test_cli_reads_a_command_file(tmp_path):
+@pytest.mark.parametrize("name", ROBOTS)
+def test_cli_reads_a_command_file(tmp_path, name):
     from pipeline.design import write_command_file
 
+    robot, _, poses, commanded = setup(name)
     cmd = tmp_path / "c.csv"
-    write_command_file(cmd, paper.TABLE4_NOMINAL_POSES, inverse_kinematics(NOMINAL, paper.TABLE4_NOMINAL_POSES), {})
+    write_command_file(cmd, robot, poses, commanded, {})
     summary = tmp_path / "s.json"
-    assert main(["--trials", "2", "--poses", str(cmd), "--heldout", "0", "--workers", "1",
+    assert main(["--robot", name, "--trials", "2", "--poses", str(cmd), "--heldout", "0", "--workers", "1",
                  "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
-    assert s["n_poses"] == 10 and s["methods"]["forward"]["heldout_position_mm"] is None
+    assert s["n_poses"] == len(poses) and s["methods"]["forward"]["heldout_position_mm"] is None
+    other = "delta" if name != "delta" else "hexapod"
+    with pytest.raises(SystemExit, match=f"--poses: .*header must be .*the {other}'s"):
+        main(["--robot", other, "--trials", "2", "--poses", str(cmd), "--workers", "1"])
 
 
 def test_cli_random_poses_and_random_errors(tmp_path):
     summary = tmp_path / "s.json"
-    assert main(["--trials", "3", "--poses", "random", "--n-poses", "8", "--workspace", "paper", "--errors", "random",
+    assert main(["--trials", "3", "--poses", "random", "--n-poses", "8", "--workspace", "default", "--errors", "random",
                  "--heldout", "3", "--workers", "1", "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
     assert s["n_poses"] == 8 and s["true_errors"] == "random" and s["criterion"] is None
@@ -110,8 +201,11 @@ def test_cli_random_poses_and_random_errors(tmp_path):
 @pytest.mark.parametrize("argv, match", [
     (["--trials", "1"], "--trials must be >= 2"),
     (["--n-poses", "6"], "--n-poses must be >= 7"),
-    (["--noise-mm", "-1"], "--noise-mm/--noise-rad: position_mm must be finite and >= 0"),
+    (["--noise-mm", "-1"], "--noise-mm/--noise-rad/--noise-joint: position_mm must be finite and >= 0"),
     (["--poses", "missing.csv"], "--poses: command file missing.csv not found"),
+    (["--robot", "delta", "--poses", "reference"], "--poses reference: the delta has no reference poses"),
+    (["--robot", "delta", "--errors", "reference"], "--errors: the delta has no reference errors"),
+    (["--robot", "moon"], "--robot: unknown robot 'moon'"),
 ])
 def test_cli_validation(argv, match):
     with pytest.raises(SystemExit, match=match):

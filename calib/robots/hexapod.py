@@ -17,7 +17,8 @@ from .._validate import as_array
 from ..robot import ClosureJacobians, Parameter, ParameterTable, Robot
 from ..rotation import rotation_matrix, rotation_matrix_derivatives
 
-__all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS"]
+__all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS",
+           "FULL_WORKSPACE_OFFSETS"]
 
 #: Names of a leg's seven parameters, before the leg number (``B.x`` -> ``B3.x``).
 LEG_PARAMETERS = ("B.x", "B.y", "B.z", "dl", "P.x", "P.y", "P.z")
@@ -29,6 +30,15 @@ PAPER_WORKSPACE_HALF_WIDTHS = np.array([
     [-10.0, 10.0], [-10.0, 10.0], [0.0, 10.0],
     [-np.deg2rad(3.0), np.deg2rad(3.0)], [-np.deg2rad(3.0), np.deg2rad(3.0)],
     [-np.deg2rad(3.0), np.deg2rad(3.0)],
+])
+
+#: The machine's whole design workspace about the home pose ((6, 2) low/high offsets, mm and
+#: rad): x, y within +-80 mm, z from -50 to +60 mm (150 ... 260 mm for the paper's machine),
+#: angles within +-25 degrees; :mod:`calib.design` keeps the feasible poses of this box.
+FULL_WORKSPACE_OFFSETS = np.array([
+    [-80.0, 80.0], [-80.0, 80.0], [-50.0, 60.0],
+    [-np.deg2rad(25.0), np.deg2rad(25.0)], [-np.deg2rad(25.0), np.deg2rad(25.0)],
+    [-np.deg2rad(25.0), np.deg2rad(25.0)],
 ])
 
 
@@ -85,6 +95,27 @@ class Hexapod(Robot):
 
     def joint_limits(self) -> np.ndarray:
         return np.stack([self.home_lengths - self.stroke_mm, self.home_lengths + self.stroke_mm], axis=1)
+
+    def full_workspace_bounds(self) -> np.ndarray:
+        return self._home_pose[:, None] + FULL_WORKSPACE_OFFSETS
+
+    def passive_joint_angles(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, 12) rad, leg by leg: the angle between the leg and the base normal (z of the base
+        frame) at its base joint, then between the leg and the platform normal (z of the
+        platform frame) at its platform joint: what a spherical or universal joint allows."""
+        L, R = self.leg_vectors(theta, poses)
+        u = L / np.linalg.norm(L, axis=-1, keepdims=True)
+        base = np.arccos(np.clip(u[..., 2], -1.0, 1.0))
+        platform = np.arccos(np.clip(np.einsum("nli,ni->nl", u, R[:, :, 2]), -1.0, 1.0))
+        return np.stack([base, platform], axis=-1).reshape(len(poses), 12)
+
+    def reference_poses(self) -> np.ndarray:
+        """The paper's Table 4 nominal poses (10, 6)."""
+        return paper.TABLE4_NOMINAL_POSES.copy()
+
+    def reference_errors(self) -> np.ndarray:
+        """The paper's Table 3 errors (42,) mm."""
+        return paper.TABLE3_ERRORS.ravel().copy()
 
     def description(self) -> dict:
         return {"base_joints_mm": self.base_joints.tolist(), "platform_joints_mm": self.platform_joints.tolist(),
