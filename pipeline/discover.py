@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.effects import (EFFECTS, Discovery, EffectData, closure_noise_std, discover_effect, effect as registered,
-                           fit_effect)
+from calib.effects import EFFECTS, Discovery, Effect, EffectData, closure_noise_std, discover_effect, fit_effect
 from calib.robot import Robot
 from calib.robots import ROBOTS
 
@@ -46,12 +45,12 @@ class DiscoveryReport:
     summary: dict
 
 
-def _heldout(data: EffectData, effect: str, heldout_rows: np.ndarray, train_rows: np.ndarray, extra) -> dict:
+def _heldout(data: EffectData, effect: Effect, heldout_rows: np.ndarray, train_rows: np.ndarray, extra) -> dict:
     """Held-out closure residual RMS (mm) of geometry only and geometry + effect, both fitted on
     ``train_rows``, and the noise floor of the held-out residuals."""
     train, test = data.subset(train_rows), data.subset(heldout_rows)
     before = fit_effect(train, "none").predict(test)[0]
-    after = fit_effect(train, effect, extra=extra).predict(test)[0] if effect != "none" else before
+    after = fit_effect(train, effect, extra=extra).predict(test)[0] if effect.name != "none" else before
     floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
     rms_b = float(np.sqrt(np.mean(before ** 2)))
     rms_a = float(np.sqrt(np.mean(after ** 2)))
@@ -107,7 +106,8 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     if disc.effect == "none":
         out["after"] = out["before"]
         return out
-    eff, fit = registered(disc.effect), disc.chosen
+    fit = disc.chosen
+    eff = fit.model
     settings = merged_settings(context, eff.machine_settings(fit.coefficients, robot, context, fit.extra))
     after = run(fit.theta, settings)
     out["after_calib_fit"] = rms(after)
@@ -173,7 +173,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         n_held = max(1, int(round(heldout_fraction * kept.size)))
         held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
         basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
-    h = _heldout(data, disc.effect, held, train, disc.chosen.extra)
+    h = _heldout(data, disc.chosen.model, held, train, disc.chosen.extra)
     summary = {
         "robot": robot.name,
         "effect": disc.effect,

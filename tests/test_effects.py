@@ -284,3 +284,32 @@ def test_effect_data_validation():
         discover_effect(synthetic("hexapod", "none", [], n=10))
     with pytest.raises(ValueError, match="unknown effect 'x'"):
         discover_effect(synthetic("hexapod", "none", []), candidates=("x",))
+
+
+class SquaredStrokeError(Effect):
+    """A made-up effect written in one place (here): ``dq_i = b (q_i - q_centre_i)^2``, one
+    coefficient shared by every chain. Applies to every robot."""
+
+    name = "squared_stroke"
+    physics = "a stroke error growing with the square of the stroke"
+
+    def coefficients(self, robot):
+        from calib.effects import Coefficient
+        return (Coefficient("b", f"1/{robot.joint_unit}"),)
+
+    def joint_regressors(self, robot, theta, data, extra=None):
+        return (data.stroke ** 2)[..., None]
+
+
+def test_an_effect_written_in_one_place_is_discovered_without_touching_the_engine():
+    new = SquaredStrokeError()
+    robot, theta, workspace = machine("hexapod")
+    rng = np.random.default_rng(8)
+    targets = workspace[:, 0] + rng.uniform(size=(80, 6)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    data = EffectData(robot, robot.table.nominal, joints, targets, np.arange(80.0), NOISE)
+    reached = robot.forward_kinematics(theta, joints + new.joint_regressors(robot, theta, data) @ [1e-5])
+    data = data.with_measured(reached + NOISE.sample(80, 9, robot.pose_units))
+    d = discover_effect(data, candidates=tuple(effects_for(robot)) + (new,))
+    assert d.effect == "squared_stroke"
+    assert d.chosen.named_coefficients()["b"]["value"] == pytest.approx(1e-5, abs=5 * d.chosen.coefficient_std[0])

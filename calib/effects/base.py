@@ -31,7 +31,7 @@ from ..noise import SensorNoise
 from ..robot import Robot
 
 __all__ = ["Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
-           "EffectData", "Effect", "scale_to_magnitude"]
+           "EffectData", "Effect", "closure_regressors", "scale_to_magnitude"]
 
 
 @dataclass(frozen=True)
@@ -203,6 +203,16 @@ class EffectData:
         return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction)
 
 
+def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.ndarray:
+    """(N, C, p) closure residual per unit coefficient, mm: ``-dF/dq Xq`` (first order).
+
+    Args:
+        dF_dq: (N, C, C) closure Jacobian with respect to the joints, mm per joint unit.
+        joint_regressors: (N, C, p) joint displacement per unit coefficient, joint unit.
+    """
+    return -dF_dq @ joint_regressors
+
+
 def scale_to_magnitude(X: np.ndarray, coefficients: np.ndarray, magnitude_mm: float) -> np.ndarray:
     """``coefficients`` rescaled so that the largest closure contribution ``|X phi|`` is
     ``magnitude_mm``.
@@ -259,8 +269,7 @@ class Effect:
         Xq = self.joint_regressors(robot, theta, data, extra)
         if Xq.shape[-1] == 0:
             return Xq
-        dF_dq = robot.closure_jacobians(theta, data.joints, data.measured).joints
-        return -dF_dq @ Xq
+        return closure_regressors(robot.closure_jacobians(theta, data.joints, data.measured).joints, Xq)
 
     def search_grid(self, data: EffectData) -> np.ndarray:
         """(K,) grid of the search coordinate (effects with :attr:`searched`)."""

@@ -23,7 +23,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effects_for
-from .base import Effect, EffectData
+from .base import Effect, EffectData, closure_regressors
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "EffectFit", "Discovery", "fit_effect", "discover_effect", "locate_mismatch",
            "closure_noise_covariance", "closure_noise_std"]
@@ -52,11 +52,17 @@ def closure_noise_std(robot: Robot, theta: np.ndarray, data: EffectData) -> np.n
     return np.sqrt(np.diagonal(closure_noise_covariance(robot, theta, data), axis1=1, axis2=2))
 
 
-def _whiten(chol: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Solve ``L w = v`` measurement by measurement; ``v`` is (N, C) or (N, C, k)."""
+def _whitening(robot: Robot, theta: np.ndarray, data: EffectData) -> np.ndarray:
+    """(N, C, C) ``L^-1``, ``L`` the Cholesky factor of each measurement's closure noise
+    covariance: ``L^-1 r`` has unit covariance."""
+    return np.linalg.inv(np.linalg.cholesky(closure_noise_covariance(robot, theta, data)))
+
+
+def _whiten(winv: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``L^-1 v`` measurement by measurement; ``v`` is (N, C) or (N, C, k)."""
     if v.ndim == 2:
-        return np.linalg.solve(chol, v[..., None])[..., 0]
-    return np.linalg.solve(chol, v)
+        return np.einsum("nij,nj->ni", winv, v)
+    return winv @ v
 
 
 def _free_indices(robot: Robot) -> np.ndarray:
@@ -68,7 +74,7 @@ class EffectFit:
     """Geometry and one effect fitted jointly (whitened by the declared noise).
 
     Attributes:
-        effect: the effect's name.
+        model: the effect fitted (its ``name`` is :attr:`effect`).
         robot: the robot.
         theta: (P,) identified parameters.
         coefficients: (p,) effect coefficients (see ``Effect.coefficients``).
@@ -81,7 +87,7 @@ class EffectFit:
         n_params: free geometric parameters + p (+1 for a searched parameter).
     """
 
-    effect: str
+    model: Effect
     robot: Robot
     theta: np.ndarray
     coefficients: np.ndarray
@@ -91,6 +97,11 @@ class EffectFit:
     whitened: np.ndarray
     chi2: float
     n_params: int
+
+    @property
+    def effect(self) -> str:
+        """The effect's name."""
+        return self.model.name
 
     @property
     def errors(self) -> np.ndarray:
@@ -115,7 +126,7 @@ class EffectFit:
 
     def named_coefficients(self) -> dict:
         """``{name: {"value", "std", "unit"}}`` plus the searched parameter when there is one."""
-        eff = registered(self.effect)
+        eff = self.model
         out = {c.name: {"value": float(v), "std": float(s), "unit": c.unit}
                for c, v, s in zip(eff.coefficients(self.robot), self.coefficients, self.coefficient_std)}
         if self.extra is not None:
@@ -124,9 +135,9 @@ class EffectFit:
 
     def predict(self, data: EffectData) -> tuple[np.ndarray, np.ndarray]:
         """(N, C) residuals (mm) and whitened residuals of this fitted model on other data."""
-        Xq = registered(self.effect).joint_regressors(self.robot, self.theta, data, self.extra)
+        Xq = self.model.joint_regressors(self.robot, self.theta, data, self.extra)
         r = self.robot.closure(self.theta, data.joints + Xq @ self.coefficients, data.measured)
-        return r, _whiten(np.linalg.cholesky(closure_noise_covariance(self.robot, self.theta, data)), r)
+        return r, _whiten(_whitening(self.robot, self.theta, data), r)
 
 
 def _design(eff: Effect, theta: np.ndarray, coef: np.ndarray, data: EffectData, free: np.ndarray, extra):
@@ -179,23 +190,23 @@ def fit_effect(data: EffectData, effect: str | Effect, *, extra: float | None = 
         searched = True
         start = base
     theta = np.array(data.theta if start is None else start, dtype=float)
-    chol = np.linalg.cholesky(closure_noise_covariance(robot, theta, data))
+    winv = _whitening(robot, theta, data)
     g = free.size
     coef = np.zeros(len(eff.coefficients(robot)))
     for _ in range(iterations):
         r, D = _design(eff, theta, coef, data, free, extra)
-        x = _solve(_whiten(chol, D).reshape(-1, D.shape[-1]), -_whiten(chol, r).ravel())
+        x = _solve(_whiten(winv, D).reshape(-1, D.shape[-1]), -_whiten(winv, r).ravel())
         theta[free] += x[:g]
         coef = coef + x[g:]
     resid, D = _design(eff, theta, coef, data, free, extra)
-    w = _whiten(chol, resid)
+    w = _whiten(winv, resid)
     chi2 = float(np.sum(w ** 2))
-    A = _whiten(chol, D).reshape(-1, D.shape[-1])
+    A = _whiten(winv, D).reshape(-1, D.shape[-1])
     n_params = D.shape[-1] + (1 if searched else 0)
     dof = resid.size - n_params
     cov = np.linalg.pinv(A.T @ A) * max(1.0, chi2 / max(dof, 1))
     std = np.sqrt(np.clip(np.diag(cov)[g:], 0, None))
-    return EffectFit(eff.name, robot, theta, coef, std, extra, resid, w, chi2, n_params)
+    return EffectFit(eff, robot, theta, coef, std, extra, resid, w, chi2, n_params)
 
 
 def _search(eff: Effect, data: EffectData, base: np.ndarray, free: np.ndarray) -> float:
@@ -203,17 +214,18 @@ def _search(eff: Effect, data: EffectData, base: np.ndarray, free: np.ndarray) -
     effect's grid of the search coordinate, refined by golden-section search between the best
     grid point's neighbours."""
     robot = data.robot
-    chol = np.linalg.cholesky(closure_noise_covariance(robot, base, data))
+    winv = _whitening(robot, base, data)
+    dF_dq = robot.closure_jacobians(base, data.joints, data.measured).joints
     r, D = _design(EFFECTS["none"], base, np.zeros(0), data, free, None)
-    Ag = _whiten(chol, D).reshape(-1, D.shape[-1])
-    b = -_whiten(chol, r).ravel()
+    Ag = _whiten(winv, D).reshape(-1, D.shape[-1])
+    b = -_whiten(winv, r).ravel()
     # Project the geometry out once; each value then costs one small least-squares problem.
     Q, _ = np.linalg.qr(Ag / np.linalg.norm(Ag, axis=0))
     b_perp = b - Q @ (Q.T @ b)
 
     def cost(u):
-        X = eff.regressors(robot, base, data, eff.searched_value(u))
-        Xw = _whiten(chol, X).reshape(-1, X.shape[-1])
+        X = closure_regressors(dF_dq, eff.joint_regressors(robot, base, data, eff.searched_value(u)))
+        Xw = _whiten(winv, X).reshape(-1, X.shape[-1])
         Xp = Xw - Q @ (Q.T @ Xw)
         x, *_ = np.linalg.lstsq(Xp, b_perp, rcond=None)
         e = b_perp - Xp @ x
@@ -265,7 +277,7 @@ class Discovery:
     adequate: bool
 
 
-def _cv_rms(data: EffectData, effect: str, folds: int, seed: int, extra: float | None) -> float:
+def _cv_rms(data: EffectData, effect: Effect, folds: int, seed: int, extra: float | None) -> float:
     order = np.random.default_rng(seed).permutation(data.n)
     ss, cnt = 0.0, 0
     for k in range(folds):
@@ -295,8 +307,9 @@ def discover_effect(data: EffectData, *, candidates=None, alpha: float = 0.01, o
 
     Args:
         data: the measurements.
-        candidates: effect names to consider (``"none"`` is always included); default every
-            registered effect that applies to the robot.
+        candidates: effects to consider, registered names or :class:`Effect` objects
+            (``"none"`` is always included); default every registered effect that applies to
+            the robot.
         alpha: significance of the geometry-only chi-square test.
         outlier_alpha: family-wise significance of the outlier test.
         folds, seed: cross-validation.
@@ -308,16 +321,17 @@ def discover_effect(data: EffectData, *, candidates=None, alpha: float = 0.01, o
     robot = data.robot
     if candidates is None:
         candidates = effects_for(robot)
-    cands = ("none",) + tuple(registered(c).name for c in candidates if registered(c).name != "none")
+    models = {e.name: e for e in [EFFECTS["none"]] + [registered(c) for c in candidates]}
+    cands = tuple(models)
     for c in cands:
-        _check_applies(registered(c), robot)
+        _check_applies(models[c], robot)
     if data.n < MIN_ROWS:
         raise ValueError(f"effect discovery needs at least {MIN_ROWS} measurements, got {data.n}")
     kept = np.arange(data.n)
     flagged: list[int] = []
     while True:
         sub = data.subset(kept)
-        fits = {c: fit_effect(sub, c) for c in cands}
+        fits = {c: fit_effect(sub, models[c]) for c in cands}
         geo = fits["none"]
         effect = min(cands, key=lambda c: fits[c].bic())
         if fits[effect].bic() > geo.bic() - min_delta_bic:
@@ -335,7 +349,7 @@ def discover_effect(data: EffectData, *, candidates=None, alpha: float = 0.01, o
     cv = {}
     for c in cands:
         f = fits[c]
-        cv[c] = _cv_rms(sub, c, folds, seed, f.extra)
+        cv[c] = _cv_rms(sub, models[c], folds, seed, f.extra)
         evidence[c] = {"chi2": f.chi2, "dof": f.dof, "p_value": f.p_value, "n_params": f.n_params, "bic": f.bic(),
                        "delta_bic_vs_none": f.bic() - geo.bic(), "aic": f.aic(), "cv_whitened_rms": cv[c]}
     if effect != "none" and not cv[effect] < cv["none"]:
