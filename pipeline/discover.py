@@ -1,35 +1,40 @@
 """``python -m pipeline.discover --real FILE``: find the physics the geometric model left out.
 
 Calibrates the geometry, locates where the residuals concentrate, names the left-out effect
-from a library of physical candidates (:mod:`calib.effects`), fits it jointly with the
+from the registry of physical candidates (:mod:`calib.effects`), fits it jointly with the
 geometry, shows the held-out fit improve, and re-simulates the MuJoCo machine with the effect
-added, re-fitting its physical parameter there with ``mujoco.sysid``.
+added (the effect's own :meth:`~calib.effects.Effect.machine_settings`), re-fitting its physical
+parameter there with ``mujoco.sysid``. ``--robot NAME --scenario EFFECT`` runs it on a seeded
+simulated recording instead (:func:`pipeline.scenarios.effect_recording`).
 
-Callable from Python as :func:`discover`.
+Callable from Python as :func:`discover`. Nothing here depends on the robot or the effect.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from calib.effects import EFFECTS, Discovery, EffectData, discover_effect, fit_effect, joint_noise_std
-from calib.hexapod import Hexapod, robot_and_theta
-from mjcf.hexapod import DEFAULT_STIFFNESS_N_PER_M
-from mjcf.machine import GRAVITY_M_S2
-from mjcf.units import M_PER_MM
+from calib.effects import EFFECTS, Discovery, Effect, EffectData, closure_noise_std, discover_effect, fit_effect
+from calib.robot import Robot
+from calib.robots import ROBOTS
 
 from .recording import Recording, atomic_write, read_recording
+from .scenarios import effect_recording, machine_context, merged_settings, recording_robot, simulate
 
-__all__ = ["discover", "DiscoveryReport", "resimulate", "main"]
+__all__ = ["discover", "DiscoveryReport", "resimulate", "main", "RESIMULATION_SETTLE_VELOCITY"]
 
-DEFAULT_PLATFORM_KG = 2.0
+#: At rest to 1e-7 m/s (or rad/s) is ample for micrometre comparisons (the settled pose is then
+#: within about 1e-10 m), and several times faster than the testbed's default.
+RESIMULATION_SETTLE_VELOCITY = 1e-7
 
 
 @dataclass
@@ -40,63 +45,23 @@ class DiscoveryReport:
     summary: dict
 
 
-def _heldout(data: EffectData, effect: str, heldout_rows: np.ndarray, train_rows: np.ndarray, pitch) -> dict:
-    """Held-out joint-space residual RMS (mm) of geometry only and geometry + effect, both
-    fitted on ``train_rows``, and the noise floor of the held-out residuals."""
+def _heldout(data: EffectData, effect: Effect, heldout_rows: np.ndarray, train_rows: np.ndarray, extra) -> dict:
+    """Held-out closure residual RMS (mm) of geometry only and geometry + effect, both fitted on
+    ``train_rows``, and the noise floor of the held-out residuals."""
     train, test = data.subset(train_rows), data.subset(heldout_rows)
     before = fit_effect(train, "none").predict(test)[0]
-    after = fit_effect(train, effect, pitch_mm=pitch).predict(test)[0] if effect != "none" else before
-    floor = float(np.sqrt(np.mean(joint_noise_std(data.nominal, test) ** 2)))
+    after = fit_effect(train, effect, extra=extra).predict(test)[0] if effect.name != "none" else before
+    floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
     rms_b = float(np.sqrt(np.mean(before ** 2)))
     rms_a = float(np.sqrt(np.mean(after ** 2)))
     return {"heldout_rms_before_mm": rms_b, "heldout_rms_after_mm": rms_a, "noise_floor_mm": floor,
             "after_over_floor": rms_a / floor, "heldout_rows": [int(i) for i in heldout_rows]}
 
 
-def _physics(effect: str, fit, meta: dict) -> tuple[dict, dict]:
-    """MuJoCo options and machine effects that reproduce a fitted effect, plus the names of
-    the physical quantities (for the report)."""
-    opts: dict = {}
-    fx: dict = {}
-    c = fit.coefficients
-    moving = float(meta.get("moving_mass_kg", DEFAULT_PLATFORM_KG))
-    if effect == "leg_compliance":
-        weight = moving * GRAVITY_M_S2
-        k = weight / max(c[0] * M_PER_MM, 1e-12)
-        opts = dict(gravity=True, payload_kg=max(moving - DEFAULT_PLATFORM_KG, 0.0), actuator_stiffness=k)
-    elif effect == "joint_friction":
-        opts = dict(joint_friction=max(c[0], 0.0) * M_PER_MM * DEFAULT_STIFFNESS_N_PER_M)
-    elif effect == "thermal_drift":
-        fx = dict(joint_drift_per_s=float(c[0]))
-    elif effect == "actuator_scale":
-        opts = dict(transmission_scale=tuple(float(v) for v in c))
-    elif effect == "periodic_screw_error":
-        a, b = c[0::2], c[1::2]
-        fx = dict(screw_amplitude=tuple(np.hypot(a, b)), screw_phase_rad=tuple(np.arctan2(b, a)),
-                  screw_pitch=float(fit.pitch_mm))
-    return opts, fx
-
-
-# The one physical parameter re-fitted in MuJoCo through mujoco.sysid, per effect.
-_SYSID_PARAMETER = {"leg_compliance": ("actuator_stiffness", "N/m"), "joint_friction": ("joint_friction", "N"),
-                    "thermal_drift": ("joint_drift_per_s", "mm/s")}
-
-
-def _simulate(hexapod: Hexapod, rec: Recording, rows: np.ndarray, opts: dict, fx: dict, *,
-              history: bool = True) -> np.ndarray:
-    from mjcf.machine import MachineEffects, MachineOptions
-    from pipeline.testbed import Testbed
-
-    o = MachineOptions(platform_mass_kg=DEFAULT_PLATFORM_KG, **opts)
-    robot, theta = robot_and_theta(hexapod)
-    # At rest to 1e-7 m/s is ample for micrometre comparisons (the settled pose is then within
-    # about 1e-10 m), and several times faster than the testbed's default.
-    bed = Testbed(robot, theta, options=o, effects=MachineEffects(**fx), settle_velocity=1e-7)
-    if not history:
-        return bed.measure(rec.commanded[rows], times_s=rec.t_s[rows]).true_poses
-    # Replay the whole record in order (friction depends on the motion history), keep rows.
-    m = bed.measure(rec.commanded, times_s=rec.t_s)
-    return m.true_poses[rows]
+def _with(settings: dict, section: str, field: str, value: float) -> dict:
+    out = {k: dict(v) for k, v in settings.items()}
+    out[section][field] = value
+    return out
 
 
 def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev: int = 5,
@@ -104,59 +69,64 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     """Re-simulate the recorded commands on MuJoCo machines and compare with the recording.
 
     Before: the machine with the geometry identified alone. After: the machine with the
-    geometry identified jointly with the effect, and the effect's physics added
-    (:func:`_physics`); for compliance, friction and thermal drift its physical parameter is then
-    re-fitted in MuJoCo with ``mujoco.sysid`` (confidence interval from its Jacobian). For the
-    transmission effects (scale, screw) the calib-level fit is already the physical parameter
-    (they enter the leg length directly), so they are simulated as fitted. The re-fit uses at
-    most ``sysid_rows`` rows (every row for friction, whose dead band depends on the whole
-    motion history), since each evaluation re-simulates them.
+    geometry identified jointly with the effect, and the effect's physics added (its
+    ``machine_settings``); where the effect names a physical parameter
+    (``physical_parameter``: servo stiffness, friction force, drift rate) it is then re-fitted
+    in MuJoCo with ``mujoco.sysid`` (confidence interval from its Jacobian). The transmission
+    effects (scale, screw) enter the joints directly, so their calib-level fit already is the
+    machine's parameter and they are simulated as fitted. The re-fit uses at most
+    ``sysid_rows`` rows (every row for an effect that depends on the motion history, such as
+    friction), since each evaluation re-simulates them.
 
     Returns:
-        JSON-ready dict: task-space RMS (um, urad) of simulated minus recorded poses, before
-        and after, and the re-fitted parameter with its 95% interval.
+        JSON-ready dict: task-space RMS of simulated minus recorded poses (um for positions,
+        urad for angles), before and after, the machine settings and the re-fitted parameter
+        with its 95% interval.
     """
+    robot = recording_robot(rec)
     rows = disc.kept
-    w = rec.noise.weights()
+    std = rec.noise.pose_std(robot.pose_units)
+    angle = robot.angle_pose_mask
     meas = rec.measured[rows]
+    context = machine_context(robot, rec.meta.get("moving_mass_kg"))
+
+    def run(theta, settings, which=rows, history=True):
+        kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
+        if not history:
+            return simulate(robot, theta, rec.commanded[which], settings, times_s=rec.t_s[which], **kw).true_poses
+        # Replay the whole record in order (the state may depend on the motion history), keep rows.
+        return simulate(robot, theta, rec.commanded, settings, times_s=rec.t_s, **kw).true_poses[which]
 
     def rms(sim):
         d = meas - sim
-        return {"position_um": float(1e3 * np.sqrt(np.mean(np.sum(d[:, :3] ** 2, axis=1)))),
-                "orientation_urad": float(1e6 * np.sqrt(np.mean(np.sum(d[:, 3:] ** 2, axis=1))))}
+        return {"position_um": float(1e3 * np.sqrt(np.mean(np.sum(d[:, ~angle] ** 2, axis=1)))),
+                "orientation_urad": float(1e6 * np.sqrt(np.mean(np.sum(d[:, angle] ** 2, axis=1))))}
 
-    before = _simulate(disc.fits["none"].hexapod, rec, rows, {}, {})
-    out = {"before": rms(before)}
-    effect = disc.effect
-    if effect == "none":
+    out = {"before": rms(run(disc.fits["none"].theta, merged_settings(context)))}
+    if disc.effect == "none":
         out["after"] = out["before"]
         return out
     fit = disc.chosen
-    opts, fx = _physics(effect, fit, rec.meta)
-    after = _simulate(fit.hexapod, rec, rows, opts, fx)
+    eff = fit.model
+    settings = merged_settings(context, eff.machine_settings(fit.coefficients, robot, context, fit.extra))
+    after = run(fit.theta, settings)
     out["after_calib_fit"] = rms(after)
-    if sysid and effect in _SYSID_PARAMETER:
+    param = eff.physical_parameter(robot)
+    if sysid and param is not None:
         import mujoco.sysid as sysid_mod
 
-        name, unit = _SYSID_PARAMETER[effect]
-        where = opts if name in opts else fx
-        hist = effect == "joint_friction"
+        name = param.field
+        hist = eff.history_dependent
         sub = rows if hist or rows.size <= sysid_rows else np.sort(
             np.random.default_rng(seed).choice(rows, sysid_rows, replace=False))
         meas_sub = rec.measured[sub]
-        x0 = float(where[name])
-        params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, x0 / 10 if x0 > 0 else -10 * abs(x0) - 1e-9,
-                                                                    x0 * 10 if x0 > 0 else 10 * abs(x0) + 1e-9)})
+        x0 = float(settings[param.section][name])
+        low, high = (x0 / 10, x0 * 10) if x0 > 0 else (-10 * abs(x0) - 1e-9, 10 * abs(x0) + 1e-9)
+        params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, low, high)})
 
         def residual_fn(x, _params):
-            trial = dict(where)
-            trial[name] = float(x[0])
-            sim = _simulate(fit.hexapod, rec, sub, trial if where is opts else opts, fx if where is opts else trial,
-                            history=hist)
-            return [((meas_sub - sim) * w).ravel()], None, None
-
-        import contextlib
-        import io
+            sim = run(fit.theta, _with(settings, param.section, name, float(x[0])), sub, history=hist)
+            return [((meas_sub - sim) / std).ravel()], None, None
 
         with contextlib.redirect_stdout(io.StringIO()):  # the scipy backend prints its iterations
             opt, res = sysid_mod.optimize(params, residual_fn, optimizer="scipy", verbose=False,
@@ -164,28 +134,36 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
         xs = float(np.ravel(opt[name].value)[0])
         r_star = residual_fn(np.array([xs]), opt)[0]
         _, intervals = sysid_mod.calculate_intervals(r_star, res.jac)
-        where[name] = xs
-        after = _simulate(fit.hexapod, rec, rows, opts, fx)
-        out["sysid"] = {"parameter": name, "unit": unit, "start": x0, "value": xs,
+        settings = _with(settings, param.section, name, xs)
+        after = run(fit.theta, settings)
+        out["sysid"] = {"parameter": name, "unit": param.unit, "start": x0, "value": xs,
                         "interval_95": float(np.ravel(intervals)[0]), "evaluations": int(res.nfev),
                         "rows": int(sub.size)}
     out["after"] = rms(after)
-    out["machine"] = {"options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opts.items()},
-                      "effects": {k: (list(v) if isinstance(v, tuple) else v) for k, v in fx.items()}}
+    out["machine"] = {section: {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()}
+                      for section, values in settings.items()}
     return out
 
 
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
-             sysid: bool = True, candidates=EFFECTS) -> DiscoveryReport:
-    """Run the whole discovery on a recording (see the module docstring)."""
+             sysid: bool = True, candidates=None) -> DiscoveryReport:
+    """Run the whole discovery on a recording (see the module docstring).
+
+    Args:
+        rec: the recording.
+        seed: seed of the held-out split and of the cross-validation folds.
+        heldout_fraction: rows held out when the recording has no ``validation`` rows.
+        resim, sysid: re-simulate on the MuJoCo machine, and re-fit there with ``mujoco.sysid``.
+        candidates: effect names to consider; default every effect that applies to the robot.
+    """
     t0 = time.perf_counter()
-    nominal = Hexapod(rec.geometry)
+    robot = recording_robot(rec)
     cal = np.flatnonzero(rec.sets == "calibration")
-    data = EffectData(nominal, rec.commanded, rec.measured, rec.t_s, rec.noise)
+    data = EffectData(robot, robot.table.nominal, rec.commanded, rec.measured, rec.t_s, rec.noise)
     disc = discover_effect(data.subset(cal), candidates=candidates, seed=seed)
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
-    disc = Discovery(**{**disc.__dict__, "kept": kept, "flagged": tuple(flagged)})
+    disc = replace(disc, kept=kept, flagged=tuple(flagged))
     val = np.flatnonzero(rec.sets == "validation")
     if val.size:
         held, train = val, kept
@@ -195,9 +173,11 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         n_held = max(1, int(round(heldout_fraction * kept.size)))
         held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
         basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
-    h = _heldout(data, disc.effect, held, train, disc.chosen.pitch_mm)
+    h = _heldout(data, disc.chosen.model, held, train, disc.chosen.extra)
     summary = {
+        "robot": robot.name,
         "effect": disc.effect,
+        "candidates": [c for c in disc.evidence if c != "geometry_chi2_test"],
         "adequate": disc.adequate,
         "evidence": disc.evidence,
         "heldout_rms_before_mm": h["heldout_rms_before_mm"],
@@ -205,13 +185,12 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "noise_floor_mm": h["noise_floor_mm"],
         "heldout_basis": basis,
         "effect_parameters": disc.chosen.named_coefficients(),
-        "identified_errors": disc.chosen.hexapod.errors.tolist(),
+        "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "located": disc.located,
         "flagged_poses": flagged,
         "rows": int(rec.commanded.shape[0]),
     }
-    truth = rec.meta.get("simulation", {}).get("effect")
-    if truth is not None:
+    if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resim:
         t1 = time.perf_counter()
@@ -221,7 +200,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     return DiscoveryReport(discovery=disc, summary=summary)
 
 
-def _words(s: dict) -> list[str]:
+def report_lines(s: dict) -> list[str]:
+    """The summary in plain words, one finding per line."""
     ev = s["evidence"]["geometry_chi2_test"]
     lines = [f"Geometry alone: chi-square {ev['chi2']:.0f} on {ev['dof']} degrees of freedom, p = {ev['p_value']:.3g} "
              f"({'consistent with' if ev['p_value'] > ev['alpha'] else 'NOT explained by'} the declared noise "
@@ -248,21 +228,22 @@ def _words(s: dict) -> list[str]:
     return lines
 
 
-def _log_rrd(path: Path, rec: Recording, report: DiscoveryReport, overwrite: bool) -> Path:
+def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, overwrite: bool) -> Path:
     import rerun as rr
     import rerun.blueprint as rrb
 
     from .rerun_log import save_recording
 
     disc, s = report.discovery, report.summary
-    nominal = Hexapod(rec.geometry)
-    data = EffectData(nominal, rec.commanded, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
+    data = EffectData(robot, robot.table.nominal, rec.commanded, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
     before = disc.fits["none"].residuals
     after = disc.chosen.residuals
+    chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]
+    candidates = s["candidates"]
 
     def log(r):
-        r.log("residuals/before_um", rr.SeriesLines(names=[f"leg {i + 1}" for i in range(6)]), static=True)
-        r.log("residuals/after_um", rr.SeriesLines(names=[f"leg {i + 1}" for i in range(6)]), static=True)
+        r.log("residuals/before_um", rr.SeriesLines(names=chains), static=True)
+        r.log("residuals/after_um", rr.SeriesLines(names=chains), static=True)
         for k, j in enumerate(disc.kept):
             r.set_time("measurement", sequence=int(j))
             r.set_time("time", duration=float(rec.t_s[j]))
@@ -270,21 +251,21 @@ def _log_rrd(path: Path, rec: Recording, report: DiscoveryReport, overwrite: boo
             r.log("residuals/after_um", rr.Scalars(1e3 * after[k]))
             r.log("residuals/rms_um/before", rr.Scalars(float(1e3 * np.sqrt(np.mean(before[k] ** 2)))))
             r.log("residuals/rms_um/after", rr.Scalars(float(1e3 * np.sqrt(np.mean(after[k] ** 2)))))
-        r.log("per_leg/rms_before_um", rr.BarChart(1e3 * np.sqrt(np.mean(before ** 2, axis=0))), static=True)
-        r.log("per_leg/rms_after_um", rr.BarChart(1e3 * np.sqrt(np.mean(after ** 2, axis=0))), static=True)
-        bic = [s["evidence"][e]["delta_bic_vs_none"] for e in EFFECTS]
+        r.log("per_chain/rms_before_um", rr.BarChart(1e3 * np.sqrt(np.mean(before ** 2, axis=0))), static=True)
+        r.log("per_chain/rms_after_um", rr.BarChart(1e3 * np.sqrt(np.mean(after ** 2, axis=0))), static=True)
+        bic = [s["evidence"][e]["delta_bic_vs_none"] for e in candidates]
         r.log("evidence/delta_bic", rr.BarChart(np.array(bic)), static=True)
-        r.log("evidence/candidates", rr.TextDocument(", ".join(EFFECTS)), static=True)
-        md = "# Discovery\n\n" + "\n".join(f"- {line}" for line in _words(s))
+        r.log("evidence/candidates", rr.TextDocument(", ".join(candidates)), static=True)
+        md = "# Discovery\n\n" + "\n".join(f"- {line}" for line in report_lines(s))
         r.log("summary", rr.TextDocument(md, media_type=rr.MediaType.MARKDOWN), static=True)
         r.log("stroke/direction", rr.BarChart(data.direction.mean(axis=0)), static=True)
 
     bp = rrb.Blueprint(rrb.Horizontal(
-        rrb.Vertical(rrb.TimeSeriesView(origin="residuals/before_um", name="Leg residuals before (um)"),
-                     rrb.TimeSeriesView(origin="residuals/after_um", name="Leg residuals after (um)"),
+        rrb.Vertical(rrb.TimeSeriesView(origin="residuals/before_um", name="Closure residuals before (um)"),
+                     rrb.TimeSeriesView(origin="residuals/after_um", name="Closure residuals after (um)"),
                      rrb.TimeSeriesView(origin="residuals/rms_um", name="Per-measurement RMS (um)")),
-        rrb.Vertical(rrb.BarChartView(origin="per_leg/rms_before_um", name="Per-leg RMS before (um)"),
-                     rrb.BarChartView(origin="per_leg/rms_after_um", name="Per-leg RMS after (um)"),
+        rrb.Vertical(rrb.BarChartView(origin="per_chain/rms_before_um", name=f"Per-{robot.chain_word} RMS before (um)"),
+                     rrb.BarChartView(origin="per_chain/rms_after_um", name=f"Per-{robot.chain_word} RMS after (um)"),
                      rrb.BarChartView(origin="evidence/delta_bic", name="Delta BIC per candidate")),
         rrb.TextDocumentView(origin="summary", name="Summary")), collapse_panels=True)
     return save_recording(path, log, overwrite=overwrite, bp=bp)
@@ -293,11 +274,18 @@ def _log_rrd(path: Path, rec: Recording, report: DiscoveryReport, overwrite: boo
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m pipeline.discover",
-        description="Find the physics a hexapod's geometric model leaves out: calibrate the geometry, locate "
-                    "the mismatch, name the effect (leg_compliance, joint_friction, thermal_drift, actuator_scale, "
-                    "periodic_screw_error or none), fit it, and show the held-out fit improve.",
+        description="Find the physics a robot's geometric model leaves out: calibrate the geometry, locate "
+                    f"the mismatch, name the effect ({', '.join(EFFECTS)}; those that apply to the robot), fit it, "
+                    "and show the held-out fit improve.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--real", type=Path, required=True, help="recording to analyse (.csv with its .json sidecar)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--real", type=Path, help="recording to analyse (.csv with its .json sidecar)")
+    src.add_argument("--scenario", choices=tuple(EFFECTS), help="analyse a seeded simulated recording of --robot "
+                     "carrying this effect (pipeline.scenarios)")
+    p.add_argument("--robot", choices=tuple(ROBOTS), default=None,
+                   help="the robot of --scenario (default hexapod); with --real, the robot the file must be of "
+                        "(default: the one its sidecar names)")
+    p.add_argument("--scenario-seed", type=int, default=0, help="seed of the --scenario recording")
     p.add_argument("--seed", type=int, default=0, help="seed of the held-out split and cross-validation folds")
     p.add_argument("--no-resim", action="store_true", help="skip the MuJoCo re-simulation")
     p.add_argument("--no-sysid", action="store_true", help="re-simulate without the mujoco.sysid re-fit")
@@ -311,17 +299,26 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        rec = read_recording(args.real)
+        if args.real is not None:
+            rec = read_recording(args.real)
+            stem = args.real.stem
+        else:
+            robot_name = args.robot or "hexapod"
+            rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)
+            stem = f"{robot_name}_{args.scenario}_{args.scenario_seed}"
+        robot = recording_robot(rec)
+        if args.robot is not None and robot.name != args.robot:
+            raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
         report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid)
-        name = args.name or f"{args.real.stem}_discover"
-        rrd = _log_rrd(args.out / f"{name}.rrd", rec, report, args.overwrite)
+        name = args.name or f"{stem}_discover"
+        rrd = _log_rrd(args.out / f"{name}.rrd", robot, rec, report, args.overwrite)
         report.summary["rrd"] = str(rrd)
         if args.summary_json is not None:
             atomic_write(args.summary_json, json.dumps(report.summary, indent=1), overwrite=True)
     except (FileExistsError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    for line in _words(report.summary):
+    for line in report_lines(report.summary):
         print(line)
     print(f"wrote {report.summary['rrd']}")
     return 0

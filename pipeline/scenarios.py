@@ -1,114 +1,258 @@
-"""Seeded recordings of the simulated hexapod carrying one physical effect (for discovery).
+"""Seeded recordings of a simulated robot carrying one physical effect (for discovery).
 
-Each recording: Table 3 geometric errors in the machine, 60 to 120 poses drawn in random order
-over :data:`DISCOVERY_WORKSPACE`, sensor noise of 1 um (normal, and 1 urad on angles), and at
-most one effect whose largest leg-length contribution is 3 to 10 times the position noise:
-small enough that the geometric errors absorb part of it (concealed).
+Each recording: the machine's geometric errors, 60 to 120 poses drawn in random order over the
+discovery workspace, sensor noise of 1 um (normal, and 1 urad on angles), and at most one effect
+(:mod:`calib.effects`) whose largest contribution to the closure residuals is 3 to 10 times the
+position noise: small enough that the geometric errors absorb part of it (concealed). The effect
+draws its own true instance (:meth:`calib.effects.Effect.scenario`) and says how the MuJoCo
+machine produces it (:meth:`calib.effects.Effect.machine_settings`); nothing here depends on
+which effect it is.
+
+The MuJoCo machine is reached through one function, :func:`simulate`, and recordings are
+converted to and from :class:`pipeline.recording.Recording` by :func:`make_recording` and
+:func:`recording_robot` only.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 
-from calib.effects import _compliance_regressors
-from calib.hexapod import Hexapod, paper_hexapod, robot_and_theta
-from calib.kinematics import inverse_kinematics, leg_vectors
+from calib import paper
+from calib.effects import EffectData, MachineContext, effect as registered_effect
 from calib.noise import SensorNoise
-from calib.workspace import random_poses
-from mjcf.hexapod import DEFAULT_STIFFNESS_N_PER_M, LEG_MASS_KG
+from calib.robot import KinematicsError, Robot, check_joint_limits
+from calib.robots import default_robot, robot_from_description
 from mjcf.machine import GRAVITY_M_S2, MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
 
 from .recording import Recording
-from .testbed import Testbed
 
-__all__ = ["DISCOVERY_WORKSPACE", "DISCOVERY_NOISE", "effect_recording"]
+__all__ = ["DISCOVERY_NOISE", "DEFAULT_MOVING_MASS_KG", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
+           "machine_context", "merged_settings", "simulate", "servo_stiffness", "make_recording", "recording_robot",
+           "effect_recording"]
 
-#: Workspace of the discovery recordings about the geometry's home pose: +-25 mm in x and y,
-#: -10..+15 mm in z, +-0.1 rad tilt, +-0.15 rad yaw (for the paper's machine z is 190..215 mm).
-DISCOVERY_WORKSPACE = np.array([[-25, 25], [-25, 25], [-10, 15], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
-# Mean simulated time a pose takes to settle, s (used to size the thermal drift beforehand).
-_SETTLE_S = 0.35
+#: Moving mass (the platform, no payload) of the simulated machines, kg; discovery assumes it
+#: when a recording does not carry ``meta.moving_mass_kg``.
+DEFAULT_MOVING_MASS_KG = 2.0
+#: Mean simulated time a pose takes to settle, s (sizes a time-dependent effect beforehand).
+ESTIMATED_SETTLE_S = 0.35
+#: Errors of a robot without a :data:`SCENARIO_MACHINES` entry: uniform within +- these on its
+#: free parameters (mm, rad), seeded once (the same machine in every recording).
+DEFAULT_ERROR_MM, DEFAULT_ERROR_RAD = 0.05, 5e-4
 
 
-def effect_recording(effect: str, seed: int, *, nominal: Hexapod | None = None, errors: np.ndarray | None = None,
-                     n_poses: int | None = None, magnitude_noise: float | None = None,
-                     noise: SensorNoise = DISCOVERY_NOISE) -> Recording:
-    """Simulate a blind recording of the MuJoCo hexapod with one effect.
+@dataclass(frozen=True)
+class ScenarioMachine:
+    """The simulated machine of a robot's scenarios.
+
+    Attributes:
+        errors: ``errors(robot) -> (P,)`` its geometric errors.
+        workspace: ``workspace(robot) -> (D, 2)`` low/high of the poses drawn.
+    """
+
+    errors: Callable[[Robot], np.ndarray]
+    workspace: Callable[[Robot], np.ndarray]
+
+
+def _seeded_errors(robot: Robot) -> np.ndarray:
+    theta = np.zeros(robot.n_parameters)
+    free = robot.table.indices(robot.free_default)
+    size = np.where(robot.table.angle_mask()[free], DEFAULT_ERROR_RAD, DEFAULT_ERROR_MM)
+    theta[free] = np.random.default_rng(0).uniform(-1.0, 1.0, free.size) * size
+    return theta
+
+
+#: The hexapod of the README's figures: the paper's machine (Table 3 errors) over +-25 mm in x
+#: and y, -10..+15 mm in z, +-0.1 rad tilt and +-0.15 rad yaw about its home pose (the paper's
+#: own workspace is too narrow to tell effects from geometry). Robots not listed get
+#: :func:`_seeded_errors` and their default calibration workspace.
+SCENARIO_MACHINES: dict[str, ScenarioMachine] = {
+    "hexapod": ScenarioMachine(
+        errors=lambda robot: paper.TABLE3_ERRORS.ravel(),
+        workspace=lambda robot: robot.home_pose[:, None] + np.array(
+            [[-25, 25], [-25, 25], [-10, 15], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)),
+}
+
+
+def scenario_machine(robot: Robot) -> ScenarioMachine:
+    """The scenario machine of ``robot`` (see :data:`SCENARIO_MACHINES`)."""
+    return SCENARIO_MACHINES.get(robot.name, ScenarioMachine(_seeded_errors, lambda r: r.workspace_bounds()))
+
+
+def machine_context(robot: Robot, moving_mass_kg: float | None = None) -> MachineContext:
+    """The numbers that turn effect coefficients into the MuJoCo physics of ``robot``'s machine.
 
     Args:
-        effect: ``none``, ``leg_compliance``, ``joint_friction``, ``thermal_drift``,
-            ``actuator_scale`` or ``periodic_screw_error``.
-        seed: seeds everything (poses, effect size, noise).
-        nominal: nominal parameter set (default the paper's Table 2).
-        errors: (6, 7) geometric errors of the machine (default Table 3).
-        n_poses: number of poses (default drawn in 60..120).
-        magnitude_noise: the effect's largest leg-length contribution in units of the position
-            noise (default drawn in 3..10).
-        noise: sensor noise.
+        robot: the robot.
+        moving_mass_kg: platform plus payload, kg; default :data:`DEFAULT_MOVING_MASS_KG`.
+    """
+    return MachineContext(
+        moving_mass_kg=float(DEFAULT_MOVING_MASS_KG if moving_mass_kg is None else moving_mass_kg),
+        platform_mass_kg=DEFAULT_MOVING_MASS_KG, payload_height_m=MachineOptions().payload_height_m,
+        gravity_m_s2=GRAVITY_M_S2, m_per_mm=M_PER_MM, servo_stiffness=servo_stiffness(robot))
+
+
+def merged_settings(context: MachineContext, settings: dict | None = None) -> dict:
+    """The machine of ``context`` (its platform mass) with an effect's ``settings`` on top."""
+    settings = settings or {}
+    return {"options": {"platform_mass_kg": context.platform_mass_kg, **settings.get("options", {})},
+            "effects": dict(settings.get("effects", {}))}
+
+
+# ----------------------------------------------------------------------------- the MuJoCo boundary
+# The three functions below are the only ones that know the testbed and the recording type.
+
+
+def servo_stiffness(robot: Robot) -> float:
+    """The actuator servo stiffness of ``robot``'s MuJoCo machine by default, SI."""
+    from mjcf.hexapod import HexapodModelOptions
+
+    _require_hexapod(robot)
+    return HexapodModelOptions().actuator_stiffness
+
+
+def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict, noise: SensorNoise = SensorNoise(),
+             seed: int = 0, times_s: np.ndarray | None = None, *, settle_velocity: float | None = None):
+    """Measure the MuJoCo machine ``theta`` of ``robot`` at commanded ``joints``.
+
+    Args:
+        robot: the robot; theta: (P,) the machine's parameters.
+        joints: (N, C) commanded joint values, in order.
+        settings: ``{"options": {MachineOptions field: value}, "effects": {MachineEffects
+            field: value}}`` (e.g. from :meth:`calib.effects.Effect.machine_settings`).
+        noise, seed: sensor noise added to the measured poses, and its seed.
+        times_s: (N,) lab times of the measurements (to replay a recording's time axis);
+            default the simulated time.
+        settle_velocity: at rest below this joint speed (SI); default the testbed's.
 
     Returns:
-        The recording; its ``meta["simulation"]`` holds the truth (effect and its size).
+        The testbed's measurements (``t_s``, ``true_poses``, ``measured``, ...).
     """
+    from calib.hexapod import Hexapod as HexapodParameterSet
+    from calib.hexapod import HexapodGeometry
+    from mjcf.hexapod import HexapodModelOptions
+
+    from .testbed import HexapodTestbed
+    from .testbed import MachineEffects as LegEffects
+
+    options = MachineOptions(**settings.get("options", {}))
+    effects = MachineEffects(**settings.get("effects", {}))
+    _require_hexapod(robot)
+    # Until the generic testbed: the hexapod testbed with its own names for the same physics.
+    defaults = HexapodModelOptions()
+    legs = HexapodModelOptions(
+        gravity=options.gravity, payload_kg=options.payload_kg, payload_height_m=options.payload_height_m,
+        actuator_stiffness=options.actuator_stiffness or defaults.actuator_stiffness,
+        actuator_damping=options.actuator_damping, joint_friction=options.joint_friction,
+        platform_mass_kg=options.platform_mass_kg or defaults.platform_mass_kg, timestep=options.timestep,
+        transmission_scale=options.transmission_scale or defaults.transmission_scale)
+    leg_effects = LegEffects(
+        leg_growth_mm_per_s=effects.joint_drift_per_s,
+        screw_amplitude_mm=effects.screw_amplitude or (0.0,) * 6,
+        screw_phase_rad=effects.screw_phase_rad or (0.0,) * 6, screw_pitch_mm=effects.screw_pitch)
+    actual = HexapodParameterSet(HexapodGeometry.from_dict(robot.description()),
+                                 (np.asarray(theta, dtype=float) - robot.table.nominal).reshape(6, 7))
+    extra = {} if settle_velocity is None else {"settle_velocity": settle_velocity}
+    bed = HexapodTestbed(actual, legs, noise, seed=seed, effects=leg_effects, **extra)
+    return bed.measure(joints, times_s=times_s)
+
+
+def make_recording(robot: Robot, t_s: np.ndarray, joints: np.ndarray, measured: np.ndarray, noise: SensorNoise,
+                   meta: dict, sets: np.ndarray | None = None) -> Recording:
+    """A :class:`Recording` of ``robot``'s measurements (``sets`` default all calibration)."""
+    from calib.hexapod import HexapodGeometry
+
+    _require_hexapod(robot)
+    n = np.asarray(joints).shape[0]
+    return Recording(geometry=HexapodGeometry.from_dict(robot.description()), noise=noise, t_s=t_s,
+                     commanded=joints, measured=measured,
+                     sets=np.array(["calibration"] * n) if sets is None else sets, meta=meta)
+
+
+def recording_robot(rec: Recording) -> Robot:
+    """The robot (nominal geometry) a :class:`Recording` was measured on; its joints are
+    ``rec.commanded``."""
+    return robot_from_description("hexapod", rec.geometry.to_dict())
+
+
+def _require_hexapod(robot: Robot) -> None:
+    if robot.name != "hexapod":
+        raise NotImplementedError(f"simulating the {robot.name} with effects needs the generic MuJoCo testbed "
+                                  f"(only the hexapod's is wired here)")
+
+
+# ----------------------------------------------------------------------------- scenarios
+
+
+def _draw_poses(robot: Robot, theta: np.ndarray, n: int, rng: np.random.Generator,
+                workspace: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(targets, joints)``: n poses drawn uniformly in ``workspace``, each redrawn until the
+    nominal inverse kinematics reaches it within the joint limits."""
+    low, span = workspace[:, 0], np.ptp(workspace, axis=1)
+    targets = low + rng.uniform(size=(n, robot.pose_dim)) * span
+    for _ in range(100):
+        bad = np.zeros(n, dtype=bool)
+        joints = np.full((n, robot.n_chains), np.nan)
+        for k in range(n):
+            try:
+                joints[k] = robot.inverse_kinematics(theta, targets[k:k + 1])[0]
+                check_joint_limits(robot, joints[k:k + 1])
+            except KinematicsError:
+                bad[k] = True
+        if not bad.any():
+            return targets, joints
+        targets[bad] = low + rng.uniform(size=(int(bad.sum()), robot.pose_dim)) * span
+    raise ValueError(f"could not draw {n} reachable poses in the workspace {workspace.tolist()}")
+
+
+def effect_recording(effect: str, seed: int, *, robot: Robot | str = "hexapod", theta: np.ndarray | None = None,
+                     n_poses: int | None = None, magnitude_noise: float | None = None,
+                     noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None) -> Recording:
+    """Simulate a blind recording of ``robot``'s MuJoCo machine with one effect.
+
+    Args:
+        effect: a registered effect name that applies to the robot.
+        seed: seeds everything (poses, effect size and instance, noise).
+        robot: a robot or a registered name (its nominal geometry is what the recording carries).
+        theta: (P,) the machine's true parameters; default the nominal plus the scenario
+            machine's errors (:func:`scenario_machine`).
+        n_poses: number of poses (default drawn in 60..120).
+        magnitude_noise: the effect's largest closure contribution in units of the position
+            noise (default drawn in 3..10).
+        noise: sensor noise.
+        workspace: (D, 2) low/high of the poses; default the scenario machine's.
+
+    Returns:
+        The recording; its ``meta["simulation"]`` holds the truth (errors, the effect's
+        coefficients and the machine settings that produced it).
+    """
+    robot = default_robot(robot) if isinstance(robot, str) else robot
+    eff = registered_effect(effect)
+    if not eff.applies_to(robot):
+        raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}")
+    machine = scenario_machine(robot)
+    nominal = robot.table.nominal
+    theta = nominal + machine.errors(robot) if theta is None else np.asarray(theta, dtype=float)
     rng = np.random.default_rng(seed)
-    nominal = nominal if nominal is not None else paper_hexapod()
-    actual = nominal.with_errors(errors if errors is not None else paper_hexapod(with_table3_errors=True).errors)
     n = int(n_poses) if n_poses is not None else int(rng.integers(60, 121))
-    mag = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * noise.std[0]
-    targets = nominal.geometry.home_pose + random_poses(n, rng, DISCOVERY_WORKSPACE)
-    commanded = inverse_kinematics(nominal, targets)
-    stroke = commanded - nominal.geometry.home_lengths
-    opts: dict = {}
-    fx: dict = {}
-    truth: dict = {"effect": effect, "largest_contribution_mm": mag}
-    platform_kg = 2.0
-    base = MachineOptions()
-    if effect == "leg_compliance":
-        payload = float(rng.uniform(0.0, 5.0))
-        W = (platform_kg + payload) * GRAVITY_M_S2
-        # Axial forces at the targets (platform + payload at its height, legs' own weight).
-        X = _compliance_regressors(actual, targets)
-        h = base.payload_height_m / M_PER_MM / 100.0 * payload / (platform_kg + payload)
-        # Legs' own weight along their axes (-u_z per unit weight) adds to their compression.
-        legs = leg_vectors(actual, targets)
-        uz = legs[..., 2] / np.linalg.norm(legs, axis=-1)
-        force = -W * (X[..., 0] + h * X[..., 1]) + LEG_MASS_KG * GRAVITY_M_S2 * uz  # N, compression positive
-        k = float(np.abs(force).max() / (mag * M_PER_MM))
-        opts = dict(gravity=True, payload_kg=payload, actuator_stiffness=k)
-        truth.update(payload_kg=payload, stiffness_n_per_m=k)
-    elif effect == "joint_friction":
-        F = mag * M_PER_MM * DEFAULT_STIFFNESS_N_PER_M
-        opts = dict(joint_friction=F)
-        truth.update(friction_n=F, dead_band_mm=mag)
-    elif effect == "thermal_drift":
-        rate = mag / (n * _SETTLE_S)
-        fx = dict(joint_drift_per_s=rate)
-        truth.update(growth_rate_mm_per_s=rate)
-    elif effect == "actuator_scale":
-        u = rng.uniform(0.3, 1.0, 6) * rng.choice([-1.0, 1.0], 6)
-        s = u / np.abs(stroke).max(axis=0)
-        s *= mag / np.max(np.abs(stroke * s))
-        opts = dict(transmission_scale=tuple(s))
-        truth.update(scale=s.tolist())
-    elif effect == "periodic_screw_error":
-        pitch = float(rng.uniform(2.0, 10.0))
-        amp = rng.uniform(0.5, 1.0, 6)
-        amp *= mag / amp.max()
-        phase = rng.uniform(0, 2 * np.pi, 6)
-        fx = dict(screw_amplitude=tuple(amp), screw_phase_rad=tuple(phase), screw_pitch=pitch)
-        truth.update(pitch_mm=pitch, amplitude_mm=amp.tolist(), phase_rad=phase.tolist())
-    elif effect != "none":
-        raise ValueError(f"unknown effect {effect!r}")
-    options = MachineOptions(platform_mass_kg=platform_kg, **opts)
-    robot, theta = robot_and_theta(actual)
-    bed = Testbed(robot, theta, options=options, effects=MachineEffects(**fx), noise=noise,
-                  seed=int(rng.integers(2**31)))
-    m = bed.measure(commanded)
-    return Recording(
-        geometry=nominal.geometry, noise=noise, t_s=m.t_s, commanded=m.commanded, measured=m.measured,
-        sets=np.array(["calibration"] * n),
-        meta={"moving_mass_kg": platform_kg + options.payload_kg, "seed": seed,
-              "simulation": {"injected_errors": actual.errors.tolist(), **truth}},
-    )
+    position_std = float(noise.pose_std(("mm",))[0])
+    magnitude = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * position_std
+    targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot) if workspace is None else workspace)
+    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
+    drawn = eff.scenario(robot, theta, planned, magnitude, rng, machine_context(robot))
+    settings = merged_settings(drawn.context, eff.machine_settings(drawn.coefficients, robot, drawn.context,
+                                                                     drawn.extra))
+    m = simulate(robot, theta, joints, settings, noise, seed=int(rng.integers(2**31)))
+    truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": eff.name,
+             "largest_contribution_mm": magnitude,
+             "coefficients": {c.name: float(v) for c, v in zip(eff.coefficients(robot), drawn.coefficients)},
+             "machine": settings}
+    if eff.searched is not None:
+        truth[eff.searched.name] = drawn.extra
+    return make_recording(robot, m.t_s, joints, m.measured, noise,
+                          meta={"moving_mass_kg": drawn.context.moving_mass_kg, "seed": seed, "simulation": truth})

@@ -1,48 +1,124 @@
+"""The effect registry and the discovery engine on exact synthetic data, for every robot an
+effect applies to."""
+
 import numpy as np
 import pytest
 
-from calib.effects import EFFECTS, EffectData, discover_effect, effect_regressors, fit_effect
-from calib.hexapod import paper_hexapod
-from calib.kinematics import forward_kinematics, inverse_kinematics
+from calib import paper
+from calib.effects import (EFFECT_MODULES, EFFECTS, Effect, EffectData, MachineContext, discover_effect,
+                           effects_for, fit_effect)
 from calib.noise import SensorNoise
+from calib.robot import pose_jacobian_of_joints
+from calib.robots import ROBOTS, default_robot
 from calib.rotation import rotation_matrix
-from calib.workspace import random_poses
 
-NOMINAL = paper_hexapod()
-ACTUAL = paper_hexapod(with_table3_errors=True)
-WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 NOISE = SensorNoise(0.001, 1e-6, "normal")
+#: A wider workspace than the hexapod paper's, where effects and geometry separate.
+HEXAPOD_WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
+CONTEXT = MachineContext(moving_mass_kg=3.0, platform_mass_kg=2.0, payload_height_m=0.05, gravity_m_s2=9.81,
+                         m_per_mm=1e-3, servo_stiffness=2e5)
 
 
-def synthetic(effect, coef, seed=0, n=80, pitch=None, noise=None):
-    """Measurements of the calib machine whose legs carry X(effect) . coef (exact truth)."""
+def machine(name):
+    """(robot, true theta, workspace): the hexapod with the paper's Table 3 errors; other robots
+    with seeded errors of 0.05 mm / 0.5 mrad on their free parameters."""
+    robot = default_robot(name)
+    if name == "hexapod":
+        return robot, robot.table.nominal + paper.TABLE3_ERRORS.ravel(), HEXAPOD_WORKSPACE
+    theta = robot.table.nominal.copy()
+    free = robot.table.indices(robot.free_default)
+    rng = np.random.default_rng(99)
+    theta[free] += rng.uniform(-1, 1, free.size) * np.where(robot.table.angle_mask()[free], 5e-4, 0.05)
+    return robot, theta, robot.workspace_bounds()
+
+
+def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
+    """Measurements of the calib machine whose joints are moved by Xq(effect) . coef (exact truth:
+    the poses are the forward kinematics at the displaced joints, not a linearisation)."""
+    robot, theta, workspace = machine(name)
     rng = np.random.default_rng(seed)
-    targets = random_poses(n, rng, WORKSPACE)
-    commanded = inverse_kinematics(NOMINAL, targets)
+    targets = workspace[:, 0] + rng.uniform(size=(n, robot.pose_dim)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
     t = np.cumsum(rng.uniform(0.5, 1.5, n))
+    eff = EFFECTS[effect]
     reached = targets
-    for _ in range(4):  # fixed point: the load regressor depends on the pose reached
-        X = effect_regressors(effect, ACTUAL, EffectData(NOMINAL, commanded, reached, t, NOISE), pitch)
-        reached = forward_kinematics(ACTUAL, commanded + X @ np.asarray(coef, dtype=float))
+    for _ in range(6):  # fixed point: the load regressor depends on the pose reached
+        Xq = eff.joint_regressors(robot, theta, EffectData(robot, robot.table.nominal, joints, reached, t, NOISE), extra)
+        reached = robot.forward_kinematics(theta, joints + Xq @ np.asarray(coef, dtype=float), initial=reached)
     if noise is not None:
-        reached = reached + noise.sample(n, seed + 1)
-    return EffectData(NOMINAL, commanded, reached, t, NOISE)
+        reached = reached + noise.sample(n, seed + 1, robot.pose_units)
+    return EffectData(robot, robot.table.nominal, joints, reached, t, NOISE)
 
 
-def test_direction_is_the_last_motion_of_each_leg():
+# -------------------------------------------------------------------------- registry
+
+
+def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
+    assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
+                             "periodic_screw_error"]
+    assert len(EFFECT_MODULES) == len(EFFECTS)
+    for name, eff in EFFECTS.items():
+        assert isinstance(eff, Effect) and eff.name == name and eff.physics
+        assert type(eff).applies_to.__doc__ or type(eff).__doc__  # the reason is written down
+
+
+def test_which_effects_apply_to_which_robot():
+    assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
+    # Rotary motors: no leg grows, no lead screw.
+    assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale")
+    for name in ROBOTS:
+        assert effects_for(default_robot(name))[0] == "none"
+
+
+CASES = [(r, e) for r in ROBOTS for e in EFFECTS if EFFECTS[e].applies_to(default_robot(r))]
+
+
+@pytest.mark.parametrize("robot_name,effect", CASES)
+def test_coefficients_match_the_regressors_and_the_machine_settings_are_plain_data(robot_name, effect):
+    data = synthetic(robot_name, "none", [], n=12)
+    eff = EFFECTS[effect]
+    extra = 4.0 if eff.searched else None
+    X = eff.regressors(data.robot, data.theta, data, extra)
+    Xq = eff.joint_regressors(data.robot, data.theta, data, extra)
+    p = len(eff.coefficients(data.robot))
+    assert X.shape == Xq.shape == (12, data.robot.n_chains, p)
+    s = eff.machine_settings(np.full(p, 1e-4), data.robot, CONTEXT, extra)
+    assert set(s) == {"options", "effects"}
+    from mjcf.machine import MachineEffects, MachineOptions  # the field names are the builder's
+    MachineOptions(**s["options"])
+    MachineEffects(**s["effects"])
+
+
+def test_robot_without_a_lead_screw_is_refused_with_the_reason():
+    data = synthetic("delta", "none", [], n=12)
+    with pytest.raises(ValueError, match="does not apply to the delta.*lead screws"):
+        fit_effect(data, "periodic_screw_error", extra=4.0)
+    with pytest.raises(ValueError, match="does not apply"):
+        discover_effect(data, candidates=("thermal_drift",))
+
+
+# -------------------------------------------------------------------------- physics of the regressors
+
+
+def test_direction_is_the_last_motion_of_each_chain():
+    robot = default_robot("hexapod")
     c = np.array([[1.0] * 6, [2.0] * 6, [2.0] * 6, [0.5] * 6]) + 233.23808
-    d = EffectData(NOMINAL, c, np.tile([0, 0, 200, 0, 0, 0.0], (4, 1)), np.arange(4.0), NOISE).direction
+    d = EffectData(robot, robot.table.nominal, c, np.tile([0, 0, 200, 0, 0, 0.0], (4, 1)), np.arange(4.0),
+                   NOISE).direction
     np.testing.assert_array_equal(d[:, 0], [1, 1, 1, -1])  # an unchanged command keeps the last direction
 
 
-def test_compliance_regressors_are_static_equilibrium():
-    poses = random_poses(10, 3, WORKSPACE)
-    data = EffectData(NOMINAL, inverse_kinematics(NOMINAL, poses), poses, np.arange(10.0), NOISE)
-    X = effect_regressors("leg_compliance", ACTUAL, data)
+def test_hexapod_compliance_regressors_are_the_static_equilibrium_of_the_legs():
+    """Independent truth: the leg forces of the old hexapod statics (force and moment balance of
+    the platform with forces along the legs)."""
+    robot, theta, workspace = machine("hexapod")
+    poses = workspace[:, 0] + np.random.default_rng(3).uniform(size=(10, 6)) * np.ptp(workspace, axis=1)
+    data = EffectData(robot, robot.table.nominal, robot.inverse_kinematics(theta, poses), poses, np.arange(10.0), NOISE)
+    X = EFFECTS["compliance"].regressors(robot, theta, data)
     f = -X[..., 0]  # compressive leg forces for a unit weight at the platform origin
-    R = rotation_matrix(poses[:, 3:])
-    a = np.einsum("nij,lj->nli", R, ACTUAL.platform_joints) + poses[:, None, :3]
-    u = a - ACTUAL.base_joints
+    B, _, P = robot.legs(theta)
+    a = np.einsum("nij,lj->nli", rotation_matrix(poses[:, 3:]), P) + poses[:, None, :3]
+    u = a - B
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     force = np.einsum("nl,nli->ni", f, u)
     moment = np.einsum("nl,nli->ni", f, np.cross(a, u)) + np.cross(poses[:, :3], [0, 0, -1.0])
@@ -51,50 +127,142 @@ def test_compliance_regressors_are_static_equilibrium():
     assert np.all(f > 0)  # a hanging weight compresses every leg of this layout
 
 
-@pytest.mark.parametrize("effect,coef", [
-    ("joint_friction", [0.004]),
-    ("thermal_drift", [5e-5]),
-    ("actuator_scale", [1e-4, -2e-4, 3e-4, -1e-4, 2e-4, 5e-5]),
-    ("leg_compliance", [0.01, 0.002]),
-])
-def test_joint_fit_recovers_injected_effect_and_geometry_noise_free(effect, coef):
-    data = synthetic(effect, coef)
+@pytest.mark.parametrize("robot_name", [r for r in ROBOTS if EFFECTS["compliance"].applies_to(default_robot(r))])
+def test_compliance_is_the_gradient_of_the_potential_energy_by_finite_differences(robot_name):
+    """Independent truth for every robot: the servo deflection is ``-dV/dq / k`` with
+    ``V(q) = m g z_com(FK(q))``, differentiated numerically through the forward kinematics."""
+    robot, theta, workspace = machine(robot_name)
+    rng = np.random.default_rng(5)
+    poses = workspace[:, 0] + rng.uniform(size=(6, robot.pose_dim)) * np.ptp(workspace, axis=1)
+    q = robot.inverse_kinematics(theta, poses)
+    data = EffectData(robot, robot.table.nominal, q, poses, np.arange(6.0), NOISE)
+    eff = EFFECTS["compliance"]
+    Xq = eff.joint_regressors(robot, theta, data)
+    h = 1e-5 if robot.joint_unit == "mm" else 1e-7
+    rotates = "gamma" in robot.pose_names
+
+    def z_com(qq, com_height_mm):
+        pose = robot.forward_kinematics(theta, qq, initial=poses)
+        z = pose[:, robot.pose_names.index("z")]
+        if rotates:
+            z = z + com_height_mm * rotation_matrix(pose[:, 3:6])[:, 2, 2]
+        return z
+
+    for c in range(robot.n_chains):
+        dq = np.zeros_like(q)
+        dq[:, c] = h
+        grad0 = (z_com(q + dq, 0.0) - z_com(q - dq, 0.0)) / (2 * h)
+        np.testing.assert_allclose(Xq[:, c, 0], -grad0, rtol=1e-6, atol=1e-9)
+        if rotates:
+            grad1 = (z_com(q + dq, 100.0) - z_com(q - dq, 100.0)) / (2 * h) - grad0
+            np.testing.assert_allclose(Xq[:, c, 1], -grad1, rtol=1e-5, atol=1e-9)
+    # The generic statics use the pose Jacobian of the closure (implicit function theorem).
+    J = pose_jacobian_of_joints(robot, theta, q, poses)
+    np.testing.assert_allclose(Xq[:, :, 0], -J[:, robot.pose_names.index("z"), :], rtol=1e-12)
+
+
+# -------------------------------------------------------------------------- mapping to the MuJoCo machine
+
+
+def test_machine_settings_map_coefficients_to_physical_parameters():
+    hexapod, delta = default_robot("hexapod"), default_robot("delta")
+    weight = CONTEXT.moving_mass_kg * CONTEXT.gravity_m_s2
+    s = EFFECTS["compliance"].machine_settings(np.array([0.01, 0.002]), hexapod, CONTEXT)["options"]
+    assert s["actuator_stiffness"] == pytest.approx(weight / 0.01e-3)  # N over m of deflection per unit
+    assert s["gravity"] and s["payload_kg"] == pytest.approx(1.0)
+    s = EFFECTS["compliance"].machine_settings(np.array([1e-4]), delta, CONTEXT)["options"]
+    assert s["actuator_stiffness"] == pytest.approx(weight * 1e-3 / 1e-4)  # N m/rad from rad/mm
+    s = EFFECTS["joint_friction"].machine_settings(np.array([0.004]), hexapod, CONTEXT)["options"]
+    assert s["joint_friction"] == pytest.approx(0.004e-3 * 2e5)  # dead band x stiffness
+    s = EFFECTS["joint_friction"].machine_settings(np.array([2e-5]), delta, CONTEXT)["options"]
+    assert s["joint_friction"] == pytest.approx(2e-5 * 2e5)  # rad x N m/rad
+    s = EFFECTS["periodic_screw_error"].machine_settings(np.array([3.0, 4.0] * 6), hexapod, CONTEXT, 4.3)["effects"]
+    assert s["screw_amplitude"][0] == pytest.approx(5.0) and s["screw_pitch"] == 4.3
+    assert 3.0 * np.sin(0.7) + 4.0 * np.cos(0.7) == pytest.approx(5.0 * np.sin(0.7 + s["screw_phase_rad"][0]))
+    assert EFFECTS["thermal_drift"].machine_settings(np.array([5e-5]), hexapod, CONTEXT)["effects"] == \
+        {"joint_drift_per_s": 5e-5}
+
+
+@pytest.mark.parametrize("robot_name,effect", [c for c in CASES if c[1] != "none"])
+def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
+    robot, theta, _ = machine(robot_name)
+    data = synthetic(robot_name, "none", [], n=30)
+    eff = EFFECTS[effect]
+    sc = eff.scenario(robot, theta, data, 0.005, np.random.default_rng(1), CONTEXT)
+    largest = np.abs(eff.regressors(robot, theta, data, sc.extra) @ sc.coefficients).max()
+    assert largest == pytest.approx(0.005, rel=1e-9) if not eff.searched else 0.0025 < largest <= 0.005 + 1e-12
+
+
+# -------------------------------------------------------------------------- joint fits
+
+INJECTED = {
+    "hexapod": {"joint_friction": [0.004], "thermal_drift": [5e-5],
+                "actuator_scale": [1e-4, -2e-4, 3e-4, -1e-4, 2e-4, 5e-5], "compliance": [0.01, 0.002]},
+    "delta": {"joint_friction": [2e-5], "actuator_scale": [1e-4, -2e-4, 3e-4], "compliance": [2e-6]},
+}
+FIT_CASES = [(r, e, c) for r, d in INJECTED.items() for e, c in d.items()]
+
+
+@pytest.mark.parametrize("robot_name,effect,coef", FIT_CASES)
+def test_joint_fit_recovers_injected_effect_and_geometry_noise_free(robot_name, effect, coef):
+    data = synthetic(robot_name, effect, coef)
+    _, theta, _ = machine(robot_name)
     fit = fit_effect(data, effect, iterations=4)
     np.testing.assert_allclose(fit.coefficients, coef, rtol=1e-5, atol=1e-10)
-    np.testing.assert_allclose(fit.hexapod.errors, ACTUAL.errors, atol=1e-7)
+    free = data.robot.table.indices(data.robot.free_default)
+    np.testing.assert_allclose(fit.theta[free], theta[free], atol=1e-7)
     assert fit.chi2 < 1e-6
 
 
 def test_pitch_search_finds_the_screw_pitch_through_noise():
     coef = np.array([0.004, -0.002, 0.001, 0.003, -0.003, 0.002, 0.0, 0.004, 0.002, 0.002, -0.001, -0.004])
-    data = synthetic("periodic_screw_error", coef, pitch=4.3, noise=NOISE)
+    data = synthetic("hexapod", "periodic_screw_error", coef, extra=4.3, noise=NOISE)
     fit = fit_effect(data, "periodic_screw_error")
-    assert fit.pitch_mm == pytest.approx(4.3, rel=2e-3)
+    assert fit.extra == pytest.approx(4.3, rel=2e-3)
+    assert fit.named_coefficients()["pitch"]["value"] == fit.extra
     np.testing.assert_allclose(fit.coefficients, coef, atol=5 * fit.coefficient_std.max())
 
 
-@pytest.mark.parametrize("effect", ["none", "joint_friction", "thermal_drift", "actuator_scale"])
-def test_discovery_names_the_synthetic_effect(effect):
-    coef = {"none": [], "joint_friction": [0.004], "thermal_drift": [5e-5],
-            "actuator_scale": [5e-5, -5e-5, 5e-5, -5e-5, 5e-5, 5e-5]}[effect]
-    d = discover_effect(synthetic(effect, coef, seed=4, noise=NOISE))
+# -------------------------------------------------------------------------- discovery
+
+DISCOVERY_CASES = [
+    ("hexapod", "none", []), ("hexapod", "joint_friction", [0.004]), ("hexapod", "thermal_drift", [5e-5]),
+    ("hexapod", "actuator_scale", [5e-5, -5e-5, 5e-5, -5e-5, 5e-5, 5e-5]),
+    ("delta", "none", []), ("delta", "joint_friction", [1e-5]),
+    # 97% of the Delta's scale regressor lies in the span of its geometry (the joint offsets and
+    # arm lengths absorb it): only a large scale error is told apart.
+    ("delta", "actuator_scale", [2e-4, -2e-4, 2e-4]),
+    ("delta", "compliance", [2e-7]),
+]
+
+
+@pytest.mark.parametrize("robot_name,effect,coef", DISCOVERY_CASES)
+def test_discovery_names_the_synthetic_effect(robot_name, effect, coef):
+    d = discover_effect(synthetic(robot_name, effect, coef, seed=4, noise=NOISE))
     assert d.effect == effect
     assert d.flagged == ()
-    assert set(d.evidence) == set(EFFECTS) | {"geometry_chi2_test"}
+    assert set(d.evidence) == set(effects_for(default_robot(robot_name))) | {"geometry_chi2_test"}
 
 
-def test_a_gross_row_is_flagged_not_explained():
-    data = synthetic("none", [], seed=5, noise=NOISE)
+@pytest.mark.parametrize("robot_name", ["hexapod", "delta"])
+def test_a_gross_row_is_flagged_not_explained(robot_name):
+    data = synthetic(robot_name, "none", [], seed=5, noise=NOISE)
     measured = data.measured.copy()
     measured[17, :3] += [0.02, -0.02, 0.0]
-    d = discover_effect(EffectData(NOMINAL, data.commanded, measured, data.t_s, NOISE))
+    d = discover_effect(data.with_measured(measured))
     assert d.flagged == (17,) and d.effect == "none"
 
 
 def test_located_mismatch_points_at_time_for_a_drift():
-    d = discover_effect(synthetic("thermal_drift", [1e-4], seed=6, noise=NOISE))
+    d = discover_effect(synthetic("hexapod", "thermal_drift", [1e-4], seed=6, noise=NOISE))
     assert d.located["time_correlation"] > 0.5
     assert abs(d.located["direction_contrast_se"]) < 4
+
+
+def test_located_mismatch_points_at_the_direction_of_motion_for_friction_on_the_delta():
+    d = discover_effect(synthetic("delta", "joint_friction", [1e-5], seed=6, noise=NOISE))
+    assert abs(d.located["direction_contrast_se"]) > 4
+    assert set(d.located["task_space_rms_per_dof"]) == {"x", "y", "z"}
 
 
 @pytest.mark.parametrize("kw,match", [
@@ -102,16 +270,46 @@ def test_located_mismatch_points_at_time_for_a_drift():
 ])
 def test_fit_effect_validation(kw, match):
     with pytest.raises(ValueError, match=match):
-        fit_effect(synthetic("none", []), **kw)
+        fit_effect(synthetic("hexapod", "none", [], n=12), **kw)
 
 
 def test_effect_data_validation():
+    robot = default_robot("hexapod")
     c = np.zeros((5, 6))
     with pytest.raises(ValueError, match="same length, got 5, 4 and 5"):
-        EffectData(NOMINAL, c, np.zeros((4, 6)), np.arange(5.0), NOISE)
+        EffectData(robot, robot.table.nominal, c, np.zeros((4, 6)), np.arange(5.0), NOISE)
     with pytest.raises(ValueError, match=r"measured must have shape \(N, 6\)"):
-        EffectData(NOMINAL, c, np.zeros((5, 3)), np.arange(5.0), NOISE)
+        EffectData(robot, robot.table.nominal, c, np.zeros((5, 3)), np.arange(5.0), NOISE)
     with pytest.raises(ValueError, match="at least 12 measurements"):
-        discover_effect(synthetic("none", [], n=10))
+        discover_effect(synthetic("hexapod", "none", [], n=10))
     with pytest.raises(ValueError, match="unknown effect 'x'"):
-        discover_effect(synthetic("none", []), candidates=("x",))
+        discover_effect(synthetic("hexapod", "none", []), candidates=("x",))
+
+
+class SquaredStrokeError(Effect):
+    """A made-up effect written in one place (here): ``dq_i = b (q_i - q_centre_i)^2``, one
+    coefficient shared by every chain. Applies to every robot."""
+
+    name = "squared_stroke"
+    physics = "a stroke error growing with the square of the stroke"
+
+    def coefficients(self, robot):
+        from calib.effects import Coefficient
+        return (Coefficient("b", f"1/{robot.joint_unit}"),)
+
+    def joint_regressors(self, robot, theta, data, extra=None):
+        return (data.stroke ** 2)[..., None]
+
+
+def test_an_effect_written_in_one_place_is_discovered_without_touching_the_engine():
+    new = SquaredStrokeError()
+    robot, theta, workspace = machine("hexapod")
+    rng = np.random.default_rng(8)
+    targets = workspace[:, 0] + rng.uniform(size=(80, 6)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    data = EffectData(robot, robot.table.nominal, joints, targets, np.arange(80.0), NOISE)
+    reached = robot.forward_kinematics(theta, joints + new.joint_regressors(robot, theta, data) @ [1e-5])
+    data = data.with_measured(reached + NOISE.sample(80, 9, robot.pose_units))
+    d = discover_effect(data, candidates=tuple(effects_for(robot)) + (new,))
+    assert d.effect == "squared_stroke"
+    assert d.chosen.named_coefficients()["b"]["value"] == pytest.approx(1e-5, abs=5 * d.chosen.coefficient_std[0])

@@ -1,0 +1,50 @@
+"""Physics the geometric model leaves out: a registry of effects, one module each, and their
+discovery (joint fits with the geometry, model choice, outliers, localisation) written once
+over :class:`calib.robot.Robot`.
+
+Adding an effect: write its module (a subclass of :class:`Effect` in an instance named
+``EFFECT``, see :mod:`calib.effects.base`) and append the module's name to
+:data:`EFFECT_MODULES`.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from ..robot import Robot
+from .base import (Coefficient, Effect, EffectData, EffectScenario, MachineContext, PhysicalParameter,
+                   SearchedParameter)
+
+__all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "EffectData", "Coefficient",
+           "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "MIN_DELTA_BIC",
+           "EffectFit", "Discovery", "fit_effect", "discover_effect", "locate_mismatch", "closure_noise_std"]
+
+#: The effect modules of this package, in the order of the registry (``none`` first).
+EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error")
+
+#: name -> effect, in the order of :data:`EFFECT_MODULES`.
+EFFECTS: dict[str, Effect] = {
+    e.name: e for e in (importlib.import_module(f"{__name__}.{m}").EFFECT for m in EFFECT_MODULES)}
+
+
+def effect(name: str | Effect) -> Effect:
+    """The effect registered under ``name`` (an :class:`Effect` is returned as is).
+
+    Raises:
+        ValueError: unknown name (the message lists the registered ones).
+    """
+    if isinstance(name, Effect):
+        return name
+    try:
+        return EFFECTS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown effect {name!r}: expected one of {', '.join(EFFECTS)}") from None
+
+
+def effects_for(robot: Robot) -> tuple[str, ...]:
+    """Names of the effects that apply to ``robot``, registry order (``none`` first)."""
+    return tuple(n for n, e in EFFECTS.items() if e.applies_to(robot))
+
+
+from .discovery import (MIN_DELTA_BIC, Discovery, EffectFit, closure_noise_std, discover_effect,  # noqa: E402
+                        fit_effect, locate_mismatch)

@@ -1,0 +1,312 @@
+"""What every physical effect declares, and the measurements it is evaluated on.
+
+An effect is physics the geometric model leaves out. It acts on the actuated joints: chain i's
+joint sits at ``q_ij + dq_ij`` where the controller commanded ``q_ij``, with
+
+    dq_ij = sum_k Xq_ijk phi_k           (robot's joint unit)
+
+``Xq`` the effect's *joint regressors* (derived from physics) and ``phi`` its unknown
+coefficients. The discovery (:mod:`calib.effects.discovery`) fits ``phi`` jointly with the
+geometry so that the closure ``F(theta, q + Xq phi, pose)`` vanishes at the measured poses. To
+first order this adds to the closure residual at the commanded joints the effect's
+*regressors* ``X = -dF/dq Xq`` (mm per unit coefficient, :meth:`Effect.regressors`), which
+size an effect's contribution in mm for every robot alike.
+
+Each effect also says how the MuJoCo machine produces it, as plain data (this package imports no
+simulator): :meth:`Effect.machine_settings` returns ``{"options": {...}, "effects": {...}}``
+with the field names of ``mjcf.machine.MachineOptions`` (SI) and ``mjcf.machine.MachineEffects``
+(joint units). The SI numbers it needs (gravity, metres per mm, the machine's servo stiffness
+and masses) come in a :class:`MachineContext` from the pipeline, which owns the MuJoCo side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import ClassVar
+
+import numpy as np
+
+from .._validate import as_array
+from ..noise import SensorNoise
+from ..robot import Robot
+
+__all__ = ["Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
+           "EffectData", "Effect", "closure_regressors", "scale_to_magnitude"]
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One coefficient of an effect: name and unit (e.g. ``("dead_band", "mm")``)."""
+
+    name: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class SearchedParameter:
+    """A nonlinear parameter of an effect found by a one-dimensional search (e.g. a screw pitch).
+
+    The search runs over the *search coordinate* ``u`` (e.g. the frequency ``1 / pitch``): a
+    grid from :meth:`Effect.search_grid`, refined by golden section between the best grid
+    point's neighbours; :meth:`Effect.searched_value` turns ``u`` into the parameter.
+
+    Attributes:
+        name: e.g. ``"pitch"``.
+        unit: e.g. ``"mm"``.
+    """
+
+    name: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class PhysicalParameter:
+    """The MuJoCo machine's parameter that carries an effect (re-fitted by ``mujoco.sysid``).
+
+    Attributes:
+        section: ``"options"`` (a ``MachineOptions`` field) or ``"effects"`` (``MachineEffects``).
+        field: the field name, e.g. ``"joint_friction"``.
+        unit: its unit, e.g. ``"N"``.
+    """
+
+    section: str
+    field: str
+    unit: str
+
+
+@dataclass(frozen=True)
+class MachineContext:
+    """Numbers of the simulated machine that turn fitted coefficients into MuJoCo physics.
+
+    Given by the pipeline (which owns the MuJoCo side), so that every constant is named once
+    there: ``gravity_m_s2`` is ``mjcf.machine.GRAVITY_M_S2``, ``m_per_mm`` is
+    ``mjcf.units.M_PER_MM``.
+
+    Attributes:
+        moving_mass_kg: platform plus payload, kg (the load of compliance).
+        platform_mass_kg: the platform alone, kg (payload = moving - platform).
+        payload_height_m: height of a payload's centre of mass over the platform frame, m.
+        gravity_m_s2: standard gravity, m/s^2.
+        m_per_mm: metres per millimetre.
+        servo_stiffness: stiffness of each actuator's position servo, SI (N/m for a prismatic
+            joint, N m/rad for a revolute one): it turns a dead band into a friction force.
+    """
+
+    moving_mass_kg: float
+    platform_mass_kg: float
+    payload_height_m: float
+    gravity_m_s2: float
+    m_per_mm: float
+    servo_stiffness: float
+
+    def si_per_joint_unit(self, robot: Robot) -> float:
+        """SI units (m or rad) per joint unit of ``robot`` (mm or rad)."""
+        return self.m_per_mm if robot.joint_unit == "mm" else 1.0
+
+    def with_payload(self, payload_kg: float) -> "MachineContext":
+        """The same machine carrying ``payload_kg`` on its platform."""
+        return replace(self, moving_mass_kg=self.platform_mass_kg + float(payload_kg))
+
+    @property
+    def payload_kg(self) -> float:
+        return max(self.moving_mass_kg - self.platform_mass_kg, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class EffectScenario:
+    """A drawn instance of an effect for a simulated recording (:meth:`Effect.scenario`).
+
+    Attributes:
+        coefficients: (p,) the true coefficients.
+        extra: the searched parameter's true value, or None.
+        context: the machine carrying it (e.g. with a drawn payload).
+    """
+
+    coefficients: np.ndarray
+    extra: float | None
+    context: MachineContext
+
+
+@dataclass(frozen=True, eq=False)
+class EffectData:
+    """The measurements an effect analysis works on.
+
+    Attributes:
+        robot: the robot measured (its nominal geometry).
+        theta: (P,) parameter vector the fits start from (usually the nominal one).
+        joints: (N, C) commanded joint values, joint unit, in the order taken.
+        measured: (N, D) measured poses, the robot's pose units.
+        t_s: (N,) time of each measurement, s.
+        noise: declared sensor noise (pose, and joint readings).
+        direction: (N, C) direction (+1 increasing, -1 decreasing) in which each joint last
+            moved before measurement j; default from the commands, the machine starting at its
+            home pose (``robot.home_pose`` reached with ``theta``).
+    """
+
+    robot: Robot
+    theta: np.ndarray
+    joints: np.ndarray
+    measured: np.ndarray
+    t_s: np.ndarray
+    noise: SensorNoise
+    direction: np.ndarray = field(default=None)
+
+    def __post_init__(self) -> None:
+        r = self.robot
+        if not isinstance(r, Robot):
+            raise TypeError(f"robot must be a calib.robot.Robot, got {type(r).__name__}")
+        if not isinstance(self.noise, SensorNoise):
+            raise TypeError(f"noise must be a SensorNoise, got {type(self.noise).__name__}")
+        theta = as_array(self.theta, "theta", (r.n_parameters,))
+        q = as_array(self.joints, "joints", (-1, r.n_chains))
+        m = as_array(self.measured, "measured", (-1, r.pose_dim))
+        t = as_array(self.t_s, "t_s", (-1,))
+        if not (q.shape[0] == m.shape[0] == t.shape[0]):
+            raise ValueError(f"joints, measured and t_s must have the same length, got "
+                             f"{q.shape[0]}, {m.shape[0]} and {t.shape[0]}")
+        for name, value in (("theta", theta), ("joints", q), ("measured", m), ("t_s", t)):
+            object.__setattr__(self, name, value)
+        if self.direction is None:
+            start = r.inverse_kinematics(theta, r.home_pose[None])[0]
+            step = np.sign(q - np.vstack([start, q[:-1]]))
+            d = np.zeros_like(q)
+            last = np.zeros(r.n_chains)
+            for j in range(q.shape[0]):
+                last = np.where(step[j] != 0, step[j], last)  # an unchanged command keeps the last direction
+                d[j] = last
+            object.__setattr__(self, "direction", d)
+        else:
+            object.__setattr__(self, "direction", as_array(self.direction, "direction", q.shape))
+
+    @property
+    def n(self) -> int:
+        """Number of measurements."""
+        return self.joints.shape[0]
+
+    @property
+    def travel_centre(self) -> np.ndarray:
+        """(C,) the centre of each actuator's travel (midpoint of its joint limits), joint unit."""
+        return self.robot.joint_limits().mean(axis=1)
+
+    @property
+    def stroke(self) -> np.ndarray:
+        """(N, C) commanded joint values from the centre of travel, joint unit."""
+        return self.joints - self.travel_centre
+
+    def subset(self, rows: np.ndarray) -> "EffectData":
+        """The same analysis restricted to ``rows`` (the motion history is kept)."""
+        return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
+                          self.noise, self.direction[rows])
+
+    def with_measured(self, measured: np.ndarray) -> "EffectData":
+        """The same commands with other measured poses."""
+        return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction)
+
+
+def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.ndarray:
+    """(N, C, p) closure residual per unit coefficient, mm: ``-dF/dq Xq`` (first order).
+
+    Args:
+        dF_dq: (N, C, C) closure Jacobian with respect to the joints, mm per joint unit.
+        joint_regressors: (N, C, p) joint displacement per unit coefficient, joint unit.
+    """
+    return -dF_dq @ joint_regressors
+
+
+def scale_to_magnitude(X: np.ndarray, coefficients: np.ndarray, magnitude_mm: float) -> np.ndarray:
+    """``coefficients`` rescaled so that the largest closure contribution ``|X phi|`` is
+    ``magnitude_mm``.
+
+    Args:
+        X: (N, C, p) regressors, mm per unit coefficient.
+        coefficients: (p,) shape of the coefficients.
+        magnitude_mm: the largest contribution wanted, mm.
+    """
+    c = np.asarray(coefficients, dtype=float)
+    return c * (magnitude_mm / np.max(np.abs(X @ c)))
+
+
+class Effect:
+    """A physical effect the geometric model leaves out (one subclass per module).
+
+    Class attributes:
+        name: registry key, e.g. ``"joint_friction"``.
+        physics: the physics in one sentence (for help texts and reports).
+        searched: the nonlinear parameter found by search, or None.
+        history_dependent: whether the machine's state depends on the motion history (the
+            MuJoCo re-simulation must then replay every row in order).
+    """
+
+    name: ClassVar[str]
+    physics: ClassVar[str]
+    searched: ClassVar[SearchedParameter | None] = None
+    history_dependent: ClassVar[bool] = False
+
+    def applies_to(self, robot: Robot) -> bool:
+        """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""
+        return True
+
+    def coefficients(self, robot: Robot) -> tuple[Coefficient, ...]:
+        """Names and units of the coefficients on ``robot``."""
+        raise NotImplementedError
+
+    def joint_regressors(self, robot: Robot, theta: np.ndarray, data: EffectData,
+                         extra: float | None = None) -> np.ndarray:
+        """(N, C, p) joint displacement per unit coefficient, joint unit (see the module docstring).
+
+        Args:
+            robot: the robot.
+            theta: (P,) current parameter estimate.
+            data: the measurements.
+            extra: the searched parameter's value (effects with :attr:`searched`).
+        """
+        raise NotImplementedError
+
+    def regressors(self, robot: Robot, theta: np.ndarray, data: EffectData,
+                   extra: float | None = None) -> np.ndarray:
+        """(N, C, p) closure residual per unit coefficient, mm: ``-dF/dq Xq`` at the measured
+        poses and commanded joints."""
+        Xq = self.joint_regressors(robot, theta, data, extra)
+        if Xq.shape[-1] == 0:
+            return Xq
+        return closure_regressors(robot.closure_jacobians(theta, data.joints, data.measured).joints, Xq)
+
+    def search_grid(self, data: EffectData) -> np.ndarray:
+        """(K,) grid of the search coordinate (effects with :attr:`searched`)."""
+        raise NotImplementedError
+
+    def searched_value(self, u: float) -> float:
+        """The searched parameter at search coordinate ``u``."""
+        raise NotImplementedError
+
+    def machine_settings(self, coefficients: np.ndarray, robot: Robot, context: MachineContext,
+                         extra: float | None = None) -> dict:
+        """How the MuJoCo machine produces the effect with these coefficients.
+
+        Returns:
+            ``{"options": {MachineOptions field: value (SI)}, "effects": {MachineEffects
+            field: value (joint units)}}``, plain numbers and tuples.
+        """
+        raise NotImplementedError
+
+    def physical_parameter(self, robot: Robot) -> PhysicalParameter | None:
+        """The machine parameter that carries the effect, for a re-fit in MuJoCo; None when the
+        fitted coefficients already are the machine's parameters."""
+        return None
+
+    def scenario(self, robot: Robot, theta: np.ndarray, data: EffectData, magnitude_mm: float,
+                 rng: np.random.Generator, context: MachineContext) -> EffectScenario:
+        """Draw a true instance whose largest closure contribution over ``data`` (the planned
+        commands, at the target poses, with estimated times) is ``magnitude_mm``.
+
+        Args:
+            robot: the robot; theta: (P,) the machine's true parameters.
+            data: the planned measurements.
+            magnitude_mm: largest contribution, mm.
+            rng: the scenario's random generator (draws made here are part of the scenario).
+            context: the machine before the effect.
+        """
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<effect {self.name!r}>"

@@ -1,0 +1,47 @@
+"""``joint_friction``: a dead band; each actuated joint stops short of its target against the
+direction in which it last moved (Coulomb friction against a position servo of finite stiffness)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Coefficient, Effect, EffectScenario, PhysicalParameter, scale_to_magnitude
+
+__all__ = ["EFFECT", "JointFriction"]
+
+
+class JointFriction(Effect):
+    """Dead band ``delta``: the joint comes to rest where its servo force ``k (q_cmd - q)``
+    equals the Coulomb friction ``F``, i.e. ``dq = -delta * direction``, ``delta = F / k``.
+
+    Applies to every robot: any actuated joint, prismatic or revolute, held by a servo of finite
+    stiffness has one (the dead band in mm or rad).
+    """
+
+    name = "joint_friction"
+    physics = "a dead band: each actuator stops short of its target against the direction it last moved"
+    history_dependent = True
+
+    def coefficients(self, robot):
+        return (Coefficient("dead_band", robot.joint_unit),)
+
+    def joint_regressors(self, robot, theta, data, extra=None):
+        return -data.direction[..., None]
+
+    def machine_settings(self, coefficients, robot, context, extra=None):
+        # Friction force = dead band x servo stiffness (SI: N for a prismatic joint, N m for a
+        # revolute one); the stiffness is set too, so that the mapping holds on any machine.
+        dead_band_si = max(float(coefficients[0]), 0.0) * context.si_per_joint_unit(robot)
+        return {"options": {"joint_friction": dead_band_si * context.servo_stiffness,
+                            "actuator_stiffness": context.servo_stiffness},
+                "effects": {}}
+
+    def physical_parameter(self, robot):
+        return PhysicalParameter("options", "joint_friction", "N" if robot.joint_unit == "mm" else "N m")
+
+    def scenario(self, robot, theta, data, magnitude_mm, rng, context):
+        X = self.regressors(robot, theta, data)
+        return EffectScenario(scale_to_magnitude(X, np.ones(1), magnitude_mm), None, context)
+
+
+EFFECT = JointFriction()
