@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calib.design import design_poses, minimum_poses, robot_workspace, sample_feasible_poses, select_poses  # noqa: E402
 from calib.noise import SensorNoise  # noqa: E402
 from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
-from calib.robots import default_robot  # noqa: E402
+from calib.robots import default_robot, reference_poses  # noqa: E402
 from pipeline.recording import atomic_write  # noqa: E402
 from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
 
@@ -54,7 +54,7 @@ class Bench:
     def __init__(self, name: str, seed: int):
         self.robot = default_robot(name)
         self.nominal = self.robot.table.nominal
-        kind = "reference" if self.robot.reference_errors() is not None else "random"
+        kind = "reference" if reference_poses(self.robot) is not None else "random"
         self.theta = self.nominal + true_errors(self.robot, kind, seed)
 
     def heldout_errors(self, errors: np.ndarray, heldout: np.ndarray) -> dict:
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
     scale = parameter_scale(robot)[robot.table.indices(robot.free_default)]
 
     # ---- designs with 10 poses -------------------------------------------------------------
-    reference = robot.reference_poses()
+    reference = reference_poses(robot)
     sets = {} if reference is None else {"reference poses": reference}
     for wsn, ws in (("full", full), ("default", small)):
         for c in ("d", "e"):

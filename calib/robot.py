@@ -237,16 +237,6 @@ class Robot(ABC):
         passive-joint limit. Default: none (K = 0)."""
         return np.zeros((np.shape(poses)[0], 0))
 
-    def reference_poses(self) -> np.ndarray | None:
-        """(N, D) a published calibration pose set that designs are compared with (e.g. the
-        hexapod paper's Table 4 poses), or None (the default)."""
-        return None
-
-    def reference_errors(self) -> np.ndarray | None:
-        """(P,) parameter errors ``theta - table.nominal`` of a published example machine (e.g.
-        the hexapod paper's Table 3), or None (the default)."""
-        return None
-
     # -- kinematics -----------------------------------------------------------------------
     @abstractmethod
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:

@@ -147,6 +147,13 @@ class Machine:
         self._pos = model.sensor(SENSOR_POS).adr[0]
         self._quat = model.sensor(SENSOR_QUAT).adr[0] if robot.pose_dim == 6 else None
 
+    @property
+    def servo_stiffness(self) -> np.ndarray:
+        """(C,) stiffness of each chain's position servo at its joint, SI (N/m or N m/rad):
+        the actuator gain times its gear squared."""
+        m = self.model
+        return m.actuator_gainprm[:, 0] * m.actuator_gear[:, 0] ** 2
+
     def ctrl(self, joints: np.ndarray) -> np.ndarray:
         """(C,) SI actuator controls for joint values in the robot's units."""
         return (np.asarray(joints, dtype=float) - self.joint_offset) * self.joint_scale

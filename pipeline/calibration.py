@@ -114,7 +114,8 @@ def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress)
 
     seeds = np.random.SeedSequence(settings.seed).spawn(4)
     nominal = robot.table.nominal
-    actual = nominal + reference_errors(robot, int(seeds[3].generate_state(1)[0]))
+    errors = reference_errors(robot, int(seeds[3].generate_state(1)[0]))
+    actual = nominal + errors
     targets, what = _targets(robot, settings, seeds[0])
     heldout = reachable_poses(robot, settings.heldout, seeds[1]) if settings.heldout else np.zeros((0, robot.pose_dim))
     options = MachineOptions(gravity=settings.gravity, payload_kg=settings.payload_kg,
@@ -127,7 +128,7 @@ def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress)
         val = bed.measure(robot.inverse_kinematics(nominal, heldout),
                           progress=lambda d, t: progress("measuring held-out poses (nominal commands)", d, t))
     scenario = f"{robot.name}: {what}, reference errors injected, simulated in MuJoCo"
-    return dict(actual=actual, targets=targets, heldout=heldout, options=options, bed=bed, cal=cal, val=val,
+    return dict(errors=errors, actual=actual, targets=targets, heldout=heldout, options=options, bed=bed, cal=cal, val=val,
                 scenario=scenario)
 
 
@@ -172,7 +173,8 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         rec = read_recording(settings.real)
         robot, noise = rec.robot, rec.noise
         truth = rec.meta.get("simulation", {}).get("injected_errors")
-        actual = robot.table.vector(truth) if isinstance(truth, dict) else None
+        injected = robot.table.vector(truth, base=np.zeros(robot.n_parameters)) if isinstance(truth, dict) else None
+        actual = None if injected is None else robot.table.nominal + injected
         joints, measured = rec.subset("calibration")
         val_joints, val_meas = rec.subset("validation")
         cal_rows = rec.rows("calibration")
@@ -181,7 +183,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         robot = default_robot(settings.robot)
         noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
         sim = _simulate(robot, settings, noise, progress)
-        actual, scenario = sim["actual"], sim["scenario"]
+        actual, injected, scenario = sim["actual"], sim["errors"], sim["scenario"]
         joints, measured = sim["cal"].joints, sim["cal"].measured
         cal_rows = np.arange(len(measured))
     nominal = robot.table.nominal
@@ -193,7 +195,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     paths: dict[str, str] = {}
     if sim is not None:
         parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
-        simulation = {"injected_errors": robot.table.to_dict(actual - nominal),
+        simulation = {"injected_errors": robot.table.to_dict(injected),
                       "gravity": settings.gravity, "payload_kg": settings.payload_kg,
                       "stiffness": settings.stiffness, "friction": settings.friction}
         recording = Recording(
@@ -203,10 +205,6 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             meta={"scenario": scenario, "seed": settings.seed, "simulation": simulation})
         csv_path, json_path = write_recording(out / f"{name}.csv", recording, overwrite=settings.overwrite)
         paths.update(csv=str(csv_path), json=str(json_path))
-        actual_errors = actual - nominal
-    else:
-        actual_errors = None if actual is None else actual - nominal
-        actual = None if actual is None else nominal + actual_errors
 
     t1 = time.perf_counter()
     solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
@@ -266,7 +264,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
         "free_parameters": list(free),
         "fixed_parameters": [n for n in robot.table.names if n not in free],
-        "injected_errors": None if actual is None else robot.table.to_dict(actual - nominal),
+        "injected_errors": None if injected is None else robot.table.to_dict(injected),
         "identified_errors": robot.table.to_dict(result.errors),
         "identified_std": robot.table.to_dict(result.std),
         "parameter_error": None if truth_in_gauge is None else

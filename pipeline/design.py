@@ -39,7 +39,7 @@ from calib.design import (CRITERIA, WORKSPACES, Workspace, design_poses, minimum
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
-from calib.robots import ROBOTS, default_robot, robot_from_description
+from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -291,8 +291,8 @@ def main(argv: list[str] | None = None) -> int:
     joints = robot.inverse_kinematics(theta, res.poses)
     check_joint_limits(robot, joints, "designed pose")
     analysis = analyze_observability(robot, theta, res.poses, noise, joints=joints)
-    reference_poses = robot.reference_poses() if args.geometry is None else None
-    reference = analyze_observability(robot, theta, reference_poses, noise) if reference_poses is not None else None
+    published = reference_poses(robot) if args.geometry is None else None
+    reference = analyze_observability(robot, theta, published, noise) if published is not None else None
     # Predicted pose uncertainty after calibration with these poses, anywhere in the workspace
     # (seeded feasible poses), for a controller compensating with the identified parameters.
     probe = sample_feasible_poses(robot, theta, ws, PROBE_POSES, [args.seed, 1])
@@ -342,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.rrd:
         _write_rrd(args.rrd, robot, analysis, reference, res.poses, (probe, pu.position_rms_mm), args.overwrite)
     gain = (f" ({summary['crb_rms_gain_vs_reference_poses']:.3g}x lower than with its "
-            f"{len(reference_poses)} reference poses)" if reference is not None else "")
+            f"{len(published)} reference poses)" if reference is not None else "")
     print(f"wrote {csv_path} and {side}: condition number {analysis.scaled_condition_number:.4g} "
           f"(column-scaled), CRB parameter RMS {analysis.crb_rms:.4g} mm{gain}; predicted position error "
           f"after calibration {uncertainty['position_rms_um']['mean']:.3g} um RMS (mean over the workspace)",

@@ -93,9 +93,9 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     def run(theta, settings, which=rows, history=True):
         kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
         if not history:
-            return simulate(robot, theta, rec.commanded[which], settings, times_s=rec.t_s[which], **kw).true_poses
+            return simulate(robot, theta, rec.joints[which], settings, times_s=rec.t_s[which], **kw).true_poses
         # Replay the whole record in order (the state may depend on the motion history), keep rows.
-        return simulate(robot, theta, rec.commanded, settings, times_s=rec.t_s, **kw).true_poses[which]
+        return simulate(robot, theta, rec.joints, settings, times_s=rec.t_s, **kw).true_poses[which]
 
     def rms(sim):
         d = meas - sim
@@ -159,7 +159,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     t0 = time.perf_counter()
     robot = recording_robot(rec)
     cal = np.flatnonzero(rec.sets == "calibration")
-    data = EffectData(robot, robot.table.nominal, rec.commanded, rec.measured, rec.t_s, rec.noise)
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
     disc = discover_effect(data.subset(cal), candidates=candidates, seed=seed)
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
@@ -188,7 +188,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "located": disc.located,
         "flagged_poses": flagged,
-        "rows": int(rec.commanded.shape[0]),
+        "rows": int(rec.joints.shape[0]),
     }
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
@@ -235,7 +235,7 @@ def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, 
     from .rerun_log import save_recording
 
     disc, s = report.discovery, report.summary
-    data = EffectData(robot, robot.table.nominal, rec.commanded, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
     before = disc.fits["none"].residuals
     after = disc.chosen.residuals
     chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]

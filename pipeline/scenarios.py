@@ -24,7 +24,7 @@ from calib import paper
 from calib.effects import EffectData, MachineContext, effect as registered_effect
 from calib.noise import SensorNoise
 from calib.robot import KinematicsError, Robot, check_joint_limits
-from calib.robots import default_robot, robot_from_description
+from calib.robots import default_robot
 from mjcf.machine import GRAVITY_M_S2, MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
 
@@ -105,15 +105,15 @@ def merged_settings(context: MachineContext, settings: dict | None = None) -> di
 
 
 # ----------------------------------------------------------------------------- the MuJoCo boundary
-# The three functions below are the only ones that know the testbed and the recording type.
+# The functions below are the only ones that know the testbed and the recording type.
 
 
 def servo_stiffness(robot: Robot) -> float:
-    """The actuator servo stiffness of ``robot``'s MuJoCo machine by default, SI."""
-    from mjcf.hexapod import HexapodModelOptions
+    """The actuator servo stiffness of ``robot``'s MuJoCo machine by default, SI (N/m for a
+    prismatic chain, N m/rad for a revolute one), read from its nominal machine."""
+    from mjcf import build_machine
 
-    _require_hexapod(robot)
-    return HexapodModelOptions().actuator_stiffness
+    return float(build_machine(robot, robot.table.nominal).servo_stiffness.mean())
 
 
 def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict, noise: SensorNoise = SensorNoise(),
@@ -131,59 +131,30 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
         settle_velocity: at rest below this joint speed (SI); default the testbed's.
 
     Returns:
-        The testbed's measurements (``t_s``, ``true_poses``, ``measured``, ...).
+        The testbed's :class:`pipeline.testbed.Measurements` (``t_s``, ``true_poses``, ``measured``, ...).
     """
-    from calib.hexapod import Hexapod as HexapodParameterSet
-    from calib.hexapod import HexapodGeometry
-    from mjcf.hexapod import HexapodModelOptions
-
-    from .testbed import HexapodTestbed
-    from .testbed import MachineEffects as LegEffects
+    from .testbed import Testbed
 
     options = MachineOptions(**settings.get("options", {}))
     effects = MachineEffects(**settings.get("effects", {}))
-    _require_hexapod(robot)
-    # Until the generic testbed: the hexapod testbed with its own names for the same physics.
-    defaults = HexapodModelOptions()
-    legs = HexapodModelOptions(
-        gravity=options.gravity, payload_kg=options.payload_kg, payload_height_m=options.payload_height_m,
-        actuator_stiffness=options.actuator_stiffness or defaults.actuator_stiffness,
-        actuator_damping=options.actuator_damping, joint_friction=options.joint_friction,
-        platform_mass_kg=options.platform_mass_kg or defaults.platform_mass_kg, timestep=options.timestep,
-        transmission_scale=options.transmission_scale or defaults.transmission_scale)
-    leg_effects = LegEffects(
-        leg_growth_mm_per_s=effects.joint_drift_per_s,
-        screw_amplitude_mm=effects.screw_amplitude or (0.0,) * 6,
-        screw_phase_rad=effects.screw_phase_rad or (0.0,) * 6, screw_pitch_mm=effects.screw_pitch)
-    actual = HexapodParameterSet(HexapodGeometry.from_dict(robot.description()),
-                                 (np.asarray(theta, dtype=float) - robot.table.nominal).reshape(6, 7))
     extra = {} if settle_velocity is None else {"settle_velocity": settle_velocity}
-    bed = HexapodTestbed(actual, legs, noise, seed=seed, effects=leg_effects, **extra)
+    bed = Testbed(robot, theta, options=options, effects=effects, noise=noise, seed=seed, **extra)
     return bed.measure(joints, times_s=times_s)
 
 
 def make_recording(robot: Robot, t_s: np.ndarray, joints: np.ndarray, measured: np.ndarray, noise: SensorNoise,
                    meta: dict, sets: np.ndarray | None = None) -> Recording:
     """A :class:`Recording` of ``robot``'s measurements (``sets`` default all calibration)."""
-    from calib.hexapod import HexapodGeometry
-
-    _require_hexapod(robot)
     n = np.asarray(joints).shape[0]
-    return Recording(geometry=HexapodGeometry.from_dict(robot.description()), noise=noise, t_s=t_s,
-                     commanded=joints, measured=measured,
+    return Recording(robot=robot, noise=noise, t_s=np.asarray(t_s, dtype=float), joints=np.asarray(joints, dtype=float),
+                     measured=np.asarray(measured, dtype=float),
                      sets=np.array(["calibration"] * n) if sets is None else sets, meta=meta)
 
 
 def recording_robot(rec: Recording) -> Robot:
     """The robot (nominal geometry) a :class:`Recording` was measured on; its joints are
-    ``rec.commanded``."""
-    return robot_from_description("hexapod", rec.geometry.to_dict())
-
-
-def _require_hexapod(robot: Robot) -> None:
-    if robot.name != "hexapod":
-        raise NotImplementedError(f"simulating the {robot.name} with effects needs the generic MuJoCo testbed "
-                                  f"(only the hexapod's is wired here)")
+    ``rec.joints``."""
+    return rec.robot
 
 
 # ----------------------------------------------------------------------------- scenarios

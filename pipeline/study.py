@@ -51,7 +51,7 @@ from calib.engine import METHODS, identify, integrated_error
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, free_indices, parameter_scale, pose_uncertainty
 from calib.robot import KinematicsError, Robot, check_joint_limits
-from calib.robots import ROBOTS, robot_from_description
+from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
 from pipeline.parallel import spawn_pool
 from pipeline.recording import atomic_write
@@ -89,7 +89,7 @@ def true_errors(robot: Robot, kind: str, seed: int, *, error_mm: float = DEFAULT
                 error_rad: float = DEFAULT_ERROR_RAD) -> np.ndarray:
     """(P,) errors of the simulated machine, ``theta_true - nominal``.
 
-    ``"reference"``: the robot's :meth:`~calib.robot.Robot.reference_errors`; ``"random"``: uniform
+    ``"reference"``: the errors of the robot's reference experiment (:func:`calib.robots.reference_errors`, seeded by ``seed``); ``"random"``: uniform
     within ``+-error_mm`` (lengths) and ``+-error_rad`` (angles) on the free parameters, zero on
     the fixed ones, drawn from ``default_rng([seed, 7])``.
 
@@ -97,10 +97,7 @@ def true_errors(robot: Robot, kind: str, seed: int, *, error_mm: float = DEFAULT
         ValueError: an unknown kind, or a robot without reference errors.
     """
     if kind == "reference":
-        errors = robot.reference_errors()
-        if errors is None:
-            raise ValueError(f"the {robot.name} has no reference errors; use random errors")
-        return np.asarray(errors, dtype=float)
+        return reference_errors(robot, seed)
     if kind != "random":
         raise ValueError(f"kind must be one of {ERROR_KINDS}, got {kind!r}")
     half = np.where(robot.table.angle_mask(), error_rad, error_mm)
@@ -326,7 +323,7 @@ def _parser() -> argparse.ArgumentParser:
 def _poses(args, robot: Robot, ws, noise: SensorNoise):
     nominal = robot.table.nominal
     if args.poses == "reference":
-        poses = robot.reference_poses()
+        poses = reference_poses(robot)
         if poses is None:
             raise SystemExit(f"--poses reference: the {robot.name} has no reference poses")
         return np.asarray(poses, dtype=float), None
@@ -350,11 +347,11 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--trials must be >= 2, got {args.trials}")
     robot = load_robot(args.robot, args.geometry)
     fewest = minimum_poses(robot)
-    if args.n_poses < fewest:
+    if args.poses in ("designed", "random") and args.n_poses < fewest:
         raise SystemExit(f"--n-poses must be >= {fewest}, got {args.n_poses}")
     noise = noise_from_arguments(args)
     nominal = robot.table.nominal
-    kind = args.errors or ("reference" if robot.reference_errors() is not None else "random")
+    kind = args.errors or ("reference" if reference_poses(robot) is not None else "random")
     try:
         theta_true = nominal + true_errors(robot, kind, args.seed, error_mm=args.error_mm, error_rad=args.error_rad)
     except ValueError as exc:

@@ -20,7 +20,7 @@ from calib.design import (
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, identification_jacobian, parameter_scale
 from calib.robot import check_joint_limits
-from calib.robots import default_robot
+from calib.robots import default_robot, reference_poses
 from calib.robots.hexapod import FULL_WORKSPACE_OFFSETS
 
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
@@ -115,7 +115,7 @@ def test_scaled_condition_of_the_finite_difference_pose_jacobian(name):
 def test_reference_poses_feasible_in_the_default_workspace():
     f = feasibility(HEXAPOD, HEXAPOD.table.nominal, paper.TABLE4_NOMINAL_POSES, robot_workspace(HEXAPOD, "default"))
     assert all(v.all() for v in f.values())
-    np.testing.assert_array_equal(HEXAPOD.reference_poses(), paper.TABLE4_NOMINAL_POSES)
+    np.testing.assert_array_equal(reference_poses(HEXAPOD), paper.TABLE4_NOMINAL_POSES)
 
 
 EVERYWHERE = Workspace(bounds=np.c_[np.full(6, -1e3), np.full(6, 1e3)])

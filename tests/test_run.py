@@ -1,14 +1,20 @@
+"""``python -m pipeline.run``: the hexapod paper's experiment end to end, files, names, bad input.
+(What every robot must do through it is in tests/test_robot_contract.py.)"""
+
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from calib import paper
+from calib.robots import ROBOTS
+from pipeline.recording import read_recording, write_recording
 from pipeline.rerun_log import rrd_entities
 from pipeline.run import main, run
 
 EXPECTED_ENTITIES = {
-    "/machine/nominal/legs", "/machine/actual/legs", "/machine/calibrated/legs", "/machine/actual/platform",
+    "/machine/nominal/chains", "/machine/actual/chains", "/machine/calibrated/chains", "/machine/actual/platform",
     "/machine/error_x1000", "/calibration/max_dqint", "/heldout/position_error_um/before",
     "/heldout/position_error_um/after", "/heldout/orientation_error_urad/after",
     "/parameters/injected", "/parameters/identified", "/parameters/difference", "/summary",
@@ -29,12 +35,10 @@ def test_default_scenario_improves_heldout_error_30x(default_run):
     h = s["heldout_position_error_mm"]
     assert h["before"] / h["after"] >= 30
     assert s["heldout_orientation_error_rad"]["after"] < s["heldout_orientation_error_rad"]["before"]
-    for key in ("injected_errors", "identified_errors", "iterations", "max_dqint_history",
-                "heldout_position_error_mm", "heldout_orientation_error_rad", "flagged_poses", "wall_time_s", "rrd"):
-        assert key in s
-    assert np.array(s["identified_errors"]).shape == (6, 7)
-    np.testing.assert_array_equal(s["injected_errors"], paper.TABLE3_ERRORS)
-    assert s["flagged_poses"] == []
+    names = list(res.result.robot.table.names)
+    assert list(s["identified_errors"]) == names and names[:7] == ["B1.x", "B1.y", "B1.z", "dl1", "P1.x", "P1.y", "P1.z"]
+    np.testing.assert_array_equal([s["injected_errors"][n] for n in names], paper.TABLE3_ERRORS.ravel())
+    assert s["flagged_poses"] == [] and s["calibration_poses"] == 10 and s["robot"] == "hexapod"
 
 
 def test_default_run_writes_the_three_files_and_a_laid_out_rrd(default_run):
@@ -54,11 +58,10 @@ def test_real_on_the_pipelines_own_csv_gives_the_same_errors(default_run, tmp_pa
     assert real.summary["heldout_position_error_mm"]["before"] > 10 * real.summary["heldout_position_error_mm"]["after"]
 
 
-def test_noise_free_through_mujoco_recovers_table3(tmp_path):
-    for method in ("paper", "forward"):
-        res = run(["--noise-mm", "0", "--heldout", "0", "--method", method, "--out", str(tmp_path),
-                   "--name", method, "--quiet"])
-        assert np.abs(res.result.errors - paper.TABLE3_ERRORS).max() < 1e-5
+@pytest.mark.parametrize("method", ["chainwise", "forward"])
+def test_noise_free_through_mujoco_recovers_table3(method, tmp_path):
+    res = run(["--noise-mm", "0", "--heldout", "0", "--method", method, "--out", str(tmp_path), "--quiet"])
+    assert np.abs(res.result.errors - paper.TABLE3_ERRORS.ravel()).max() < 1e-5
 
 
 def test_default_name_is_numbered_and_explicit_names_are_never_overwritten(tmp_path, capsys):
@@ -72,45 +75,38 @@ def test_default_name_is_numbered_and_explicit_names_are_never_overwritten(tmp_p
     assert (tmp_path / "hexapod_paper.csv").read_text() == before
 
 
-def test_paper_row_a2_style_outlier_is_flagged(tmp_path):
-    from pipeline.recording import read_recording, write_recording
+def test_paper_row_a2_style_outlier_is_flagged_by_its_1_based_data_row(tmp_path):
     res = run(["--heldout", "0", "--out", str(tmp_path), "--name", "clean", "--quiet"])
     rec = read_recording(tmp_path / "clean.csv")
     bad = rec.measured.copy()
-    bad[1, :3] += [0.02, -0.02, 0.0]  # like row A2: tens of micrometres off
-    from dataclasses import replace
+    bad[1, :3] += [0.02, -0.02, 0.0]  # like row A2: tens of micrometres off, second data row
     write_recording(tmp_path / "bad.csv", replace(rec, measured=bad))
     out = run(["--real", str(tmp_path / "bad.csv"), "--out", str(tmp_path), "--name", "bad_run", "--quiet"])
-    assert out.summary["flagged_poses"] == [1]
+    assert out.summary["flagged_poses"] == [2]
     assert res.summary["flagged_poses"] == []
 
 
 @pytest.mark.parametrize("argv,match", [
-    (["--poses", "5"], "--poses must be 'paper' or an integer >= 7"),
-    (["--poses", "many"], "--poses must be 'paper' or an integer >= 7"),
+    (["--poses", "0"], "--poses must be a positive integer"),
+    (["--poses", "many"], "--poses must be 'reference', an integer or a .csv command file"),
     (["--heldout", "-1"], "--heldout must be >= 0"),
+    (["--noise-mm", "-1"], "--noise-mm must be >= 0"),
 ])
-def test_bad_arguments(argv, match, tmp_path):
-    with pytest.raises(SystemExit, match=match):
-        run(argv + ["--out", str(tmp_path)])
+def test_bad_arguments_exit_2_naming_the_flag(argv, match, tmp_path, capsys):
+    assert main(argv + ["--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_help_explains_options(capsys):
     with pytest.raises(SystemExit):
         run(["--help"])
     text = capsys.readouterr().out
-    for opt in ("--poses", "--heldout", "--noise-mm", "--noise-rad", "--seed", "--method", "--gravity",
-                "--payload-kg", "--out", "--summary-json", "--real"):
+    for opt in ("--robot", "--poses", "--heldout", "--noise-mm", "--noise-rad", "--noise-joint", "--seed", "--method",
+                "--solver", "--gravity", "--payload-kg", "--out", "--summary-json", "--real"):
         assert opt in text
-
-
-def test_robot_delta_dispatches_to_the_delta_loop(tmp_path):
-    summary = tmp_path / "summary.json"
-    assert main(["--robot", "delta", "--configs", "8", "--heldout", "5", "--out", str(tmp_path),
-                 "--summary-json", str(summary)]) == 0
-    s = json.loads(summary.read_text())
-    assert s["robot"] == "delta" and "gain_G" in s
-    assert (tmp_path / "delta.rrd").exists()
+    for name in ROBOTS:
+        assert name in text
 
 
 def test_design_optimal_and_command_files_feed_the_run(tmp_path):
@@ -124,4 +120,4 @@ def test_design_optimal_and_command_files_feed_the_run(tmp_path):
     for r in (from_file, optimal):
         assert r.summary["calibration_poses"] == 10
         # designed poses determine the 42 parameters far better than the paper's
-        assert r.summary["parameter_error_rms_mm"] < paper_run.summary["parameter_error_rms_mm"] / 10
+        assert r.summary["parameter_error"]["rms_mm"] < paper_run.summary["parameter_error"]["rms_mm"] / 10

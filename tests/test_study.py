@@ -9,7 +9,7 @@ from calib.design import design_poses, minimum_poses, robot_workspace
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, free_indices
 from calib.robot import KinematicsError
-from calib.robots import default_robot
+from calib.robots import default_robot, reference_errors, reference_poses
 from pipeline.study import compensation_errors, main, monte_carlo, trial_noise, true_errors
 
 ROBOTS = sorted(calib.robots.ROBOTS)
@@ -20,9 +20,12 @@ HEXAPOD = default_robot("hexapod")
 def setup(name):
     """(robot, true parameters, designed poses, commanded joints) of a robot."""
     robot = default_robot(name)
-    kind = "reference" if robot.reference_errors() is not None else "random"
+    kind = "reference" if reference_poses(robot) is not None else "random"
     theta = robot.table.nominal + true_errors(robot, kind, 0)
-    poses = design_poses(robot, robot.table.nominal, max(10, minimum_poses(robot)), robot_workspace(robot, "full"),
+    # Twice the fewest poses that determine the robot: exactly determined, the rus's weak
+    # combinations (docs/rus.md) make the estimate non-linear in the noise and the forward
+    # method's spread 3x its bound (measured); with twice as many, it meets it.
+    poses = design_poses(robot, robot.table.nominal, max(10, 2 * minimum_poses(robot)), robot_workspace(robot, "full"),
                          NOISE, seed=2, n_candidates=300).poses
     return robot, theta, poses, robot.inverse_kinematics(robot.table.nominal, poses)
 
@@ -57,11 +60,7 @@ def test_true_errors(name):
     angle = robot.table.angle_mask()
     assert np.all(np.abs(e[angle]) <= 1e-3) and np.all(np.abs(e[~angle]) <= 0.05)
     np.testing.assert_array_equal(e, true_errors(robot, "random", 3, error_mm=0.05, error_rad=1e-3))
-    if robot.reference_errors() is None:
-        with pytest.raises(ValueError, match=f"the {name} has no reference errors"):
-            true_errors(robot, "reference", 0)
-    else:
-        np.testing.assert_array_equal(true_errors(robot, "reference", 0), robot.reference_errors())
+    np.testing.assert_array_equal(true_errors(robot, "reference", 4), reference_errors(robot, 4))
 
 
 @pytest.mark.parametrize("name", ROBOTS)
@@ -204,7 +203,6 @@ def test_cli_random_poses_and_random_errors(tmp_path):
     (["--noise-mm", "-1"], "--noise-mm/--noise-rad/--noise-joint: position_mm must be finite and >= 0"),
     (["--poses", "missing.csv"], "--poses: command file missing.csv not found"),
     (["--robot", "delta", "--poses", "reference"], "--poses reference: the delta has no reference poses"),
-    (["--robot", "delta", "--errors", "reference"], "--errors: the delta has no reference errors"),
     (["--robot", "moon"], "--robot: unknown robot 'moon'"),
 ])
 def test_cli_validation(argv, match):

@@ -109,14 +109,6 @@ class Hexapod(Robot):
         platform = np.arccos(np.clip(np.einsum("nli,ni->nl", u, R[:, :, 2]), -1.0, 1.0))
         return np.stack([base, platform], axis=-1).reshape(len(poses), 12)
 
-    def reference_poses(self) -> np.ndarray:
-        """The paper's Table 4 nominal poses (10, 6)."""
-        return paper.TABLE4_NOMINAL_POSES.copy()
-
-    def reference_errors(self) -> np.ndarray:
-        """The paper's Table 3 errors (42,) mm."""
-        return paper.TABLE3_ERRORS.ravel().copy()
-
     def description(self) -> dict:
         return {"base_joints_mm": self.base_joints.tolist(), "platform_joints_mm": self.platform_joints.tolist(),
                 "home_lengths_mm": self.home_lengths.tolist(), "home_pose": self._home_pose.tolist(),
