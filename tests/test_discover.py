@@ -82,7 +82,7 @@ def test_recordings_of_another_hexapod_work_the_same(effect, tmp_path):
     assert rep.summary["heldout_rms_after_mm"] <= 1.5 * rep.summary["noise_floor_mm"]
     # Individual errors are poorly determined along known combinations (dl against B.z), but the
     # identified machine must move like the true one over the recorded workspace.
-    cmd = rec.commanded[::5]
+    cmd = rec.joints[::5]
     diff = robot.forward_kinematics(rep.discovery.chosen.theta, cmd) - robot.forward_kinematics(theta, cmd)
     assert np.abs(diff[:, :3]).max() < 0.003  # mm
 

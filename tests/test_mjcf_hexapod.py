@@ -1,3 +1,5 @@
+from operator import attrgetter
+
 import mujoco
 import numpy as np
 import pytest
@@ -23,8 +25,7 @@ def test_saved_default_model_is_the_builders_machine():
     for name in ("body_pos", "body_quat", "body_mass", "site_pos", "actuator_gainprm", "actuator_biasprm",
                  "actuator_gear", "eq_solref", "eq_solimp", "dof_damping", "dof_frictionloss", "key_qpos",
                  "key_ctrl", "qpos0", "opt.timestep", "opt.gravity"):
-        a, b = (np.ravel(getattr(getattr(m, name.split(".")[0]), name.split(".")[1]) if "." in name
-                         else getattr(m, name)) for m in (saved, built))
+        a, b = (np.ravel(attrgetter(name)(m)) for m in (saved, built))
         np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6, err_msg=name)
     for kind, n in (("body", saved.nbody), ("site", saved.nsite), ("actuator", saved.nu), ("sensor", saved.nsensor)):
         assert [getattr(saved, kind)(k).name for k in range(n)] == [getattr(built, kind)(k).name for k in range(n)]
