@@ -20,15 +20,22 @@ when they do not converge.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import chi2 as chi2_dist
+from scipy.special import gammaincinv
 
 from ._validate import as_array
 from .noise import SensorNoise
-from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
+from .robot import (
+    KinematicsError,
+    Robot,
+    newton_forward_kinematics,
+    pose_jacobian_of_joints,
+    pose_jacobian_of_parameters,
+)
 from .workspace import reachable_poses
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
@@ -179,6 +186,39 @@ def _column_scaled_cond(A: np.ndarray) -> float:
     return float(np.linalg.cond(A / norms))
 
 
+def _column_scaled_conds(A: np.ndarray) -> np.ndarray:
+    """(M,) :func:`_column_scaled_cond` of each matrix of a stack (M, N, K), in one batched SVD."""
+    norms = np.linalg.norm(A, axis=1, keepdims=True)
+    zero = np.any(norms == 0, axis=(1, 2))
+    if A.shape[1] == 0 or A.shape[2] == 0:
+        return np.full(A.shape[0], np.inf)
+    cond = np.linalg.cond(A / np.where(norms == 0, 1.0, norms))
+    return np.where(zero, np.inf, cond)
+
+
+def _chain_groups(robot: Robot, idx: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The chains that have free parameters, grouped by how many: ``[(chains (M,), params (M, K))]``,
+    so that each group is handled as one stack of M problems of K unknowns."""
+    owner = robot.table.chains[idx]
+    groups: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for c in range(robot.n_chains):
+        ix = idx[owner == c]
+        if ix.size:
+            groups.setdefault(ix.size, []).append((c, ix))
+    return [(np.array([c for c, _ in g]), np.array([ix for _, ix in g])) for g in groups.values()]
+
+
+def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: np.ndarray,
+                   params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted chain-wise systems of one group: ``A`` (M, N, K) C-ordered, one chain's
+    ``J[:, c, ix] * w[:, c, None]`` per slice, and ``b`` (M, N), ``r[:, c] * w[:, c]``
+    (``w`` None: unweighted)."""
+    A = J[:, chains[:, None], params]  # (N, M, K), a copy
+    A = np.ascontiguousarray(np.moveaxis(A, 1, 0) if w is None else np.moveaxis(A * w[:, chains, None], 1, 0))
+    b = r[:, chains].T if w is None else (r[:, chains] * w[:, chains]).T
+    return A, b
+
+
 def _gauss_newton(fun, jac, x0, max_iter, xtol):
     """Plain Gauss-Newton with a relative step test; returns (x, iterations, success, message)."""
     x = x0.copy()
@@ -207,6 +247,34 @@ def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
         return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
     except (KinematicsError, np.linalg.LinAlgError) as exc:
         return x0, 0, False, f"the fit left the workspace: {exc}"
+
+
+#: Residual (mm) below which the default forward kinematics takes a row as converged.
+_NEWTON_TOL = inspect.signature(newton_forward_kinematics).parameters["tol"].default
+
+
+def _corrected_poses(robot: Robot, theta, joints, measured, r, jac_pose) -> np.ndarray:
+    """The robot's forward kinematics of ``joints`` started from ``measured``, given the closure
+    ``r`` (N, C) and its pose Jacobian (N, C, D) at ``(theta, joints, measured)``.
+
+    For a robot on the default forward kinematics (Newton on the closure), the first Newton step
+    from ``measured`` needs exactly these, which the chain-wise iteration has computed anyway: it
+    is taken here (on the rows not yet converged, as the default does) and the robot's forward
+    kinematics goes on from there: the same iterates, one closure Jacobian fewer. Any trouble
+    on that step (singular, non-finite) is left to the robot's forward kinematics to report.
+    """
+    start = measured
+    if type(robot).forward_kinematics is Robot.forward_kinematics:
+        rows = np.max(np.abs(r), axis=1) > _NEWTON_TOL
+        if np.any(rows):
+            try:
+                stepped = measured[rows] - np.linalg.solve(jac_pose[rows], r[rows][..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                stepped = None
+            if stepped is not None and np.all(np.isfinite(stepped)):
+                start = measured.copy()
+                start[rows] = stepped
+    return robot.forward_kinematics(theta, joints, initial=start)
 
 
 def _predicted(robot, theta, joints, measured) -> np.ndarray:
@@ -329,8 +397,11 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     noise = SensorNoise() if noise is None else noise
     joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
     n = measured.shape[0]
-    chains = [idx[robot.table.chains[idx] == c] for c in range(robot.n_chains)]
-    most = max(len(c) for c in chains)
+    # Chains with free parameters, grouped by their number: each group is one stack of problems
+    # (the hexapod's six legs of seven parameters are one stack), gathered from the Jacobian,
+    # conditioned and turned into covariances in one batched call each.
+    groups = _chain_groups(robot, idx)
+    most = max(p.shape[1] for _, p in groups)
     if n < most:
         raise ValueError(f"measured must have at least {most} rows ({most} unknowns in one "
                          f"{robot.chain_word}), got {n}")
@@ -338,7 +409,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         sigma = _closure_std(robot, robot.closure_jacobians(theta0, joints, measured), noise)
         w = 1.0 / np.maximum(sigma, 1e-12)
     else:
-        w = np.ones((n, robot.n_chains))
+        w = None  # unit weights, not multiplied in
     theta = theta0.copy()
     history: list[float] = []
     cond = np.full(robot.n_chains, np.nan)
@@ -346,18 +417,26 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     message = f"no stopping rule met in {max_iter} iterations"
     corrected = measured.copy()
     if solver == "gn":
+        last = None  # the last iteration's systems: their condition numbers are reported
+        # The closure and its Jacobians at the measured poses, for the current vector: computed
+        # once per vector, they serve its Gauss-Newton step, the first Newton step of the forward
+        # kinematics that follows the previous one, and, for the final vector, the result.
+        r = robot.closure(theta, joints, measured)
+        jac = robot.closure_jacobians(theta, joints, measured)
         for iterations in range(1, max_iter + 1):
-            r = robot.closure(theta, joints, measured)
-            J = robot.closure_jacobians(theta, joints, measured).parameters
+            J = jac.parameters
             step = np.zeros_like(theta)
-            for c, ix in enumerate(chains):
-                if ix.size:
-                    A = J[:, c, ix] * w[:, c, None]
-                    step[ix] = np.linalg.lstsq(A, -r[:, c] * w[:, c], rcond=None)[0]
-                    cond[c] = _column_scaled_cond(A)
+            last = []
+            for chains, params in groups:
+                A, b = _chain_systems(J, r, w, chains, params)
+                for k, ix in enumerate(params):  # LAPACK's gelsd, one chain at a time
+                    step[ix] = np.linalg.lstsq(A[k], -b[k], rcond=None)[0]
+                last.append((chains, A))
             theta = theta + step
+            r = robot.closure(theta, joints, measured)
+            jac = robot.closure_jacobians(theta, joints, measured)
             try:
-                corrected = robot.forward_kinematics(theta, joints, initial=measured)
+                corrected = _corrected_poses(robot, theta, joints, measured, r, jac.pose)
             except KinematicsError as exc:
                 message = f"forward kinematics of the corrected model failed: {exc}"
                 break
@@ -372,11 +451,12 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                            f"paper's criterion is not reachable: max dQint stays at {history[-1]:.3g} "
                            f"(> epsilon = {epsilon:g})")
                 break
+        for chains, A in last or ():
+            cond[chains] = _column_scaled_conds(A)
     else:
         messages, oks = [], []
-        for c, ix in enumerate(chains):
-            if not ix.size:
-                continue
+        in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
+        for c, ix in in_order:
 
             def full(x, ix=ix):
                 th = theta.copy()
@@ -384,37 +464,43 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                 return th
 
             def fun(x, c=c, full=full):
-                return robot.closure(full(x), joints, measured)[:, c] * w[:, c]
+                r = robot.closure(full(x), joints, measured)[:, c]
+                return r if w is None else r * w[:, c]
 
             def jac(x, c=c, ix=ix, full=full):
-                return robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix] * w[:, c, None]
+                A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
+                return A if w is None else A * w[:, c, None]
 
             x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
             theta[ix] = x
-            cond[c] = _column_scaled_cond(jac(x))
             iterations += it
             oks.append(ok)
             messages.append(f"{robot.chain_word} {c + 1}: {msg}")
         success, message = all(oks), "; ".join(messages)
         corrected = _predicted(robot, theta, joints, measured)
-    r = robot.closure(theta, joints, measured)
-    jac_final = robot.closure_jacobians(theta, joints, measured)
+        r = robot.closure(theta, joints, measured)
+        jac = robot.closure_jacobians(theta, joints, measured)
+    jac_final = jac
     J = jac_final.parameters
     cov = np.zeros((robot.n_parameters,) * 2)
-    for c, ix in enumerate(chains):
-        if not ix.size:
-            continue
-        A = J[:, c, ix] * w[:, c, None]
-        dof = n - ix.size
-        if weighted:
-            cov[np.ix_(ix, ix)] = np.linalg.pinv(A.T @ A, hermitian=True)
-        elif dof > 0:
-            rc = r[:, c]
-            cov[np.ix_(ix, ix)] = float(rc @ rc) / dof * np.linalg.pinv(A.T @ A, hermitian=True)
-        else:
-            cov[np.ix_(ix, ix)] = np.nan
-    white = r / np.maximum(_closure_std(robot, jac_final, noise), 1e-12)
-    chi2 = float(np.sum(white ** 2)) if noise_given else float("nan")
+    for chains, params in groups:
+        A, _ = _chain_systems(J, r, w, chains, params)
+        if solver == "lm":
+            # Chain c's closure involves only its own parameters, so its Jacobian at the final
+            # vector is the one at the end of its own fit.
+            cond[chains] = _column_scaled_conds(A)
+        dof = n - params.shape[1]
+        block = np.linalg.pinv(np.swapaxes(A, 1, 2) @ A, hermitian=True)  # (M, K, K), per chain
+        if not weighted:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
+            rc = r[:, chains]
+            block = block * (np.einsum("nm,nm->m", rc, rc) / dof)[:, None, None] if dof > 0 else \
+                np.full_like(block, np.nan)
+        cov[params[:, :, None], params[:, None, :]] = block
+    if noise_given:
+        white = r / np.maximum(_closure_std(robot, jac_final, noise), 1e-12)
+        chi2 = float(np.sum(white ** 2))
+    else:
+        chi2 = float("nan")
     dof_total = n * robot.n_chains - idx.size
     if noise_given and success and dof_total > 0:
         message += "; " + noise_verdict(chi2, dof_total)
@@ -427,7 +513,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
 
 def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
     """Whether a chi-square of whitened residuals is at the declared noise, in words."""
-    limit = float(chi2_dist.ppf(1.0 - alpha, dof))
+    limit = float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, dof)
     ratio = np.sqrt(chi2 / dof)
     if chi2 <= limit:
         return (f"the residual is at the declared noise (chi-square {chi2:.4g} on {dof} degrees of "

@@ -110,3 +110,15 @@ def test_identification_validates_its_arguments():
         identify_forward(ROBOT, commanded, measured, noise, free=["B9.q"])
     with pytest.raises(TypeError, match="noise must be a SensorNoise"):
         identify_forward(ROBOT, commanded, measured, 0.001)
+
+
+def test_chainwise_corrected_poses_are_the_forward_kinematics_from_the_measured_poses():
+    """The Gauss-Newton loop starts the forward kinematics one Newton step ahead (reusing the
+    closure Jacobians it has computed): the corrected poses must be those from the measured poses."""
+    commanded, measured = _paper_data()
+    noise = SensorNoise(paper.PAPER_NOISE_MM)
+    noisy = measured + noise.sample(10, 0)
+    fit = identify_chainwise(ROBOT, commanded, noisy, noise)
+    direct = ROBOT.forward_kinematics(fit.theta, commanded, initial=noisy)
+    np.testing.assert_allclose(fit.pose_residuals, noisy - direct, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fit.residuals, ROBOT.closure(fit.theta, commanded, noisy), rtol=0, atol=0)
