@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from calib.robots.delta import DeltaParams, forward_kinematics
+from calib.delta import DeltaParams, forward_kinematics
 from calib.delta_identification import (
     calibration_gain,
     identify_fkm,

@@ -1,34 +1,39 @@
 """Calibration mathematics for parallel robots (no simulator, no I/O).
 
-One robot interface (:mod:`calib.robot`), one module per robot (:mod:`calib.robots`), one engine
-over it (:mod:`calib.engine`, :mod:`calib.outliers`, :mod:`calib.metrics`). Units: mm and rad.
-Poses are ``(N, D)`` float64 in the robot's pose coordinates (the hexapod's
-``[x, y, z, alpha, beta, gamma]`` with ``R = Rz(gamma) Ry(beta) Rx(alpha)``).
+Units: mm and rad. Poses are ``[x, y, z, alpha, beta, gamma]`` with
+``R = Rz(gamma) Ry(beta) Rx(alpha)``; arrays of poses are (N, 6) float64.
 """
 
 from . import paper
-from .engine import (
-    IdentificationResult,
-    gauge_representative,
-    identify,
-    identify_chainwise,
-    identify_forward,
-    integrated_error,
-    noise_verdict,
+from .hexapod import (
+    ERROR_COLUMNS,
+    N_PARAMETERS,
+    Hexapod,
+    HexapodGeometry,
+    paper_geometry,
+    paper_hexapod,
+    parameter_index,
+    parameter_table,
 )
+from .identification import IdentificationResult, identify_forward, identify_paper
+from .kinematics import (
+    KinematicsError,
+    forward_kinematics,
+    forward_parameter_jacobian,
+    inverse_kinematics,
+    leg_vectors,
+    parameter_jacobian,
+    pose_jacobian,
+)
+from .outliers import OutlierReport, find_outliers
 from .metrics import (
     CompensationEvaluation,
     ConsistencyCheck,
-    GainReport,
-    calibration_gain,
     consistency_check,
     evaluate_compensation,
-    pose_error_norms,
+    integrated_error,
 )
 from .noise import SensorNoise
-from .outliers import OutlierReport, find_outliers
-from .robot import ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot
-from .robots import ROBOTS, Delta, Hexapod, default_robot, robot_from_description
 from .rotation import (
     euler_from_matrix,
     euler_from_quaternion,
@@ -36,15 +41,40 @@ from .rotation import (
     quaternion_from_euler,
     rotation_matrix,
 )
-from .workspace import random_poses, reachable_poses
+from .workspace import random_poses
+from .design import DesignResult, Workspace, design_poses, full_workspace, paper_workspace
+from .effects import EFFECTS, Discovery, EffectData, EffectFit, discover_effect, fit_effect
+from .observability import (
+    ObservabilityAnalysis,
+    PoseUncertainty,
+    analyze_observability,
+    fisher_information,
+    identification_jacobian,
+    pose_uncertainty,
+)
+from . import delta
+from .delta import DeltaParams, canonical_params
+from .delta_identification import (
+    DeltaIdentificationResult,
+    GainReport,
+    calibration_gain,
+    identify_fkm,
+    identify_ikm,
+)
 
 __all__ = [
-    "paper", "IdentificationResult", "gauge_representative", "identify", "identify_chainwise",
-    "identify_forward", "integrated_error", "noise_verdict", "CompensationEvaluation",
-    "ConsistencyCheck", "GainReport", "calibration_gain", "consistency_check", "evaluate_compensation",
-    "pose_error_norms", "SensorNoise", "OutlierReport", "find_outliers", "ClosureJacobians",
-    "KinematicsError", "Parameter", "ParameterTable", "Robot", "ROBOTS", "Delta", "Hexapod",
-    "default_robot", "robot_from_description", "euler_from_matrix", "euler_from_quaternion",
-    "matrix_from_quaternion", "quaternion_from_euler", "rotation_matrix", "random_poses",
-    "reachable_poses",
+    "paper", "ERROR_COLUMNS", "N_PARAMETERS", "Hexapod", "HexapodGeometry", "paper_geometry",
+    "paper_hexapod", "parameter_index", "parameter_table", "IdentificationResult",
+    "identify_forward", "identify_paper", "KinematicsError", "forward_kinematics",
+    "forward_parameter_jacobian", "inverse_kinematics", "leg_vectors", "parameter_jacobian",
+    "pose_jacobian", "CompensationEvaluation", "ConsistencyCheck", "consistency_check",
+    "evaluate_compensation", "integrated_error", "SensorNoise", "euler_from_matrix",
+    "euler_from_quaternion", "matrix_from_quaternion", "quaternion_from_euler",
+    "rotation_matrix", "random_poses", "OutlierReport", "find_outliers",
+    "delta", "DeltaParams", "canonical_params", "DeltaIdentificationResult", "GainReport",
+    "calibration_gain", "identify_fkm", "identify_ikm",
+    "DesignResult", "Workspace", "design_poses", "full_workspace", "paper_workspace",
+    "EFFECTS", "Discovery", "EffectData", "EffectFit", "discover_effect", "fit_effect",
+    "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
+    "identification_jacobian", "pose_uncertainty",
 ]

@@ -1,5 +1,4 @@
-"""Error metrics for any robot: compensation on held-out targets, model consistency, and the
-Delta paper's calibration gain G (Eq. 4.1)."""
+"""Error metrics: the paper's integrated error (Eqs. 15-17) and held-out evaluation."""
 
 from __future__ import annotations
 
@@ -7,16 +6,34 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .robot import Robot
+from ._validate import as_poses
+from .hexapod import Hexapod
+from .kinematics import forward_kinematics, inverse_kinematics
 
-__all__ = ["CompensationEvaluation", "evaluate_compensation", "ConsistencyCheck", "consistency_check",
-           "GainReport", "calibration_gain", "pose_error_norms"]
+__all__ = [
+    "integrated_error",
+    "CompensationEvaluation",
+    "evaluate_compensation",
+    "ConsistencyCheck",
+    "consistency_check",
+]
 
 
-def pose_error_norms(robot: Robot, dQ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(position, orientation)`` (N,) norms of (N, D) pose errors: mm and rad (0 without angles)."""
-    angle = robot.angle_pose_mask
-    return np.linalg.norm(dQ[:, ~angle], axis=1), np.linalg.norm(dQ[:, angle], axis=1)
+def integrated_error(dQ: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The paper's position, orientation and integrated errors.
+
+    Args:
+        dQ: (N, 6) pose errors, mm and rad.
+
+    Returns:
+        ``(dQ1, dQ2, dQint)``, each (N,): ``|dXYZ|`` in mm (Eq. 15), ``|d angles|`` in rad
+        (Eq. 16) and their plain sum (Eq. 17, mixing units as the paper does; used only for
+        its stopping rule).
+    """
+    dQ = as_poses(dQ, "dQ")
+    dQ1 = np.linalg.norm(dQ[:, :3], axis=1)
+    dQ2 = np.linalg.norm(dQ[:, 3:], axis=1)
+    return dQ1, dQ2, dQ1 + dQ2
 
 
 @dataclass(frozen=True, eq=False)
@@ -24,11 +41,11 @@ class CompensationEvaluation:
     """Pose errors a controller makes on target poses, before and after compensation.
 
     Attributes:
-        targets: (N, D) target poses.
-        reached_before / reached_after: (N, D) poses the machine reaches when the nominal /
-            identified model commands it.
-        position_before / position_after: (N,) mm, position error norms.
-        orientation_before / orientation_after: (N,) rad, angle error norms (0 without angles).
+        targets: (N, 6) target poses, mm and rad.
+        reached_before: (N, 6) poses the machine reaches when the nominal model commands it.
+        reached_after: (N, 6) poses reached when the identified model commands it.
+        position_before / position_after: (N,) mm, |reached - target| of the positions.
+        orientation_before / orientation_after: (N,) rad, norm of the angle errors.
     """
 
     targets: np.ndarray
@@ -56,23 +73,28 @@ class CompensationEvaluation:
         }
 
 
-def evaluate_compensation(robot: Robot, true: np.ndarray, identified: np.ndarray, targets: np.ndarray,
-                          nominal: np.ndarray | None = None) -> CompensationEvaluation:
-    """Errors on target poses of the machine ``true`` commanded by the nominal and identified models.
+def evaluate_compensation(true: Hexapod, identified: Hexapod, targets: np.ndarray) -> CompensationEvaluation:
+    """Errors on (held-out) target poses of the machine ``true`` commanded by two models.
+
+    Before: the controller uses the nominal geometry (``identified.nominal()``); after: it
+    uses ``identified``. The machine always moves as ``true`` (forward kinematics).
 
     Args:
-        robot: the robot.
-        true: (P,) the machine's parameters (it moves by their forward kinematics).
-        identified: (P,) the parameters found by calibration.
-        targets: (N, D) target poses.
-        nominal: (P,) the controller's model before calibration; default the robot's nominal.
+        true: the machine's actual parameter set.
+        identified: the parameter set found by calibration (same nominal geometry).
+        targets: (N, 6) target poses, mm and rad.
     """
-    nominal = robot.table.nominal if nominal is None else nominal
-    before = robot.forward_kinematics(true, robot.inverse_kinematics(nominal, targets), initial=targets)
-    after = robot.forward_kinematics(true, robot.inverse_kinematics(identified, targets), initial=targets)
-    pb, ob = pose_error_norms(robot, before - targets)
-    pa, oa = pose_error_norms(robot, after - targets)
-    return CompensationEvaluation(targets, before, after, pb, pa, ob, oa)
+    targets = as_poses(targets, "targets")
+    before = forward_kinematics(true, inverse_kinematics(identified.nominal(), targets), initial=targets)
+    after = forward_kinematics(true, inverse_kinematics(identified, targets), initial=targets)
+    db, da = before - targets, after - targets
+    return CompensationEvaluation(
+        targets=targets, reached_before=before, reached_after=after,
+        position_before=np.linalg.norm(db[:, :3], axis=1),
+        position_after=np.linalg.norm(da[:, :3], axis=1),
+        orientation_before=np.linalg.norm(db[:, 3:], axis=1),
+        orientation_after=np.linalg.norm(da[:, 3:], axis=1),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,9 +102,9 @@ class ConsistencyCheck:
     """Measured poses compared with what a model of the machine predicts.
 
     Attributes:
-        predicted: (N, D) predicted poses.
-        position_deviation: (N,) mm, max abs deviation of the position coordinates.
-        orientation_deviation: (N,) rad, max abs deviation of the angles (0 without angles).
+        predicted: (N, 6) predicted poses, mm and rad.
+        position_deviation: (N,) mm, max abs coordinate deviation of position.
+        orientation_deviation: (N,) rad, max abs deviation of the angles.
         consistent: (N,) bool, both deviations within the tolerances.
     """
 
@@ -93,70 +115,26 @@ class ConsistencyCheck:
 
     @property
     def flagged(self) -> list[int]:
-        """0-based indices of inconsistent rows."""
+        """Indices of inconsistent rows."""
         return [int(i) for i in np.flatnonzero(~self.consistent)]
 
 
-def consistency_check(robot: Robot, theta: np.ndarray, joints: np.ndarray, measured: np.ndarray, *,
-                      tol_mm: float, tol_rad: float) -> ConsistencyCheck:
-    """Which measured rows the model ``theta`` of the machine cannot reproduce.
+def consistency_check(
+    model: Hexapod, commanded: np.ndarray, measured: np.ndarray, *, tol_mm: float, tol_rad: float
+) -> ConsistencyCheck:
+    """Which measured rows the model of the machine cannot reproduce.
 
-    Used to reproduce Table 4 of the hexapod paper (model Table 2 + Table 3, joints the nominal
-    inverse kinematics of the targets).
-    """
-    predicted = robot.forward_kinematics(theta, joints, initial=measured)
-    dev = np.abs(predicted - measured)
-    angle = robot.angle_pose_mask
-    pos = dev[:, ~angle].max(axis=1)
-    ang = dev[:, angle].max(axis=1) if angle.any() else np.zeros(len(dev))
-    return ConsistencyCheck(predicted, pos, ang, (pos <= tol_mm) & (ang <= tol_rad))
-
-
-@dataclass(frozen=True)
-class GainReport:
-    """Calibration gain G of the Delta paper's Eq. (4.1), in percent.
-
-    Attributes:
-        names: parameter names the gains refer to.
-        per_parameter: ``100 (|Pr-Pn| - |Pr-Pc|) / |Pr-Pn|`` per parameter, (K,); NaN where the
-            initial error is exactly zero.
-        mean: mean of ``per_parameter`` over the parameters: the paper's figure ("percentage
-            average of the gain on all parameters"), NaN entries ignored.
-        norm: Eq. (4.1) applied to the norm of the error vector over all listed parameters,
-            lengths in mm and angles in degrees (the paper states errors in "mm/degrees").
-    """
-
-    names: tuple
-    per_parameter: np.ndarray
-    mean: float
-    norm: float
-
-    def as_dict(self) -> dict:
-        """JSON-ready: per-parameter gains by name, mean and norm (percent)."""
-        return {"per_parameter": {n: (None if not np.isfinite(g) else float(g))
-                                  for n, g in zip(self.names, self.per_parameter)},
-                "mean": float(self.mean), "norm": float(self.norm)}
-
-
-def calibration_gain(robot: Robot, true: np.ndarray, nominal: np.ndarray, calibrated: np.ndarray,
-                     names=None) -> GainReport:
-    """Calibration gain G per parameter, averaged (the paper's figure) and on the error norm.
+    Used to reproduce Table 4 of the paper: the model there is Table 2 + Table 3, the
+    commanded lengths the nominal inverse kinematics of the target poses.
 
     Args:
-        robot: the robot (units of its parameters).
-        true, nominal, calibrated: (P,) the machine's parameters ``Pr`` (in the gauge of the
-            identification, see :func:`calib.identifiability.gauge_representative`), the start
-            ``Pn`` and the identified ``Pc``.
-        names: parameters to score; default the robot's identifiable ones (``free_default``).
+        model: parameter set believed to describe the machine.
+        commanded: (N, 6) commanded leg lengths, mm.
+        measured: (N, 6) measured poses, mm and rad.
+        tol_mm, tol_rad: tolerances on each coordinate.
     """
-    names = tuple(robot.free_default if names is None else names)
-    idx = robot.table.indices(names)
-    pr, pn, pc = (np.asarray(v, dtype=float)[idx] for v in (true, nominal, calibrated))
-    e0, e1 = np.abs(pr - pn), np.abs(pr - pc)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per = np.where(e0 > 0, 100.0 * (e0 - e1) / e0, np.nan)
-    scale = np.where(robot.table.angle_mask()[idx], 180.0 / np.pi, 1.0)
-    n0, n1 = np.linalg.norm(scale * (pr - pn)), np.linalg.norm(scale * (pr - pc))
-    norm = 100.0 * (n0 - n1) / n0 if n0 > 0 else float("nan")
-    mean = float(np.nanmean(per)) if np.any(np.isfinite(per)) else float("nan")
-    return GainReport(names=names, per_parameter=per, mean=mean, norm=float(norm))
+    measured = as_poses(measured, "measured")
+    predicted = forward_kinematics(model, commanded, initial=measured)
+    d = np.abs(predicted - measured)
+    pos, ang = d[:, :3].max(axis=1), d[:, 3:].max(axis=1)
+    return ConsistencyCheck(predicted, pos, ang, (pos <= tol_mm) & (ang <= tol_rad))

@@ -1,14 +1,11 @@
-"""Outlier test for any robot: leave-one-out in closed form on the forward identification.
+"""Outlier poses: leave-one-out prediction residuals tested against the declared noise.
 
-At the forward-method estimate from the rows kept, the whitened pose residuals ``r`` (N D,) and
-the whitened Jacobian ``A`` (N D, p) give the hat matrix ``H = A (A^T A)^-1 A^T``. The residual of
-row j predicted by the model identified WITHOUT row j is, to first order,
-``d_j = (I - H_jj)^-1 r_j`` (H_jj the D x D block of row j), with covariance
-``(I - H_jj)^-1``, so ``t_j = r_j^T (I - H_jj)^-1 r_j`` is chi-square with D degrees of freedom for
-a consistent row (studentized deleted residual). A gross row also spoils the fit that contains
-it (swamping), so the worst row is removed and the model re-identified until every kept row
-passes; removed rows are judged against the model of the rows kept. One fit per removed row, no
-refit per row.
+A grossly wrong row (the paper's row A2) is partly absorbed by a least-squares fit that
+includes it, so its own residual understates the problem. Each pose j is therefore predicted
+by the model identified *without* it; the deleted residual ``d_j = QM_j - FK(theta_-j, l_j)``
+has covariance ``S_j = Sigma_noise + J_j Sigma_theta J_j^T`` (sensor noise plus the
+uncertainty of the prediction, propagated through the paper's estimator), and ``d_j^T S_j^-1 d_j`` is chi-square with 6 degrees of
+freedom for a consistent row.
 """
 
 from __future__ import annotations
@@ -18,9 +15,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from .engine import identify_forward
+from .hexapod import Hexapod
+from .identification import _check_inputs, identify_paper
+from .kinematics import (
+    KinematicsError,
+    _parameter_jacobian,
+    _pose_jacobian,
+    forward_kinematics,
+    forward_parameter_jacobian,
+)
 from .noise import SensorNoise
-from .robot import Robot, pose_jacobian_of_parameters
 
 __all__ = ["OutlierReport", "find_outliers"]
 
@@ -30,10 +34,10 @@ class OutlierReport:
     """Leave-one-out consistency of each measured pose.
 
     Attributes:
-        deleted_residuals: (N, D) measured minus the leave-one-out prediction (mm, rad).
-        statistic: (N,) chi-square(D) statistic of each row.
-        threshold: the chi-square(D) quantile at ``1 - alpha``.
-        flagged: 0-based indices of the rows whose statistic exceeds the threshold.
+        deleted_residuals: (N, 6) mm and rad, measured minus leave-one-out prediction.
+        statistic: (N,) ``d^T S^-1 d``, chi-square(6) for a consistent row.
+        threshold: the chi-square(6) quantile at ``1 - alpha``.
+        flagged: indices of rows whose statistic exceeds the threshold.
     """
 
     deleted_residuals: np.ndarray
@@ -42,67 +46,76 @@ class OutlierReport:
     flagged: tuple
 
 
-def _whitened(robot: Robot, theta, joints, measured, noise):
-    std = noise.pose_std(robot.pose_units)
-    pred = robot.forward_kinematics(theta, joints, initial=measured)
-    r = (measured - pred) / std
-    J = pose_jacobian_of_parameters(robot, theta, joints, pred) / std[None, :, None]
-    return r, J
+def _paper_estimator_covariance(hexapod: Hexapod, measured: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """(42, 42) covariance of :func:`identify_paper`'s estimate caused by pose noise of variance
+    ``var`` (6,), by linear propagation through the estimator itself.
+
+    Leg i's estimate moves by ``-pinv(J_i) dr_i`` and its residuals by ``dr_ij = Jp_ij . dQ_j``
+    (pose Jacobian row of leg i at pose j), so all six legs share each pose's noise.
+    """
+    m = measured.shape[0]
+    Jl = _parameter_jacobian(hexapod, measured)  # (m, 6, 7)
+    Jp = _pose_jacobian(hexapod, measured)  # (m, 6, 6)
+    G = np.zeros((42, m, 6))
+    for leg in range(6):
+        pinv = np.linalg.pinv(Jl[:, leg])  # (7, m)
+        G[leg * 7:(leg + 1) * 7] = -pinv[:, :, None] * Jp[None, :, leg, :]
+    G = G.reshape(42, m * 6)
+    return (G * np.tile(var, m)) @ G.T
 
 
-def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=None,
-                  alpha: float = 1e-3) -> OutlierReport:
-    """Flag measured poses inconsistent with the rest (closed-form leave-one-out, chi-square).
+def find_outliers(nominal: Hexapod, commanded: np.ndarray, measured: np.ndarray, noise: SensorNoise,
+                  *, alpha: float = 1e-3) -> OutlierReport:
+    """Flag measured poses inconsistent with the rest (leave-one-out, chi-square test).
 
     Args:
-        robot: the robot (its nominal vector starts the fits).
-        joints: (N, C) commanded joints.
-        measured: (N, D) measured poses.
-        noise: declared noise (its pose part; zero components floored).
-        free: identified parameters (default ``robot.free_default``).
+        nominal: nominal parameter set.
+        commanded: (N, 6) commanded leg lengths, mm; N >= 8 (each fit leaves one row out).
+        measured: (N, 6) measured poses, mm and rad.
+        noise: declared sensor noise (zero components floored as in ``SensorNoise.weights``).
         alpha: false-alarm probability per consistent row.
     """
+    commanded, measured = _check_inputs(nominal, commanded, measured)
+    n = measured.shape[0]
+    if n < 8:
+        raise ValueError(f"outlier detection needs at least 8 poses (7 per fit plus the one left out), got {n}")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
-    joints = np.asarray(joints, dtype=float)
-    measured = np.asarray(measured, dtype=float)
-    n, d = measured.shape
-    free = robot.free_default if free is None else tuple(free)
-    idx = robot.table.indices(free)
-    p = idx.size
-    if n * d <= p + d:
-        raise ValueError(f"outlier detection needs more than {(p + d) // d} poses for {p} parameters "
-                         f"(one left out), got {n}")
-    thr = float(chi2.ppf(1 - alpha, d))
+    w = noise.weights()
+    thr = float(chi2.ppf(1 - alpha, 6))
+    # Backward search: a gross row also spoils every leave-one-out fit that contains it
+    # (swamping), so remove the worst row and test again until all remaining rows pass.
     rows = np.arange(n)
     removed: list[int] = []
     while True:
-        fit = identify_forward(robot, joints[rows], measured[rows], noise, free=free)
-        r, J = _whitened(robot, fit.theta, joints[rows], measured[rows], noise)
-        A = J[:, :, idx].reshape(-1, p)
-        cov = np.linalg.pinv(A.T @ A, hermitian=True)
-        Jr = J[:, :, idx]
-        H = np.einsum("nip,pq,njq->nij", Jr, cov, Jr)  # (m, D, D) diagonal blocks of the hat matrix
-        M = np.eye(d)[None] - H
-        dw = np.linalg.solve(M, r[..., None])[..., 0]  # whitened deleted residuals
-        stat = np.einsum("ni,ni->n", r, dw)
+        res = [_deleted(nominal, commanded, measured, np.delete(rows, k), rows[k], w) for k in range(rows.size)]
+        stat = np.array([r[1] for r in res])
         worst = int(np.argmax(stat))
-        if stat[worst] <= thr or (rows.size - 1) * d <= p + d:
+        if stat[worst] <= thr or rows.size <= 8:
             break
         removed.append(int(rows[worst]))
         rows = np.delete(rows, worst)
-    std = noise.pose_std(robot.pose_units)
-    deleted = np.zeros((n, d))
+    d_all = np.zeros((n, 6))
     stat_all = np.zeros(n)
-    deleted[rows] = dw * std
-    stat_all[rows] = stat
-    if removed:
-        # Removed rows are judged against the model identified from all the rows kept.
-        out = np.array(removed)
-        r_out, J_out = _whitened(robot, fit.theta, joints[out], measured[out], noise)
-        Jo = J_out[:, :, idx]
-        S = np.eye(d)[None] + np.einsum("nip,pq,njq->nij", Jo, cov, Jo)
-        deleted[out] = r_out * std
-        stat_all[out] = np.einsum("ni,ni->n", r_out, np.linalg.solve(S, r_out[..., None])[..., 0])
+    for k, j in enumerate(rows):
+        d_all[j], stat_all[j] = res[k]
+    # Removed rows are judged against the model identified from all the rows kept.
+    for j in removed:
+        d_all[j], stat_all[j] = _deleted(nominal, commanded, measured, rows, j, w)
     flagged = tuple(sorted(int(i) for i in np.flatnonzero(stat_all > thr)))
-    return OutlierReport(deleted, stat_all, thr, flagged)
+    return OutlierReport(d_all, stat_all, thr, flagged)
+
+
+def _deleted(nominal, commanded, measured, keep, j, w) -> tuple[np.ndarray, float]:
+    """Residual of row ``j`` predicted by the model identified from rows ``keep``, and its
+    chi-square statistic."""
+    fit = identify_paper(nominal, commanded[keep], measured[keep])
+    try:
+        pred = forward_kinematics(fit.hexapod, commanded[j:j + 1], initial=measured[j], stroke_mm=None)
+    except KinematicsError:
+        return np.full(6, np.nan), np.inf
+    d = measured[j] - pred[0]
+    cov_theta = _paper_estimator_covariance(fit.hexapod, measured[keep], 1.0 / w**2)
+    Jj = forward_parameter_jacobian(fit.hexapod, pred)[0]
+    S = np.diag(1.0 / w**2) + Jj @ cov_theta @ Jj.T
+    return d, float(d @ np.linalg.solve(S, d))

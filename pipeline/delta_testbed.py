@@ -12,7 +12,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from calib.robots.delta import DeltaParams, _as_array, forward_kinematics, inverse_kinematics
+from calib.delta import DeltaParams, _as_array, forward_kinematics, inverse_kinematics
 from mjcf.delta import ACTUATORS, ARM_JOINTS, PLATE_SENSOR, DeltaMjcfGeometry, build_delta_model
 
 __all__ = ["M_PER_MM", "DeltaMeasurements", "DeltaTestbed", "delta_geometry_si"]

@@ -1,14 +1,12 @@
-"""Measurement recordings on disk, the same format for every robot: a CSV plus a JSON sidecar.
+"""Measurement recordings on disk: a CSV of measurements plus a JSON sidecar.
 
 CSV: one row per measurement in the order taken, columns
 
-    t_s, <joints>, <pose>[, set]
+    t_s, l1_mm, ..., l6_mm, x_mm, y_mm, z_mm, alpha_rad, beta_rad, gamma_rad[, set]
 
-with the robot's joint columns (``l1_mm .. l6_mm`` for the hexapod, ``q1_rad .. q3_rad`` for
-the Delta: what was commanded, or read when joints are measured) and pose columns (``x_mm, y_mm,
-z_mm[, alpha_rad, beta_rad, gamma_rad]``: the measured pose, base frame); the optional ``set``
-column is ``calibration`` or ``validation`` (default ``calibration``). The JSON sidecar names the
-robot, its nominal geometry and parameter table, the declared noise and the units.
+(time, commanded leg lengths, measured pose; the optional ``set`` column is ``calibration``
+or ``validation`` and defaults to ``calibration``). The JSON sidecar (same stem, ``.json``)
+names the robot's nominal geometry, the declared sensor noise and the units.
 
 Reading validates everything and names file, row and column on error; writing is atomic
 (temporary file + rename) and never overwrites an existing file unless asked to.
@@ -27,18 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.hexapod import HexapodGeometry
 from calib.noise import SensorNoise
-from calib.robot import Robot
-from calib.robots import ROBOTS, robot_from_description
 
-__all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns",
-           "atomic_write", "publish", "writing", "sidecar_path", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["COLUMNS", "RecordingError", "Recording", "write_recording", "read_recording",
+           "atomic_write", "publish", "writing", "sidecar_path"]
 
+POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad")
+LENGTH_COLUMNS = tuple(f"l{i}_mm" for i in range(1, 7))
+COLUMNS = ("t_s",) + LENGTH_COLUMNS + POSE_COLUMNS
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
-#: Version 2: any robot (joint and pose columns from the robot, parameter table in the sidecar);
-#: version 1 (hexapod only) is read too.
-FORMAT_VERSION = 2
 UNITS = {"length": "mm", "angle": "rad", "time": "s"}
 
 
@@ -46,43 +43,32 @@ class RecordingError(ValueError):
     """A recording file is malformed; the message names file, row and column."""
 
 
-def columns(robot: Robot) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """``(joint_columns, pose_columns)`` of a robot's recordings, e.g. ``("l1_mm", ...)``."""
-    joints = tuple(f"{n}_{robot.joint_unit}" for n in robot.joint_names)
-    pose = tuple(f"{n}_{u}" for n, u in zip(robot.pose_names, robot.pose_units))
-    return joints, pose
-
-
 @dataclass(frozen=True, eq=False)
 class Recording:
-    """Measurements of a robot and what is needed to analyse them.
+    """Measurements of a hexapod and what is needed to analyse them.
 
     Attributes:
-        robot: the robot measured, with its nominal geometry.
-        noise: declared noise.
+        geometry: nominal geometry of the robot measured.
+        noise: declared sensor noise.
         t_s: (N,) time of each measurement, s, non-decreasing.
-        joints: (N, C) commanded (or read) joint values, the robot's joint unit.
-        measured: (N, D) measured poses, mm and rad, base frame.
+        commanded: (N, 6) commanded leg lengths, mm.
+        measured: (N, 6) measured poses, mm and rad.
         sets: (N,) str, ``"calibration"`` or ``"validation"``.
         meta: free-form JSON-ready information (scenario, seed, simulation truth...).
     """
 
-    robot: Robot
+    geometry: HexapodGeometry
     noise: SensorNoise
     t_s: np.ndarray
-    joints: np.ndarray
+    commanded: np.ndarray
     measured: np.ndarray
     sets: np.ndarray
     meta: dict = field(default_factory=dict)
 
     def subset(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(joints, measured)`` of the rows in set ``name``."""
+        """``(commanded, measured)`` of the rows in set ``name``."""
         mask = self.sets == name
-        return self.joints[mask], self.measured[mask]
-
-    def rows(self, name: str) -> np.ndarray:
-        """0-based indices of the rows in set ``name``."""
-        return np.flatnonzero(self.sets == name)
+        return self.commanded[mask], self.measured[mask]
 
 
 def sidecar_path(csv_path: str | Path) -> Path:
@@ -170,24 +156,19 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
         for p in (csv_path, json_path):
             if p.exists():
                 raise FileExistsError(_exists_message(p))
-    joint_cols, pose_cols = columns(rec.robot)
-    header = ("t_s",) + joint_cols + pose_cols + ("set",)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
+    w.writerow(COLUMNS + ("set",))
     for k in range(len(rec.t_s)):
-        w.writerow([repr(float(rec.t_s[k]))] + [repr(float(v)) for v in rec.joints[k]]
+        w.writerow([repr(float(rec.t_s[k]))] + [repr(float(v)) for v in rec.commanded[k]]
                    + [repr(float(v)) for v in rec.measured[k]] + [rec.sets[k]])
-    table = rec.robot.table
     sidecar = {
         "format": FORMAT,
-        "version": FORMAT_VERSION,
-        "robot": rec.robot.name,
+        "version": 1,
+        "robot": "hexapod",
         "units": UNITS,
-        "columns": list(header),
-        "nominal_geometry": rec.robot.description(),
-        "parameter_table": [{"name": p.name, "unit": p.unit, "nominal": p.nominal, "chain": p.chain + 1}
-                            for p in table],
+        "columns": list(COLUMNS) + ["set"],
+        "nominal_geometry": rec.geometry.to_dict(),
         "declared_noise": rec.noise.to_dict(),
         "meta": rec.meta,
     }
@@ -196,7 +177,7 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
     return csv_path, json_path
 
 
-def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
+def _read_sidecar(json_path: Path) -> tuple[HexapodGeometry, SensorNoise, dict]:
     if not json_path.exists():
         raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
     try:
@@ -205,9 +186,8 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
         raise RecordingError(f"{json_path}: not valid JSON: {exc}") from exc
     if not isinstance(side, dict):
         raise RecordingError(f"{json_path}: top level must be an object")
-    name = side.get("robot")
-    if name not in ROBOTS:
-        raise RecordingError(f"{json_path}: field 'robot' must be one of {', '.join(sorted(ROBOTS))}, got {name!r}")
+    if side.get("robot") != "hexapod":
+        raise RecordingError(f"{json_path}: field 'robot' must be 'hexapod', got {side.get('robot')!r}")
     units = side.get("units")
     if units != UNITS:
         raise RecordingError(f"{json_path}: field 'units' must be {UNITS}, got {units!r}")
@@ -215,17 +195,14 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
         if key not in side:
             raise RecordingError(f"{json_path}: missing field {key!r}")
     try:
-        robot = robot_from_description(name, side["nominal_geometry"])
+        geometry = HexapodGeometry.from_dict(side["nominal_geometry"])
     except (KeyError, ValueError, TypeError) as exc:
         raise RecordingError(f"{json_path}: field 'nominal_geometry': {exc}") from exc
     try:
         noise = SensorNoise(**side["declared_noise"])
     except (TypeError, ValueError) as exc:
         raise RecordingError(f"{json_path}: field 'declared_noise': {exc}") from exc
-    meta = side.get("meta", {})
-    if not isinstance(meta, dict):
-        raise RecordingError(f"{json_path}: field 'meta' must be an object, got {type(meta).__name__}")
-    return robot, noise, meta
+    return geometry, noise, side.get("meta", {})
 
 
 def read_recording(csv_path: str | Path) -> Recording:
@@ -238,31 +215,29 @@ def read_recording(csv_path: str | Path) -> Recording:
     csv_path = Path(csv_path)
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
-    robot, noise, meta = _read_sidecar(sidecar_path(csv_path))
-    joint_cols, pose_cols = columns(robot)
-    expected = ("t_s",) + joint_cols + pose_cols
+    geometry, noise, meta = _read_sidecar(sidecar_path(csv_path))
     with csv_path.open(newline="") as f:
         rows = list(csv.reader(f))
     if not rows:
-        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
+        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(COLUMNS)})")
     header = [h.strip() for h in rows[0]]
-    missing = [c for c in expected if c not in header]
+    missing = [c for c in COLUMNS if c not in header]
     if missing:
         raise RecordingError(f"{csv_path}: header lacks column(s) {', '.join(missing)}; got {', '.join(header)}")
-    unknown = [h for h in header if h not in expected + ("set",)]
+    unknown = [h for h in header if h not in COLUMNS + ("set",)]
     if unknown:
         raise RecordingError(f"{csv_path}: unknown column(s) {', '.join(unknown)}")
     idx = {h: i for i, h in enumerate(header)}
     data = rows[1:]
     if not data:
         raise RecordingError(f"{csv_path}: no data rows")
-    values = np.empty((len(data), len(expected)))
+    values = np.empty((len(data), len(COLUMNS)))
     sets = np.empty(len(data), dtype=object)
     for r, row in enumerate(data, start=1):
         where = f"{csv_path}: row {r} (line {r + 1})"
         if len(row) != len(header):
             raise RecordingError(f"{where}: expected {len(header)} fields, got {len(row)}")
-        for c, name in enumerate(expected):
+        for c, name in enumerate(COLUMNS):
             cell = row[idx[name]].strip()
             try:
                 v = float(cell)
@@ -279,6 +254,5 @@ def read_recording(csv_path: str | Path) -> Recording:
             raise RecordingError(f"{where}, column 't_s': time goes backwards "
                                  f"({values[r - 1, 0]!r} after {values[r - 2, 0]!r}); rows must be in the order taken")
     sets = sets.astype(str)
-    c = len(joint_cols)
-    return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
-                     measured=values[:, 1 + c:], sets=sets, meta=meta)
+    return Recording(geometry=geometry, noise=noise, t_s=values[:, 0], commanded=values[:, 1:7],
+                     measured=values[:, 7:13], sets=sets, meta=meta)

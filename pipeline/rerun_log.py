@@ -1,17 +1,17 @@
-"""Rerun recordings of a calibration run, for any robot (rerun-sdk 0.41 API).
+"""Rerun recordings of a calibration run (rerun-sdk 0.41 API).
 
 Entities (all lengths in mm):
 
-* ``machine/{nominal,actual,calibrated}/chains|platform``: the 3D machine at each measured pose
-  (timeline ``pose``), drawn from :meth:`calib.robot.Robot.chain_points`: the pose the controller
-  intended (nominal), the pose measured on the machine (actual) and the pose the calibrated model
-  predicts (calibrated); ``machine/error_x1000``: the position error magnified 1000 times.
+* ``machine/{nominal,actual,calibrated}/legs|platform``: the 3D machine at each measured pose
+  (timeline ``pose``): the pose the controller intended (nominal), the pose measured on the
+  machine (actual) and the pose the calibrated model predicts (calibrated);
+  ``machine/error_x1000``: the position error magnified 1000 times (tens of micrometres are
+  invisible at the scale of the machine).
 * ``calibration/max_dqint``: max dQint per iteration (timeline ``iteration``).
 * ``heldout/position_error_um/{before,after}``, ``heldout/orientation_error_urad/{before,after}``
   per held-out pose (timeline ``heldout_pose``).
-* ``parameters/{injected,identified,difference}``: bar charts of the errors (um or urad),
-  ``parameters/names`` their names in order.
-* ``observability``: see :mod:`pipeline.obs_log`; ``summary``: a markdown summary.
+* ``parameters/{injected,identified,difference}``: bar charts of the 42 errors, um.
+* ``summary``: a markdown summary.
 """
 
 from __future__ import annotations
@@ -22,23 +22,35 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from calib.robot import Robot
+from calib.hexapod import Hexapod, parameter_table
+from calib.rotation import rotation_matrix
 
-from .obs_log import log_observability, observability_views
+from .obs_log import observability_views
 from .recording import writing
 
-__all__ = ["log_calibration_run", "save_recording", "rrd_entities", "summary_markdown", "blueprint"]
+__all__ = ["machine_points", "log_calibration_run", "save_recording", "rrd_entities"]
 
 COLORS = {"nominal": [150, 150, 150], "actual": [230, 120, 30], "calibrated": [40, 160, 220]}
-#: Magnification of the position error arrows (tens of micrometres are invisible at machine scale).
-ERROR_MAGNIFICATION = 1000.0
 
 
-def _log_machine(rec: rr.RecordingStream, path: str, points: np.ndarray, color) -> None:
-    """``points``: (C, K, 3) chain polylines of one pose; the platform joins their last points."""
-    rec.log(f"{path}/chains", rr.LineStrips3D(list(points), colors=color, radii=1.5))
-    tips = points[:, -1]
-    rec.log(f"{path}/platform", rr.LineStrips3D([np.vstack([tips, tips[:1]])], colors=color, radii=1.0))
+def machine_points(hexapod: Hexapod, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Base and platform joint positions of ``hexapod`` at ``pose``.
+
+    Args:
+        hexapod: parameter set whose joints to place.
+        pose: (6,) mm and rad.
+
+    Returns:
+        ``(B, P)``: (6, 3) and (6, 3), mm, base frame.
+    """
+    R = rotation_matrix(pose[3:6])
+    return hexapod.base_joints, hexapod.platform_joints @ R.T + pose[:3]
+
+
+def _log_machine(rec: rr.RecordingStream, path: str, hexapod: Hexapod, pose: np.ndarray, color) -> None:
+    B, P = machine_points(hexapod, pose)
+    rec.log(f"{path}/legs", rr.LineStrips3D(np.stack([B, P], axis=1), colors=color, radii=1.5))
+    rec.log(f"{path}/platform", rr.LineStrips3D([np.vstack([P, P[:1]])], colors=color, radii=1.0))
 
 
 def blueprint() -> rrb.Blueprint:
@@ -52,9 +64,9 @@ def blueprint() -> rrb.Blueprint:
             ),
             rrb.Vertical(
                 rrb.Tabs(
-                    rrb.BarChartView(origin="parameters/identified", name="Identified (um, urad)"),
-                    rrb.BarChartView(origin="parameters/injected", name="Injected (um, urad)"),
-                    rrb.BarChartView(origin="parameters/difference", name="Identified - injected (um, urad)"),
+                    rrb.BarChartView(origin="parameters/identified", name="Identified (um)"),
+                    rrb.BarChartView(origin="parameters/injected", name="Injected (um)"),
+                    rrb.BarChartView(origin="parameters/difference", name="Identified - injected (um)"),
                     observability_views("observability", "Observability"),
                 ),
                 rrb.TextDocumentView(origin="summary", name="Summary"),
@@ -65,77 +77,41 @@ def blueprint() -> rrb.Blueprint:
     )
 
 
-def summary_markdown(summary: dict) -> str:
-    """The run summary as a markdown panel."""
-    h = summary.get("heldout_position_error_mm")
-    o = summary.get("heldout_orientation_error_rad")
-    lines = [
-        f"# Calibration of the {summary['robot']}",
-        f"{summary['scenario']}",
-        "",
-        f"- method: **{summary['method']}** ({summary['solver']}), {summary['calibration_poses']} "
-        f"calibration poses, {summary['heldout_poses']} held-out",
-        f"- declared noise: {summary['declared_noise']}",
-        f"- iterations: {summary['iterations']}",
-        f"- stop: {summary['message']}",
-    ]
-    if h:
-        lines += ["", "| held-out | before | after (mean) | after (max) |", "|---|---|---|---|",
-                  f"| position, um | {1e3 * h['before']:.3f} | {1e3 * h['after']:.3f} | {1e3 * h['max_after']:.3f} |"]
-        if o:
-            lines.append(f"| orientation, urad | {1e6 * o['before']:.3f} | {1e6 * o['after']:.3f} | "
-                         f"{1e6 * o['max_after']:.3f} |")
-        lines += ["", f"Held-out basis: {summary['heldout_basis']}"]
-    pe = summary.get("parameter_error")
-    if pe and pe.get("rms_mm") is not None:
-        lines.append(f"\nParameter error RMS (identified - injected, lengths): {1e3 * pe['rms_mm']:.3f} um")
-    lines.append("\nCondition numbers: " + ", ".join(f"{c:.0f}" for c in summary["condition_numbers"]))
-    fl = summary["flagged_poses"]
-    lines.append(f"\nFlagged rows: {', '.join(str(i) for i in fl) if fl else 'none'}")
-    return "\n".join(lines)
-
-
-def _bar_scale(robot: Robot) -> np.ndarray:
-    """um per mm and urad per rad: errors of micrometres and microradians read as numbers."""
-    return np.where(robot.table.angle_mask(), 1e6, 1e3)
-
-
 def log_calibration_run(
-    rec: rr.RecordingStream, *, robot: Robot, nominal: np.ndarray, actual: np.ndarray | None,
-    identified: np.ndarray, std: np.ndarray, joints: np.ndarray, targets: np.ndarray, measured: np.ndarray,
-    predicted: np.ndarray, history: tuple, heldout_before: np.ndarray | None,
-    heldout_after: np.ndarray | None, summary_markdown: str, observability=None,
+    rec: rr.RecordingStream,
+    *,
+    nominal: Hexapod,
+    actual: Hexapod | None,
+    identified: Hexapod,
+    targets: np.ndarray,
+    measured: np.ndarray,
+    predicted: np.ndarray,
+    history: tuple,
+    heldout_before: np.ndarray | None,
+    heldout_after: np.ndarray | None,
+    summary_markdown: str,
 ) -> None:
     """Log one calibration run.
 
     Args:
         rec: the recording stream.
-        robot: the robot.
-        nominal, actual, identified: (P,) parameter vectors (``actual`` None for a real machine).
-        std: (P,) standard uncertainty of the identified parameters.
-        joints: (N, C) commanded joints of the calibration poses.
-        targets: (N, D) poses the controller intended.
-        measured: (N, D) measured poses.
-        predicted: (N, D) poses the identified model predicts at the commanded joints.
-        history: max dQint (or cost) per iteration.
-        heldout_before, heldout_after: (M, D) held-out pose errors (reached - target), or None.
+        nominal, actual, identified: parameter sets (``actual`` None for a real machine).
+        targets: (N, 6) poses the controller intended, mm and rad.
+        measured: (N, 6) measured poses.
+        predicted: (N, 6) poses the identified model predicts at the commanded lengths.
+        history: max dQint per iteration.
+        heldout_before, heldout_after: (M, 6) held-out pose errors (reached - target), or None.
         summary_markdown: text of the summary panel.
-        observability: a :class:`calib.observability.ObservabilityAnalysis` to log, or None.
     """
     rec.log("machine", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    angle = robot.angle_pose_mask
-    nominal_joints = robot.inverse_kinematics(nominal, targets)
-    drawn = actual if actual is not None else identified
+    rec.log("machine/base_joints", rr.Points3D(nominal.base_joints, radii=3.0, colors=[90, 90, 90]), static=True)
     for k in range(targets.shape[0]):
         rec.set_time("pose", sequence=k)
-        _log_machine(rec, "machine/nominal", robot.chain_points(nominal, nominal_joints[k:k + 1], targets[k:k + 1])[0],
-                     COLORS["nominal"])
-        _log_machine(rec, "machine/actual", robot.chain_points(drawn, joints[k:k + 1], measured[k:k + 1])[0],
-                     COLORS["actual"])
-        _log_machine(rec, "machine/calibrated", robot.chain_points(identified, joints[k:k + 1], predicted[k:k + 1])[0],
-                     COLORS["calibrated"])
-        err = (measured[k, ~angle] - targets[k, ~angle]) * ERROR_MAGNIFICATION
-        rec.log("machine/error_x1000", rr.Arrows3D(origins=[targets[k, ~angle]], vectors=[err], colors=[220, 30, 30]))
+        _log_machine(rec, "machine/nominal", nominal, targets[k], COLORS["nominal"])
+        _log_machine(rec, "machine/actual", actual if actual is not None else identified, measured[k], COLORS["actual"])
+        _log_machine(rec, "machine/calibrated", identified, predicted[k], COLORS["calibrated"])
+        err = (measured[k, :3] - targets[k, :3]) * 1000.0
+        rec.log("machine/error_x1000", rr.Arrows3D(origins=[targets[k, :3]], vectors=[err], colors=[220, 30, 30]))
     for it, v in enumerate(history, start=1):
         rec.set_time("iteration", sequence=it)
         rec.log("calibration/max_dqint", rr.Scalars(v))
@@ -144,18 +120,14 @@ def log_calibration_run(
         for k in range(heldout_before.shape[0]):
             rec.set_time("heldout_pose", sequence=k)
             for name, e in (("before", heldout_before[k]), ("after", heldout_after[k])):
-                rec.log(f"heldout/position_error_um/{name}", rr.Scalars(1000.0 * np.linalg.norm(e[~angle])))
-                if angle.any():
-                    rec.log(f"heldout/orientation_error_urad/{name}", rr.Scalars(1e6 * np.linalg.norm(e[angle])))
-    scale = _bar_scale(robot)
-    rec.log("parameters/names", rr.TextDocument(", ".join(robot.table.names)), static=True)
-    rec.log("parameters/identified", rr.BarChart(scale * (identified - nominal)), static=True)
-    rec.log("parameters/std", rr.BarChart(scale * std), static=True)
+                rec.log(f"heldout/position_error_um/{name}", rr.Scalars(1000.0 * np.linalg.norm(e[:3])))
+                rec.log(f"heldout/orientation_error_urad/{name}", rr.Scalars(1e6 * np.linalg.norm(e[3:])))
+    names = [n for n, _, _ in parameter_table()]
+    rec.log("parameters/names", rr.TextDocument(", ".join(names)), static=True)
+    rec.log("parameters/identified", rr.BarChart(1000.0 * identified.vector), static=True)
     if actual is not None:
-        rec.log("parameters/injected", rr.BarChart(scale * (actual - nominal)), static=True)
-        rec.log("parameters/difference", rr.BarChart(scale * (identified - actual)), static=True)
-    if observability is not None:
-        log_observability(rec, observability, "observability", title="Observability of the calibration poses")
+        rec.log("parameters/injected", rr.BarChart(1000.0 * actual.vector), static=True)
+        rec.log("parameters/difference", rr.BarChart(1000.0 * (identified.vector - actual.vector)), static=True)
     rec.log("summary", rr.TextDocument(summary_markdown, media_type=rr.MediaType.MARKDOWN), static=True)
 
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from calib.robots.delta import (
+from calib.delta import (
     CHAIN_PARAMETER_NAMES,
     NOMINAL_GEOMETRY,
     PARAMETER_NAMES,
@@ -26,19 +26,17 @@ from calib.robots.delta import (
     inverse_kinematics,
     parameter_index,
 )
-from calib.robots import Delta, uniform_errors
-from calib.workspace import reachable_poses
+from calib.delta_identification import perturb_params, random_workspace_positions
 
 NOM = DeltaParams.nominal()
 
 
 def _perturbed(seed, e_mm=2.0, e_deg=2.0):
-    robot = Delta(NOM)
-    return DeltaParams.from_vector(robot.table.nominal + uniform_errors(robot, seed, e_mm, np.deg2rad(e_deg)))
+    return perturb_params(NOM, e_mm, np.deg2rad(e_deg), seed)
 
 
 def _configs(params, n, seed):
-    x = reachable_poses(Delta(NOM), n, seed, theta=params.to_vector())
+    x = random_workspace_positions(n, seed)
     return inverse_kinematics(params, x), x
 
 

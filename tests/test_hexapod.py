@@ -1,19 +1,17 @@
-"""The hexapod and its paper: tables, Table 4 reproduced, Table 3 recovered by both methods."""
-
 import numpy as np
 import pytest
 
 from calib import paper
-from calib.engine import identify_chainwise, identify_forward
-from calib.metrics import consistency_check
-from calib.noise import SensorNoise
-from calib.outliers import find_outliers
-from calib.robots import paper_hexapod
-from calib.robots.hexapod import LEG_PARAMETERS
-
-ROBOT = paper_hexapod()
-NOMINAL = ROBOT.table.nominal
-ACTUAL = NOMINAL + paper.TABLE3_ERRORS.ravel()
+from calib.hexapod import (
+    ERROR_COLUMNS,
+    Hexapod,
+    HexapodGeometry,
+    paper_geometry,
+    paper_hexapod,
+    parameter_index,
+    parameter_table,
+)
+from calib.kinematics import inverse_kinematics
 
 
 def test_builtin_tables_match_reference_transcription(reference_tables):
@@ -22,7 +20,7 @@ def test_builtin_tables_match_reference_transcription(reference_tables):
     np.testing.assert_array_equal(paper.TABLE2_PLATFORM_JOINTS_MM, t2["P"])
     np.testing.assert_array_equal(paper.TABLE2_HOME_LENGTHS_MM, t2["l"])
     t3 = reference_tables["table3_injected_errors"]
-    assert len(t3["columns"]) == len(LEG_PARAMETERS)
+    assert tuple(t3["columns"]) == ERROR_COLUMNS
     np.testing.assert_array_equal(paper.TABLE3_ERRORS, t3["rows"])
     t4 = reference_tables["table4_poses"]
     np.testing.assert_array_equal(paper.TABLE4_NOMINAL_POSES, t4["nominal_PT"])
@@ -30,83 +28,68 @@ def test_builtin_tables_match_reference_transcription(reference_tables):
 
 
 def test_home_lengths_are_the_inverse_kinematics_of_the_home_pose():
-    lengths = ROBOT.inverse_kinematics(NOMINAL, ROBOT.home_pose[None])[0]
-    np.testing.assert_allclose(lengths, ROBOT.home_lengths, atol=1e-5)  # Table 2 prints 8 digits
+    g = paper_geometry()
+    l = inverse_kinematics(Hexapod(g), g.home_pose[None])[0]
+    np.testing.assert_allclose(l, g.home_lengths, atol=1e-5)  # Table 2 prints 8 digits
 
 
-@pytest.mark.parametrize("name,leg,column", [("B1.x", 0, 0), ("dl5", 4, 3), ("P6.z", 5, 6), ("B3.y", 2, 1)])
-def test_parameter_names_address_the_paper_table3_layout(name, leg, column):
-    assert ROBOT.table.index(name) == leg * 7 + column
-    assert (ACTUAL - NOMINAL)[ROBOT.table.index(name)] == pytest.approx(paper.TABLE3_ERRORS[leg, column], abs=1e-12)
+def test_parameter_table_names_every_parameter_once():
+    table = parameter_table()
+    assert len(table) == 42
+    assert [i for _, i, _ in table] == list(range(42))
+    assert {u for *_, u in table} == {"mm"}
+    assert table[0][0] == "dXB1" and table[-1][0] == "dZP6"
 
 
-def test_leg_offset_is_additive():
-    """Commanding length l makes leg i l + dl_i long."""
-    theta = NOMINAL.copy()
-    theta[ROBOT.table.index("dl2")] = 0.5
-    lengths = ROBOT.inverse_kinematics(theta, ROBOT.home_pose[None])[0]
-    np.testing.assert_allclose(ROBOT.home_lengths - lengths, [0, 0.5, 0, 0, 0, 0], atol=1e-5)
+@pytest.mark.parametrize("name,leg,col", [("dXB3", 3, "dXB"), ("dl5", 5, "dl"), ("dZP6", 6, "dZP"), ("dYB1", 1, "dYB")])
+def test_parameter_index_addresses_the_error_array(name, leg, col):
+    h = paper_hexapod(with_table3_errors=True)
+    assert h.vector[parameter_index(name)] == paper.TABLE3_ERRORS[leg - 1, ERROR_COLUMNS.index(col)]
 
 
-def test_table4_reproduced_and_row_a2_flagged():
-    """Table 4: actual poses = FK(Table 2 + Table 3) at the nominal IK lengths of the targets."""
-    commanded = ROBOT.inverse_kinematics(NOMINAL, paper.TABLE4_NOMINAL_POSES)
-    check = consistency_check(ROBOT, ACTUAL, commanded, paper.TABLE4_MEASURED_POSES, tol_mm=1e-4, tol_rad=3e-5)
-    assert check.flagged == [1]  # row A2 (index 1) is inconsistent with the model
-    ok = np.delete(np.arange(10), 1)
-    assert check.position_deviation[ok].max() < 1e-4
-    assert check.orientation_deviation[ok].max() < 3e-5
-    assert check.position_deviation[1] > 0.01 and check.orientation_deviation[1] > 1e-4
+@pytest.mark.parametrize("name", ["dXB7", "dXB0", "dq1", "XB1", ""])
+def test_unknown_parameter_name(name):
+    with pytest.raises(KeyError, match="unknown hexapod parameter"):
+        parameter_index(name)
 
 
-def test_find_outliers_flags_a2_alone_at_the_print_resolution():
-    commanded = ROBOT.inverse_kinematics(NOMINAL, paper.TABLE4_NOMINAL_POSES)
-    report = find_outliers(ROBOT, commanded, paper.TABLE4_MEASURED_POSES, SensorNoise(1e-4, 3e-5))
-    assert report.flagged == (1,)
+def test_errors_apply_to_joints_and_leg_offsets():
+    h = paper_hexapod(with_table3_errors=True)
+    np.testing.assert_allclose(h.base_joints - paper.TABLE2_BASE_JOINTS_MM, paper.TABLE3_ERRORS[:, :3])
+    np.testing.assert_allclose(h.platform_joints - paper.TABLE2_PLATFORM_JOINTS_MM, paper.TABLE3_ERRORS[:, 4:])
+    np.testing.assert_allclose(h.leg_offsets, paper.TABLE3_ERRORS[:, 3])
+    assert np.all(h.nominal().errors == 0)
+    np.testing.assert_array_equal(h.with_errors(h.vector).errors, h.errors)
 
 
-def _paper_data():
-    commanded = ROBOT.inverse_kinematics(NOMINAL, paper.TABLE4_NOMINAL_POSES)
-    return commanded, ROBOT.forward_kinematics(ACTUAL, commanded, initial=paper.TABLE4_NOMINAL_POSES)
+def test_parameter_sets_are_immutable():
+    h = paper_hexapod(with_table3_errors=True)
+    with pytest.raises(ValueError):
+        h.errors[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        h.geometry.base_joints[0, 0] = 1.0
 
 
-def test_paper_method_recovers_table3_noise_free_in_two_iterations():
-    commanded, measured = _paper_data()
-    fit = identify_chainwise(ROBOT, commanded, measured, SensorNoise(paper.PAPER_NOISE_MM), epsilon=paper.PAPER_EPSILON)
-    assert fit.success and "paper's criterion met" in fit.message
-    assert fit.iterations == 2
-    assert np.abs(fit.errors - paper.TABLE3_ERRORS.ravel()).max() < 1e-9
-    assert fit.condition_numbers.shape == (6,)
+@pytest.mark.parametrize("field,value,match", [
+    ("base_joints", np.zeros((5, 3)), r"base_joints must have shape \(6, 3\), got \(5, 3\)"),
+    ("platform_joints", np.zeros(18), r"platform_joints must have shape \(6, 3\), got \(18,\)"),
+    ("home_lengths", np.full(6, np.nan), "home_lengths has a non-finite value"),
+])
+def test_geometry_validation(field, value, match):
+    kw = dict(base_joints=paper.TABLE2_BASE_JOINTS_MM, platform_joints=paper.TABLE2_PLATFORM_JOINTS_MM,
+              home_lengths=paper.TABLE2_HOME_LENGTHS_MM)
+    kw[field] = value
+    with pytest.raises(ValueError, match=match):
+        HexapodGeometry(**kw)
 
 
-def test_forward_method_recovers_table3_noise_free():
-    commanded, measured = _paper_data()
-    fit = identify_forward(ROBOT, commanded, measured, SensorNoise(paper.PAPER_NOISE_MM))
-    assert fit.success
-    assert np.abs(fit.errors - paper.TABLE3_ERRORS.ravel()).max() < 1e-9
+def test_errors_validation():
+    with pytest.raises(ValueError, match=r"errors must have shape \(6, 7\), got \(7, 6\)"):
+        Hexapod(paper_geometry(), np.zeros((7, 6)))
 
 
-def test_noisy_stop_message_tells_whether_the_residual_is_at_the_noise():
-    commanded, measured = _paper_data()
-    noise = SensorNoise(paper.PAPER_NOISE_MM)
-    noisy = measured + noise.sample(10, 0)
-    fit = identify_chainwise(ROBOT, commanded, noisy, noise)
-    assert "step_tol" in fit.message and "at the declared noise" in fit.message
-    bad = measured + SensorNoise(100 * paper.PAPER_NOISE_MM).sample(10, 0)
-    fit = identify_forward(ROBOT, commanded, bad, noise)
-    assert "does not fit" in fit.message
-
-
-def test_identification_validates_its_arguments():
-    commanded, measured = _paper_data()
-    noise = SensorNoise(paper.PAPER_NOISE_MM)
-    with pytest.raises(ValueError, match=r"measured must have shape \(N, 6\)"):
-        identify_forward(ROBOT, commanded, measured[:, :5], noise)
-    with pytest.raises(ValueError, match="same number of rows"):
-        identify_forward(ROBOT, commanded[:9], measured, noise)
-    with pytest.raises(ValueError, match="at least 7 rows"):
-        identify_chainwise(ROBOT, commanded[:6], measured[:6], noise)
-    with pytest.raises(KeyError, match="unknown parameter"):
-        identify_forward(ROBOT, commanded, measured, noise, free=["B9.q"])
-    with pytest.raises(TypeError, match="noise must be a SensorNoise"):
-        identify_forward(ROBOT, commanded, measured, 0.001)
+def test_geometry_dict_round_trip():
+    g = paper_geometry()
+    g2 = HexapodGeometry.from_dict(g.to_dict())
+    for f in ("base_joints", "platform_joints", "home_lengths", "home_pose"):
+        np.testing.assert_array_equal(getattr(g, f), getattr(g2, f))

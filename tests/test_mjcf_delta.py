@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from calib.robots.delta import PARAMETER_NAMES, PARAMETER_UNITS, DeltaParams, canonical_params, forward_kinematics, inverse_kinematics
+from calib.delta import PARAMETER_NAMES, PARAMETER_UNITS, DeltaParams, canonical_params, forward_kinematics, inverse_kinematics
 from calib.delta_identification import DEFAULT_FREE, calibration_gain, identify_fkm, identify_ikm, perturb_params, random_workspace_positions
 from mjcf.delta import ACTUATORS, ARM_JOINTS, PLATE_SENSOR, DeltaMjcfGeometry, build_delta_model, build_delta_xml
 from pipeline.delta_testbed import M_PER_MM, DeltaTestbed, delta_geometry_si

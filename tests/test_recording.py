@@ -3,16 +3,16 @@ import json
 import numpy as np
 import pytest
 
+from calib.hexapod import paper_geometry
 from calib.noise import SensorNoise
-from calib.robots import paper_hexapod
-from pipeline.recording import Recording, RecordingError, read_recording, write_recording
+from pipeline.recording import COLUMNS, Recording, RecordingError, read_recording, write_recording
 
 
 def make_recording(n=8, seed=0):
     rng = np.random.default_rng(seed)
     return Recording(
-        robot=paper_hexapod(), noise=SensorNoise(0.001, 1e-6, "normal"),
-        t_s=np.cumsum(rng.uniform(0.1, 1, n)), joints=233 + rng.normal(size=(n, 6)),
+        geometry=paper_geometry(), noise=SensorNoise(0.001, 1e-6, "normal"),
+        t_s=np.cumsum(rng.uniform(0.1, 1, n)), commanded=233 + rng.normal(size=(n, 6)),
         measured=np.column_stack([rng.normal(size=(n, 2)), 200 + rng.normal(size=n), 0.01 * rng.normal(size=(n, 3))]),
         sets=np.array(["calibration"] * (n - 2) + ["validation"] * 2), meta={"seed": seed},
     )
@@ -22,11 +22,10 @@ def test_round_trip_is_exact(tmp_path):
     rec = make_recording()
     csv_path, json_path = write_recording(tmp_path / "r.csv", rec)
     back = read_recording(csv_path)
-    for f in ("t_s", "joints", "measured", "sets"):
+    for f in ("t_s", "commanded", "measured", "sets"):
         np.testing.assert_array_equal(getattr(back, f), getattr(rec, f))
     assert back.noise == rec.noise and back.meta == {"seed": 0}
-    np.testing.assert_array_equal(back.robot.table.nominal, rec.robot.table.nominal)
-    assert back.robot.name == "hexapod"
+    np.testing.assert_array_equal(back.geometry.base_joints, rec.geometry.base_joints)
     side = json.loads(json_path.read_text())
     assert side["units"] == {"length": "mm", "angle": "rad", "time": "s"}
 
@@ -76,7 +75,7 @@ def test_bad_csv_names_file_row_and_column(tmp_path, edit, match):
 
 
 @pytest.mark.parametrize("edit,match", [
-    (lambda s: s.update(robot="tripod"), "field 'robot' must be one of"),
+    (lambda s: s.update(robot="delta"), "field 'robot' must be 'hexapod'"),
     (lambda s: s.update(units={"length": "m", "angle": "rad", "time": "s"}), "field 'units' must be"),
     (lambda s: s.pop("declared_noise"), "missing field 'declared_noise'"),
     (lambda s: s["nominal_geometry"].update(base_joints_mm=[[0, 0, 0]]), r"field 'nominal_geometry': base_joints must have shape \(6, 3\)"),
@@ -94,6 +93,6 @@ def test_bad_sidecar_names_file_and_field(tmp_path, edit, match):
 def test_missing_files(tmp_path):
     with pytest.raises(RecordingError, match="file not found"):
         read_recording(tmp_path / "none.csv")
-    (tmp_path / "a.csv").write_text("t_s,l1_mm\n")
+    (tmp_path / "a.csv").write_text(",".join(COLUMNS) + "\n")
     with pytest.raises(RecordingError, match="sidecar not found"):
         read_recording(tmp_path / "a.csv")
