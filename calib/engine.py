@@ -24,10 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as chi2_dist
 
 from ._validate import as_array
 from .noise import SensorNoise
 from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
+from .workspace import reachable_poses
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
            "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative"]
@@ -157,9 +159,9 @@ def _whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.nda
     return np.broadcast_to(np.diag(1.0 / std), (n, d, d)).copy()
 
 
-def _closure_std(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
-    """(N, C) standard deviation of each closure residual from the declared noise."""
-    jac = robot.closure_jacobians(theta, joints, poses)
+def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
+    """(N, C) standard deviation of each closure residual from the declared noise, given the
+    closure's :class:`~calib.robot.ClosureJacobians` at the residuals' configurations."""
     std = noise.pose_std(robot.pose_units)
     var = np.einsum("ncd,d->nc", jac.pose ** 2, std ** 2)
     var += noise.joint_std ** 2 * np.einsum("ncq->nc", jac.joints ** 2)
@@ -174,22 +176,21 @@ def _column_scaled_cond(A: np.ndarray) -> float:
 
 
 def _gauss_newton(fun, jac, x0, max_iter, xtol):
-    """Plain Gauss-Newton with a relative step test; returns (x, r, J, iterations, success, message)."""
+    """Plain Gauss-Newton with a relative step test; returns (x, iterations, success, message)."""
     x = x0.copy()
     for it in range(1, max_iter + 1):
-        r, J = fun(x), jac(x)
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step = np.linalg.lstsq(jac(x), -fun(x), rcond=None)[0]
         x = x + step
         if not np.all(np.isfinite(x)):
-            return x - step, r, J, it, False, "Gauss-Newton diverged (non-finite step)"
+            return x - step, it, False, "Gauss-Newton diverged (non-finite step)"
         if np.linalg.norm(step) <= max(xtol, 1e-12) * (1e-12 + np.linalg.norm(x)):
-            return x, fun(x), jac(x), it, True, f"Gauss-Newton step below xtol = {xtol:g}"
-    return x, fun(x), jac(x), max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
+            return x, it, True, f"Gauss-Newton step below xtol = {xtol:g}"
+    return x, max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
 
 
 def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
-    """Run a solver; returns (x, r, J, iterations, success, message); never raises on a
-    kinematics failure (returns the start then)."""
+    """Run a solver; returns (x, iterations, success, message); never raises on a kinematics
+    failure (returns the start then)."""
     def logged(x):
         f = fun(x)
         history.append(0.5 * float(f @ f))
@@ -199,10 +200,9 @@ def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
             return _gauss_newton(logged, jac, x0, max_iter, xtol)
         sol = least_squares(logged, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
                             max_nfev=max_iter * (x0.size + 1), x_scale="jac")
-        return sol.x, sol.fun, sol.jac, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
+        return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
     except (KinematicsError, np.linalg.LinAlgError) as exc:
-        return x0, fun(x0) if solver == "gn" else np.full(0, np.nan), None, 0, False, \
-            f"the fit left the workspace: {exc}"
+        return x0, 0, False, f"the fit left the workspace: {exc}"
 
 
 def _predicted(robot, theta, joints, measured) -> np.ndarray:
@@ -266,14 +266,14 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         return -np.einsum("nij,njk->nik", winv, jp).reshape(n * d, idx.size)
 
     history: list[float] = []
-    x, _, _, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, history)
+    x, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, history)
     theta = full(x)
     predicted = _predicted(robot, theta, joints, measured)
     res = measured - predicted
     cov = np.zeros((robot.n_parameters,) * 2)
     if np.all(np.isfinite(res)):
-        state["poses"] = predicted
-        J = jac(x)
+        jp = pose_jacobian_of_parameters(robot, theta, joints, predicted)[:, :, idx]
+        J = -np.einsum("nij,njk->nik", winv, jp).reshape(n * d, idx.size)
         r = np.einsum("nij,nj->ni", winv, res).ravel()
         chi2, cond = float(r @ r), np.array([_column_scaled_cond(J)])
         cov[np.ix_(idx, idx)] = np.linalg.pinv(J.T @ J, hermitian=True)
@@ -330,8 +330,11 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     if n < most:
         raise ValueError(f"measured must have at least {most} rows ({most} unknowns in one "
                          f"{robot.chain_word}), got {n}")
-    sigma = _closure_std(robot, theta0, joints, measured, noise)
-    w = 1.0 / np.maximum(sigma, 1e-12) if weighted else np.ones_like(sigma)
+    if weighted:
+        sigma = _closure_std(robot, robot.closure_jacobians(theta0, joints, measured), noise)
+        w = 1.0 / np.maximum(sigma, 1e-12)
+    else:
+        w = np.ones((n, robot.n_chains))
     theta = theta0.copy()
     history: list[float] = []
     cond = np.full(robot.n_chains, np.nan)
@@ -382,7 +385,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
             def jac(x, c=c, ix=ix, full=full):
                 return robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix] * w[:, c, None]
 
-            x, _, J, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
+            x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
             theta[ix] = x
             cond[c] = _column_scaled_cond(jac(x))
             iterations += it
@@ -391,7 +394,8 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         success, message = all(oks), "; ".join(messages)
         corrected = _predicted(robot, theta, joints, measured)
     r = robot.closure(theta, joints, measured)
-    J = robot.closure_jacobians(theta, joints, measured).parameters
+    jac_final = robot.closure_jacobians(theta, joints, measured)
+    J = jac_final.parameters
     cov = np.zeros((robot.n_parameters,) * 2)
     for c, ix in enumerate(chains):
         if not ix.size:
@@ -405,7 +409,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
             cov[np.ix_(ix, ix)] = float(rc @ rc) / dof * np.linalg.pinv(A.T @ A, hermitian=True)
         else:
             cov[np.ix_(ix, ix)] = np.nan
-    white = r / np.maximum(_closure_std(robot, theta, joints, measured, noise), 1e-12)
+    white = r / np.maximum(_closure_std(robot, jac_final, noise), 1e-12)
     chi2 = float(np.sum(white ** 2)) if noise_given else float("nan")
     dof_total = n * robot.n_chains - idx.size
     if noise_given and success and dof_total > 0:
@@ -419,8 +423,6 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
 
 def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
     """Whether a chi-square of whitened residuals is at the declared noise, in words."""
-    from scipy.stats import chi2 as chi2_dist
-
     limit = float(chi2_dist.ppf(1.0 - alpha, dof))
     ratio = np.sqrt(chi2 / dof)
     if chi2 <= limit:
@@ -460,8 +462,6 @@ def gauge_representative(robot: Robot, theta: np.ndarray, start: np.ndarray | No
     Returns:
         (P,) ``theta`` itself when the robot has no gauge parameters.
     """
-    from .workspace import reachable_poses
-
     if not robot.gauge_fixed:
         return np.array(theta, dtype=float)
     start = robot.table.nominal if start is None else start

@@ -66,8 +66,7 @@ class SensorNoise:
         A declared noise of zero is floored (``floor_mm``, ``floor_rad``): no sensor is exact,
         and a zero would make the weight infinite.
         """
-        std = self.std
-        return 1.0 / np.maximum(std, np.repeat([floor_mm, floor_rad], 3))
+        return 1.0 / self.pose_std(floor_mm=floor_mm, floor_rad=floor_rad)
 
     def sample(self, n: int, seed: int | np.random.Generator,
                units=("mm",) * 3 + ("rad",) * 3) -> np.ndarray:

@@ -44,13 +44,20 @@ def reachable_poses(robot, n: int, seed, *, bounds: np.ndarray | None = None,
     kept: list[np.ndarray] = []
     for _ in range(max_rounds):
         cand = b[:, 0] + rng.uniform(size=(max(n, 8), b.shape[0])) * (b[:, 1] - b[:, 0])
-        for pose in cand:
-            try:
-                q = robot.inverse_kinematics(theta, pose[None])[0]
-            except KinematicsError:
-                continue
-            if np.all((q >= limits[:, 0]) & (q <= limits[:, 1])):
-                kept.append(pose)
+        try:  # the whole draw at once; pose by pose only when some pose is out of reach
+            joints = robot.inverse_kinematics(theta, cand)
+            reached = cand
+        except KinematicsError:
+            reached, rows = [], []
+            for pose in cand:
+                try:
+                    rows.append(robot.inverse_kinematics(theta, pose[None])[0])
+                    reached.append(pose)
+                except KinematicsError:
+                    continue
+            joints = np.array(rows).reshape(-1, limits.shape[0])
+        inside = np.all((joints >= limits[:, 0]) & (joints <= limits[:, 1]), axis=1)
+        kept.extend(np.asarray(reached)[inside])
         if len(kept) >= n:
             return np.array(kept[:n]).reshape(n, robot.pose_dim)
     raise ValueError(f"fewer than {n} reachable poses found in the workspace {b.tolist()}")

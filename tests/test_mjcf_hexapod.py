@@ -1,3 +1,5 @@
+from operator import attrgetter
+
 import mujoco
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ def test_saved_default_model_is_current():
     assert (m.nu, m.neq, m.nsensor) == (fresh.nu, fresh.neq, fresh.nsensor) == (6, 6, 2)
     for field in ("body_pos", "body_quat", "site_pos", "actuator_gainprm", "actuator_biasprm", "eq_solref",
                   "body_mass", "opt.timestep"):
-        a, b = (np.asarray(eval(f"model.{field}", {}, {"model": x})) for x in (m, fresh))
+        a, b = (np.asarray(attrgetter(field)(x)) for x in (m, fresh))
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15, err_msg=field)
 
 
