@@ -31,7 +31,7 @@ import numpy as np
 
 from calib.robots.delta import Delta
 
-from .machine import GRAVITY_M_S2, HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, new_spec
 from .units import mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "ARM_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD",
@@ -113,15 +113,7 @@ def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = Machin
     kv = DEFAULT_DAMPING_NMS_PER_RAD if options.actuator_damping is None else options.actuator_damping
     platform_kg = DEFAULT_PLATFORM_MASS_KG if options.platform_mass_kg is None else options.platform_mass_kg
 
-    spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.degree = False
-    spec.option.timestep = step
-    spec.option.gravity = [0.0, 0.0, -GRAVITY_M_S2 if options.gravity else 0.0]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    spec.default.geom.contype = 0
-    spec.default.geom.conaffinity = 0
+    spec = new_spec(name, step, options.gravity)
     world = spec.worldbody
     world.add_geom(name="base", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0.0, 0.0, 0.01],
                    size=[float(np.linalg.norm(shoulders, axis=1).max()) + 0.02, 0.01, 0.0], rgba=[0.5, 0.5, 0.5, 0.5])

@@ -38,7 +38,7 @@ import numpy as np
 from calib.robots.hexapod import Hexapod
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import GRAVITY_M_S2, HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, new_spec
 from .units import M_PER_MM, mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "servo_damping", "DEFAULT_XML",
@@ -127,15 +127,7 @@ def build_spec(robot: Hexapod, theta: np.ndarray, options: MachineOptions = Mach
     step = integration_step(options)
     kp, kv = _stiffness(options), servo_damping(options)
 
-    spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.degree = False
-    spec.option.timestep = step
-    spec.option.gravity = [0.0, 0.0, -GRAVITY_M_S2 if options.gravity else 0.0]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-    spec.default.geom.contype = 0
-    spec.default.geom.conaffinity = 0
+    spec = new_spec(name, step, options.gravity)
     spec.visual.global_.offwidth = 1280
     spec.visual.global_.offheight = 960
     world = spec.worldbody

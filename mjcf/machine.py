@@ -29,7 +29,7 @@ from calib.rotation import euler_from_quaternion
 
 from .units import m_to_mm
 
-__all__ = ["MachineOptions", "MachineEffects", "Machine", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
+__all__ = ["MachineOptions", "MachineEffects", "Machine", "new_spec", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
 
 #: Name of the platform site whose frame is the pose.
 PLATFORM_SITE = "platform"
@@ -41,6 +41,22 @@ SENSOR_QUAT = "platform_quat"
 HOME_KEY = "home"
 #: Standard gravity, m/s^2 (the one place it is named).
 GRAVITY_M_S2 = 9.81
+
+
+def new_spec(name: str, timestep_s: float, gravity: bool) -> mujoco.MjSpec:
+    """An empty machine spec with the settings every builder shares: angles in radians, the
+    implicit-fast integrator, ``timestep_s``, gravity (``-GRAVITY_M_S2`` along base z) on or off,
+    contacts off (geoms collide with nothing by default)."""
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.degree = False
+    spec.option.timestep = timestep_s
+    spec.option.gravity = [0.0, 0.0, -GRAVITY_M_S2 if gravity else 0.0]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec.default.geom.contype = 0
+    spec.default.geom.conaffinity = 0
+    return spec
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ import numpy as np
 from calib.robots.rus import RotaryHexapod, crank_frames
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import GRAVITY_M_S2, HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, new_spec
 from .units import mm_to_m
 
 __all__ = ["build_machine", "DEFAULT_STIFFNESS_NM_PER_RAD", "MOTOR_ARMATURE_KG_M2", "DEFAULT_PLATFORM_MASS_KG"]
@@ -82,12 +82,7 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
     omega = float(np.sqrt(kp / crank_inertia.min()))
     step = o.timestep if omega * o.timestep <= 1.0 else 0.3 / omega  # the explicit stiffness stays stable
 
-    spec = mujoco.MjSpec()
-    spec.modelname = "rus"
-    spec.option.timestep = step
-    spec.option.gravity = [0.0, 0.0, -GRAVITY_M_S2 if o.gravity else 0.0]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec = new_spec("rus", step, o.gravity)
     world = spec.worldbody
     world.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[float(np.linalg.norm(M, axis=1).max()) + 0.03, 0.005, 0],
                    pos=[0, 0, float(M[:, 2].min()) - 0.03], contype=0, conaffinity=0, rgba=[0.25, 0.25, 0.3, 1])
