@@ -184,7 +184,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
         sim = _simulate(robot, settings, noise, progress)
         actual, injected, scenario = sim["actual"], sim["errors"], sim["scenario"]
-        joints, measured = sim["cal"].joints, sim["cal"].measured
+        joints, measured = sim["cal"].encoders, sim["cal"].measured
         cal_rows = np.arange(len(measured))
     nominal = robot.table.nominal
     split["simulate"] = time.perf_counter() - t0
@@ -200,7 +200,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                       "stiffness": settings.stiffness, "friction": settings.friction}
         recording = Recording(
             robot=robot, noise=noise, t_s=np.concatenate([p.t_s for p in parts]),
-            joints=np.vstack([p.joints for p in parts]), measured=np.vstack([p.measured for p in parts]),
+            joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
             sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
             meta={"scenario": scenario, "seed": settings.seed, "simulation": simulation})
         csv_path, json_path = write_recording(out / f"{name}.csv", recording, overwrite=settings.overwrite)

@@ -32,8 +32,12 @@ class Measurements:
     Attributes:
         t_s: (N,) time of each measurement, s (simulated, or the ``times_s`` given).
         commanded: (N, C) commanded joint values, robot joint unit (mm or rad).
-        joints: (N, C) joint values the machine reports: the settled actuated joints (its
-            encoders) plus seeded joint noise, robot joint unit.
+        settled_joints: (N, C) where the actuated joints came to rest (no noise), robot joint
+            unit: the command moved by load (servo compliance), friction, drift, screw error and
+            transmission scale.
+        encoders: (N, C) the joint values the machine reports: its encoders sit on the motors,
+            ahead of the servo's and the transmission's compliance, so they read the command,
+            plus seeded joint noise; robot joint unit. What a recording holds and calibration uses.
         true_poses: (N, D) settled platform poses before sensor noise, mm and rad, base frame.
         measured: (N, D) measured poses (true + seeded noise), mm and rad, base frame.
         steps: (N,) simulation steps each pose took to settle.
@@ -41,7 +45,8 @@ class Measurements:
 
     t_s: np.ndarray
     commanded: np.ndarray
-    joints: np.ndarray
+    settled_joints: np.ndarray
+    encoders: np.ndarray
     true_poses: np.ndarray
     measured: np.ndarray
     steps: np.ndarray
@@ -182,6 +187,7 @@ class Testbed:
             if progress is not None:
                 progress(k + 1, n)
         measured = true + self.noise.sample(n, self._rng, self.robot.pose_units)
+        encoders = joints.copy()
         if self.noise.joint > 0:
-            read = read + self.noise.sample_joints(n, c, self._rng)
-        return Measurements(t, joints.copy(), read, true, measured, steps)
+            encoders += self.noise.sample_joints(n, c, self._rng)
+        return Measurements(t, joints.copy(), read, encoders, true, measured, steps)

@@ -77,7 +77,7 @@ def test_home_keyframe_closes_the_chains_at_the_home_position():
 
 def test_settled_plate_matches_the_forward_kinematics(measured):
     """MuJoCo against calib's forward kinematics of the injected parameters (mm)."""
-    np.testing.assert_allclose(measured.joints, measured.commanded, atol=1e-10)
+    np.testing.assert_allclose(measured.settled_joints, measured.commanded, atol=1e-10)
     fk = ROBOT.forward_kinematics(TRUE, measured.commanded)
     assert np.abs(measured.true_poses - fk).max() <= 1e-6
     np.testing.assert_array_equal(measured.measured, measured.true_poses)  # noise-free
@@ -89,9 +89,9 @@ def test_identification_through_mujoco_noise_free(measured, method):
     """Identified = injected (canonical: Lay held at 0) to 1e-5 mm / 1e-7 rad."""
     noise = SensorNoise(position_mm=1e-3, distribution="normal")
     if method == "forward":
-        res = identify_forward(ROBOT, measured.joints, measured.measured, noise)
+        res = identify_forward(ROBOT, measured.encoders, measured.measured, noise)
     else:
-        res = identify_chainwise(ROBOT, measured.joints, measured.measured, noise, solver="lm")
+        res = identify_chainwise(ROBOT, measured.encoders, measured.measured, noise, solver="lm")
     assert res.success, res.message
     truth = canonical_params(ROBOT.params(TRUE)).to_vector()
     err = np.abs(res.theta - truth)
@@ -106,11 +106,11 @@ def test_noise_is_seeded():
     b = Testbed(ROBOT, TRUE, noise=noise, seed=9).measure(q)
     c = Testbed(ROBOT, TRUE, noise=noise, seed=10).measure(q)
     np.testing.assert_array_equal(a.measured, b.measured)
-    np.testing.assert_array_equal(a.joints, b.joints)
+    np.testing.assert_array_equal(a.encoders, b.encoders)
     assert not np.array_equal(a.measured, c.measured)
     rng = np.random.default_rng(9)
     np.testing.assert_allclose(a.measured - a.true_poses, noise.sample(3, rng, ROBOT.pose_units), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(a.joints - q, noise.sample_joints(3, 3, rng), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.encoders - q, noise.sample_joints(3, 3, rng), rtol=0, atol=1e-12)
 
 
 def test_friction_dead_band_and_transmission_scale_on_the_arms():
@@ -119,12 +119,12 @@ def test_friction_dead_band_and_transmission_scale_on_the_arms():
     m = Testbed(ROBOT, TRUE, options=MachineOptions(joint_friction=friction)).measure(q)
     home = ROBOT.inverse_kinematics(TRUE, ROBOT.home_pose[None])[0]
     direction = np.sign(np.diff(np.vstack([home, q]), axis=0))
-    np.testing.assert_allclose(q - m.joints, direction * friction / DEFAULT_STIFFNESS_NM_PER_RAD, atol=1e-9)
-    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.joints), atol=1e-6)
+    np.testing.assert_allclose(q - m.settled_joints, direction * friction / DEFAULT_STIFFNESS_NM_PER_RAD, atol=1e-9)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.settled_joints), atol=1e-6)
     s = np.array([1e-3, -2e-3, 5e-4])
     m = Testbed(ROBOT, TRUE, options=MachineOptions(transmission_scale=tuple(s))).measure(q)
-    np.testing.assert_allclose(m.joints, (1 + s) * q, atol=1e-10)
-    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.joints), atol=1e-6)
+    np.testing.assert_allclose(m.settled_joints, (1 + s) * q, atol=1e-10)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(TRUE, m.settled_joints), atol=1e-6)
 
 
 def test_gravity_and_payload_pull_the_plate_down():

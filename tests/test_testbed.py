@@ -29,7 +29,7 @@ def test_gravity_off_settled_pose_equals_forward_kinematics_on_100_poses():
     assert np.abs(m.true_poses[:, :3] - fk[:, :3]).max() <= 1e-6  # mm
     assert np.abs(m.true_poses[:, 3:] - fk[:, 3:]).max() <= 1e-9  # rad
     np.testing.assert_array_equal(m.measured, m.true_poses)  # no noise declared
-    np.testing.assert_allclose(m.joints, commanded, atol=1e-6)  # unloaded servos sit at their command
+    np.testing.assert_allclose(m.settled_joints, commanded, atol=1e-6)  # unloaded servos sit at their command
     np.testing.assert_array_equal(m.commanded, commanded)
     assert np.all(np.diff(m.t_s) > 0) and m.steps.min() > 5
 
@@ -45,14 +45,15 @@ def test_noise_is_seeded_and_is_the_declared_stream():
     # The pose noise is the seed's first draw (as the hexapod testbed has always drawn it).
     np.testing.assert_allclose(a.measured - a.true_poses, noise.sample(5, np.random.default_rng(7), ROBOT.pose_units),
                                rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(a.joints, b.joints)  # no joint noise declared: none drawn
+    np.testing.assert_array_equal(a.encoders, a.commanded)  # no joint noise declared: none drawn
     # Joint noise comes after the pose noise, from the same stream.
     jn = SensorNoise(0.001, 1e-6, joint=1e-4)
     d = Testbed(ROBOT, ACTUAL, noise=jn, seed=7).measure(commanded)
     rng = np.random.default_rng(7)
     np.testing.assert_allclose(d.measured - d.true_poses, jn.sample(5, rng, ROBOT.pose_units), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(d.joints - a.joints, jn.sample_joints(5, 6, rng), rtol=0, atol=1e-12)
-    assert 0 < np.abs(d.joints - a.joints).max() <= 1e-4
+    np.testing.assert_allclose(d.encoders - commanded, jn.sample_joints(5, 6, rng), rtol=0, atol=1e-12)
+    assert 0 < np.abs(d.encoders - commanded).max() <= 1e-4
+    np.testing.assert_array_equal(d.settled_joints, a.settled_joints)  # the noise is the encoders', not the machine's
 
 
 def test_gravity_and_payload_make_the_platform_sag():
@@ -62,7 +63,7 @@ def test_gravity_and_payload_make_the_platform_sag():
     # 5 kg + 2 kg platform on six legs of 2e5 N/m: of order 0.1 mm down.
     assert np.all(sag < -0.03) and np.all(sag > -0.3)
     # The legs are compressed: they read shorter than commanded.
-    assert np.all(m.joints < m.commanded)
+    assert np.all(m.settled_joints < m.commanded)
 
 
 def test_friction_leaves_a_dead_band_of_friction_over_stiffness_against_the_last_move():
@@ -74,25 +75,25 @@ def test_friction_leaves_a_dead_band_of_friction_over_stiffness_against_the_last
     direction = np.array([[1.0] * 6, [1.0] * 6, [-1.0] * 6, [1.0] * 3 + [-1.0] * 3])
     bed = Testbed(ROBOT, ACTUAL, options=MachineOptions(actuator_stiffness=stiffness, joint_friction=friction))
     m = bed.measure(home + steps)
-    np.testing.assert_allclose(m.commanded - m.joints, direction * band_mm, atol=1e-7)
+    np.testing.assert_allclose(m.commanded - m.settled_joints, direction * band_mm, atol=1e-7)
     # The platform is where the kinematics of the legs' actual lengths put it.
-    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.settled_joints), atol=1e-6)
 
 
 def test_thermal_drift_and_screw_error_enter_the_servo_reference():
     commanded = commands(4, 5)
     times = np.array([0.0, 10.0, 20.0, 30.0])
     drift = Testbed(ROBOT, ACTUAL, effects=MachineEffects(joint_drift_per_s=1e-4)).measure(commanded, times_s=times)
-    np.testing.assert_allclose(drift.joints - commanded, 1e-4 * times[:, None] * np.ones(6), atol=1e-7)
+    np.testing.assert_allclose(drift.settled_joints - commanded, 1e-4 * times[:, None] * np.ones(6), atol=1e-7)
     np.testing.assert_array_equal(drift.t_s, times)
     amp, phase, pitch = np.linspace(1e-3, 6e-3, 6), np.linspace(0, 3, 6), 4.0
     screw = Testbed(ROBOT, ACTUAL, effects=MachineEffects(screw_amplitude=amp, screw_phase_rad=phase,
                                                           screw_pitch=pitch)).measure(commanded)
     expected = amp * np.sin(2 * np.pi * (commanded - ROBOT.home_lengths) / pitch + phase)
-    np.testing.assert_allclose(screw.joints - commanded, expected, atol=1e-7)
+    np.testing.assert_allclose(screw.settled_joints - commanded, expected, atol=1e-7)
     # In both, the pose follows the legs' actual lengths.
     for m in (drift, screw):
-        np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
+        np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.settled_joints), atol=1e-6)
 
 
 def test_transmission_scale_moves_the_legs_1_plus_s_times_the_stroke():
@@ -100,8 +101,8 @@ def test_transmission_scale_moves_the_legs_1_plus_s_times_the_stroke():
     commanded = commands(3, 6)
     m = Testbed(ROBOT, ACTUAL, options=MachineOptions(transmission_scale=tuple(s))).measure(commanded)
     home = ROBOT.home_lengths
-    np.testing.assert_allclose(m.joints - home, (1 + s) * (commanded - home), atol=1e-7)
-    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.joints), atol=1e-6)
+    np.testing.assert_allclose(m.settled_joints - home, (1 + s) * (commanded - home), atol=1e-7)
+    np.testing.assert_allclose(m.true_poses, ROBOT.forward_kinematics(ACTUAL, m.settled_joints), atol=1e-6)
 
 
 def test_step_cap_raises_a_clear_error():
