@@ -20,7 +20,7 @@ from calib.engine import IdentificationResult, gauge_representative, identify, i
 from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
-from calib.robot import KinematicsError, Robot
+from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
 
@@ -225,6 +225,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         t2 = time.perf_counter()
         try:
             compensated = robot.inverse_kinematics(result.theta, sim["heldout"])
+            check_joint_limits(robot, compensated, "held-out pose")
         except KinematicsError as exc:
             raise ValueError(
                 f"the identified model cannot command the held-out poses ({exc}); its geometry is "
