@@ -29,6 +29,7 @@ viewer's only font has no emoji and it stops on a missing glyph.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,7 @@ __all__ = [
     "APP_IDS", "MACHINE_COLORS", "chain_color", "chain_colors", "magnitude_colors", "magnification",
     "log_named_bars", "log_plot", "log_residual_scatter", "log_series_by_pose", "chart_view",
     "log_calibration_run", "blueprint", "summary_markdown", "save_recording", "rrd_entities",
-    "rrd_application_ids",
+    "rrd_application_ids", "rrd_blueprint", "empty_views", "rrd_labels", "run_eye", "run_magnification",
 ]
 
 #: One application id per tool: the viewer keeps one layout per application id.
@@ -103,6 +104,11 @@ def magnification(departure_mm: float, size_mm: float) -> float:
 
 def _fmt(v: float) -> str:
     return f"{v:.4g}" if 1e-3 <= abs(v) < 1e5 or v == 0 else f"{v:.2e}"
+
+
+def _slug(label: str) -> str:
+    """An entity path part from a label (``delta BIC`` -> ``delta_BIC``)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", label).strip("_") or "series"
 
 
 def _text(rec: rr.RecordingStream, path: str, xy, labels, color=TEXT_COLOR) -> None:
@@ -216,7 +222,7 @@ def log_named_bars(rec: rr.RecordingStream, path: str, names, series, *, unit: s
                 ticks.append(("+" if t > 0 else "") + _fmt(t) if abs(t) > 1e-12 * full else "0")
     for s, (label, _, color) in enumerate(series):
         strips, labels, _ = bars[s]
-        rec.log(f"{path}/bars/{label.replace(' ', '_')}", rr.LineStrips2D(strips, radii=thick / 2, colors=color,
+        rec.log(f"{path}/bars/{_slug(label)}", rr.LineStrips2D(strips, radii=thick / 2, colors=color,
                 labels=labels, show_labels=False), static=True)
     rec.log(f"{path}/grid", rr.LineStrips2D(grid, radii=0.5, colors=GRID_COLOR), static=True)
     if whisk:
@@ -306,12 +312,12 @@ def log_plot(rec: rr.RecordingStream, path: str, series, *, x_label: str, y_labe
         keep = np.all(np.isfinite(pts), axis=1)
         col = np.asarray(color)
         col = col[keep] if col.ndim == 2 else col
-        rec.log(f"{path}/series/{label.replace(' ', '_')}",
+        rec.log(f"{path}/series/{_slug(label)}",
                 rr.Points2D(pts[keep], radii=2.5, colors=col, labels=[label] * int(keep.sum()), show_labels=False),
                 static=True)
         if lines and keep.sum() > 1:
             order = np.argsort(np.asarray(x, float)[keep])
-            rec.log(f"{path}/series/{label.replace(' ', '_')}/line",
+            rec.log(f"{path}/series/{_slug(label)}/line",
                     rr.LineStrips2D([pts[keep][order]], radii=0.8, colors=col if col.ndim == 1 else TEXT_COLOR),
                     static=True)
     if len(marks):
@@ -644,3 +650,74 @@ def rrd_application_ids(path: str | Path) -> set[str]:
 
     r = RrdReader(str(path))
     return {x.application_id for x in list(r.recordings()) + list(r.blueprints())}
+
+
+# -- reading a file back (tests, checks) -----------------------------------------------------------
+def _timelines(batch) -> set[str]:
+    return {n for n in batch.schema.names if ":" not in n and not n.startswith("rerun.")}
+
+
+def rrd_blueprint(path: str | Path) -> dict:
+    """The default blueprint of an ``.rrd``: ``{"views": [{"class", "name", "origin"}], "timeline"}``
+    (``timeline``: the one active at open, or None)."""
+    from rerun.chunk import RrdReader
+
+    r = RrdReader(str(path))
+    views, timeline = {}, None
+    for bp in r.blueprints():
+        for c in r.stream(store=bp).to_chunks():
+            b = c.to_record_batch()
+            ep = str(c.entity_path)
+            cols = set(b.schema.names)
+            if "TimePanelBlueprint:timeline" in cols:
+                timeline = b.column("TimePanelBlueprint:timeline").to_pylist()[-1][0]
+            if "ViewBlueprint:class_identifier" in cols:
+                last = lambda n: b.column(n).to_pylist()[-1][0]  # noqa: E731
+                views[ep] = {"class": last("ViewBlueprint:class_identifier"),
+                             "name": last("ViewBlueprint:display_name"),
+                             "origin": last("ViewBlueprint:space_origin")}
+    return {"views": list(views.values()), "timeline": timeline}
+
+
+#: Components that style a view's data but are no data themselves.
+STYLE_ONLY = ("SeriesLines:", "SeriesPoints:", "ViewCoordinates:")
+
+
+def empty_views(path: str | Path) -> list[str]:
+    """Names of the blueprint's views that show nothing when the file opens: no data under their
+    origin that is static or on the timeline active at open (a time series needs scalars on it)."""
+    from rerun.chunk import RrdReader
+
+    bp = rrd_blueprint(path)
+    tl = bp["timeline"]
+    chunks = []
+    for c in RrdReader(str(path)).stream().to_chunks():
+        b = c.to_record_batch()
+        comps = [n for n in b.schema.names if ":" in n and not n.startswith(STYLE_ONLY)]
+        if comps and b.num_rows:
+            chunks.append((str(c.entity_path), c.is_static, _timelines(b), comps))
+    out = []
+    for v in bp["views"]:
+        root = "/" + v["origin"].strip("/")
+        mine = [ch for ch in chunks if ch[0] == root or ch[0].startswith(root + "/") or root == "/"]
+        if v["class"] == "TimeSeries":
+            ok = any(not st and tl in tls and any(x.startswith("Scalars:") for x in comps)
+                     for _, st, tls, comps in mine)
+        else:
+            ok = any(st or tl in tls for _, st, tls, _ in mine)
+        if not ok:
+            out.append(v["name"])
+    return out
+
+
+def rrd_labels(path: str | Path, entity: str) -> list[str]:
+    """The labels logged on ``entity`` (e.g. the names on a chart's bars)."""
+    from rerun.chunk import RrdReader
+
+    for c in RrdReader(str(path)).stream().to_chunks():
+        if str(c.entity_path) == entity:
+            b = c.to_record_batch()
+            for n in b.schema.names:
+                if n.endswith(":labels"):
+                    return [str(x) for x in b.column(n).to_pylist()[-1]]
+    raise KeyError(f"no labels on {entity} in {path}")
