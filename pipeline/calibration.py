@@ -300,7 +300,8 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
 
     t3 = time.perf_counter()
     from calib.observability import analyze_observability
-    from pipeline.rerun_log import log_calibration_run, save_recording, summary_markdown
+    from pipeline.rerun_log import (APP_IDS, blueprint, log_calibration_run, run_eye, run_magnification,
+                                    save_recording, summary_markdown)
 
     analysis = analyze_observability(robot, result.start, measured, noise)
     summary["observability"] = {"condition_number": float(analysis.condition_number),
@@ -311,14 +312,22 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     except KinematicsError:
         predicted = measured
 
+    magnified = run_magnification(robot, nominal, actual, result.theta, targets, measured)
+    history_label = "max dQint (mm)" if (settings.method == "chainwise" and solver == "gn") else "cost"
+    flagged_index = [int(np.flatnonzero(cal_rows == f - 1)[0]) for f in flagged]
+
     def log(stream):
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
                             predicted=predicted, history=result.history, heldout_before=heldout_before,
                             heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
-                            observability=analysis)
+                            observability=analysis, flagged=flagged_index, history_label=history_label,
+                            magnified=magnified)
 
-    paths["rrd"] = str(save_recording(out / f"{name}.rrd", log, overwrite=settings.overwrite))
+    bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
+                   has_heldout=heldout_before is not None, history_label=history_label)
+    paths["rrd"] = str(save_recording(out / f"{name}.rrd", log, application_id=APP_IDS["run"],
+                                      overwrite=settings.overwrite, bp=bp))
     split["log"] = time.perf_counter() - t3
     summary.update(paths)
     summary["wall_time_s"] = time.perf_counter() - t0

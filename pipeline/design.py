@@ -360,17 +360,17 @@ def _write_rrd(path: str, robot: Robot, analysis, reference, poses: np.ndarray, 
     import rerun.blueprint as rrb
 
     from pipeline.obs_log import log_observability, observability_views
-    from pipeline.rerun_log import save_recording
+    from pipeline.rerun_log import APP_IDS, save_recording
 
-    views = [observability_views("design/observability", "Designed poses")]
+    views = [observability_views("design/observability", "Designed poses", per_parameter=True)]
     if reference is not None:
-        views.append(observability_views("reference_poses/observability", "Reference poses"))
-    bp = rrb.Blueprint(rrb.Vertical(
-        rrb.Horizontal(
+        views.append(observability_views("reference_poses/observability", "Reference poses", per_parameter=True))
+    bp = rrb.Blueprint(rrb.Horizontal(
+        rrb.Vertical(
             rrb.Spatial3DView(origin="design/poses", name="Designed pose positions (mm)"),
             rrb.Spatial3DView(origin="design/pose_uncertainty",
                               name="Predicted position error RMS after calibration (radius, um)"),
-        ), *views))
+        ), *views), collapse_panels=True)
 
     def log(rec):
         rec.log("design/poses", rr.Points3D(position_columns(robot, poses), radii=2.0), static=True)
@@ -384,7 +384,7 @@ def _write_rrd(path: str, robot: Robot, analysis, reference, poses: np.ndarray, 
                               title=f"Reference poses ({robot.name})")
 
     try:
-        save_recording(path, log, application_id="parallel-calib-design", overwrite=overwrite, bp=bp)
+        save_recording(path, log, application_id=APP_IDS["design"], overwrite=overwrite, bp=bp)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
 

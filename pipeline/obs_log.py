@@ -9,6 +9,11 @@ Reusable by every pipeline command: :func:`log_observability` writes, under ``pr
   undetermined parameter is logged as 0 and named in the report. Rerun's bar charts carry no
   per-bar labels, so the entity also holds a ``parameter_names`` component (the bars' names, in
   order; shown in the viewer's selection panel);
+* ``{prefix}/combinations``: the worst-determined parameter combinations, each bar NAMED by its
+  combination (``0.71 B1.z - 0.70 dl1``), length its standard deviation (um); the combinations
+  that are not identifiable at all are named in the report;
+* every bar chart logged with names (:func:`log_bars`) is also drawn as a named chart in 2D
+  (``{path}/bars``, ``{path}/names``...; see :func:`pipeline.rerun_log.log_named_bars`);
 * ``{prefix}/report``: a markdown document with the indices, the condition numbers, the weakest
   and the not identifiable parameter combinations and the per-parameter table.
 
@@ -23,7 +28,7 @@ import rerun.blueprint as rrb
 
 from calib.observability import ObservabilityAnalysis
 
-__all__ = ["log_observability", "log_bars", "observability_markdown", "observability_views"]
+__all__ = ["log_observability", "log_bars", "log_combinations", "observability_markdown", "observability_views"]
 
 
 def _fmt(x: float) -> str:
@@ -67,9 +72,11 @@ def observability_markdown(analysis: ObservabilityAnalysis, *, title: str = "Obs
     return "\n".join(lines) + "\n"
 
 
-def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None) -> None:
+def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None, *, unit: str = "",
+             title: str = "", groups=None, group_names=None) -> None:
     """A static bar chart of finite values (non-finite entries logged as 0); ``names`` (one per
-    bar) are logged beside it as a ``parameter_names`` component."""
+    bar) are logged beside it as a ``parameter_names`` component, and the bars are drawn again,
+    named, under ``path`` for a :func:`pipeline.rerun_log.chart_view`."""
     v = np.asarray(values, dtype=float)
     extra = []
     if names is not None:
@@ -78,6 +85,11 @@ def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None)
             raise ValueError(f"names must have one entry per bar ({v.size}), got {len(names)}")
         extra.append(rr.AnyValues(parameter_names=names))
     rec.log(path, rr.BarChart(np.where(np.isfinite(v), v, 0.0)), *extra, static=True)
+    if names is not None:
+        from .rerun_log import log_named_bars
+
+        log_named_bars(rec, path, names, [("value", v, (50, 150, 235))], unit=unit, title=title,
+                       groups=groups, group_names=group_names)
 
 
 def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, prefix: str = "observability",
@@ -96,18 +108,33 @@ def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, 
     log_bars(rec, f"{prefix}/singular_values", s)
     with np.errstate(divide="ignore"):
         log_bars(rec, f"{prefix}/log10_singular_values", np.log10(s))
-    log_bars(rec, f"{prefix}/crb_std_mm", analysis.crb_std_mm, analysis.names)
+    log_bars(rec, f"{prefix}/crb_std_mm", analysis.crb_std_mm, analysis.names, unit="mm",
+             title="Cramer-Rao std per parameter")
+    log_combinations(rec, f"{prefix}/combinations", analysis)
     rec.log(f"{prefix}/report",
             rr.TextDocument(observability_markdown(analysis, title=title), media_type=rr.MediaType.MARKDOWN),
             static=True)
 
 
-def observability_views(prefix: str = "observability", name: str = "Observability") -> rrb.Container:
-    """Blueprint views of what :func:`log_observability` writes."""
-    return rrb.Horizontal(
-        rrb.Vertical(
-            rrb.BarChartView(origin=f"{prefix}/log10_singular_values", name=f"{name}: log10 singular values"),
-            rrb.BarChartView(origin=f"{prefix}/crb_std_mm", name=f"{name}: CRB std per parameter (mm)"),
-        ),
-        rrb.TextDocumentView(origin=f"{prefix}/report", name=f"{name}: report"),
-    )
+def log_combinations(rec: rr.RecordingStream, path: str, analysis: ObservabilityAnalysis, k: int = 6) -> None:
+    """The ``k`` worst-determined combinations as bars named by the combination (std in um)."""
+    from .rerun_log import log_named_bars
+
+    combos = analysis.weakest_combinations(min(k, analysis.n_free), n_terms=3)[::-1]  # best of them first
+    names = [c["combination"] + ("" if c["determined"] else " (not identifiable)") for c in combos]
+    std = np.array([c["std_mm"] * 1e3 if c["determined"] else np.nan for c in combos])
+    log_named_bars(rec, path, names, [("std", std, (235, 205, 60))], unit="um",
+                   title="worst-determined combinations (std)", names_above=True, rows_per_column=k)
+
+
+def observability_views(prefix: str = "observability", name: str = "Observability", *,
+                        per_parameter: bool = False) -> rrb.Container:
+    """Blueprint views of what :func:`log_observability` writes: the named weakest combinations
+    (and with ``per_parameter`` the named CRB bars) above the report."""
+    from .rerun_log import chart_view
+
+    views = [chart_view(f"{prefix}/combinations", f"{name}: worst-determined parameter combinations")]
+    if per_parameter:
+        views.append(chart_view(f"{prefix}/crb_std_mm", f"{name}: Cramer-Rao std per parameter (mm)"))
+    views.append(rrb.TextDocumentView(origin=f"{prefix}/report", name=f"{name}: report"))
+    return rrb.Vertical(*views)

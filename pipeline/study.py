@@ -441,27 +441,31 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
     import rerun.blueprint as rrb
 
     from pipeline.obs_log import log_bars, log_observability, observability_views
-    from pipeline.rerun_log import save_recording
+    from pipeline.rerun_log import APP_IDS, chart_view, save_recording
 
     names = list(analysis.names)
-    views = [observability_views("study/observability", "Calibration poses")]
+    views = [observability_views("study/observability", "Calibration poses", per_parameter=True)]
     for m in results:
-        views.append(rrb.Horizontal(
-            rrb.BarChartView(origin=f"study/{m}/mse_over_crb", name=f"{m}: MSE / CRB per parameter"),
-            rrb.BarChartView(origin=f"study/{m}/empirical_std_mm", name=f"{m}: empirical std per parameter (mm)"),
-            rrb.TimeSeriesView(origin=f"study/{m}/heldout_position_um", name=f"{m}: held-out position error (um)"),
+        views.append(rrb.Vertical(
+            chart_view(f"study/{m}/mse_over_crb", f"{m}: MSE / CRB per parameter"),
+            chart_view(f"study/{m}/empirical_std_mm", f"{m}: empirical std per parameter (mm)"),
+            rrb.TimeSeriesView(origin=f"study/{m}/heldout_position_um", name=f"{m}: held-out position error (um) per trial"),
+            row_shares=[2, 2, 1],
         ))
-    bp = rrb.Blueprint(rrb.Vertical(rrb.TextDocumentView(origin="study/summary", name="Summary"), *views))
+    bp = rrb.Blueprint(rrb.Horizontal(rrb.TextDocumentView(origin="study/summary", name="Summary"), *views),
+                       rrb.TimePanel(timeline="trial", play_state="paused", state="collapsed"), collapse_panels=True)
 
     def log(rec):
         log_observability(rec, analysis, "study/observability", title=f"Calibration poses ({summary['robot']})")
         rec.log("study/summary", rr.TextDocument(_markdown(summary), media_type=rr.MediaType.MARKDOWN), static=True)
         for m, r in results.items():
             f = figures[m]
-            log_bars(rec, f"study/{m}/mse_over_crb", np.array([f["mse_over_crb"][n] for n in names]), names)
+            log_bars(rec, f"study/{m}/mse_over_crb", np.array([f["mse_over_crb"][n] for n in names]), names,
+                     unit="1 (MSE / CRB)", title=f"{m}: MSE / CRB")
             # An angle's std as the length it moves at the machine's size, like crb_std_mm.
             log_bars(rec, f"study/{m}/empirical_std_mm",
-                     np.array([f["empirical_std"][n] for n in names]) * analysis.scale, names)
+                     np.array([f["empirical_std"][n] for n in names]) * analysis.scale, names, unit="mm",
+                     title=f"{m}: empirical std")
             hp = r["heldout_position_mm"]
             if not np.all(np.isnan(hp)):
                 rec.send_columns(f"study/{m}/heldout_position_um",
@@ -469,7 +473,7 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
                                  columns=rr.Scalars.columns(scalars=hp * 1e3))
 
     try:
-        save_recording(path, log, application_id="parallel-calib-study", overwrite=overwrite, bp=bp)
+        save_recording(path, log, application_id=APP_IDS["study"], overwrite=overwrite, bp=bp)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
 

@@ -15,10 +15,10 @@ from pipeline.run import main, run
 
 EXPECTED_ENTITIES = {
     "/machine/nominal/chains", "/machine/actual/chains", "/machine/calibrated/chains", "/machine/actual/platform",
-    "/machine/error_x1000", "/calibration/max_dqint", "/heldout/position_error_um/before",
-    "/heldout/position_error_um/after", "/heldout/orientation_error_urad/after",
-    "/parameters/injected", "/parameters/identified", "/parameters/difference", "/summary",
-    "/observability/singular_values", "/observability/crb_std_mm",
+    "/machine/errors/before", "/machine/errors/after", "/convergence/log10", "/convergence/chart/series/max_dQint_mm",
+    "/heldout/position_error_um", "/heldout/orientation_error_urad", "/residuals/before_um", "/residuals/after_um",
+    "/parameters/chart/bars/injected", "/parameters/chart/bars/identified", "/summary", "/key",
+    "/observability/singular_values", "/observability/crb_std_mm", "/observability/combinations/names",
 }
 
 

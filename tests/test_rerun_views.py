@@ -1,0 +1,127 @@
+"""The Rerun files read back: every view of the default blueprint shows data on the timeline active
+at open, parameter bars carry names, each tool has its own application id, the snapshot command."""
+
+import numpy as np
+import pytest
+import rerun as rr
+import rerun.blueprint as rrb
+
+from calib.robots import ROBOTS, default_robot
+from pipeline.rerun_log import (APP_IDS, chart_view, empty_views, log_named_bars, log_residual_scatter,
+                                rrd_application_ids, rrd_blueprint, rrd_entities, rrd_labels, save_recording)
+from pipeline.run import run
+
+
+@pytest.fixture(autouse=True)
+def _home(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))  # rerun writes analytics under HOME
+
+
+@pytest.fixture(scope="module", params=sorted(ROBOTS))
+def robot_run(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp(f"run_{request.param}")
+    res = run(["--robot", request.param, "--heldout", "5", "--out", str(out), "--name", "r", "--quiet"])
+    return request.param, out / "r.rrd", res
+
+
+def test_every_view_has_data_on_the_timeline_active_at_open(robot_run):
+    name, rrd, _ = robot_run
+    bp = rrd_blueprint(rrd)
+    assert bp["timeline"] == "pose"
+    classes = {v["class"] for v in bp["views"]}
+    assert {"3D", "TimeSeries", "2D", "TextDocument"} <= classes
+    assert empty_views(rrd) == []
+    ents = rrd_entities(rrd)
+    for e in ("/machine/nominal/chains", "/machine/actual/chains", "/machine/calibrated/chains",
+              "/machine/errors/before", "/residuals/before_um", "/residuals/after_um", "/key", "/summary",
+              "/heldout/position_error_um", "/convergence/log10", "/observability/combinations/names"):
+        assert e in ents, e
+
+
+def test_parameter_bars_are_named_identified_beside_injected(robot_run):
+    name, rrd, res = robot_run
+    names = list(default_robot(name).table.names)
+    for series in ("identified", "injected"):
+        assert rrd_labels(rrd, f"/parameters/chart/bars/{series}") == names
+    assert rrd_labels(rrd, "/parameters/chart/names") == names
+    assert "/parameters/chart/sigma2" in rrd_entities(rrd)  # +-2 sigma whiskers
+    combos = rrd_labels(rrd, "/observability/combinations/names")
+    assert combos and all(any(n in c for n in names) for c in combos)  # combinations named by parameter
+
+
+def test_summary_is_markdown_tables_with_short_lines(robot_run):
+    from rerun.chunk import RrdReader
+
+    _, rrd, _ = robot_run
+    chunk = next(c for c in RrdReader(str(rrd)).stream().to_chunks() if str(c.entity_path) == "/summary")
+    text = chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    assert "| held-out | before | after | max after |" in text
+    table_rows = [ln for ln in text.splitlines() if ln.startswith("|")]
+    assert table_rows and max(len(ln) for ln in table_rows) < 90
+    assert text.isascii() or set(text) - set(map(chr, range(128))) <= set("±×µσ")
+
+
+def test_a_view_without_data_on_the_active_timeline_is_reported(tmp_path):
+    bp = rrb.Blueprint(rrb.TimeSeriesView(origin="a", name="elsewhere"), rrb.TimePanel(timeline="pose"))
+
+    def log(rec):
+        rec.set_time("other", sequence=0)
+        rec.log("a", rr.Scalars(1.0))
+
+    save_recording(tmp_path / "x.rrd", log, bp=bp)
+    assert empty_views(tmp_path / "x.rrd") == ["elsewhere"]
+
+
+def _discovery_like(path):
+    """A file made with the helpers discovery uses, under discovery's application id."""
+    x = np.linspace(0, 10, 12)
+    res = np.c_[np.sin(x), np.cos(x), 0.1 * x]
+    bp = rrb.Blueprint(rrb.Horizontal(chart_view("stroke", "Residuals vs stroke"),
+                                      chart_view("evidence", "Evidence per candidate")), collapse_panels=True)
+
+    def log(rec):
+        log_residual_scatter(rec, "stroke", x, res, 0.1 * res, x_label="stroke (mm)",
+                             chain_names=["leg 1", "leg 2", "leg 3"], flagged=[3])
+        log_named_bars(rec, "evidence", ["gravity", "backlash", "thermal"], [("delta BIC", [-40.0, 3.0, 1.0],
+                                                                           (235, 205, 60))], unit="1")
+
+    return save_recording(path, log, application_id=APP_IDS["discover"], bp=bp)
+
+
+def test_run_and_discovery_files_keep_their_own_layouts(robot_run, tmp_path):
+    _, rrd, _ = robot_run
+    disc = _discovery_like(tmp_path / "d.rrd")
+    assert len(set(APP_IDS.values())) == len(APP_IDS) == 4
+    # The viewer keeps one blueprint per application id: distinct ids, each file's blueprint under its own.
+    assert rrd_application_ids(rrd) == {APP_IDS["run"]}
+    assert rrd_application_ids(disc) == {APP_IDS["discover"]}
+    assert empty_views(disc) == []
+    assert rrd_labels(disc, "/evidence/bars/delta_BIC") == ["gravity", "backlash", "thermal"]
+    assert rrd_labels(disc, "/stroke/before/marks") == ["flagged row 4"]
+
+
+@pytest.mark.xfail(strict=False, reason="pipeline.discover is being rewritten; it must pass "
+                                        "application_id=APP_IDS['discover'] to save_recording")
+def test_discover_writes_under_its_own_application_id():
+    import inspect
+
+    import pipeline.discover
+
+    assert 'APP_IDS["discover"]' in inspect.getsource(pipeline.discover)
+
+
+def test_snapshot_renders_the_default_view_or_says_why_not(robot_run, tmp_path, capsys):
+    from pipeline.snapshot import main, renderer_available
+
+    name, rrd, _ = robot_run
+    if name != "hexapod":
+        pytest.skip("one rendering is enough")
+    png = tmp_path / "v.png"
+    code = main([str(rrd), "--out", str(png), "--size", "800x450"])
+    err = capsys.readouterr().err
+    if renderer_available() is None:
+        assert code == 0 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    else:
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "error:" in err
+    assert main([str(tmp_path / "missing.rrd"), "--out", str(png)]) == 2
+    assert "no such recording" in capsys.readouterr().err
