@@ -51,7 +51,7 @@ __all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETE
            "MeasurementSettings", "measurement_settings", "frame_from_dict", "frame_to_dict", "compose",
            "instrument_measurements", "measurement_jacobians", "measurement_units", "measurement_names",
            "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
-           "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "gauge_null_space",
+           "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "identify_as_measured", "gauge_null_space",
            "MeasurementObservability", "measurement_observability"]
 
 #: ``"auto"``: estimate the frame when the data show it (:func:`detect_frame`); ``"base"``: the
@@ -621,6 +621,13 @@ class MeasuredFit:
         poses = robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float), initial=initial)
         return instrument_measurements(robot, poses, self.frame, self.targets)
 
+    def base_poses(self, joints, measured) -> np.ndarray:
+        """(N, D) the data as poses in the (gauge) base frame: full poses taken out of the
+        instrument frame; for position-only data the poses the identified model predicts."""
+        if self.targets is None:
+            return self.to_base(measured)
+        return self.result.robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float))
+
     def to_base(self, measured) -> np.ndarray:
         """(N, D) full poses measured in the instrument frame, expressed in the (gauge) base frame."""
         robot = self.result.robot
@@ -726,7 +733,8 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
     if fit["success"] and dof > 0 and np.isfinite(fit["chi2"]):
         msg = f"{msg}; {noise_verdict(fit['chi2'], dof)}"
     if est_frame:
-        msg = f"{msg}; instrument frame estimated with the geometry"
+        msg = f"{msg}; " + (detection.message if detection is not None else
+                            "the instrument frame is estimated with the geometry")
     result = IdentificationResult(
         method="forward", robot=robot, theta=theta, start=theta0, free_names=names, residuals=res,
         pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
@@ -736,6 +744,21 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
                        targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
                        registration=registration, notes=tuple(notes))
+
+
+def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,
+                         **options) -> MeasuredFit | None:
+    """:func:`identify_measured` as a recording's ``settings`` say, or None when the data are plain
+    full poses in the base frame (``"base"``, or ``"auto"`` and :func:`detect_frame` finds
+    nothing): then the caller's own method applies unchanged."""
+    if settings.n_targets == 0:
+        if settings.frame == "base":
+            return None
+        if settings.frame == "auto" and not detect_frame(robot, joints, measured).detected:
+            return None
+    return identify_measured(robot, joints, measured, noise, frame=settings.frame,
+                             initial_frame=settings.initial_frame, targets=settings.targets,
+                             estimate_targets=settings.estimate_targets, **options)
 
 
 def _frame_words(frame) -> str:

@@ -184,3 +184,60 @@ def test_position_only_observability_names_the_platform_gauge():
     assert both.n_unknowns - both.rank == 12
     full = measurement_observability(robot, robot.table.nominal, q, NOISE, estimate_frame=False)
     assert full.rank == full.n_unknowns == 42
+
+
+# --------------------------------------------------------------------------- pipeline
+
+
+@pytest.fixture(scope="module")
+def hexapod_recording(tmp_path_factory):
+    """A pipeline run's own recording (MuJoCo testbed, 30 poses, +-1 um, +-1 urad) and its forward
+    calibration in the base frame."""
+    from pipeline.run import run
+    out = tmp_path_factory.mktemp("measurement")
+    run(["--poses", "30", "--noise-rad", "1e-6", "--out", str(out), "--name", "base", "--quiet"])
+    base = run(["--real", str(out / "base.csv"), "--method", "forward", "--out", str(out), "--name", "base_cal", "--quiet"])
+    return out, base
+
+
+def test_real_recording_in_a_far_frame_reports_the_frame(hexapod_recording):
+    from dataclasses import replace
+    from pipeline.recording import read_recording, write_recording
+    from pipeline.run import run
+    out, base = hexapod_recording
+    rec = read_recording(out / "base.csv")
+    write_recording(out / "far.csv", replace(rec, measured=instrument_measurements(rec.robot, rec.measured, FAR_FRAME),
+                                             meta=dict(rec.meta, measurement={"frame": "auto"})))
+    s = run(["--real", str(out / "far.csv"), "--out", str(out), "--name", "far_cal", "--quiet"]).summary
+    assert "not in the robot's base frame" in s["message"]
+    frame = np.r_[s["measurement_frame"]["translation_mm"], s["measurement_frame"]["rotation_rad"]]
+    # the true frame in the gauge: the base joints of the injected machine fitted to the nominal ones
+    robot = rec.robot
+    true = robot.table.vector(rec.meta["simulation"]["injected_errors"], base=np.zeros(robot.n_parameters)) + robot.table.nominal
+    R, t = rigid_registration(true.reshape(6, 7)[:, :3], robot.table.nominal.reshape(6, 7)[:, :3])
+    gauge_frame = compose(FAR_FRAME, robot, _invert(np.r_[t, euler_from_matrix(R)])[None])[0]
+    std = np.r_[s["measurement_frame_std"]["translation_mm"], s["measurement_frame_std"]["rotation_rad"]]
+    assert np.all(np.abs(frame - gauge_frame) < 5 * std + 1e-9)
+    h, hb = s["heldout_position_error_mm"]["after"], base.summary["heldout_position_error_mm"]["after"]
+    assert h < 1.1 * hb
+    # a sidecar that says "base" keeps the frame out: the fit then cannot explain the data
+    write_recording(out / "far_base.csv", replace(rec, measured=instrument_measurements(rec.robot, rec.measured, FAR_FRAME),
+                                                  meta=dict(rec.meta, measurement={"frame": "base"})))
+    with pytest.raises(ValueError):
+        run(["--real", str(out / "far_base.csv"), "--out", str(out), "--name", "far_base_cal", "--quiet"])
+
+
+def test_real_position_only_recording_round_trips_and_calibrates(hexapod_recording):
+    from dataclasses import replace
+    from pipeline.recording import read_recording, write_recording
+    from pipeline.run import run
+    out, base = hexapod_recording
+    rec = read_recording(out / "base.csv")
+    points = instrument_measurements(rec.robot, rec.measured, None, TARGETS)
+    write_recording(out / "targets.csv", replace(rec, measured=points, meta=dict(rec.meta, measurement={"targets": 3})))
+    assert (out / "targets.csv").read_text().splitlines()[0].endswith("t3_x_mm,t3_y_mm,t3_z_mm,set")
+    back = read_recording(out / "targets.csv")
+    np.testing.assert_array_equal(back.measured, points)
+    s = run(["--real", str(out / "targets.csv"), "--out", str(out), "--name", "targets_cal", "--quiet"]).summary
+    assert s["measurement_targets_estimated"] and "measurement_frame" not in s
+    assert s["heldout_position_error_mm"]["after"] < 1.5 * base.summary["heldout_position_error_mm"]["after"]
