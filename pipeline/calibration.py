@@ -18,7 +18,7 @@ import numpy as np
 from calib import paper
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
 from calib.measurement import frame_to_dict, identify_as_measured, instrument_measurements, \
-    measurement_residuals, measurement_settings
+    measured_gauge_representative, measurement_residuals, measurement_settings
 from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
@@ -293,7 +293,10 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         heldout_basis = "recorded validation rows: measured minus model prediction (includes sensor noise)"
 
     free = result.free_names
-    truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start)
+    truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start) \
+        if instrument is None else measured_gauge_representative(
+            robot, actual, estimate_frame=instrument.frame_estimated,
+            targets=instrument.targets if instrument.targets_estimated else None, start=result.start)
     history = list(result.history) if (settings.method == "chainwise" and solver == "gn" and instrument is None) \
         else [float(integrated_error(robot, result.pose_residuals if instrument is None else
                                      measured - robot.forward_kinematics(result.theta, joints))[2].max())]

@@ -114,6 +114,17 @@ def test_base_frame_data_are_not_taken_for_another_frame(name):
     assert far.detected and "not in the robot's base frame" in far.message
 
 
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_reference_errors_never_look_like_another_frame(name):
+    robot = default_robot(name)
+    nominal = robot.table.nominal
+    for seed in range(10):
+        q = robot.inverse_kinematics(nominal, reachable_poses(robot, 40, seed))
+        true = robot.forward_kinematics(nominal + reference_errors(robot, seed), q)
+        found = detect_frame(robot, q, true)
+        assert not found.detected and found.rms_mm < 0.5 * found.limit_mm and found.rms_rad < 0.5 * found.limit_rad
+
+
 def test_in_base_frame_the_fit_is_the_forward_method():
     robot, _, q, poses, _, _ = _experiment("hexapod", n=20)
     measured = poses + NOISE.sample(len(q), 0, robot.pose_units)
