@@ -756,8 +756,13 @@ def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, set
     full poses in the base frame (``"base"``, or ``"auto"`` and :func:`detect_frame` finds
     nothing): then the caller's own method applies unchanged."""
     if settings.frame != "estimate":
-        found = detect_frame(robot, joints, measured, targets=settings.targets,
-                             estimate_targets=settings.estimate_targets)
+        try:
+            found = detect_frame(robot, joints, measured, targets=settings.targets,
+                                 estimate_targets=settings.estimate_targets)
+        except ValueError:
+            if settings.n_targets:
+                raise
+            return None  # the nominal model cannot start from home here: the caller's method judges
         if settings.frame == "base" and found.detected:
             raise ValueError(f"meta.measurement.frame is 'base', but {found.message.split(': ', 1)[1].split(';')[0]}: "
                              "the poses seem to be measured in another frame; set it to 'auto' or 'estimate'")
