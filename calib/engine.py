@@ -39,7 +39,8 @@ from .robot import (
 from .workspace import reachable_poses
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
-           "pose_whitening", "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative"]
+           "pose_whitening", "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative",
+           "minimise"]
 
 #: Solvers of both methods.
 SOLVERS = ("lm", "gn")
@@ -247,6 +248,21 @@ def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
         return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
     except (KinematicsError, np.linalg.LinAlgError) as exc:
         return x0, 0, False, f"the fit left the workspace: {exc}"
+
+
+def minimise(fun, jac, x0, *, solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
+             ftol: float = 1e-15, history: list | None = None):
+    """The engine's least-squares solver for any residual ``fun(x)`` with Jacobian ``jac(x)``
+    (used by :mod:`calib.measurement`): Levenberg-Marquardt (MINPACK) or Gauss-Newton.
+
+    Returns:
+        ``(x, iterations, success, message)``; ``history`` (if given) gets the cost of each
+        evaluation. A kinematics failure returns the start with ``success`` False.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    return _least_squares(fun, jac, np.asarray(x0, dtype=float), solver, max_iter, xtol, ftol,
+                          [] if history is None else history)
 
 
 #: Residual (mm) below which the default forward kinematics takes a row as converged.

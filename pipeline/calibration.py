@@ -17,6 +17,8 @@ import numpy as np
 
 from calib import paper
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
+from calib.measurement import frame_to_dict, identify_as_measured, instrument_measurements, \
+    measured_gauge_representative, measurement_residuals, measurement_settings
 from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
@@ -153,6 +155,39 @@ def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, fre
             "max_abs_rad": float(np.abs(err[angle]).max()) if angle.any() else None}
 
 
+def _instrument_heldout(robot: Robot, fit, val_joints, val_meas):
+    """Held-out errors of a recording in an instrument frame or of targets: measured minus the
+    prediction, before (nominal geometry, the registered frame, the start offsets) and after."""
+    k = fit.n_targets
+    start_frame = fit.registration.frame if (fit.frame_estimated and fit.registration is not None) else np.zeros(6)
+    start_targets = None if k == 0 else (fit.registration.targets if fit.registration is not None and fit.frame_estimated
+                                         else fit.targets)
+    nominal = robot.forward_kinematics(robot.table.nominal, val_joints)
+    before = measurement_residuals(robot, val_meas, instrument_measurements(robot, nominal, start_frame, start_targets), k)
+    after = measurement_residuals(robot, val_meas, fit.predict(val_joints), k)
+    what = "target positions" if k else "poses"
+    return before, after, len(val_joints), (f"recorded validation rows: measured {what} minus model prediction, "
+                                            "instrument frame (includes sensor noise)")
+
+
+def _instrument_block(fit, before, after) -> dict:
+    """Summary keys of an instrument frame or target fit."""
+    block = {"method": "forward", "solver": "lm", "weighted": True,
+             "measurement_notes": list(fit.notes), "measurement_gauge": list(fit.gauge)}
+    if fit.frame_estimated:
+        block["measurement_frame"] = fit.frame_dict()
+        block["measurement_frame_std"] = frame_to_dict(fit.frame_std)
+    if fit.targets is not None:
+        block["measurement_targets_mm"] = fit.targets.tolist()
+        block["measurement_targets_estimated"] = fit.targets_estimated
+        if before is not None:  # one position error per target and row
+            b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2) for e in (before, after))
+            block["heldout_position_error_mm"] = {"before": float(b.mean()), "after": float(a.mean()),
+                                                  "max_after": float(a.max())}
+            block["heldout_orientation_error_rad"] = None
+    return block
+
+
 def run_calibration(settings: RunSettings, progress=lambda label, done, total: None) -> RunResult:
     """Run one calibration (see the module docstring).
 
@@ -169,6 +204,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     t0 = time.perf_counter()
     split: dict[str, float] = {}
     sim = None
+    instrument = None  # the fit of an instrument frame or targets, when the recording needs one
     if settings.real is not None:
         rec = read_recording(settings.real)
         robot, noise = rec.robot, rec.noise
@@ -211,7 +247,13 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     options = {"solver": solver}
     if settings.method == "chainwise":
         options.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
-    result = identify(robot, joints, measured, noise, method=settings.method, **options)
+    if sim is None:
+        instrument = identify_as_measured(robot, joints, measured, noise, measurement_settings(rec.meta.get("measurement")))
+    if instrument is not None:  # the forward method with the frame and targets; poses in the base frame below
+        result, solver = instrument.result, "lm"
+        measured_raw, measured = measured, instrument.base_poses(joints, measured)
+    else:
+        result = identify(robot, joints, measured, noise, method=settings.method, **options)
     try:
         report = find_outliers(robot, joints, measured, noise)
         flagged = [int(cal_rows[i]) + 1 for i in report.flagged]
@@ -239,6 +281,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         heldout_basis = ("simulated machine, compensated commands, noise-free settled poses "
                          "(before: nominal commands)")
         split["simulate"] += time.perf_counter() - t2
+    elif instrument is not None and len(val_joints):
+        heldout_before, heldout_after, n_heldout, heldout_basis = _instrument_heldout(
+            robot, instrument, val_joints, val_meas)
     elif sim is None and len(val_joints):
         # A recording holds the validation poses measured under nominal commands only: the
         # identified model's prediction error there stands for the compensated error (equal to
@@ -249,9 +294,13 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         heldout_basis = "recorded validation rows: measured minus model prediction (includes sensor noise)"
 
     free = result.free_names
-    truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start)
-    history = list(result.history) if (settings.method == "chainwise" and solver == "gn") else \
-        [float(integrated_error(robot, result.pose_residuals)[2].max())]
+    truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start) \
+        if instrument is None else measured_gauge_representative(
+            robot, actual, estimate_frame=instrument.frame_estimated,
+            targets=instrument.targets if instrument.targets_estimated else None, start=result.start)
+    history = list(result.history) if (settings.method == "chainwise" and solver == "gn" and instrument is None) \
+        else [float(integrated_error(robot, result.pose_residuals if instrument is None else
+                                     measured - robot.forward_kinematics(result.theta, joints))[2].max())]
     summary = {
         "robot": robot.name,
         "scenario": scenario,
@@ -285,8 +334,10 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         "heldout_position_error_mm": None,
         "heldout_orientation_error_rad": None,
     }
-    if heldout_before is not None:
+    if heldout_before is not None and (instrument is None or instrument.targets is None):
         summary.update(_heldout_block(robot, heldout_before, heldout_after))
+    if instrument is not None:
+        summary.update(_instrument_block(instrument, heldout_before, heldout_after))
     if sim is not None:
         cal = sim["cal"]
         summary["settle_steps_per_pose"] = {"mean": float(cal.steps.mean()), "max": int(cal.steps.max())}
@@ -319,8 +370,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     def log(stream):
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
-                            predicted=predicted, history=result.history, heldout_before=heldout_before,
-                            heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
+                            predicted=predicted, history=result.history,
+                            heldout_before=None if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim
+                            else heldout_before, heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
                             observability=analysis, flagged=flagged_index, history_label=history_label,
                             magnified=magnified)
 

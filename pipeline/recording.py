@@ -6,7 +6,9 @@ CSV: one row per measurement in the order taken, columns
 
 with the robot's joint columns (``l1_mm .. l6_mm`` for the hexapod, ``q1_rad .. q3_rad`` for
 the Delta: what was commanded, or read when joints are measured) and pose columns (``x_mm, y_mm,
-z_mm[, alpha_rad, beta_rad, gamma_rad]``: the measured pose, base frame); the optional ``set``
+z_mm[, alpha_rad, beta_rad, gamma_rad]``: the measured pose, base frame, or the instrument's
+frame with ``meta.measurement``; position-only data have ``t1_x_mm, t1_y_mm, t1_z_mm, t2_x_mm ...``
+instead, one triple per target, see :mod:`calib.measurement`); the optional ``set``
 column is ``calibration`` or ``validation`` (default ``calibration``). The JSON sidecar names the
 robot, its nominal geometry and parameter table, the declared noise and the units.
 
@@ -27,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.measurement import measurement_settings, target_names
 from calib.noise import SensorNoise
 from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
@@ -46,10 +49,12 @@ class RecordingError(ValueError):
     """A recording file is malformed; the message names file, row and column."""
 
 
-def columns(robot: Robot) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """``(joint_columns, pose_columns)`` of a robot's recordings, e.g. ``("l1_mm", ...)``."""
+def columns(robot: Robot, n_targets: int = 0) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``(joint_columns, pose_columns)`` of a robot's recordings, e.g. ``("l1_mm", ...)``; with
+    ``n_targets`` the target columns ``t1_x_mm ...`` stand for the pose columns."""
     joints = tuple(f"{n}_{robot.joint_unit}" for n in robot.joint_names)
-    pose = tuple(f"{n}_{u}" for n, u in zip(robot.pose_names, robot.pose_units))
+    pose = tuple(f"{n}_{u}" for n, u in zip(robot.pose_names, robot.pose_units)) if n_targets == 0 else \
+        tuple(f"{n}_mm" for n in target_names(n_targets))
     return joints, pose
 
 
@@ -62,7 +67,8 @@ class Recording:
         noise: declared noise.
         t_s: (N,) time of each measurement, s, non-decreasing.
         joints: (N, C) commanded (or read) joint values, the robot's joint unit.
-        measured: (N, D) measured poses, mm and rad, base frame.
+        measured: (N, D) measured poses, mm and rad, base frame (or the instrument's frame, or
+            (N, 3K) target positions: ``meta["measurement"]``, see :mod:`calib.measurement`).
         sets: (N,) str, ``"calibration"`` or ``"validation"``.
         meta: free-form JSON-ready information (scenario, seed, simulation truth...).
     """
@@ -170,7 +176,7 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
         for p in (csv_path, json_path):
             if p.exists():
                 raise FileExistsError(_exists_message(p))
-    joint_cols, pose_cols = columns(rec.robot)
+    joint_cols, pose_cols = columns(rec.robot, measurement_settings(rec.meta.get("measurement")).n_targets)
     header = ("t_s",) + joint_cols + pose_cols + ("set",)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -225,6 +231,10 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
     meta = side.get("meta", {})
     if not isinstance(meta, dict):
         raise RecordingError(f"{json_path}: field 'meta' must be an object, got {type(meta).__name__}")
+    try:
+        measurement_settings(meta.get("measurement"))
+    except ValueError as exc:
+        raise RecordingError(f"{json_path}: field {exc}") from exc
     return robot, noise, meta
 
 
@@ -239,7 +249,7 @@ def read_recording(csv_path: str | Path) -> Recording:
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
     robot, noise, meta = _read_sidecar(sidecar_path(csv_path))
-    joint_cols, pose_cols = columns(robot)
+    joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
     expected = ("t_s",) + joint_cols + pose_cols
     with csv_path.open(newline="") as f:
         rows = list(csv.reader(f))

@@ -1,0 +1,874 @@
+"""What an instrument reports of a robot's pose: its own frame, and targets on the platform.
+
+Measurement model. A robot's pose ``p`` (base frame: position ``t_p``, rotation ``R_p`` from the
+angles in the project's convention ``R = Rz(gamma) Ry(beta) Rx(alpha)``; the identity for a
+translating platform) is seen by an instrument through
+
+* its frame ``F`` relative to the robot's base, six numbers ``[x, y, z, alpha, beta, gamma]``
+  (mm, rad, the same convention): a pose as the instrument sees it is ``F`` composed with the
+  pose in the base frame, ``R_m = R_F R_p``, ``t_m = R_F t_p + t_F``;
+* either the whole pose (the robot's pose coordinates, ``t_m`` and the angles of ``R_m``), or
+  the positions of ``K`` targets (tracker reflectors) fixed on the platform at offsets ``o_k``
+  (mm, platform frame): ``m_k = R_F (R_p o_k + t_p) + t_F``, three numbers each, no angles.
+
+Identification (:func:`identify_measured`): the geometry (the robot's free parameters), the
+frame and the target offsets at once, by the forward method (pose residuals through the forward
+kinematics, whitened by the declared noise, analytic Jacobians). Levenberg-Marquardt is the
+engine's (:func:`calib.engine.minimise`).
+
+Gauge. Frame, targets and geometry are partly redundant: moving every base joint of a hexapod
+rigidly moves the platform rigidly, which the frame undoes (6 directions); with target offsets
+estimated, moving the platform frame rigidly (its joints and the targets together) changes no
+measurement (6 more). These directions are found numerically, for any robot, as the null space of
+the whitened Jacobian with respect to [geometry | targets | frame], and fixed in that order of
+priority: the geometry's errors have no component along them (the robot's geometric errors are
+expressed in the base (and platform) frame best fitted to the nominal one), then the targets keep
+their start values along what is left, then the frame. The fit runs in the complement of the null
+space (a plane through the start); a second pass re-takes the null space at the solution, so that
+the gauge holds beyond first order.
+
+Detection (:func:`detect_frame`): the measured poses disagree grossly with the nominal model's
+(more than :data:`FRAME_DETECTION_FRACTION` of the machine's size, or
+:data:`FRAME_DETECTION_RAD`): the data are not in the base frame; the frame is then registered in
+closed form (rotation averaging or Kabsch on the positions, then the target offsets by a rigid
+fit) before the joint fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validate import as_array, frozen_array
+from .engine import IdentificationResult, minimise, noise_verdict
+from .noise import SensorNoise
+from .observability import describe_combination
+from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
+from .rotation import euler_from_matrix, rotation_matrix, rotation_matrix_derivatives
+
+__all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETECTION_RAD", "GAUGE_RTOL",
+           "MeasurementSettings", "measurement_settings", "frame_from_dict", "frame_to_dict", "compose",
+           "instrument_measurements", "measurement_jacobians", "measurement_units", "measurement_names",
+           "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
+           "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "identify_as_measured",
+           "measured_gauge_representative", "gauge_null_space",
+           "MeasurementObservability", "measurement_observability"]
+
+#: ``"auto"``: estimate the frame when the data show it (:func:`detect_frame`); ``"base"``: the
+#: poses are in the base frame; ``"estimate"``: always estimate it.
+FRAME_MODES = ("auto", "base", "estimate")
+#: Names of the frame's six numbers (messages, gauge descriptions).
+FRAME_NAMES = ("frame.x", "frame.y", "frame.z", "frame.alpha", "frame.beta", "frame.gamma")
+#: Position disagreement (RMS, mm) between measured and nominal poses beyond which the poses are
+#: taken as measured in another frame, as a fraction of the machine's size.
+FRAME_DETECTION_FRACTION = 0.1
+#: The same for the angle disagreement (RMS, rad).
+FRAME_DETECTION_RAD = 0.1
+#: Singular values of the scaled Jacobian below this times the largest span the gauge.
+GAUGE_RTOL = 1e-9
+#: Most targets a position-only recording may name.
+MAX_TARGETS = 3
+
+
+# --------------------------------------------------------------------------- settings
+
+
+def frame_from_dict(value, what: str = "frame") -> np.ndarray:
+    """(6,) ``[x, y, z, alpha, beta, gamma]`` from ``{"translation_mm": [3], "rotation_rad": [3]}``.
+
+    Raises:
+        ValueError: naming ``what`` and the key that is wrong.
+    """
+    if not isinstance(value, dict):
+        raise ValueError(f"{what} must be an object with keys translation_mm and rotation_rad, got "
+                         f"{type(value).__name__}")
+    extra = sorted(set(value) - {"translation_mm", "rotation_rad"})
+    if extra:
+        raise ValueError(f"{what}: unknown key(s) {', '.join(extra)} (expected translation_mm, rotation_rad)")
+    parts = []
+    for key in ("translation_mm", "rotation_rad"):
+        if key not in value:
+            raise ValueError(f"{what}: missing key {key!r}")
+        parts.append(as_array(value[key], f"{what}.{key}", (3,)))
+    return np.concatenate(parts)
+
+
+def frame_to_dict(frame) -> dict:
+    """``{"translation_mm": [x, y, z], "rotation_rad": [alpha, beta, gamma]}`` of a (6,) frame."""
+    f = np.asarray(frame, dtype=float)
+    return {"translation_mm": f[:3].tolist(), "rotation_rad": f[3:].tolist()}
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementSettings:
+    """How a recording was measured (the sidecar's ``meta.measurement``).
+
+    Attributes:
+        frame: one of :data:`FRAME_MODES`.
+        initial_frame: (6,) a known or guessed frame (start of the estimate; with ``"base"``
+            ignored), or None.
+        targets: (K, 3) target offsets on the platform, mm (given or start values), or None for
+            full-pose data.
+        estimate_targets: whether the target offsets are estimated (default: when not given).
+    """
+
+    frame: str = "auto"
+    initial_frame: np.ndarray | None = None
+    targets: np.ndarray | None = None
+    estimate_targets: bool = False
+
+    @property
+    def n_targets(self) -> int:
+        """K (0 for full-pose data)."""
+        return 0 if self.targets is None else int(self.targets.shape[0])
+
+
+def measurement_settings(value) -> MeasurementSettings:
+    """Parse ``{"frame": "auto"|"base"|"estimate", "initial_frame": {...}, "targets": K or
+    [[x, y, z], ...], "estimate_targets": bool}`` (every key optional; None: the defaults).
+
+    Raises:
+        ValueError: naming the key that is wrong.
+    """
+    if value is None:
+        return MeasurementSettings()
+    where = "meta.measurement"
+    if not isinstance(value, dict):
+        raise ValueError(f"{where} must be an object, got {type(value).__name__}")
+    known = {"frame", "initial_frame", "targets", "estimate_targets"}
+    extra = sorted(set(value) - known)
+    if extra:
+        raise ValueError(f"{where}: unknown key(s) {', '.join(extra)} (expected {', '.join(sorted(known))})")
+    mode = value.get("frame", "auto")
+    if mode not in FRAME_MODES:
+        raise ValueError(f"{where}.frame must be one of {', '.join(FRAME_MODES)}, got {mode!r}")
+    initial = value.get("initial_frame")
+    initial = None if initial is None else frame_from_dict(initial, f"{where}.initial_frame")
+    targets, given = value.get("targets"), True
+    if targets is not None:
+        if isinstance(targets, bool):
+            raise ValueError(f"{where}.targets must be a count 1..{MAX_TARGETS} or a list of [x, y, z] offsets")
+        if isinstance(targets, int):
+            if not 1 <= targets <= MAX_TARGETS:
+                raise ValueError(f"{where}.targets must be between 1 and {MAX_TARGETS}, got {targets}")
+            targets, given = np.zeros((targets, 3)), False
+        else:
+            targets = as_array(targets, f"{where}.targets", (-1, 3))
+            if not 1 <= targets.shape[0] <= MAX_TARGETS:
+                raise ValueError(f"{where}.targets must list 1 to {MAX_TARGETS} offsets, got {targets.shape[0]}")
+    estimate = value.get("estimate_targets", not given)
+    if not isinstance(estimate, bool):
+        raise ValueError(f"{where}.estimate_targets must be true or false, got {estimate!r}")
+    if targets is None and "estimate_targets" in value:
+        raise ValueError(f"{where}.estimate_targets needs targets")
+    return MeasurementSettings(frame=mode, initial_frame=None if initial is None else frozen_array(initial),
+                               targets=None if targets is None else frozen_array(targets),
+                               estimate_targets=bool(estimate))
+
+
+# --------------------------------------------------------------------------- model
+
+
+def _pose_parts(robot: Robot, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) positions and (N, 3, 3) rotations (identity for a translating platform)."""
+    angle = robot.angle_pose_mask
+    t = poses[:, ~angle]
+    R = rotation_matrix(poses[:, angle]) if angle.any() else np.broadcast_to(np.eye(3), (len(poses), 3, 3))
+    return t, R
+
+
+def compose(frame, robot: Robot, poses) -> np.ndarray:
+    """(N, D) the poses ``F o pose`` (a pose in the base frame as the instrument sees it)."""
+    return instrument_measurements(robot, poses, frame)
+
+
+def target_names(n_targets: int) -> tuple[str, ...]:
+    """``("t1_x", "t1_y", "t1_z", "t2_x", ...)``."""
+    return tuple(f"t{k + 1}_{c}" for k in range(n_targets) for c in "xyz")
+
+
+def measurement_names(robot: Robot, n_targets: int = 0) -> tuple[str, ...]:
+    """Names of the measured coordinates: the robot's pose names, or :func:`target_names`."""
+    return robot.pose_names if n_targets == 0 else target_names(n_targets)
+
+
+def measurement_units(robot: Robot, n_targets: int = 0) -> tuple[str, ...]:
+    """Units of the measured coordinates: the robot's pose units, or mm for every target coordinate."""
+    return robot.pose_units if n_targets == 0 else ("mm",) * (3 * n_targets)
+
+
+def instrument_measurements(robot: Robot, poses, frame=None, targets=None) -> np.ndarray:
+    """(N, M) what the instrument reports at base-frame ``poses`` (N, D).
+
+    Args:
+        robot: the robot (its pose units say which coordinates are angles).
+        poses: (N, D) poses in the base frame.
+        frame: (6,) the instrument frame; default the base frame itself.
+        targets: (K, 3) target offsets on the platform, mm: report their positions (M = 3K); None:
+            report the pose (M = D).
+    """
+    poses = as_array(poses, "poses", (-1, robot.pose_dim))
+    frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
+    RF = rotation_matrix(frame[3:])
+    t, R = _pose_parts(robot, poses)
+    if targets is not None:
+        targets = as_array(targets, "targets", (-1, 3))
+        pts = np.einsum("nij,kj->nki", R, targets) + t[:, None, :]
+        return (np.einsum("ij,nkj->nki", RF, pts) + frame[:3]).reshape(len(poses), -1)
+    out = np.empty_like(poses)
+    angle = robot.angle_pose_mask
+    out[:, ~angle] = t @ RF.T + frame[:3]
+    if angle.any():
+        out[:, angle] = euler_from_matrix(RF @ R)
+    return out
+
+
+def _angular_rates(angles: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) ``E^-1``: angle rates from the world angular velocity, ``R = Rz Ry Rx``
+    (``omega = E [da, db, dc]``, columns ``Rz Ry x``, ``Rz y``, ``z``)."""
+    b, c = angles[:, 1], angles[:, 2]
+    E = np.zeros((len(angles), 3, 3))
+    E[:, 0, 0], E[:, 1, 0], E[:, 2, 0] = np.cos(c) * np.cos(b), np.sin(c) * np.cos(b), -np.sin(b)
+    E[:, 0, 1], E[:, 1, 1] = -np.sin(c), np.cos(c)
+    E[:, 2, 2] = 1.0
+    return np.linalg.inv(E)
+
+
+def _vee(W: np.ndarray) -> np.ndarray:
+    return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+
+
+def measurement_jacobians(robot: Robot, poses, frame=None, targets=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Analytic derivatives of :func:`instrument_measurements`.
+
+    Returns:
+        ``(H_pose (N, M, D), H_frame (N, M, 6), H_targets (N, M, 3K))`` (K = 0 without targets).
+    """
+    poses = as_array(poses, "poses", (-1, robot.pose_dim))
+    frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
+    n, d = poses.shape
+    angle = robot.angle_pose_mask
+    pos_cols, ang_cols = np.flatnonzero(~angle), np.flatnonzero(angle)
+    RF = rotation_matrix(frame[3:])
+    dRF = rotation_matrix_derivatives(frame[3:])  # (3, 3, 3)
+    t, R = _pose_parts(robot, poses)
+    dR = rotation_matrix_derivatives(poses[:, angle]) if angle.any() else np.zeros((n, 0, 3, 3))
+    if targets is not None:
+        targets = as_array(targets, "targets", (-1, 3))
+        k = targets.shape[0]
+        Hp, HF, Ho = np.zeros((n, k, 3, d)), np.zeros((n, k, 3, 6)), np.zeros((n, k, 3, k, 3))
+        Hp[:, :, :, pos_cols] = RF[None, None]
+        if angle.any():
+            Hp[:, :, :, ang_cols] = np.einsum("ij,najl,kl->nkia", RF, dR, targets)
+        pts = np.einsum("nij,kj->nki", R, targets) + t[:, None, :]
+        HF[:, :, :, :3] = np.eye(3)
+        HF[:, :, :, 3:] = np.einsum("aij,nkj->nkia", dRF, pts)
+        RFR = RF @ R  # (N, 3, 3)
+        for j in range(k):
+            Ho[:, j, :, j, :] = RFR
+        return Hp.reshape(n, 3 * k, d), HF.reshape(n, 3 * k, 6), Ho.reshape(n, 3 * k, 3 * k)
+    Hp, HF = np.zeros((n, d, d)), np.zeros((n, d, 6))
+    Hp[:, pos_cols[:, None], pos_cols] = RF
+    HF[:, pos_cols, :3] = np.eye(3)
+    HF[:, pos_cols, 3:] = np.einsum("aij,nj->nia", dRF, t)
+    if angle.any():
+        Rm = RF @ R
+        Einv = _angular_rates(euler_from_matrix(Rm))
+        RmT = np.swapaxes(Rm, 1, 2)
+        w_pose = _vee(np.einsum("ij,najl,nlm->naim", RF, dR, RmT))  # (N, 3 angles, 3)
+        w_frame = _vee(np.einsum("aij,njl,nlm->naim", dRF, R, RmT))
+        Hp[:, ang_cols[:, None], ang_cols] = np.einsum("nij,naj->nia", Einv, w_pose)
+        HF[:, ang_cols, 3:] = np.einsum("nij,naj->nia", Einv, w_frame)
+    return Hp, HF, np.zeros((n, d, 0))
+
+
+def measurement_residuals(robot: Robot, measured, predicted, n_targets: int = 0) -> np.ndarray:
+    """(N, M) ``measured - predicted``, angles wrapped to (-pi, pi]."""
+    r = np.asarray(measured, dtype=float) - np.asarray(predicted, dtype=float)
+    if n_targets == 0 and robot.angle_pose_mask.any():
+        a = robot.angle_pose_mask
+        r[:, a] = -((-r[:, a] + np.pi) % (2 * np.pi) - np.pi)
+    return r
+
+
+# --------------------------------------------------------------------------- registration
+
+
+def rigid_registration(source, target) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` minimising ``sum |R source_i + t - target_i|^2`` (Kabsch), (N, 3) points each."""
+    src, dst = np.asarray(source, dtype=float), np.asarray(target, dtype=float)
+    cs, cd = src.mean(axis=0), dst.mean(axis=0)
+    U, _, Vt = np.linalg.svd((dst - cd).T @ (src - cs))
+    S = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ S @ Vt
+    return R, cd - R @ cs
+
+
+def _nearest_rotation(M: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(M)
+    return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+
+
+@dataclass(frozen=True, eq=False)
+class Registration:
+    """A closed-form first estimate of the instrument frame from the nominal model.
+
+    Attributes:
+        frame: (6,) the frame.
+        targets: (K, 3) the target offsets (None for full-pose data).
+        poses: (N, D) the nominal model's poses at the joints (base frame).
+        rms_mm: RMS position residual after registration, mm.
+        rms_rad: RMS angle residual after registration, rad (0 without angles).
+    """
+
+    frame: np.ndarray
+    targets: np.ndarray | None
+    poses: np.ndarray
+    rms_mm: float
+    rms_rad: float
+
+
+def _nominal_poses(robot: Robot, theta, joints) -> np.ndarray:
+    try:
+        return robot.forward_kinematics(theta, joints)
+    except KinematicsError as exc:
+        raise ValueError(f"joints: the nominal model cannot reach row {exc.index}: {exc}") from None
+
+
+def _disagreement(robot: Robot, measured, predicted, n_targets) -> tuple[float, float]:
+    r = measurement_residuals(robot, measured, predicted, n_targets)
+    angle = np.zeros(r.shape[1], bool) if n_targets else robot.angle_pose_mask
+    rms = lambda v: float(np.sqrt(np.mean(np.sum(v ** 2, axis=1)))) if v.size else 0.0  # noqa: E731
+    pos = r[:, ~angle].reshape(len(r), -1, 3)
+    return float(np.sqrt(np.mean(np.sum(pos ** 2, axis=2)))), rms(r[:, angle])
+
+
+def register_frame(robot: Robot, joints, measured, *, targets=None, estimate_targets: bool = False,
+                   theta=None) -> Registration:
+    """The instrument frame (and target offsets) that best map the model's poses onto the data.
+
+    Full poses with angles: the rotation is the average (nearest rotation to the sum) of
+    ``R_m R_p^T`` over the poses, the translation the mean of ``t_m - R_F t_p``. Positions only
+    (a translating platform, or targets): Kabsch on the points, the targets at their start
+    values; with ``estimate_targets`` a rigid fit (nominal geometry held) then refines frame and
+    targets together.
+
+    Args:
+        robot: the robot.
+        joints: (N, C) joints.
+        measured: (N, M) the instrument's data.
+        targets: (K, 3) target offsets (start values when estimated), or None for full poses.
+        estimate_targets: refine the target offsets too.
+        theta: (P,) the model; default nominal.
+    """
+    theta = robot.table.nominal if theta is None else as_array(theta, "theta", (robot.n_parameters,))
+    k = 0 if targets is None else len(targets)
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
+    poses = _nominal_poses(robot, theta, joints)
+    t, R = _pose_parts(robot, poses)
+    angle = robot.angle_pose_mask
+    if k == 0 and angle.any():
+        Rm = rotation_matrix(measured[:, angle])
+        RF = _nearest_rotation(np.einsum("nij,nkj->ik", Rm, R))
+        tF = np.mean(measured[:, ~angle] - t @ RF.T, axis=0)
+    else:
+        offsets = np.zeros((1, 3)) if k == 0 else np.asarray(targets, dtype=float)
+        src = (np.einsum("nij,kj->nki", R, offsets) + t[:, None, :]).reshape(-1, 3)
+        RF, tF = rigid_registration(src, measured.reshape(-1, 3))
+    frame = np.concatenate([tF, euler_from_matrix(RF)])
+    fitted_targets = None if k == 0 else np.array(targets, dtype=float)
+    if k and estimate_targets:
+        fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int), frame,
+                   fitted_targets, True, True, poses, "lm", 100, 1e-15, 1e-15, gauge_passes=1)
+        frame, fitted_targets = fit["frame"], fit["targets"]
+    pred = instrument_measurements(robot, poses, frame, fitted_targets)
+    mm, rad = _disagreement(robot, measured, pred, k)
+    return Registration(frame=frozen_array(frame), targets=None if k == 0 else frozen_array(fitted_targets),
+                        poses=frozen_array(poses), rms_mm=mm, rms_rad=rad)
+
+
+@dataclass(frozen=True)
+class FrameDetection:
+    """Whether the data are in the robot's base frame.
+
+    Attributes:
+        detected: True when they are not (the frame should be estimated).
+        rms_mm, rms_rad: RMS disagreement between the data and the nominal model in the base frame.
+        limit_mm, limit_rad: the detection limits.
+        message: the finding in words.
+    """
+
+    detected: bool
+    rms_mm: float
+    rms_rad: float
+    limit_mm: float
+    limit_rad: float
+    message: str
+
+
+def _fit_targets(robot, joints, measured, theta, poses, frame, targets) -> np.ndarray:
+    """(K, 3) target offsets fitted with the geometry ``theta`` and the frame held (rigid fit)."""
+    fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int), frame,
+               np.asarray(targets, dtype=float), False, True, poses, "lm", 100, 1e-15, 1e-15, gauge_passes=1)
+    return fit["targets"]
+
+
+def detect_frame(robot: Robot, joints, measured, *, targets=None, estimate_targets: bool = False,
+                 theta=None) -> FrameDetection:
+    """Compare the data with the nominal model in the base frame (targets at their given offsets,
+    or fitted with the frame held when ``estimate_targets``): a disagreement beyond
+    :data:`FRAME_DETECTION_FRACTION` of the machine's size (RMS position) or
+    :data:`FRAME_DETECTION_RAD` (RMS angle) means another frame. Geometric errors give far less:
+    the reference experiments' errors (Delta within 1 mm and 1 degree, rus 0.5 mm and 0.5 degree)
+    at most 3.6 % of the size and 0.022 rad over 20 seeds. A smaller offset is not detected; for a
+    robot whose base joints can move rigidly (hexapod, rus) the geometry absorbs it, and
+    ``"estimate"`` forces the frame in."""
+    theta = robot.table.nominal if theta is None else theta
+    k = 0 if targets is None else len(targets)
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
+    poses = _nominal_poses(robot, theta, joints)
+    if k and estimate_targets:
+        targets = _fit_targets(robot, joints, measured, theta, poses, np.zeros(6), targets)
+    mm, rad = _disagreement(robot, measured, instrument_measurements(robot, poses, None, targets), k)
+    lim_mm, lim_rad = FRAME_DETECTION_FRACTION * robot.length_scale_mm, FRAME_DETECTION_RAD
+    detected = mm > lim_mm or rad > lim_rad
+    what = f"{mm:.4g} mm RMS" + (f", {rad:.3g} rad RMS" if k == 0 and robot.angle_pose_mask.any() else "")
+    if detected:
+        message = (f"the measured poses are not in the robot's base frame: they differ from the nominal "
+                   f"model by {what} (limits {lim_mm:.3g} mm, {lim_rad:g} rad); the instrument frame is "
+                   "registered and estimated with the geometry")
+    else:
+        message = (f"the measured poses are in the robot's base frame: they differ from the nominal "
+                   f"model by {what} (limits {lim_mm:.3g} mm, {lim_rad:g} rad)")
+    return FrameDetection(detected, mm, rad, lim_mm, lim_rad, message)
+
+
+# --------------------------------------------------------------------------- joint fit
+
+
+def _whitening(robot, theta, joints, poses, noise, Hp, n_targets) -> np.ndarray:
+    """(N, M, M) whitening of each measurement's covariance: instrument noise plus the joint
+    noise through the manipulator Jacobian and the measurement model."""
+    std = noise.pose_std(measurement_units(robot, n_targets))
+    n, m = Hp.shape[:2]
+    if noise.joint_std > 0:
+        jq = Hp @ pose_jacobian_of_joints(robot, theta, joints, poses)
+        cov = np.broadcast_to(np.diag(std ** 2), (n, m, m)) + noise.joint_std ** 2 * jq @ np.swapaxes(jq, 1, 2)
+        return np.linalg.inv(np.linalg.cholesky(cov))
+    return np.broadcast_to(np.diag(1.0 / std), (n, m, m)).copy()
+
+
+def gauge_null_space(A: np.ndarray, groups, rtol: float = GAUGE_RTOL) -> tuple[np.ndarray, np.ndarray]:
+    """The redundant directions of a scaled Jacobian and the constraints that fix them.
+
+    Args:
+        A: (R, n) Jacobian in scaled coordinates (every column per mm).
+        groups: column index arrays in order of priority (geometry, targets, frame): a direction
+            is fixed on the first group it touches.
+        rtol: singular values below ``rtol`` times the largest are zero.
+
+    Returns:
+        ``(null (n, k), constraints (k, n))``: an orthonormal basis of the null space, and rows
+        ``c`` such that ``c . (z - reference) = 0`` fixes it (each row within one group).
+    """
+    n = A.shape[1]
+    _, s, vt = np.linalg.svd(A, full_matrices=True)
+    s = np.r_[s, np.zeros(n - s.size)]
+    null = vt[s <= rtol * s[0]].T
+    rows, left = [], null
+    for cols in groups:
+        if left.shape[1] == 0:
+            break
+        cols = np.asarray(cols, int)
+        if cols.size == 0:
+            continue
+        U, sv, Vt = np.linalg.svd(left[cols], full_matrices=True)
+        r = int(np.count_nonzero(sv > 1e-8))
+        for u in U[:, :r].T:
+            c = np.zeros(n)
+            c[cols] = u
+            rows.append(c)
+        left = left @ Vt[r:].T
+    return null, np.array(rows).reshape(-1, n)
+
+
+def _complement(constraints: np.ndarray, n: int) -> np.ndarray:
+    """(n, n - k) orthonormal basis of the directions the constraints leave free."""
+    if constraints.shape[0] == 0:
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(constraints, full_matrices=True)
+    return vt[constraints.shape[0]:].T
+
+
+def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
+         solver, max_iter, xtol, ftol, gauge_passes=2, reference=None):
+    """The joint fit of geometry ``idx``, frame and targets; see :func:`identify_measured`."""
+    n = joints.shape[0]
+    k = 0 if targets0 is None else targets0.shape[0]
+    nt, nf = (3 * k if est_targets else 0), (6 if est_frame else 0)
+    scale_theta = np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0)
+    scale = np.concatenate([scale_theta, np.ones(nt), np.r_[np.ones(3), np.full(3, robot.length_scale_mm)][:nf]])
+    groups = [np.arange(idx.size), idx.size + np.arange(nt), idx.size + nt + np.arange(nf)]
+    tg_start = np.zeros(0) if targets0 is None else np.asarray(targets0, dtype=float).ravel()[:nt]
+    z_ref = np.concatenate([theta0[idx] if reference is None else reference[idx], tg_start, frame0[:nf]])
+    state = {"poses": poses0}
+
+    def unpack(z):
+        th = theta0.copy()
+        th[idx] = z[:idx.size]
+        tg = targets0 if not est_targets else z[idx.size:idx.size + nt].reshape(k, 3)
+        fr = frame0 if not est_frame else z[idx.size + nt:]
+        return th, tg, fr
+
+    def poses_of(th):
+        if idx.size:
+            state["poses"] = robot.forward_kinematics(th, joints, initial=state["poses"])
+        return state["poses"]
+
+    z = np.concatenate([theta0[idx], tg_start, frame0[:nf]])
+    th0, tg0, fr0 = unpack(z)
+    Hp0, _, _ = measurement_jacobians(robot, poses0, fr0, tg0)
+    winv = _whitening(robot, th0, joints, poses0, noise, Hp0, k)
+
+    def residual(z):
+        th, tg, fr = unpack(z)
+        pred = instrument_measurements(robot, poses_of(th), fr, tg)
+        return np.einsum("nij,nj->ni", winv, measurement_residuals(robot, measured, pred, k)).ravel()
+
+    def jacobian(z):
+        th, tg, fr = unpack(z)
+        p = poses_of(th)
+        Hp, HF, Ho = measurement_jacobians(robot, p, fr, tg)
+        blocks = []
+        if idx.size:
+            blocks.append(Hp @ pose_jacobian_of_parameters(robot, th, joints, p)[:, :, idx])
+        if nt:
+            blocks.append(Ho)
+        if nf:
+            blocks.append(HF)
+        J = np.concatenate(blocks, axis=2)
+        return -np.einsum("nij,njk->nik", winv, J).reshape(n * J.shape[1], -1)
+
+    history: list[float] = []
+    iters, ok, msg = 0, False, "not run"
+    null = np.zeros((z.size, 0))
+    for _ in range(max(1, gauge_passes)):
+        null, C = gauge_null_space(jacobian(z) / scale, groups)
+        Q = _complement(C, z.size)
+        G = Q / scale[:, None]  # y (scaled) -> z
+        base = z_ref + G @ (Q.T @ ((z - z_ref) * scale))  # the start, projected onto the gauge plane
+        state["poses"] = poses0
+        y, it, ok, msg = minimise(lambda y: residual(base + G @ y), lambda y: jacobian(base + G @ y) @ G,
+                                  np.zeros(Q.shape[1]), solver=solver, max_iter=max_iter, xtol=xtol,
+                                  ftol=ftol, history=history)
+        iters += it
+        z = base + G @ y
+        if null.shape[1] == 0:
+            break
+    r = residual(z)
+    Jy = jacobian(z) @ G
+    cov = G @ np.linalg.pinv(Jy.T @ Jy, hermitian=True) @ G.T
+    th, tg, fr = unpack(z)
+    norms = np.linalg.norm(Jy, axis=0)
+    cond = float(np.linalg.cond(Jy / norms)) if np.all(norms > 0) and Jy.size else float("inf")
+    return {"theta": th, "targets": None if k == 0 else np.array(tg, dtype=float), "frame": np.array(fr, dtype=float),
+            "poses": state["poses"], "chi2": float(r @ r), "dof": int(r.size - Q.shape[1]), "cov": cov,
+            "iterations": iters, "history": tuple(history), "success": ok, "message": msg,
+            "null": null / scale[:, None], "cond": cond, "n_theta": idx.size, "nt": nt, "nf": nf}
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredFit:
+    """The geometry, instrument frame and target offsets identified together.
+
+    Attributes:
+        result: the geometry as an :class:`~calib.engine.IdentificationResult` (method
+            ``"forward"``; ``residuals``/``pose_residuals`` in the instrument's coordinates, (N, M);
+            ``covariance`` the geometry's, in the gauge).
+        frame: (6,) the instrument frame (zeros when the data are in the base frame).
+        frame_std: (6,) its standard uncertainty (zeros when not estimated).
+        targets: (K, 3) the target offsets (None for full-pose data).
+        targets_std: (K, 3) their standard uncertainty (zeros when given).
+        frame_estimated, targets_estimated: what was estimated.
+        gauge: the redundant directions the gauge fixes, in words (parameter units).
+        detection: the frame detection (None when the mode was not ``"auto"``).
+        registration: the closed-form start (None when the frame was not estimated).
+        notes: what was found and done, in words.
+    """
+
+    result: IdentificationResult
+    frame: np.ndarray
+    frame_std: np.ndarray
+    targets: np.ndarray | None
+    targets_std: np.ndarray | None
+    frame_estimated: bool
+    targets_estimated: bool
+    gauge: tuple
+    detection: FrameDetection | None
+    registration: Registration | None
+    notes: tuple
+
+    @property
+    def n_targets(self) -> int:
+        return 0 if self.targets is None else int(self.targets.shape[0])
+
+    def frame_dict(self) -> dict:
+        """The summary's ``measurement_frame``: ``{"translation_mm": [...], "rotation_rad": [...]}``."""
+        return frame_to_dict(self.frame)
+
+    def predict(self, joints, *, initial=None) -> np.ndarray:
+        """(N, M) what the instrument would report at ``joints`` by the identified model."""
+        robot = self.result.robot
+        poses = robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float), initial=initial)
+        return instrument_measurements(robot, poses, self.frame, self.targets)
+
+    def base_poses(self, joints, measured) -> np.ndarray:
+        """(N, D) the data as poses in the (gauge) base frame: full poses taken out of the
+        instrument frame; for position-only data the poses the identified model predicts."""
+        if self.targets is None:
+            return self.to_base(measured)
+        return self.result.robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float))
+
+    def to_base(self, measured) -> np.ndarray:
+        """(N, D) full poses measured in the instrument frame, expressed in the (gauge) base frame."""
+        robot = self.result.robot
+        inv = _invert(self.frame)
+        return instrument_measurements(robot, as_array(measured, "measured", (-1, robot.pose_dim)), inv)
+
+
+def _invert(frame: np.ndarray) -> np.ndarray:
+    R = rotation_matrix(frame[3:])
+    return np.concatenate([-R.T @ frame[:3], euler_from_matrix(R.T)])
+
+
+def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto",
+                      initial_frame=None, targets=None, estimate_targets: bool | None = None, free=None,
+                      start=None, solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
+                      ftol: float = 1e-15, gauge_passes: int = 2) -> MeasuredFit:
+    """Identify the geometry jointly with the instrument frame and the target offsets.
+
+    Args:
+        robot: the robot.
+        joints: (N, C) commanded (or read) joints.
+        measured: (N, D) full poses or (N, 3K) target positions, the instrument's frame.
+        noise: declared noise (positions of targets take ``position_mm``).
+        frame: ``"auto"`` (estimate when :func:`detect_frame` finds the data in another frame),
+            ``"base"`` (the data are in the base frame) or ``"estimate"``.
+        initial_frame: (6,) start of the frame estimate; default the closed-form registration.
+        targets: (K, 3) target offsets (given, or start values), None for full poses.
+        estimate_targets: estimate the offsets; default True when ``targets`` are given.
+        free, start, solver, max_iter, xtol, ftol: as :func:`calib.engine.identify_forward`.
+        gauge_passes: fits with the null space re-taken at the last solution (2: the gauge holds
+            beyond first order).
+
+    Raises:
+        ValueError: bad arguments, a row the start model cannot reach, too few rows.
+    """
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
+    if not isinstance(noise, SensorNoise):
+        raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
+    if frame not in FRAME_MODES:
+        raise ValueError(f"frame must be one of {FRAME_MODES}, got {frame!r}")
+    targets = None if targets is None else as_array(targets, "targets", (-1, 3))
+    k = 0 if targets is None else targets.shape[0]
+    if targets is not None and not 1 <= k <= MAX_TARGETS:
+        raise ValueError(f"targets must hold 1 to {MAX_TARGETS} offsets, got {k}")
+    est_targets = k > 0 and (True if estimate_targets is None else bool(estimate_targets))
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
+    names = robot.free_default if free is None else tuple(free)
+    if not names or len(set(names)) != len(names):
+        raise ValueError(f"free must be a non-empty list of distinct parameter names, got {names}")
+    idx = np.sort(robot.table.indices(names))
+    theta0 = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    notes, detection = [], None
+    if frame == "auto":
+        detection = detect_frame(robot, joints, measured, targets=targets, estimate_targets=est_targets,
+                                 theta=theta0)
+        notes.append(detection.message)
+        est_frame = detection.detected
+    else:
+        est_frame = frame == "estimate"
+    poses0 = _nominal_poses(robot, theta0, joints)
+    registration = None
+    if est_frame:
+        registration = register_frame(robot, joints, measured, targets=targets, estimate_targets=est_targets,
+                                      theta=theta0)
+        frame0 = registration.frame.copy() if initial_frame is None else as_array(initial_frame, "initial_frame", (6,))
+        notes.append(f"registered the instrument frame in closed form: {_frame_words(frame0)} (residual "
+                     f"{registration.rms_mm:.3g} mm RMS with the nominal geometry)")
+        targets0 = None if k == 0 else registration.targets.copy()
+    else:
+        frame0 = np.zeros(6) if initial_frame is None or frame == "base" else as_array(initial_frame, "initial_frame", (6,))
+        targets0 = None if k == 0 else (
+            _fit_targets(robot, joints, measured, theta0, poses0, frame0, targets) if est_targets else targets.copy())
+    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
+    m = robot.pose_dim if k == 0 else 3 * k
+    if joints.shape[0] * m < unknowns:
+        raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
+                         f"unknowns, got {joints.shape[0]}")
+    fit = _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
+               solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
+    theta = fit["theta"]
+    try:
+        poses = robot.forward_kinematics(theta, joints, initial=fit["poses"])
+        res = measurement_residuals(robot, measured, instrument_measurements(robot, poses, fit["frame"], fit["targets"]), k)
+    except KinematicsError:
+        res = np.full(measured.shape, np.nan)
+    cov = np.zeros((robot.n_parameters,) * 2)
+    ni, nt = fit["n_theta"], fit["nt"]
+    cov[np.ix_(idx, idx)] = fit["cov"][:ni, :ni]
+    std = np.sqrt(np.clip(np.diag(fit["cov"]), 0.0, None))
+    frame_std = std[ni + nt:] if est_frame else np.zeros(6)
+    targets_std = None if k == 0 else (std[ni:ni + nt].reshape(k, 3) if est_targets else np.zeros((k, 3)))
+    all_names = list(np.array(robot.table.names)[idx]) + \
+        [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"][:fit["nt"]] + list(FRAME_NAMES[:fit["nf"]])
+    gauge = tuple(describe_combination(v / np.max(np.abs(v)), all_names, n_terms=6, number_format=".3g")
+                  for v in fit["null"].T)
+    if gauge:
+        notes.append(f"{len(gauge)} direction(s) are redundant between geometry, targets and frame; fixed by "
+                     "the gauge (geometric errors expressed in the base frame best fitted to the nominal one)")
+    msg = fit["message"]
+    dof = fit["dof"]
+    if fit["success"] and dof > 0 and np.isfinite(fit["chi2"]):
+        msg = f"{msg}; {noise_verdict(fit['chi2'], dof)}"
+    if est_frame:
+        msg = f"{msg}; " + (detection.message if detection is not None else
+                            "the instrument frame is estimated with the geometry")
+    result = IdentificationResult(
+        method="forward", robot=robot, theta=theta, start=theta0, free_names=names, residuals=res,
+        pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
+        history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]))
+    return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frame_std),
+                       targets=None if k == 0 else frozen_array(fit["targets"]),
+                       targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
+                       targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
+                       registration=registration, notes=tuple(notes))
+
+
+def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,
+                         **options) -> MeasuredFit | None:
+    """:func:`identify_measured` as a recording's ``settings`` say, or None when the data are plain
+    full poses in the base frame (``"base"``, or ``"auto"`` and :func:`detect_frame` finds
+    nothing): then the caller's own method applies unchanged."""
+    if settings.frame != "estimate":
+        try:
+            found = detect_frame(robot, joints, measured, targets=settings.targets,
+                                 estimate_targets=settings.estimate_targets)
+        except ValueError:
+            if settings.n_targets:
+                raise
+            return None  # the nominal model cannot start from home here: the caller's method judges
+        if settings.frame == "base" and found.detected:
+            raise ValueError(f"meta.measurement.frame is 'base', but {found.message.split(': ', 1)[1].split(';')[0]}: "
+                             "the poses seem to be measured in another frame; set it to 'auto' or 'estimate'")
+        if settings.n_targets == 0 and not found.detected:
+            return None
+    return identify_measured(robot, joints, measured, noise, frame=settings.frame,
+                             initial_frame=settings.initial_frame, targets=settings.targets,
+                             estimate_targets=settings.estimate_targets, **options)
+
+
+def measured_gauge_representative(robot: Robot, theta, *, estimate_frame: bool = True, targets=None,
+                                  poses: int = 60, seed: int = 0, start=None) -> np.ndarray:
+    """(P,) the parameter vector, in the gauge of :func:`identify_measured` with the frame (and,
+    with ``targets``, the target offsets) estimated, that moves like ``theta``: to compare an
+    identified vector with a machine's true one (a noise-free fit over ``poses`` workspace poses,
+    exact to numerical precision; see :func:`calib.engine.gauge_representative`)."""
+    from .workspace import reachable_poses
+
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    start = robot.table.nominal if start is None else start
+    targets_at = reachable_poses(robot, poses, seed, theta=theta)
+    joints = robot.inverse_kinematics(theta, targets_at)
+    data = instrument_measurements(robot, targets_at, None, targets)
+    fit = identify_measured(robot, joints, data, SensorNoise(1.0, 1.0), frame="estimate" if estimate_frame else "base",
+                            targets=targets, start=start, initial_frame=np.zeros(6))
+    return fit.result.theta
+
+
+def _frame_words(frame) -> str:
+    f = np.asarray(frame)
+    return (f"translation [{', '.join(f'{v:.4g}' for v in f[:3])}] mm, rotation "
+            f"[{', '.join(f'{v:.4g}' for v in f[3:])}] rad")
+
+
+# --------------------------------------------------------------------------- observability
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementObservability:
+    """What a measurement set determines, frame and targets included.
+
+    Attributes:
+        names: the unknowns (free parameters, then ``T1.x ...``, then ``frame.x ...``).
+        rank: numerical rank of the whitened, scaled Jacobian.
+        n_unknowns: their number.
+        gauge: the redundant directions (between geometry, targets and frame), in words.
+        condition_number: of the scaled Jacobian restricted to the gauge-free directions.
+    """
+
+    names: tuple
+    rank: int
+    n_unknowns: int
+    gauge: tuple
+    condition_number: float
+
+    def summary(self) -> dict:
+        return {"rank": self.rank, "n_unknowns": self.n_unknowns, "not_identifiable": list(self.gauge),
+                "condition_number": self.condition_number if np.isfinite(self.condition_number) else None}
+
+
+def measurement_observability(robot: Robot, theta, joints, noise: SensorNoise, *, frame=None, targets=None,
+                              estimate_frame: bool = True, estimate_targets: bool = True, free=None,
+                              rtol: float = GAUGE_RTOL) -> MeasurementObservability:
+    """Which combinations of geometry, target offsets and frame a pose set cannot identify.
+
+    Args:
+        robot, theta: the robot and the parameter vector to linearise at.
+        joints: (N, C) the joints of the measurements.
+        noise: declared noise (whitening).
+        frame: (6,) the frame to linearise at; default the base frame.
+        targets: (K, 3) target offsets (position-only data), None for full poses.
+        estimate_frame, estimate_targets: which of them are unknowns.
+        free: the free parameters; default ``robot.free_default``.
+    """
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
+    k = 0 if targets is None else len(targets)
+    targets = None if targets is None else as_array(targets, "targets", (-1, 3))
+    est_targets = bool(estimate_targets and k)
+    idx = np.sort(robot.table.indices(robot.free_default if free is None else tuple(free)))
+    poses = _nominal_poses(robot, theta, joints)
+    Hp, HF, Ho = measurement_jacobians(robot, poses, frame, targets)
+    winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
+    blocks = [Hp @ pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]]
+    names = list(np.array(robot.table.names)[idx])
+    scale = [np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0)]
+    if est_targets:
+        blocks.append(Ho)
+        names += [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"]
+        scale.append(np.ones(3 * k))
+    if estimate_frame:
+        blocks.append(HF)
+        names += list(FRAME_NAMES)
+        scale.append(np.r_[np.ones(3), np.full(3, robot.length_scale_mm)])
+    J = np.concatenate(blocks, axis=2)
+    A = np.einsum("nij,njk->nik", winv, J).reshape(-1, J.shape[2])
+    scale = np.concatenate(scale)
+    ni, nt = idx.size, 3 * k if est_targets else 0
+    groups = [np.arange(ni), ni + np.arange(nt), ni + nt + np.arange(6 if estimate_frame else 0)]
+    null, C = gauge_null_space(A / scale, groups, rtol)
+    Q = _complement(C, A.shape[1])
+    s = np.linalg.svd(A / scale @ Q, compute_uv=False) if Q.shape[1] else np.zeros(1)
+    natural = null / scale[:, None]
+    gauge = tuple(describe_combination(v / np.max(np.abs(v)), names, n_terms=6, number_format=".3g")
+                  for v in natural.T)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    return MeasurementObservability(names=tuple(names), rank=A.shape[1] - null.shape[1], n_unknowns=A.shape[1],
+                                    gauge=gauge, condition_number=cond)
