@@ -91,7 +91,14 @@ def summary_markdown(summary: dict) -> str:
         lines.append(f"\nParameter error RMS (identified - injected, lengths): {1e3 * pe['rms_mm']:.3f} um")
     lines.append("\nCondition numbers: " + ", ".join(f"{c:.0f}" for c in summary["condition_numbers"]))
     fl = summary["flagged_poses"]
-    lines.append(f"\nFlagged rows: {', '.join(str(i) for i in fl) if fl else 'none'}")
+    out = summary.get("outliers") or {}
+    state = ("left out" if out.get("left_out") else "kept (--keep-outliers)") if fl else ""
+    lines.append(f"\nFlagged rows (data rows, row k = file line k + 1): "
+                 f"{', '.join(str(i) for i in fl) + ', ' + state if fl else 'none'}")
+    if out.get("verdict"):
+        lines.append(f"\nOutlier test: {out['verdict']}")
+    for w in summary.get("warnings") or ():
+        lines.append(f"\nWarning: {w}")
     return "\n".join(lines)
 
 
