@@ -7,9 +7,10 @@ errors end with exit status 2, an interruption with 130, and never with a Python
 
 from __future__ import annotations
 
+import argparse
 import sys
 
-__all__ = ["UsageError", "cli_main", "one_line", "EXIT_USAGE", "EXIT_INTERRUPTED"]
+__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
 EXIT_USAGE = 2
@@ -48,3 +49,10 @@ def cli_main(run, argv: list[str] | None = None) -> int:
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     return 0
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"error: {self.prog}: {' '.join(message.split())} (see --help)\n")

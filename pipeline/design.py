@@ -40,6 +40,7 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
+from pipeline.cli import ArgumentParser, cli_main
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -250,7 +251,7 @@ def noise_from_arguments(args) -> SensorNoise:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline.design", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m pipeline.design", description=__doc__.split("\n\n")[0])
     p.add_argument("--poses", type=int, required=True, help="number of poses to design (7 for hexapod and Delta)")
     p.add_argument("--robot", default="hexapod", help=f"registered robot: {', '.join(sorted(ROBOTS))}")
     p.add_argument("--criterion", choices=CRITERIA, default="d", help="d: D-optimal, e: E-optimal")
@@ -269,6 +270,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
+    return cli_main(_main, argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     robot = load_robot(args.robot, args.geometry)
     fewest = minimum_poses(robot)

@@ -15,13 +15,13 @@ from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
 from .calibration import RunResult, RunSettings, run_calibration
-from .cli import cli_main
+from .cli import ArgumentParser, cli_main
 
 __all__ = ["main", "build_parser", "settings_from_args", "run", "print_summary"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="python -m pipeline.run",
         description="Calibrate a parallel robot: simulate it in MuJoCo (or read a recording), identify "
                     "its geometric parameters, compensate, validate on held-out poses, and write a Rerun "

@@ -54,6 +54,7 @@ from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
 from pipeline.parallel import spawn_pool
+from pipeline.cli import ArgumentParser, cli_main
 from pipeline.recording import atomic_write
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
@@ -293,7 +294,7 @@ def summarize(results: dict, names, scale: np.ndarray, crb_var: np.ndarray, tria
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline.study", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m pipeline.study", description=__doc__.split("\n\n")[0])
     p.add_argument("--robot", default="hexapod", help=f"registered robot: {', '.join(sorted(ROBOTS))}")
     p.add_argument("--trials", type=int, default=200)
     add_noise_arguments(p)
@@ -339,6 +340,11 @@ def _poses(args, robot: Robot, ws, noise: SensorNoise):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
+    return cli_main(_main, argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     for p in (args.summary_json, args.rrd):
         if p and Path(p).exists() and not args.overwrite:
