@@ -199,7 +199,7 @@ def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunS
     except KinematicsError as exc:
         raise ValueError(f"{where}: the nominal {robot.name} cannot reach the recorded joints: {exc}") from None
     except ValueError as exc:
-        raise ValueError(f"{where}: {len(measured)} calibration rows: {exc}") from None
+        raise ValueError(f"{where}: {len(measured)} calibration rows are too few or unusable: {exc}") from None
 
 
 def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: tuple | None, truth, free) -> dict:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -224,12 +225,18 @@ class ResultSet:
         self.paths = {k: Path(v) for k, v in paths.items()}
         self.overwrite = overwrite
         self._tmp: dict[str, Path] = {}
-        flags = flags or {}
+        try:
+            self._check(flags or {}, create_folders)
+        except BaseException:
+            self.discard()
+            raise
+
+    def _check(self, flags: dict, create_folders: bool) -> None:
         for key, path in self.paths.items():
             who = f"{flags[key]} {path}" if key in flags else str(path)
             if path.is_dir():
                 raise OutputError(f"{who}: is a folder, not a file")
-            if path.exists() and not overwrite:
+            if path.exists() and not self.overwrite:
                 raise FileExistsError(f"{who} exists; pass --overwrite to replace it (refusing to overwrite it "
                                       "silently)")
             folder = path.parent
@@ -361,6 +368,14 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
     if not (np.isfinite(scale) and scale >= MIN_ROBOT_SIZE_MM):
         raise RecordingError(f"{json_path}: field 'nominal_geometry' describes a {name} {scale:.3g} mm in "
                              "size: it seems to be in metres; lengths must be in mm")
+    fields = {f.name: f.type for f in dataclasses.fields(SensorNoise)}
+    for key, value in side["declared_noise"].items():
+        if key not in fields:
+            raise RecordingError(f"{json_path}: field 'declared_noise': unknown key {key!r}; the keys are "
+                                 f"{', '.join(fields)}")
+        numeric = key != "distribution"
+        if numeric and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise RecordingError(f"{json_path}: field 'declared_noise.{key}' must be a number, got {value!r}")
     try:
         noise = SensorNoise(**side["declared_noise"])
     except (TypeError, ValueError) as exc:
@@ -444,8 +459,13 @@ def read_recording(csv_path: str | Path) -> Recording:
             raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
         sets[r - 1] = s
         if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
+            same = np.flatnonzero((values[:r - 1] == values[r - 1]).all(axis=1) & (sets[:r - 1] == s))
+            if same.size:
+                raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
+                                     "delete it")
             raise RecordingError(f"{where}, column 't_s': time goes backwards "
-                                 f"({values[r - 1, 0]!r} after {values[r - 2, 0]!r}); rows must be in the order taken")
+                                 f"({float(values[r - 1, 0])!r} after {float(values[r - 2, 0])!r}); rows must be in "
+                                 "the order taken")
     sets = sets.astype(str)
     c = len(joint_cols)
     return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
