@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "EXIT_USAGE", "EXIT_INTERRUPTED"]
+__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "check_outputs",
+           "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
 EXIT_USAGE = 2
@@ -56,3 +57,24 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(EXIT_USAGE, f"error: {self.prog}: {' '.join(message.split())} (see --help)\n")
+
+
+def nonnegative_int(text: str) -> int:
+    """argparse type: an integer >= 0 (seeds, counts that may be zero)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def check_outputs(paths: dict, *, overwrite: bool) -> None:
+    """Check output paths before any work (see :class:`pipeline.recording.ResultSet`); ``paths``
+    maps each flag to its path (``None``: not asked for)."""
+    from pipeline.recording import ResultSet
+
+    given = {flag: path for flag, path in paths.items() if path}
+    with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
+        pass

@@ -40,7 +40,7 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
-from pipeline.cli import ArgumentParser, cli_main
+from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -257,7 +257,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--criterion", choices=CRITERIA, default="d", help="d: D-optimal, e: E-optimal")
     p.add_argument("--workspace", choices=WORKSPACES, default="full",
                    help="full: the robot's whole feasible workspace; default: its calibration workspace")
-    p.add_argument("--seed", type=int, default=0, help="seed of the candidate draw")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the candidate draw")
     p.add_argument("--out", default="designed_poses.csv", help="command file (CSV); sidecar .json beside it")
     add_noise_arguments(p)
     p.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help="feasible candidate poses drawn")
@@ -287,6 +287,8 @@ def _main(argv: list[str] | None = None) -> int:
     for p in outs:
         if p.exists() and not args.overwrite:
             raise SystemExit(f"{p} exists; pass --overwrite to replace it")
+    check_outputs({"--out": args.out, "--out (sidecar)": str(sidecar_path(args.out)),
+                   "--summary-json": args.summary_json, "--rrd": args.rrd}, overwrite=args.overwrite)
     noise = noise_from_arguments(args)
     theta = robot.table.nominal
     ws = robot_workspace(robot, args.workspace)
