@@ -67,7 +67,7 @@ def refused(argv, out: Path, capsys, *needles) -> str:
     assert snapshot(out) == before  # nothing written, nothing earlier replaced, no temporary file left
     if os.environ.get("HOSTILE_LOG"):  # collect the messages (docs/real_data.md lists them)
         with open(os.environ["HOSTILE_LOG"], "a") as log:
-            log.write(f"{os.environ.get('PYTEST_CURRENT_TEST', '').split(' ')[0]}\t{lines[0]}\n")
+            log.write(f"{os.environ.get('PYTEST_CURRENT_TEST', '').rsplit(' ', 1)[0]}\t{lines[0]}\n")
     return lines[0]
 
 
