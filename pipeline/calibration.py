@@ -384,8 +384,6 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     history = list(result.history) if (settings.method == "chainwise" and solver == "gn") else \
         [float(integrated_error(robot, result.pose_residuals)[2].max())]
     misfit = bool(report is not None and report.misfit)
-    if misfit:
-        warnings.append(outlier_verdict)
     summary = {
         "robot": robot.name,
         "scenario": scenario,

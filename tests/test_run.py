@@ -164,3 +164,18 @@ def test_paper_table4_as_a_real_recording_leaves_row_a2_out(tmp_path):
     kept = run(["--real", str(csv_path), "--keep-outliers", "--out", str(tmp_path), "--quiet"]).summary
     assert kept["calibration_poses_used"] == 10 and not kept["outliers"]["left_out"]
     assert kept["heldout_position_error_mm"]["after"] == s["with_flagged"]["heldout_position_error_mm"]["after"]
+
+
+def test_real_model_misfit_is_reported_in_words_and_no_row_is_left_out(tmp_path):
+    """An unmodelled sag 20 times the declared noise over 60 calibration rows."""
+    from tests.test_hostile_inputs import clean_recording
+
+    rec = clean_recording(60, 20)
+    measured = rec.measured + rec.noise.sample(80, 2)
+    r2 = measured[:, 0] ** 2 + measured[:, 1] ** 2
+    measured[:, 2] += 20 * rec.noise.position_mm * (2 * r2 / r2.max() - 1)
+    csv_path, _ = write_recording(tmp_path / "sag.csv", replace(rec, measured=measured))
+    s = run(["--real", str(csv_path), "--out", str(tmp_path), "--quiet"]).summary
+    assert s["model_misfit"] and s["outliers"]["model_misfit"] and s["flagged_poses"] == []
+    assert "model misfit" in s["outliers"]["verdict"] and s["calibration_poses_used"] == 60
+    assert "does not fit to the declared noise" in s["message"]
