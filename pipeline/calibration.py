@@ -34,7 +34,8 @@ DEFAULT_CONFIGURATIONS = 20
 #: The robot simulated when none is named.
 DEFAULT_ROBOT = "hexapod"
 #: How every message, summary and view names a recording's rows.
-ROW_NUMBERING = "1-based data row of the recording, as a spreadsheet shows it below the header (row k is file line k + 1)"
+ROW_NUMBERING = ("1-based data row of the recording, as a spreadsheet shows it below the header "
+                 "(row k is file line k + 1)")
 
 
 @dataclass(frozen=True)
@@ -230,7 +231,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.recording import Recording, ResultSet, plausibility, read_recording, recording_texts
+    from pipeline.recording import ResultSet, plausibility, read_recording, recording_texts
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}

@@ -33,7 +33,8 @@ from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns",
-           "atomic_write", "publish", "writing", "ResultSet", "OutputError", "recording_texts", "sidecar_path", "plausibility", "FORMAT", "FORMAT_VERSION",
+           "atomic_write", "publish", "writing", "ResultSet", "OutputError", "recording_texts", "sidecar_path",
+           "plausibility", "FORMAT", "FORMAT_VERSION",
            "SIDECAR_FIELDS", "READABLE_VERSIONS", "MIN_ROBOT_SIZE_MM", "REFUSED_CONDITION", "WARNED_CONDITION"]
 
 SETS = ("calibration", "validation")
