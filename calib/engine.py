@@ -368,7 +368,7 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     else:
         chi2, cond = float("nan"), np.array([np.nan])
         cov[np.ix_(idx, idx)] = np.nan
-    if ok and n * d > idx.size and np.isfinite(chi2):
+    if n * d > idx.size and np.isfinite(chi2):  # converged or not, say where the residual stands
         msg = f"{msg}; {noise_verdict(chi2, n * d - idx.size)}"
     return IdentificationResult(
         method="forward", robot=robot, theta=theta, start=theta0, free_names=free, residuals=res,
@@ -518,7 +518,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     else:
         chi2 = float("nan")
     dof_total = n * robot.n_chains - idx.size
-    if noise_given and success and dof_total > 0:
+    if noise_given and dof_total > 0 and np.isfinite(chi2):  # converged or not
         message += "; " + noise_verdict(chi2, dof_total)
     return IdentificationResult(
         method="chainwise", robot=robot, theta=theta, start=theta0, free_names=free, residuals=r,
@@ -535,7 +535,8 @@ def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
         return (f"the residual is at the declared noise (chi-square {chi2:.4g} on {dof} degrees of "
                 f"freedom, {ratio:.2f} times the declared noise)")
     return (f"the model does not fit to the declared noise: the residual is {ratio:.3g} times the "
-            f"declared noise (chi-square {chi2:.4g} on {dof} degrees of freedom, limit {limit:.4g})")
+            f"declared noise (chi-square {chi2:.4g} on {dof} degrees of freedom, limit {limit:.4g}): an "
+            "unmodelled effect, outlying rows, or noise declared too small")
 
 
 def identify(robot: Robot, joints, measured, noise: SensorNoise, *, method: str = "forward",

@@ -6,13 +6,19 @@ row j predicted by the model identified WITHOUT row j is, to first order,
 ``d_j = (I - H_jj)^-1 r_j`` (H_jj the D x D block of row j), with covariance
 ``(I - H_jj)^-1``, so ``t_j = r_j^T (I - H_jj)^-1 r_j`` is chi-square with D degrees of freedom for
 a consistent row (studentized deleted residual). A gross row also spoils the fit that contains
-it (swamping), so the worst row is removed and the model re-identified until every kept row
-passes; removed rows are judged against the model of the rows kept. One fit per removed row, no
-refit per row.
+it (swamping), so the worst row is removed until every kept row passes; removed rows are judged
+against the model of the rows kept (``r_j^T (I + H_jj)^-1 r_j``). The search runs on the model
+linearised at the fit (removing rows moves the estimate by a closed-form update), then the kept
+rows are re-identified once to check it: two or three fits in all, whatever the number of rows.
+
+A few bad rows are outliers; many are not: when more than ``max_fraction`` of the rows would
+have to go, the model does not fit the data at the declared noise (an unmodelled effect, or noise
+declared too small), and the report says so (``misfit``) instead of listing rows to delete.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +28,10 @@ from .engine import identify_forward
 from .noise import SensorNoise
 from .robot import Robot, pose_jacobian_of_parameters
 
-__all__ = ["OutlierReport", "find_outliers"]
+__all__ = ["OutlierReport", "find_outliers", "MISFIT_FRACTION"]
+
+#: More rows than this fraction failing the test is model misfit, not outliers.
+MISFIT_FRACTION = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,13 +42,21 @@ class OutlierReport:
         deleted_residuals: (N, D) measured minus the leave-one-out prediction (mm, rad).
         statistic: (N,) chi-square(D) statistic of each row.
         threshold: the chi-square(D) quantile at ``1 - alpha``.
-        flagged: 0-based indices of the rows whose statistic exceeds the threshold.
+        flagged: 0-based indices of the rows whose statistic exceeds the threshold; empty when
+            ``misfit`` (no row is singled out then).
+        misfit: more than ``max_fraction`` of the rows fail: the model does not fit the data at
+            the declared noise.
+        exceeding: rows whose statistic exceeds the threshold (in the last fit).
+        verdict: the outcome in words.
     """
 
     deleted_residuals: np.ndarray
     statistic: np.ndarray
     threshold: float
     flagged: tuple
+    misfit: bool = False
+    exceeding: int = 0
+    verdict: str = ""
 
 
 def _whitened(robot: Robot, theta, joints, measured, noise):
@@ -51,7 +68,7 @@ def _whitened(robot: Robot, theta, joints, measured, noise):
 
 
 def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=None,
-                  alpha: float = 1e-3) -> OutlierReport:
+                  alpha: float = 1e-3, max_fraction: float = MISFIT_FRACTION) -> OutlierReport:
     """Flag measured poses inconsistent with the rest (closed-form leave-one-out, chi-square).
 
     Args:
@@ -61,9 +78,13 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         noise: declared noise (its pose part; zero components floored).
         free: identified parameters (default ``robot.free_default``).
         alpha: false-alarm probability per consistent row.
+        max_fraction: at most this fraction of the rows (at least one row) is left out as
+            outliers; more failing rows are reported as model misfit.
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
+    if not 0 <= max_fraction < 1:
+        raise ValueError(f"max_fraction must be in [0, 1), got {max_fraction!r}")
     joints = np.asarray(joints, dtype=float)
     measured = np.asarray(measured, dtype=float)
     n, d = measured.shape
@@ -74,35 +95,55 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         raise ValueError(f"outlier detection needs more than {(p + d) // d} poses for {p} parameters "
                          f"(one left out), got {n}")
     thr = float(chi2.ppf(1 - alpha, d))
-    rows = np.arange(n)
-    removed: list[int] = []
-    while True:
-        fit = identify_forward(robot, joints[rows], measured[rows], noise, free=free)
-        r, J = _whitened(robot, fit.theta, joints[rows], measured[rows], noise)
-        A = J[:, :, idx].reshape(-1, p)
-        cov = np.linalg.pinv(A.T @ A, hermitian=True)
-        Jr = J[:, :, idx]
-        H = np.einsum("nip,pq,njq->nij", Jr, cov, Jr)  # (m, D, D) diagonal blocks of the hat matrix
-        M = np.eye(d)[None] - H
-        dw = np.linalg.solve(M, r[..., None])[..., 0]  # whitened deleted residuals
-        stat = np.einsum("ni,ni->n", r, dw)
-        worst = int(np.argmax(stat))
-        if stat[worst] <= thr or (rows.size - 1) * d <= p + d:
-            break
-        removed.append(int(rows[worst]))
-        rows = np.delete(rows, worst)
+    most = max(1, math.floor(max_fraction * n))
     std = noise.pose_std(robot.pose_units)
-    deleted = np.zeros((n, d))
-    stat_all = np.zeros(n)
-    deleted[rows] = dw * std
-    stat_all[rows] = stat
-    if removed:
-        # Removed rows are judged against the model identified from all the rows kept.
-        out = np.array(removed)
-        r_out, J_out = _whitened(robot, fit.theta, joints[out], measured[out], noise)
-        Jo = J_out[:, :, idx]
-        S = np.eye(d)[None] + np.einsum("nip,pq,njq->nij", Jo, cov, Jo)
-        deleted[out] = r_out * std
-        stat_all[out] = np.einsum("ni,ni->n", r_out, np.linalg.solve(S, r_out[..., None])[..., 0])
+    kept = np.ones(n, dtype=bool)
+    removed: list[int] = []
+    misfit = False
+    theta = None
+    for _ in range(3):  # nonlinear refits: the first, and one check per linearised search
+        fit = identify_forward(robot, joints[kept], measured[kept], noise, free=free, start=theta)
+        theta = fit.theta
+        r0, J = _whitened(robot, theta, joints, measured, noise)
+        Jr = J[:, :, idx]
+        # Backward search on the model linearised at this fit: leaving rows out moves the
+        # estimate by delta = (sum_kept Jr^T Jr)^-1 sum_kept Jr^T r0, in closed form.
+        grown = False
+        while True:
+            A = Jr[kept].reshape(-1, p)
+            cov = np.linalg.pinv(A.T @ A, hermitian=True)
+            delta = cov @ (A.T @ r0[kept].ravel())
+            r = r0 - Jr @ delta
+            H = (Jr @ cov) @ np.swapaxes(Jr, 1, 2)  # (N, D, D) diagonal blocks of the hat matrix
+            sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
+            dw = np.linalg.solve(np.eye(d)[None] + sign * H, r[..., None])[..., 0]
+            stat = np.sum(r * dw, axis=1)
+            cand = np.flatnonzero(kept)
+            worst = int(cand[np.argmax(stat[cand])])
+            if stat[worst] <= thr:
+                break
+            if len(removed) == most:
+                misfit = True
+                break
+            if (cand.size - 1) * d <= p + d:
+                break
+            removed.append(worst)
+            kept[worst] = False
+            grown = True
+        if misfit or not grown:
+            break
+    deleted = np.where(kept[:, None], dw, r) * std
+    stat_all = stat
+    exceeding = int(np.count_nonzero(stat_all > thr))
+    if misfit:
+        ratio = math.sqrt(float(np.median(stat)) / d)
+        verdict = (f"model misfit, not outliers: {exceeding} of {n} rows fail the leave-one-out test "
+                   f"(more than {100 * max_fraction:g}% of the rows; typical row {ratio:.3g} times the "
+                   "declared noise): the geometric model does not explain the data at the declared noise "
+                   "(an unmodelled effect, or noise declared too small); no row is left out")
+        return OutlierReport(deleted, stat_all, thr, (), True, exceeding, verdict)
     flagged = tuple(sorted(int(i) for i in np.flatnonzero(stat_all > thr)))
-    return OutlierReport(deleted, stat_all, thr, flagged)
+    verdict = (f"{len(flagged)} of {n} rows inconsistent with the others (leave-one-out chi-square "
+               f"above {thr:.3g}, false-alarm rate {alpha:g} per row)" if flagged else
+               f"every row consistent with the others (leave-one-out chi-square <= {thr:.3g})")
+    return OutlierReport(deleted, stat_all, thr, flagged, False, exceeding, verdict)

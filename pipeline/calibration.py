@@ -9,6 +9,7 @@ keys for every robot.
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,18 +26,25 @@ from calib.outliers import find_outliers
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
+from pipeline.recording import OutputError
 
-__all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS"]
+__all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
+           "NameReservation", "default_name", "OUTPUT_EXTENSIONS"]
 
 #: Calibration poses of a robot whose reference experiment names none.
 DEFAULT_CONFIGURATIONS = 20
+#: The robot simulated when none is named.
+DEFAULT_ROBOT = "hexapod"
+#: How every message, summary and view names a recording's rows.
+ROW_NUMBERING = ("1-based data row of the recording, as a spreadsheet shows it below the header "
+                 "(row k is file line k + 1)")
 
 
 @dataclass(frozen=True)
 class RunSettings:
     """What a run does (see ``python -m pipeline.run --help`` for each field)."""
 
-    robot: str = "hexapod"
+    robot: str | None = None
     poses: str = "reference"
     design: str = "random"
     heldout: int = 50
@@ -57,6 +65,7 @@ class RunSettings:
     name: str | None = None
     overwrite: bool = False
     summary_json: Path | None = None
+    keep_outliers: bool = False
 
 
 @dataclass
@@ -72,23 +81,51 @@ def default_name(settings: RunSettings) -> str:
     """``hexapod_paper`` for the hexapod's reference run, else ``<robot>_<poses>``, or the input's stem."""
     if settings.real is not None:
         return Path(settings.real).stem + "_calibrated"
-    if settings.robot == "hexapod" and settings.poses == "reference":
+    robot = settings.robot or DEFAULT_ROBOT
+    if robot == "hexapod" and settings.poses == "reference":
         return "hexapod_paper"
-    return f"{settings.robot}_{Path(settings.poses).stem}"
+    return f"{robot}_{Path(settings.poses).stem}"
 
 
-def _free_name(out: Path, settings: RunSettings) -> str:
-    """The default name is numbered rather than overwritten; an explicit name is never changed."""
-    if settings.name is not None:
-        return settings.name
-    base = default_name(settings)
-    if settings.overwrite:
-        return base
-    cand, k = base, 1
-    while any((out / f"{cand}{ext}").exists() for ext in (".rrd", ".csv", ".json")):
-        k += 1
-        cand = f"{base}_{k}"
-    return cand
+OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json")
+
+
+class NameReservation:
+    """The base name of a run's output files, held by a hidden lock file in the output folder.
+
+    The default name is numbered rather than overwritten, and two runs into one folder at the same
+    time each get their own name (the lock is taken atomically). An explicit name is never changed:
+    a name held by another run is refused. The lock is removed on :meth:`release`.
+    """
+
+    def __init__(self, out: Path, settings: RunSettings):
+        self.out = out
+        self.lock: Path | None = None
+        base = settings.name if settings.name is not None else default_name(settings)
+        k = 1
+        while True:
+            cand = base if k == 1 else f"{base}_{k}"
+            taken = any((out / f"{cand}{ext}").exists() for ext in OUTPUT_EXTENSIONS)
+            if not taken or settings.overwrite or settings.name is not None:
+                lock = out / f".{cand}.lock"
+                try:
+                    fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+                except FileExistsError:
+                    if settings.name is not None:
+                        raise OutputError(f"--name {cand}: another run is writing {out / cand}.* now "
+                                          f"(or was interrupted: remove {lock})") from None
+                except OSError as exc:
+                    raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
+                else:
+                    os.close(fd)
+                    self.lock, self.name = lock, cand
+                    return
+            k += 1
+
+    def release(self) -> None:
+        if self.lock is not None and self.lock.exists():
+            self.lock.unlink()
+        self.lock = None
 
 
 def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str]:
@@ -188,8 +225,38 @@ def _instrument_block(fit, before, after) -> dict:
     return block
 
 
+def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str):
+    solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
+    options = {"solver": solver}
+    if settings.method == "chainwise":
+        options.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
+    try:
+        return identify(robot, joints, measured, noise, method=settings.method, **options), solver
+    except KinematicsError as exc:
+        raise ValueError(f"{where}: the nominal {robot.name} cannot reach the recorded joints: {exc}") from None
+    except ValueError as exc:
+        raise ValueError(f"{where}: {len(measured)} calibration rows are too few or unusable: {exc}") from None
+
+
+def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: tuple | None, truth, free) -> dict:
+    """One identification's outcome, for the with/without-flagged-rows comparison."""
+    block = {"rows_used": len(rows), "identified_errors": robot.table.to_dict(result.errors),
+             "chi2": result.chi2, "dof": result.dof, "success": result.success, "message": result.message,
+             "heldout_position_error_mm": None, "heldout_orientation_error_rad": None,
+             "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free)}
+    if held is not None:
+        block.update(_heldout_block(robot, *held))
+    return block
+
+
 def run_calibration(settings: RunSettings, progress=lambda label, done, total: None) -> RunResult:
     """Run one calibration (see the module docstring).
+
+    Every output path is checked before any work; the outputs (recording ``.csv`` + ``.json``
+    when simulating, ``.rrd``, ``summary_json``) are written to temporary files and published
+    together at the end, or not at all. Rows flagged by the outlier test are left out of the
+    identification unless ``keep_outliers``; the summary gives the result with and without them.
+    Rows are named by their 1-based data row in the recording (row k is file line k + 1).
 
     Args:
         settings: what to do.
@@ -199,115 +266,188 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.recording import Recording, atomic_write, read_recording, write_recording
+    from pipeline.recording import ResultSet, plausibility, read_recording, recording_texts
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}
-    sim = None
-    instrument = None  # the fit of an instrument frame or targets, when the recording needs one
+    warnings: list[str] = []
+    rec = None
     if settings.real is not None:
         rec = read_recording(settings.real)
+        if settings.robot is not None and settings.robot != rec.robot.name:
+            raise ValueError(f"--robot {settings.robot}: the recording {settings.real} is of a {rec.robot.name} "
+                             "(its sidecar's 'robot'); leave --robot out with --real")
+        warnings += plausibility(rec, settings.real)
+    # Every output is checked before any work, and the files are published together at the end.
+    out = Path(settings.out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    reservation = NameReservation(out, settings)
+    try:
+        name = reservation.name
+        targets_out = {"rrd": out / f"{name}.rrd"}
+        if rec is None:
+            targets_out.update(csv=out / f"{name}.csv", json=out / f"{name}.json")
+        if settings.summary_json is not None:
+            targets_out["summary_json"] = Path(settings.summary_json)
+        flags = {k: "--out" for k in ("rrd", "csv", "json")} | {"summary_json": "--summary-json"}
+        with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
+            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs)
+            paths = {k: str(v) for k, v in targets_out.items()}
+            summary.update({k: v for k, v in paths.items() if k != "summary_json"})
+            summary["wall_time_s"] = time.perf_counter() - t0
+            summary["wall_time_split_s"] = split
+            recording = summary.pop("_recording", None)
+            if "summary_json" in targets_out:
+                outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
+            if recording is not None:
+                csv_text, json_text = recording_texts(recording)
+                outputs.temp("csv").write_text(csv_text)
+                outputs.temp("json").write_text(json_text)
+            outputs.publish()
+    finally:
+        reservation.release()
+    return RunResult(summary=summary, result=result, paths=paths)
+
+
+def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs):
+    """The analysis of :func:`run_calibration`; writes the ``.rrd`` to its temporary file."""
+    from pipeline.recording import Recording
+
+    sim = None
+    if rec is not None:
         robot, noise = rec.robot, rec.noise
         truth = rec.meta.get("simulation", {}).get("injected_errors")
-        injected = robot.table.vector(truth, base=np.zeros(robot.n_parameters)) if isinstance(truth, dict) else None
+        try:
+            injected = robot.table.vector(truth, base=np.zeros(robot.n_parameters)) if isinstance(truth, dict) else None
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{sidecar_name(settings.real)}: field 'meta.simulation.injected_errors': {exc}") from None
         actual = None if injected is None else robot.table.nominal + injected
         joints, measured = rec.subset("calibration")
         val_joints, val_meas = rec.subset("validation")
         cal_rows = rec.rows("calibration")
         scenario = f"recording {settings.real}"
+        where = str(settings.real)
+        if len(measured) == 0:
+            raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
     else:
-        robot = default_robot(settings.robot)
+        robot = default_robot(settings.robot or DEFAULT_ROBOT)
         noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
         sim = _simulate(robot, settings, noise, progress)
         actual, injected, scenario = sim["actual"], sim["errors"], sim["scenario"]
         joints, measured = sim["cal"].encoders, sim["cal"].measured
         cal_rows = np.arange(len(measured))
+        where = "the simulated calibration poses"
     nominal = robot.table.nominal
     split["simulate"] = time.perf_counter() - t0
 
-    # The measurements are written before any analysis, so that nothing is lost if it fails.
-    out = Path(settings.out)
-    name = _free_name(out, settings)
-    paths: dict[str, str] = {}
-    if sim is not None:
-        parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
-        simulation = {"injected_errors": robot.table.to_dict(injected),
-                      "gravity": settings.gravity, "payload_kg": settings.payload_kg,
-                      "stiffness": settings.stiffness, "friction": settings.friction}
-        recording = Recording(
-            robot=robot, noise=noise, t_s=np.concatenate([p.t_s for p in parts]),
-            joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
-            sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
-            meta={"scenario": scenario, "seed": settings.seed, "simulation": simulation})
-        csv_path, json_path = write_recording(out / f"{name}.csv", recording, overwrite=settings.overwrite)
-        paths.update(csv=str(csv_path), json=str(json_path))
-
     t1 = time.perf_counter()
-    solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
-    options = {"solver": solver}
-    if settings.method == "chainwise":
-        options.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
-    if sim is None:
+    # The outlier test (closed-form leave-one-out, forward model), then the identification from
+    # the rows kept; the one from every row is kept for the comparison.
+    n_cal = len(measured)
+    instrument = None  # the fit of an instrument frame or targets, when the recording needs one
+    if rec is not None:
         instrument = identify_as_measured(robot, joints, measured, noise, measurement_settings(rec.meta.get("measurement")))
     if instrument is not None:  # the forward method with the frame and targets; poses in the base frame below
-        result, solver = instrument.result, "lm"
-        measured_raw, measured = measured, instrument.base_poses(joints, measured)
-    else:
-        result = identify(robot, joints, measured, noise, method=settings.method, **options)
+        measured = instrument.base_poses(joints, measured)
     try:
         report = find_outliers(robot, joints, measured, noise)
-        flagged = [int(cal_rows[i]) + 1 for i in report.flagged]
-    except ValueError:
-        flagged = []
+    except (ValueError, KinematicsError) as exc:
+        report = None
+        outlier_verdict = f"outlier test not run: {exc}"
+    else:
+        outlier_verdict = report.verdict
+    flagged_idx = list(report.flagged) if report is not None else []
+    flagged = [int(cal_rows[i]) + 1 for i in flagged_idx]
+    if instrument is not None:
+        result_all, solver = instrument.result, "lm"
+    else:
+        result_all, solver = _identify(robot, joints, measured, noise, settings, where)
+    keep = np.setdiff1d(np.arange(n_cal), flagged_idx)
+    left_out = bool(flagged_idx) and not settings.keep_outliers and instrument is None
+    if flagged_idx and instrument is not None:
+        warnings.append("the flagged rows are kept: leaving rows out is not done with an instrument frame or "
+                        "targets estimated")
+    result_kept = None
+    if flagged_idx and instrument is None:
+        try:
+            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, where)
+        except ValueError as exc:
+            warnings.append(f"the flagged rows are kept: without them {exc}")
+            left_out = False
+    result = result_kept if left_out else result_all
+    used = keep if left_out else np.arange(n_cal)
     split["identify"] = time.perf_counter() - t1
 
-    heldout_before = heldout_after = None
-    heldout_basis, n_heldout = None, 0
-    if sim is not None and sim["val"] is not None:
-        t2 = time.perf_counter()
-        try:
-            compensated = robot.inverse_kinematics(result.theta, sim["heldout"])
-            check_joint_limits(robot, compensated, "held-out pose")
-        except KinematicsError as exc:
-            raise ValueError(
-                f"the identified model cannot command the held-out poses ({exc}); its geometry is "
-                "implausible: the measurements carry effects the geometric model lacks (gravity, "
-                "payload, compliance; see python -m pipeline.discover)") from exc
-        after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
-            "measuring held-out poses (compensated commands)", d, t))
-        heldout_before = sim["val"].true_poses - sim["heldout"]
-        heldout_after = after.true_poses - sim["heldout"]
-        n_heldout = len(sim["heldout"])
+    def heldout(theta):
+        """(before, after) held-out pose errors of the model ``theta``, or None."""
+        if sim is not None and sim["val"] is not None:
+            try:
+                compensated = robot.inverse_kinematics(theta, sim["heldout"])
+                check_joint_limits(robot, compensated, "held-out pose")
+            except KinematicsError as exc:
+                raise ValueError(
+                    f"the identified model cannot command the held-out poses ({exc}); its geometry is "
+                    "implausible: the measurements carry effects the geometric model lacks (gravity, "
+                    "payload, compliance; see python -m pipeline.discover)") from exc
+            after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
+                "measuring held-out poses (compensated commands)", d, t))
+            return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
+        if instrument is not None and len(val_joints):
+            return _instrument_heldout(robot, instrument, val_joints, val_meas)[:2]
+        if sim is None and len(val_joints):
+            # A recording holds the validation poses measured under nominal commands only: the
+            # identified model's prediction error there stands for the compensated error (equal to
+            # first order), and includes the sensor noise.
+            try:
+                before = val_meas - robot.forward_kinematics(nominal, val_joints, initial=val_meas)
+                after = val_meas - robot.forward_kinematics(theta, val_joints, initial=val_meas)
+            except KinematicsError as exc:
+                raise ValueError(f"{where}: validation row {int(rec.rows('validation')[exc.index]) + 1}: "
+                                 f"the model cannot reach its joints: {exc}") from None
+            return before, after
+        return None
+
+    t2 = time.perf_counter()
+    held = heldout(result.theta)
+    n_heldout = 0 if held is None else len(held[0])
+    heldout_basis = None
+    if held is not None:
         heldout_basis = ("simulated machine, compensated commands, noise-free settled poses "
-                         "(before: nominal commands)")
-        split["simulate"] += time.perf_counter() - t2
-    elif instrument is not None and len(val_joints):
-        heldout_before, heldout_after, n_heldout, heldout_basis = _instrument_heldout(
-            robot, instrument, val_joints, val_meas)
-    elif sim is None and len(val_joints):
-        # A recording holds the validation poses measured under nominal commands only: the
-        # identified model's prediction error there stands for the compensated error (equal to
-        # first order), and includes the sensor noise.
-        heldout_before = val_meas - robot.forward_kinematics(nominal, val_joints, initial=val_meas)
-        heldout_after = val_meas - robot.forward_kinematics(result.theta, val_joints, initial=val_meas)
-        n_heldout = len(val_joints)
-        heldout_basis = "recorded validation rows: measured minus model prediction (includes sensor noise)"
+                         "(before: nominal commands)") if sim is not None else \
+            "recorded validation rows: measured minus model prediction (includes sensor noise)"
+        if instrument is not None:
+            heldout_basis = _instrument_heldout(robot, instrument, val_joints, val_meas)[3]
+    split["simulate"] += time.perf_counter() - t2
 
     free = result.free_names
     truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start) \
         if instrument is None else measured_gauge_representative(
             robot, actual, estimate_frame=instrument.frame_estimated,
             targets=instrument.targets if instrument.targets_estimated else None, start=result.start)
+    with_flagged = without_flagged = None
+    if result_kept is not None:
+        other = result_all if left_out else result_kept
+        held_other = heldout(other.theta)
+        blocks = {id(result): held, id(other): held_other}
+        with_flagged = _variant(robot, result_all, list(range(n_cal)), blocks[id(result_all)], truth_in_gauge, free)
+        without_flagged = _variant(robot, result_kept, list(keep), blocks[id(result_kept)], truth_in_gauge, free)
     history = list(result.history) if (settings.method == "chainwise" and solver == "gn" and instrument is None) \
         else [float(integrated_error(robot, result.pose_residuals if instrument is None else
                                      measured - robot.forward_kinematics(result.theta, joints))[2].max())]
+    misfit = bool(report is not None and report.misfit)
     summary = {
         "robot": robot.name,
         "scenario": scenario,
         "method": settings.method,
         "solver": solver,
         "weighted": settings.weighted if settings.method == "chainwise" else True,
-        "calibration_poses": int(len(measured)),
+        "calibration_poses": int(n_cal),
+        "calibration_poses_used": int(used.size),
         "heldout_poses": n_heldout,
         "declared_noise": noise.to_dict(),
         "seed": settings.seed,
@@ -329,15 +469,25 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         "dof": result.dof,
         "max_dqint_history": history,
         "condition_numbers": result.condition_numbers.tolist(),
+        "row_numbering": ROW_NUMBERING,
         "flagged_poses": flagged,
+        "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
+                             "against the declared noise), forward model",
+                     "verdict": outlier_verdict, "flagged_rows": flagged, "left_out": left_out,
+                     "model_misfit": misfit},
+        "model_misfit": misfit,
+        "with_flagged": with_flagged,
+        "without_flagged": without_flagged,
+        "warnings": warnings,
         "heldout_basis": heldout_basis,
         "heldout_position_error_mm": None,
         "heldout_orientation_error_rad": None,
     }
-    if heldout_before is not None and (instrument is None or instrument.targets is None):
-        summary.update(_heldout_block(robot, heldout_before, heldout_after))
+    if held is not None and (instrument is None or instrument.targets is None):
+        summary.update(_heldout_block(robot, *held))
     if instrument is not None:
-        summary.update(_instrument_block(instrument, heldout_before, heldout_after))
+        summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
+    heldout_before, heldout_after = (None, None) if held is None else held
     if sim is not None:
         cal = sim["cal"]
         summary["settle_steps_per_pose"] = {"mean": float(cal.steps.mean()), "max": int(cal.steps.max())}
@@ -348,43 +498,56 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         pos, ang = pose_error_norms(robot, dep)
         summary["kinematic_departure"] = {"position_mm": {"mean": float(pos.mean()), "max": float(pos.max())},
                                           "orientation_rad": {"mean": float(ang.mean()), "max": float(ang.max())}}
+        parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
+        simulation = {"injected_errors": robot.table.to_dict(injected),
+                      "gravity": settings.gravity, "payload_kg": settings.payload_kg,
+                      "stiffness": settings.stiffness, "friction": settings.friction}
+        summary["_recording"] = Recording(
+            robot=robot, noise=noise, t_s=np.concatenate([p.t_s for p in parts]),
+            joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
+            sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
+            meta={"scenario": scenario, "seed": settings.seed, "simulation": simulation})
 
     t3 = time.perf_counter()
     from calib.observability import analyze_observability
     from pipeline.rerun_log import (APP_IDS, blueprint, log_calibration_run, run_eye, run_magnification,
                                     save_recording, summary_markdown)
 
-    analysis = analyze_observability(robot, result.start, measured, noise)
+    analysis = analyze_observability(robot, result.start, measured[used], noise)
     summary["observability"] = {"condition_number": float(analysis.condition_number),
                                 "crb_std": robot.table.to_dict(analysis.crb_std)}
-    targets = sim["targets"] if sim is not None else robot.forward_kinematics(nominal, joints, initial=measured)
-    try:
-        predicted = robot.forward_kinematics(result.theta, joints, initial=measured)
-    except KinematicsError:
-        predicted = measured
+    targets = sim["targets"] if sim is not None else _predicted_or(robot, nominal, joints, measured)
+    predicted = _predicted_or(robot, result.theta, joints, measured)
 
     magnified = run_magnification(robot, nominal, actual, result.theta, targets, measured)
     history_label = "max dQint (mm)" if (settings.method == "chainwise" and solver == "gn") else "cost"
-    flagged_index = [int(np.flatnonzero(cal_rows == f - 1)[0]) for f in flagged]
+    if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim:  # target positions
+        heldout_before = heldout_after = None
 
     def log(stream):
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
-                            predicted=predicted, history=result.history,
-                            heldout_before=None if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim
-                            else heldout_before, heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
-                            observability=analysis, flagged=flagged_index, history_label=history_label,
+                            predicted=predicted, history=result.history, heldout_before=heldout_before,
+                            heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
+                            observability=analysis, flagged=flagged_idx, history_label=history_label,
                             magnified=magnified)
 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
                    has_heldout=heldout_before is not None, history_label=history_label)
-    paths["rrd"] = str(save_recording(out / f"{name}.rrd", log, application_id=APP_IDS["run"],
-                                      overwrite=settings.overwrite, bp=bp))
+    save_recording(outputs.temp("rrd"), log, application_id=APP_IDS["run"], overwrite=True, bp=bp)
     split["log"] = time.perf_counter() - t3
-    summary.update(paths)
-    summary["wall_time_s"] = time.perf_counter() - t0
-    summary["wall_time_split_s"] = split
-    if settings.summary_json is not None:
-        atomic_write(settings.summary_json, json.dumps(summary, indent=1), overwrite=settings.overwrite)
-        paths["summary_json"] = str(settings.summary_json)
-    return RunResult(summary=summary, result=result, paths=paths)
+    return summary, result
+
+
+def _predicted_or(robot: Robot, theta, joints, measured) -> np.ndarray:
+    """The forward kinematics of ``theta`` at ``joints``, or the measured poses where it fails."""
+    try:
+        return robot.forward_kinematics(theta, joints, initial=measured)
+    except KinematicsError:
+        return measured
+
+
+def sidecar_name(csv_path) -> str:
+    from pipeline.recording import sidecar_path
+
+    return str(sidecar_path(csv_path))

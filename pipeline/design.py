@@ -40,6 +40,7 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
+from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -250,13 +251,13 @@ def noise_from_arguments(args) -> SensorNoise:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline.design", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m pipeline.design", description=__doc__.split("\n\n")[0])
     p.add_argument("--poses", type=int, required=True, help="number of poses to design (7 for hexapod and Delta)")
     p.add_argument("--robot", default="hexapod", help=f"registered robot: {', '.join(sorted(ROBOTS))}")
     p.add_argument("--criterion", choices=CRITERIA, default="d", help="d: D-optimal, e: E-optimal")
     p.add_argument("--workspace", choices=WORKSPACES, default="full",
                    help="full: the robot's whole feasible workspace; default: its calibration workspace")
-    p.add_argument("--seed", type=int, default=0, help="seed of the candidate draw")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the candidate draw")
     p.add_argument("--out", default="designed_poses.csv", help="command file (CSV); sidecar .json beside it")
     add_noise_arguments(p)
     p.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help="feasible candidate poses drawn")
@@ -269,6 +270,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
+    return cli_main(_main, argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     robot = load_robot(args.robot, args.geometry)
     fewest = minimum_poses(robot)
@@ -281,6 +287,8 @@ def main(argv: list[str] | None = None) -> int:
     for p in outs:
         if p.exists() and not args.overwrite:
             raise SystemExit(f"{p} exists; pass --overwrite to replace it")
+    check_outputs({"--out": args.out, "--out (sidecar)": str(sidecar_path(args.out)),
+                   "--summary-json": args.summary_json, "--rrd": args.rrd}, overwrite=args.overwrite)
     noise = noise_from_arguments(args)
     theta = robot.table.nominal
     ws = robot_workspace(robot, args.workspace)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -35,7 +36,9 @@ from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns",
-           "atomic_write", "publish", "writing", "sidecar_path", "FORMAT", "FORMAT_VERSION"]
+           "atomic_write", "publish", "writing", "ResultSet", "OutputError", "recording_texts", "sidecar_path",
+           "plausibility", "FORMAT", "FORMAT_VERSION",
+           "SIDECAR_FIELDS", "READABLE_VERSIONS", "MIN_ROBOT_SIZE_MM", "REFUSED_CONDITION", "WARNED_CONDITION"]
 
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
@@ -162,20 +165,8 @@ def atomic_write(path: str | Path, data: str | bytes, *, overwrite: bool = False
     return Path(path)
 
 
-def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:
-    """Write ``rec`` as ``csv_path`` plus its JSON sidecar.
-
-    Both files are checked before either is written, so that nothing is half-replaced.
-
-    Returns:
-        The paths of the CSV and JSON files.
-    """
-    csv_path = Path(csv_path)
-    json_path = sidecar_path(csv_path)
-    if not overwrite:
-        for p in (csv_path, json_path):
-            if p.exists():
-                raise FileExistsError(_exists_message(p))
+def recording_texts(rec: Recording) -> tuple[str, str]:
+    """The CSV text and the JSON sidecar text of ``rec``."""
     joint_cols, pose_cols = columns(rec.robot, measurement_settings(rec.meta.get("measurement")).n_targets)
     header = ("t_s",) + joint_cols + pose_cols + ("set",)
     buf = io.StringIO()
@@ -197,37 +188,205 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
         "declared_noise": rec.noise.to_dict(),
         "meta": rec.meta,
     }
-    atomic_write(csv_path, buf.getvalue(), overwrite=overwrite)
-    atomic_write(json_path, json.dumps(sidecar, indent=1), overwrite=overwrite)
+    return buf.getvalue(), json.dumps(sidecar, indent=1)
+
+
+def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:
+    """Write ``rec`` as ``csv_path`` plus its JSON sidecar, both or neither (see :class:`ResultSet`).
+
+    Returns:
+        The paths of the CSV and JSON files.
+    """
+    csv_path = Path(csv_path)
+    json_path = sidecar_path(csv_path)
+    csv_text, json_text = recording_texts(rec)
+    with ResultSet({"csv": csv_path, "json": json_path}, overwrite=overwrite, create_folders=True) as out:
+        out.temp("csv").write_text(csv_text)
+        out.temp("json").write_text(json_text)
+        out.publish()
     return csv_path, json_path
 
 
-def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
-    if not json_path.exists():
-        raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
+class OutputError(ValueError):
+    """An output path cannot be written; the message names it (and the flag that gave it)."""
+
+
+class ResultSet:
+    """The output files of one run, published together or not at all.
+
+    Every path is checked when the set is made (before any work): not a folder, not existing
+    unless ``overwrite``, in a folder that exists (or is created, ``create_folders``) and can be
+    written. Each file is written to a temporary file beside its destination (:meth:`temp`);
+    :meth:`publish` moves them all into place, and if one move fails, removes those already moved
+    (restoring what they replaced). Leaving the ``with`` block without publishing removes the
+    temporary files: an interrupted run leaves only hidden ``.*.tmp`` files, nothing that looks
+    complete.
+
+    Raises:
+        FileExistsError: a path exists and ``overwrite`` is off.
+        OutputError: a path cannot be written.
+    """
+
+    def __init__(self, paths: dict, *, overwrite: bool = False, flags: dict | None = None,
+                 create_folders: bool = False):
+        self.paths = {k: Path(v) for k, v in paths.items()}
+        self.overwrite = overwrite
+        self._tmp: dict[str, Path] = {}
+        try:
+            self._check(flags or {}, create_folders)
+        except BaseException:
+            self.discard()
+            raise
+
+    def _check(self, flags: dict, create_folders: bool) -> None:
+        for key, path in self.paths.items():
+            who = f"{flags[key]} {path}" if key in flags else str(path)
+            if path.is_dir():
+                raise OutputError(f"{who}: is a folder, not a file")
+            if path.exists() and not self.overwrite:
+                raise FileExistsError(f"{who} exists; pass --overwrite to replace it (refusing to overwrite it "
+                                      "silently)")
+            folder = path.parent
+            if create_folders and not folder.exists():
+                try:
+                    folder.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise OutputError(f"{who}: cannot create the folder {folder}: {exc.strerror or exc}") from None
+            if not folder.is_dir():
+                raise OutputError(f"{who}: the folder {folder} does not exist" if not folder.exists() else
+                                  f"{who}: {folder} is not a folder")
+            try:  # the real test of writability (permissions, read-only file systems)
+                fd, probe = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+            except OSError as exc:
+                raise OutputError(f"{who}: cannot write in the folder {folder}: {exc.strerror or exc}") from None
+            os.close(fd)
+            self._tmp[key] = Path(probe)
+
+    def temp(self, key: str) -> Path:
+        """The temporary file that becomes ``paths[key]`` on :meth:`publish`."""
+        return self._tmp[key]
+
+    def publish(self) -> None:
+        """Move every temporary file into place, all or none."""
+        done: list[tuple[Path, Path | None]] = []
+        try:
+            for key, path in self.paths.items():
+                backup = None
+                if self.overwrite and path.exists():
+                    fd, b = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".bak")
+                    os.close(fd)
+                    os.replace(path, b)
+                    backup = Path(b)
+                try:
+                    publish(self._tmp[key], path, overwrite=self.overwrite)
+                except BaseException:
+                    if backup is not None:
+                        os.replace(backup, path)
+                    raise
+                done.append((path, backup))
+        except BaseException:
+            for path, backup in reversed(done):
+                if backup is not None:
+                    os.replace(backup, path)
+                elif path.exists():
+                    path.unlink()
+            raise
+        for _, backup in done:
+            if backup is not None:
+                backup.unlink()
+
+    def discard(self) -> None:
+        """Remove the temporary files that were not published."""
+        for tmp in self._tmp.values():
+            if tmp.exists():
+                tmp.unlink()
+
+    def __enter__(self) -> "ResultSet":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.discard()
+
+
+#: The sidecar's fields; any other is refused (a misspelt key would otherwise be ignored silently).
+SIDECAR_FIELDS = ("format", "version", "robot", "units", "columns", "nominal_geometry", "parameter_table",
+                  "declared_noise", "meta")
+#: Sidecar versions this reader understands.
+READABLE_VERSIONS = (1, FORMAT_VERSION)
+#: A parallel robot smaller than this (mm) is a geometry written in metres.
+MIN_ROBOT_SIZE_MM = 5.0
+
+
+def _read_text(path: Path, what: str) -> str:
+    """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line RecordingError."""
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a folder, not a {what}")
+    if not path.exists():
+        raise RecordingError(f"{path}: {what} not found")
     try:
-        side = json.loads(json_path.read_text())
+        data = path.read_bytes()
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    if b"\0" in data:
+        raise RecordingError(f"{path}: not a text file (it holds NUL bytes): expected a {what}")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
+
+
+def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
+    if not json_path.exists() and not json_path.is_dir():
+        raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
+    text = _read_text(json_path, "JSON sidecar")
+    try:
+        side = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise RecordingError(f"{json_path}: not valid JSON: {exc}") from exc
+        raise RecordingError(f"{json_path}: not valid JSON: {exc}") from None
     if not isinstance(side, dict):
-        raise RecordingError(f"{json_path}: top level must be an object")
-    name = side.get("robot")
-    if name not in ROBOTS:
+        raise RecordingError(f"{json_path}: top level must be an object, got {type(side).__name__}")
+    unknown = [k for k in side if k not in SIDECAR_FIELDS]
+    if unknown:
+        raise RecordingError(f"{json_path}: unknown field(s) {', '.join(map(repr, unknown))}; "
+                             f"the fields are {', '.join(SIDECAR_FIELDS)}")
+    for key in ("format", "version", "robot", "units", "nominal_geometry", "declared_noise"):
+        if key not in side:
+            raise RecordingError(f"{json_path}: missing field {key!r}")
+    if side["format"] != FORMAT:
+        raise RecordingError(f"{json_path}: field 'format' must be {FORMAT!r}, got {side['format']!r}")
+    version = side["version"]
+    if isinstance(version, bool) or version not in READABLE_VERSIONS:
+        raise RecordingError(f"{json_path}: field 'version' must be one of "
+                             f"{', '.join(map(str, READABLE_VERSIONS))}, got {version!r}")
+    name = side["robot"]
+    if not isinstance(name, str) or name not in ROBOTS:
         raise RecordingError(f"{json_path}: field 'robot' must be one of {', '.join(sorted(ROBOTS))}, got {name!r}")
-    units = side.get("units")
+    units = side["units"]
     if units != UNITS:
         raise RecordingError(f"{json_path}: field 'units' must be {UNITS}, got {units!r}")
     for key in ("nominal_geometry", "declared_noise"):
-        if key not in side:
-            raise RecordingError(f"{json_path}: missing field {key!r}")
+        if not isinstance(side[key], dict):
+            raise RecordingError(f"{json_path}: field {key!r} must be an object, got {type(side[key]).__name__}")
     try:
         robot = robot_from_description(name, side["nominal_geometry"])
-    except (KeyError, ValueError, TypeError) as exc:
-        raise RecordingError(f"{json_path}: field 'nominal_geometry': {exc}") from exc
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise RecordingError(f"{json_path}: field 'nominal_geometry': {exc}") from None
+    scale = robot.length_scale_mm
+    if not (np.isfinite(scale) and scale >= MIN_ROBOT_SIZE_MM):
+        raise RecordingError(f"{json_path}: field 'nominal_geometry' describes a {name} {scale:.3g} mm in "
+                             "size: it seems to be in metres; lengths must be in mm")
+    fields = {f.name: f.type for f in dataclasses.fields(SensorNoise)}
+    for key, value in side["declared_noise"].items():
+        if key not in fields:
+            raise RecordingError(f"{json_path}: field 'declared_noise': unknown key {key!r}; the keys are "
+                                 f"{', '.join(fields)}")
+        numeric = key != "distribution"
+        if numeric and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise RecordingError(f"{json_path}: field 'declared_noise.{key}' must be a number, got {value!r}")
     try:
         noise = SensorNoise(**side["declared_noise"])
     except (TypeError, ValueError) as exc:
-        raise RecordingError(f"{json_path}: field 'declared_noise': {exc}") from exc
+        raise RecordingError(f"{json_path}: field 'declared_noise': {exc}") from None
     meta = side.get("meta", {})
     if not isinstance(meta, dict):
         raise RecordingError(f"{json_path}: field 'meta' must be an object, got {type(meta).__name__}")
@@ -235,41 +394,66 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
         measurement_settings(meta.get("measurement"))
     except ValueError as exc:
         raise RecordingError(f"{json_path}: field {exc}") from exc
+    sim = meta.get("simulation")
+    if sim is not None and not isinstance(sim, dict):
+        raise RecordingError(f"{json_path}: field 'meta.simulation' must be an object, got {type(sim).__name__}")
     return robot, noise, meta
 
 
 def read_recording(csv_path: str | Path) -> Recording:
     """Read and validate a recording (CSV + JSON sidecar).
 
+    A UTF-8 byte-order mark, CRLF line ends and trailing blank lines are accepted; columns may be
+    in any order (they are found by name).
+
     Raises:
         RecordingError: naming the file, the row (1-based data row, with its line number) and
             the column of the first problem found.
     """
     csv_path = Path(csv_path)
+    if csv_path.is_dir():
+        raise RecordingError(f"{csv_path}: is a folder, not a CSV recording")
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
+    text = _read_text(csv_path, "CSV recording")
     robot, noise, meta = _read_sidecar(sidecar_path(csv_path))
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
     expected = ("t_s",) + joint_cols + pose_cols
-    with csv_path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    try:
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise RecordingError(f"{csv_path}: not a readable CSV file: {exc}") from None
+    while rows and not any(c.strip() for c in rows[-1]):
+        rows.pop()  # trailing blank lines
     if not rows:
         raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
     header = [h.strip() for h in rows[0]]
+    if len(header) == 1 and ";" in header[0]:
+        raise RecordingError(f"{csv_path}: line 1: the fields are separated by ';'; a recording is "
+                             "comma-separated (t_s,...)")
+    if len(header) == 1 and "\t" in header[0]:
+        raise RecordingError(f"{csv_path}: line 1: the fields are separated by tabs; a recording is "
+                             "comma-separated (t_s,...)")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise RecordingError(f"{csv_path}: line 1: column(s) {', '.join(dup)} appear more than once")
     missing = [c for c in expected if c not in header]
     if missing:
-        raise RecordingError(f"{csv_path}: header lacks column(s) {', '.join(missing)}; got {', '.join(header)}")
+        raise RecordingError(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} "
+                             f"(a {robot.name} recording, per its sidecar); got {', '.join(header)}")
     unknown = [h for h in header if h not in expected + ("set",)]
     if unknown:
-        raise RecordingError(f"{csv_path}: unknown column(s) {', '.join(unknown)}")
+        raise RecordingError(f"{csv_path}: line 1: unknown column(s) {', '.join(unknown)}")
     idx = {h: i for i, h in enumerate(header)}
     data = rows[1:]
     if not data:
-        raise RecordingError(f"{csv_path}: no data rows")
+        raise RecordingError(f"{csv_path}: no data rows (the header alone)")
     values = np.empty((len(data), len(expected)))
     sets = np.empty(len(data), dtype=object)
     for r, row in enumerate(data, start=1):
         where = f"{csv_path}: row {r} (line {r + 1})"
+        if not any(c.strip() for c in row):
+            raise RecordingError(f"{where}: blank line inside the data")
         if len(row) != len(header):
             raise RecordingError(f"{where}: expected {len(header)} fields, got {len(row)}")
         for c, name in enumerate(expected):
@@ -286,9 +470,146 @@ def read_recording(csv_path: str | Path) -> Recording:
             raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
         sets[r - 1] = s
         if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
+            same = np.flatnonzero((values[:r - 1] == values[r - 1]).all(axis=1) & (sets[:r - 1] == s))
+            if same.size:
+                raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
+                                     "delete it")
             raise RecordingError(f"{where}, column 't_s': time goes backwards "
-                                 f"({values[r - 1, 0]!r} after {values[r - 2, 0]!r}); rows must be in the order taken")
+                                 f"({float(values[r - 1, 0])!r} after {float(values[r - 2, 0])!r}); rows must be in "
+                                 "the order taken")
     sets = sets.astype(str)
     c = len(joint_cols)
     return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
                      measured=values[:, 1 + c:], sets=sets, meta=meta)
+
+
+#: Column-scaled condition number of the identification Jacobian above which the calibration
+#: poses are refused (too alike to tell the parameters apart), and above which a warning is given.
+#: Poses spread over the workspace give 1e2 to 1e5.
+REFUSED_CONDITION = 1e8
+WARNED_CONDITION = 1e6
+
+
+def _row(path: Path, r: int) -> str:
+    """How messages name the 0-based data row ``r``: its spreadsheet row number and file line."""
+    return f"{path}: row {r + 1} (line {r + 2})"
+
+
+def _condition_in_words(cond: float) -> str:
+    if not np.isfinite(cond) or cond > 1e12:
+        return "numerically singular"
+    if cond > REFUSED_CONDITION:
+        return "nearly singular"
+    return "poorly conditioned"
+
+
+def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
+    """Check that the machine can have produced ``rec`` before anything is fitted.
+
+    Refuses: joint values outside the nominal geometry's range (the stroke of a leg), with a
+    guess when the whole file seems to hold metres for mm or degrees for rad; poses whose
+    positions or angles seem to be in metres or degrees; values beyond any workspace; rows copied
+    exactly (time included); calibration poses too alike to identify the parameters
+    (condition number in words).
+
+    Returns:
+        Warnings in words: repeated measurements (same joints and pose at another time), poorly
+        excited calibration poses.
+
+    Raises:
+        RecordingError: naming the file, row and column, and what the file seems to hold.
+    """
+    from calib.robot import KinematicsError, pose_jacobian_of_parameters
+
+    path = Path(csv_path)
+    robot = rec.robot
+    joint_cols, pose_cols = columns(robot)
+    limits = robot.joint_limits()
+    q = rec.joints
+    out = (q < limits[:, 0]) | (q > limits[:, 1])
+    warnings: list[str] = []
+    if out.any():
+        unit = robot.joint_unit
+        factor = 1000.0 if unit == "mm" else 180.0 / np.pi
+        other = "metres" if unit == "mm" else "degrees"
+        scaled = q * factor if unit == "mm" else np.deg2rad(q)
+        if out.all(axis=1).any() and not ((scaled < limits[:, 0]) | (scaled > limits[:, 1])).any():
+            raise RecordingError(f"{path}: columns {', '.join(joint_cols)}: the joint values seem to be in "
+                                 f"{other} (e.g. {q[0, 0]:.6g}), a recording holds {unit}")
+        r, c = np.argwhere(out)[0]
+        raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
+                             f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} of the nominal geometry: "
+                             "the machine cannot reach it")
+    angle = robot.angle_pose_mask
+    m = rec.measured
+    nominal = robot.table.nominal
+    try:
+        fk = robot.forward_kinematics(nominal, q, initial=np.repeat(robot.home_pose[None], len(q), axis=0))
+    except KinematicsError:
+        fk = None
+    if fk is not None:
+        pos = ~angle
+        e1 = np.median(np.abs(m[:, pos] - fk[:, pos]))
+        e1000 = np.median(np.abs(1000.0 * m[:, pos] - fk[:, pos]))
+        if e1 > 1.0 and e1000 < 0.1 * e1:
+            cols = [c for c, a in zip(pose_cols, angle) if not a]
+            raise RecordingError(f"{path}: columns {', '.join(cols)}: the positions seem to be in metres "
+                                 f"(e.g. {m[0, pos][-1]:.6g} where the joints put the platform near "
+                                 f"{fk[0, pos][-1]:.6g} mm); a recording holds mm")
+        if angle.any():
+            e = np.median(np.abs(m[:, angle] - fk[:, angle]))
+            edeg = np.median(np.abs(np.deg2rad(m[:, angle]) - fk[:, angle]))
+            if e > 0.01 and edeg < 0.1 * e:
+                cols = [c for c, a in zip(pose_cols, angle) if a]
+                raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to be in degrees "
+                                     "(they match the joints once converted from degrees); a recording holds rad")
+    bound = np.where(angle, 2 * np.pi, 100.0 * robot.length_scale_mm)
+    far = np.abs(m) > bound
+    if far.any():
+        r, c = np.argwhere(far)[0]
+        what = "not an angle in rad" if angle[c] else f"far beyond the {robot.name}'s reach"
+        raise RecordingError(f"{_row(path, r)}, column {pose_cols[c]!r}: {m[r, c]:.6g} is {what}")
+    full = np.column_stack([rec.t_s, q, m])
+    body = np.column_stack([q, m])
+    first: dict[bytes, int] = {}
+    for r in range(len(full)):
+        key = full[r].tobytes() + rec.sets[r].encode()
+        if key in first:
+            raise RecordingError(f"{_row(path, r)}: repeats row {first[key] + 1} exactly (time included): "
+                                 "a copied row; delete it")
+        first[key] = r
+    seen: dict[bytes, int] = {}
+    repeats = []
+    for r in range(len(body)):
+        key = body[r].tobytes()
+        if key in seen:
+            repeats.append(f"{r + 1} (= {seen[key] + 1})")
+        else:
+            seen[key] = r
+    if repeats:
+        warnings.append(f"{path}: rows {', '.join(repeats)} repeat the joints and pose of an earlier row exactly "
+                        "(at another time): each counts as a new measurement and shrinks the uncertainty")
+    cal = rec.sets == "calibration"
+    if cal.sum() >= 2:
+        free = robot.table.indices(robot.free_default)
+        poses = fk[cal] if fk is not None else m[cal]
+        std = rec.noise.pose_std(robot.pose_units)
+        J = pose_jacobian_of_parameters(robot, nominal, q[cal], poses)[:, :, free] / std[None, :, None]
+        A = J.reshape(-1, free.size)
+        norms = np.linalg.norm(A, axis=0)
+        if np.all(norms > 0):
+            sv = np.linalg.svd(A / norms, compute_uv=False)
+            cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+        else:
+            cond = float("inf")
+        distinct = len({b.tobytes() for b in body[cal]})
+        if cond > REFUSED_CONDITION:
+            raise RecordingError(
+                f"{path}: the {int(cal.sum())} calibration poses ({distinct} distinct) are too alike to identify "
+                f"the {free.size} parameters: the identification is {_condition_in_words(cond)} (condition "
+                f"number {cond:.2g}; poses spread over the workspace give 1e2 to 1e5); measure poses spread "
+                "over the workspace")
+        if cond > WARNED_CONDITION:
+            warnings.append(f"{path}: the calibration poses excite the parameters poorly (condition number "
+                            f"{cond:.2g}, {_condition_in_words(cond)}): expect large uncertainties")
+    return warnings

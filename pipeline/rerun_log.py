@@ -430,6 +430,11 @@ def blueprint(robot: Robot | None = None, *, eye: rrb.EyeControls3D | None = Non
     )
 
 
+def _flagged_state(summary: dict) -> str:
+    left_out = (summary.get("outliers") or {}).get("left_out")
+    return " (data rows; left out)" if left_out else " (data rows; kept)"
+
+
 def summary_markdown(summary: dict) -> str:
     """The run summary as a markdown panel: short lines and tables."""
     h = summary.get("heldout_position_error_mm")
@@ -445,7 +450,8 @@ def summary_markdown(summary: dict) -> str:
         f"| noise | {n.get('position_mm', 0):g} mm, {n.get('orientation_rad', 0):g} rad, "
         f"joints {n.get('joint', 0):g} ({n.get('distribution', '')}) |",
         f"| iterations | {summary['iterations']} ({'converged' if summary.get('success') else 'not converged'}) |",
-        f"| flagged rows | {', '.join(str(i) for i in summary['flagged_poses']) or 'none'} |",
+        f"| flagged rows | {', '.join(str(i) for i in summary['flagged_poses']) or 'none'}"
+        f"{_flagged_state(summary) if summary['flagged_poses'] else ''} |",
     ]
     if h:
         lines += ["", "| held-out | before | after | max after |", "|---|---|---|---|",
@@ -467,6 +473,11 @@ def summary_markdown(summary: dict) -> str:
     if h:
         lines += ["", f"Held-out basis: {summary['heldout_basis']}."]
     lines += ["", f"Stop: {summary['message']}"]
+    out = summary.get("outliers") or {}
+    if out.get("verdict"):
+        lines += ["", f"Outlier test: {out['verdict']}"]
+    for w in summary.get("warnings") or ():
+        lines += ["", f"Warning: {w}"]
     return "\n".join(lines)
 
 

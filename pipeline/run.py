@@ -6,6 +6,7 @@ Thin: parses the flags, calls :func:`pipeline.calibration.run_calibration`, prin
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -14,19 +15,21 @@ from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
 from .calibration import RunResult, RunSettings, run_calibration
+from .cli import ArgumentParser, cli_main
 
 __all__ = ["main", "build_parser", "settings_from_args", "run", "print_summary"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="python -m pipeline.run",
         description="Calibrate a parallel robot: simulate it in MuJoCo (or read a recording), identify "
                     "its geometric parameters, compensate, validate on held-out poses, and write a Rerun "
                     "recording (.rrd), the measurements (.csv + .json) and a summary. Lengths in mm, "
                     "angles in rad.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--robot", choices=sorted(ROBOTS), default="hexapod", help="robot to calibrate")
+    p.add_argument("--robot", choices=sorted(ROBOTS), default=None,
+                   help="robot to calibrate (default hexapod; with --real the recording's sidecar names it)")
     p.add_argument("--poses", default="reference",
                    help="calibration poses: 'reference' (the robot's reference experiment: the hexapod paper's "
                         "10 Table 4 poses; 20 random poses otherwise), a number N (see --design), or a command "
@@ -62,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--summary-json", type=Path, default=None, help="write the summary as JSON to this path")
     p.add_argument("--real", type=Path, default=None,
                    help="analyse this recording (.csv with its .json sidecar, any robot) instead of simulating")
+    p.add_argument("--keep-outliers", action="store_true",
+                   help="identify from every calibration row, the ones the outlier test flags included "
+                        "(default: flagged rows are left out; the summary gives both results)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -77,9 +83,20 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
             raise ValueError(f"--poses must be 'reference', an integer or a .csv command file, got {args.poses!r}") from None
         if n < 1:
             raise ValueError(f"--poses must be a positive integer, got {n}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
     for flag in ("noise_mm", "noise_rad", "noise_joint", "payload_kg", "friction"):
-        if not getattr(args, flag) >= 0:
-            raise ValueError(f"--{flag.replace('_', '-')} must be >= 0, got {getattr(args, flag)}")
+        v = getattr(args, flag)
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"--{flag.replace('_', '-')} must be >= 0 and finite, got {v}")
+    if args.stiffness is not None and not (args.stiffness > 0 and math.isfinite(args.stiffness)):
+        raise ValueError(f"--stiffness must be finite and > 0, got {args.stiffness}")
+    if args.poses.endswith(".csv") and not Path(args.poses).is_file():
+        raise ValueError(f"--poses {args.poses}: " + ("is a folder, not a command file" if Path(args.poses).is_dir()
+                                                       else "file not found"))
+    if args.real is not None and not args.real.is_file():
+        raise ValueError(f"--real {args.real}: " + ("is a folder, not a recording" if args.real.is_dir()
+                                                     else "file not found"))
     fields = {k: v for k, v in vars(args).items() if k != "quiet"}
     return RunSettings(**fields)
 
@@ -122,7 +139,17 @@ def print_summary(s: dict) -> None:
         print(f"  calibration gain G: mean over parameters {g['mean']:.4f}%, on the error norm {g['norm']:.4f}%")
     print(f"  condition numbers: {', '.join(f'{c:.0f}' for c in s['condition_numbers'])}")
     fl = s["flagged_poses"]
-    print(f"  flagged rows: {', '.join(str(i) for i in fl) if fl else 'none'}")
+    out = s.get("outliers") or {}
+    state = (" (left out; --keep-outliers keeps them)" if out.get("left_out") else " (kept)") if fl else ""
+    print(f"  flagged data rows (row k = file line k + 1): {', '.join(str(i) for i in fl) if fl else 'none'}{state}")
+    if out.get("verdict"):
+        print(f"  outlier test: {out['verdict']}")
+    w, wo = s.get("with_flagged"), s.get("without_flagged")
+    if w and wo and w.get("heldout_position_error_mm") and wo.get("heldout_position_error_mm"):
+        print(f"  held-out position error after: {1e3 * wo['heldout_position_error_mm']['after']:.3f} um without the "
+              f"flagged rows, {1e3 * w['heldout_position_error_mm']['after']:.3f} um with them")
+    for warning in s.get("warnings") or ():
+        print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")
     for k in ("rrd", "csv", "json", "summary_json"):
         if s.get(k):
@@ -141,12 +168,8 @@ def run(argv: list[str] | None = None) -> RunResult:
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
-        run(argv)
-    except (FileExistsError, ValueError, KeyError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    """Run; a bad input or output ends with one line on stderr and exit status 2."""
+    return cli_main(run, argv)
 
 
 if __name__ == "__main__":

@@ -54,6 +54,7 @@ from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
 from pipeline.parallel import spawn_pool
+from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
@@ -293,7 +294,7 @@ def summarize(results: dict, names, scale: np.ndarray, crb_var: np.ndarray, tria
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m pipeline.study", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog="python -m pipeline.study", description=__doc__.split("\n\n")[0])
     p.add_argument("--robot", default="hexapod", help=f"registered robot: {', '.join(sorted(ROBOTS))}")
     p.add_argument("--trials", type=int, default=200)
     add_noise_arguments(p)
@@ -311,7 +312,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--error-mm", type=float, default=DEFAULT_ERROR_MM, help="random errors: half-width, mm")
     p.add_argument("--error-rad", type=float, default=DEFAULT_ERROR_RAD, help="random errors: half-width, rad")
     p.add_argument("--heldout", type=int, default=100, help="held-out poses (0: none)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=nonnegative_int, default=0)
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument("--geometry", default=None, help="robot description JSON (Robot.description())")
     p.add_argument("--summary-json", default=None)
@@ -339,10 +340,16 @@ def _poses(args, robot: Robot, ws, noise: SensorNoise):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
+    return cli_main(_main, argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     for p in (args.summary_json, args.rrd):
         if p and Path(p).exists() and not args.overwrite:
             raise SystemExit(f"{p} exists; pass --overwrite to replace it")
+    check_outputs({"--summary-json": args.summary_json, "--rrd": args.rrd}, overwrite=args.overwrite)
     if args.trials < 2:
         raise SystemExit(f"--trials must be >= 2, got {args.trials}")
     robot = load_robot(args.robot, args.geometry)

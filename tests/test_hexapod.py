@@ -122,3 +122,60 @@ def test_chainwise_corrected_poses_are_the_forward_kinematics_from_the_measured_
     direct = ROBOT.forward_kinematics(fit.theta, commanded, initial=noisy)
     np.testing.assert_allclose(fit.pose_residuals, noisy - direct, rtol=0, atol=1e-12)
     np.testing.assert_allclose(fit.residuals, ROBOT.closure(fit.theta, commanded, noisy), rtol=0, atol=0)
+
+
+def _two_hundred_poses(seed=3):
+    from calib.workspace import reachable_poses
+
+    targets = reachable_poses(ROBOT, 200, np.random.default_rng(seed))
+    joints = ROBOT.inverse_kinematics(NOMINAL, targets)
+    return targets, joints, ROBOT.forward_kinematics(ACTUAL, joints, initial=targets)
+
+
+def test_outlier_test_is_closed_form_fast_and_finds_gross_rows_among_200():
+    import time
+
+    targets, joints, measured = _two_hundred_poses()
+    noise = SensorNoise(0.001, 1e-6, "normal")
+    noisy = measured + noise.sample(200, 1)
+    noisy[[5, 50, 150], :3] += [0.02, -0.02, 0.0]
+    t = time.perf_counter()
+    report = find_outliers(ROBOT, joints, noisy, noise)
+    elapsed = time.perf_counter() - t
+    assert report.flagged == (5, 50, 150) and not report.misfit
+    assert elapsed < 1.0, elapsed
+
+
+def test_real_model_misfit_is_reported_as_misfit_not_a_list_of_rows():
+    """An unmodelled effect 20 times the noise (a sag growing with the distance from the axis)."""
+    import time
+
+    targets, joints, measured = _two_hundred_poses()
+    noise = SensorNoise(0.001, 1e-6, "normal")
+    r2 = targets[:, 0] ** 2 + targets[:, 1] ** 2
+    sag = 20 * 0.001 * (2 * r2 / r2.max() - 1)
+    data = measured + noise.sample(200, 1)
+    data[:, 2] += sag
+    t = time.perf_counter()
+    report = find_outliers(ROBOT, joints, data, noise)
+    elapsed = time.perf_counter() - t
+    assert report.misfit and len(report.flagged) <= 10  # at most 5% of the rows: none
+    assert "model misfit" in report.verdict and "no row is left out" in report.verdict
+    assert elapsed < 1.0, elapsed
+
+
+@pytest.mark.parametrize("method,options", [("chainwise", {}), ("chainwise", {"solver": "lm"}),
+                                            ("chainwise", {"weighted": True}), ("forward", {}),
+                                            ("forward", {"solver": "gn", "max_iter": 2}),
+                                            ("chainwise", {"max_iter": 1})])
+def test_every_method_says_when_the_residual_is_far_above_the_declared_noise(method, options):
+    """Noise 100 times the declared: every method, converged or not, says the model does not fit."""
+    from calib.engine import identify
+
+    commanded, measured = _paper_data()
+    bad = measured + SensorNoise(100 * paper.PAPER_NOISE_MM).sample(10, 0)
+    fit = identify(ROBOT, commanded, bad, SensorNoise(paper.PAPER_NOISE_MM), method=method, **options)
+    assert "does not fit to the declared noise" in fit.message and "at the declared noise" not in fit.message
+    good = identify(ROBOT, commanded, measured + SensorNoise(paper.PAPER_NOISE_MM).sample(10, 0),
+                    SensorNoise(paper.PAPER_NOISE_MM), method=method, **options)
+    assert "does not fit" not in good.message or not good.success

@@ -1,4 +1,5 @@
 import json
+import re
 
 import numpy as np
 import pytest
@@ -92,13 +93,14 @@ def test_cli_writes_command_file_sidecar_summary_and_rrd(tmp_path, name):
     np.testing.assert_allclose(bar_values(bars), [s["observability"]["crb_std_mm"][n] for n in robot.free_default])
 
 
-def test_cli_refuses_to_overwrite(tmp_path):
+def test_cli_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "poses.csv"
     argv = ["--poses", "7", "--candidates", "100", "--out", str(out), "--workspace", "default"]
     assert main(argv) == 0
     before = out.read_text()
-    with pytest.raises(SystemExit, match="exists; pass --overwrite"):
-        main(argv + ["--seed", "1"])
+    capsys.readouterr()
+    assert main(argv + ["--seed", "1"]) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
     assert out.read_text() == before
     assert main(argv + ["--seed", "1", "--overwrite"]) == 0
     assert out.read_text() != before
@@ -114,9 +116,10 @@ def test_cli_refuses_to_overwrite(tmp_path):
     (["--poses", "8", "--candidates", "7"], "--candidates must be >= --poses"),
     (["--poses", "8", "--geometry", "missing.json"], "--geometry missing.json: cannot read a hexapod description"),
 ])
-def test_cli_rejects_bad_arguments(tmp_path, argv, match):
-    with pytest.raises(SystemExit, match=match):
-        main(argv + ["--out", str(tmp_path / "p.csv")])
+def test_cli_rejects_bad_arguments(tmp_path, argv, match, capsys):
+    assert main(argv + ["--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(match, err) and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
 def test_cli_geometry_file_gives_another_machine(tmp_path):

@@ -121,3 +121,61 @@ def test_design_optimal_and_command_files_feed_the_run(tmp_path):
         assert r.summary["calibration_poses"] == 10
         # designed poses determine the 42 parameters far better than the paper's
         assert r.summary["parameter_error"]["rms_mm"] < paper_run.summary["parameter_error"]["rms_mm"] / 10
+
+
+def table4_recording(path, heldout=50, seed=1):
+    """The paper's Table 4 as a recording: the printed measured poses at the paper's commanded leg
+    lengths (the nominal inverse kinematics of its target poses), and, since the paper gives no
+    validation poses, ``heldout`` validation rows simulated noise-free from the Table 3 machine."""
+    from calib.noise import SensorNoise
+    from calib.robots import paper_hexapod
+    from calib.workspace import reachable_poses
+    from pipeline.recording import Recording
+
+    robot = paper_hexapod()
+    nominal = robot.table.nominal
+    actual = nominal + paper.TABLE3_ERRORS.ravel()
+    cal_joints = robot.inverse_kinematics(nominal, paper.TABLE4_NOMINAL_POSES)
+    targets = reachable_poses(robot, heldout, np.random.default_rng(seed))
+    val_joints = robot.inverse_kinematics(nominal, targets)
+    val_meas = robot.forward_kinematics(actual, val_joints, initial=targets)
+    n = 10 + heldout
+    # Declared noise: the paper's 1 um on positions; 1e-5 rad on angles, the print resolution of
+    # Table 4's angles (some are printed to 4 decimals).
+    rec = Recording(robot=robot, noise=SensorNoise(paper.PAPER_NOISE_MM, 1e-5), t_s=np.arange(n, dtype=float),
+                    joints=np.vstack([cal_joints, val_joints]),
+                    measured=np.vstack([paper.TABLE4_MEASURED_POSES, val_meas]),
+                    sets=np.array(["calibration"] * 10 + ["validation"] * heldout),
+                    meta={"scenario": "the hexapod paper's Table 4 (printed poses) + noise-free validation rows"})
+    return write_recording(path, rec)[0]
+
+
+def test_paper_table4_as_a_real_recording_leaves_row_a2_out(tmp_path):
+    csv_path = table4_recording(tmp_path / "table4.csv")
+    res = run(["--real", str(csv_path), "--out", str(tmp_path), "--summary-json", str(tmp_path / "s.json"), "--quiet"])
+    s = res.summary
+    assert s["flagged_poses"] == [2]  # row A2: second data row, file line 3
+    assert s["outliers"]["left_out"] and not s["model_misfit"] and s["calibration_poses_used"] == 9
+    h = s["heldout_position_error_mm"]
+    assert h["before"] > 0.04 and h["after"] <= 0.001  # 53.5 um -> 0.32 um
+    assert s["without_flagged"]["heldout_position_error_mm"]["after"] == h["after"]
+    assert s["with_flagged"]["heldout_position_error_mm"]["after"] > 0.01  # A2 used: 11.9 um
+    assert json.loads((tmp_path / "s.json").read_text())["flagged_poses"] == [2]
+    kept = run(["--real", str(csv_path), "--keep-outliers", "--out", str(tmp_path), "--quiet"]).summary
+    assert kept["calibration_poses_used"] == 10 and not kept["outliers"]["left_out"]
+    assert kept["heldout_position_error_mm"]["after"] == s["with_flagged"]["heldout_position_error_mm"]["after"]
+
+
+def test_real_model_misfit_is_reported_in_words_and_no_row_is_left_out(tmp_path):
+    """An unmodelled sag 20 times the declared noise over 60 calibration rows."""
+    from tests.test_hostile_inputs import clean_recording
+
+    rec = clean_recording(60, 20)
+    measured = rec.measured + rec.noise.sample(80, 2)
+    r2 = measured[:, 0] ** 2 + measured[:, 1] ** 2
+    measured[:, 2] += 20 * rec.noise.position_mm * (2 * r2 / r2.max() - 1)
+    csv_path, _ = write_recording(tmp_path / "sag.csv", replace(rec, measured=measured))
+    s = run(["--real", str(csv_path), "--out", str(tmp_path), "--quiet"]).summary
+    assert s["model_misfit"] and s["outliers"]["model_misfit"] and s["flagged_poses"] == []
+    assert "model misfit" in s["outliers"]["verdict"] and s["calibration_poses_used"] == 60
+    assert "does not fit to the declared noise" in s["message"]

@@ -1,0 +1,80 @@
+"""What every command line does with a bad input: one line on stderr naming what is wrong, exit 2.
+
+:func:`cli_main` runs a command's ``run(argv)``; a refused input or output (``ValueError``,
+``KeyError``, ``FileExistsError``, ``OSError``, :class:`UsageError`) and argparse's own usage
+errors end with exit status 2, an interruption with 130, and never with a Python traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "check_outputs",
+           "EXIT_USAGE", "EXIT_INTERRUPTED"]
+
+#: Exit status of a refused input, output or flag (argparse's own).
+EXIT_USAGE = 2
+#: Exit status of a run interrupted by Ctrl-C.
+EXIT_INTERRUPTED = 130
+
+
+class UsageError(ValueError):
+    """A command-line value is refused; the message names the flag."""
+
+
+def one_line(exc: BaseException) -> str:
+    """The exception's message on one line (OS errors with their path)."""
+    if isinstance(exc, KeyError) and exc.args:
+        text = str(exc.args[0])
+    elif isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
+
+
+def cli_main(run, argv: list[str] | None = None) -> int:
+    """``run(argv)``, with refusals turned into one line on stderr and exit status 2."""
+    try:
+        run(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2, already printed)
+        if isinstance(exc.code, str):
+            print(f"error: {' '.join(exc.code.split())}", file=sys.stderr)
+            return EXIT_USAGE
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    except KeyboardInterrupt:
+        print("error: interrupted; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (ValueError, KeyError, FileExistsError, OSError) as exc:
+        print(f"error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    return 0
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"error: {self.prog}: {' '.join(message.split())} (see --help)\n")
+
+
+def nonnegative_int(text: str) -> int:
+    """argparse type: an integer >= 0 (seeds, counts that may be zero)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def check_outputs(paths: dict, *, overwrite: bool) -> None:
+    """Check output paths before any work (see :class:`pipeline.recording.ResultSet`); ``paths``
+    maps each flag to its path (``None``: not asked for)."""
+    from pipeline.recording import ResultSet
+
+    given = {flag: path for flag, path in paths.items() if path}
+    with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
+        pass

@@ -1,0 +1,409 @@
+"""Every bad file, sidecar, flag and output path is refused clearly by ``python -m pipeline.run``.
+
+Each hostile case goes through ``main()`` and must end with exit status 2 and ONE line on stderr
+naming the file, row, column, key or flag and what is wrong: no traceback, nothing written in the
+output folder, nothing written earlier replaced. Legitimate variations (a UTF-8 byte-order mark,
+CRLF line ends, trailing blank lines, columns in another order) are accepted and give the same
+result as the clean file. The cases are listed in docs/real_data.md.
+"""
+
+import json
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib import paper
+from calib.noise import SensorNoise
+from calib.robots import paper_hexapod
+from calib.workspace import reachable_poses
+from pipeline.recording import Recording, read_recording, write_recording
+from pipeline.run import main, run
+
+ROBOT = paper_hexapod()
+NOMINAL = ROBOT.table.nominal
+ACTUAL = NOMINAL + paper.TABLE3_ERRORS.ravel()
+
+
+def clean_recording(n_cal: int = 12, n_val: int = 5, seed: int = 0) -> Recording:
+    """A small noise-free hexapod recording of the Table 3 machine (no MuJoCo: fast)."""
+    targets = reachable_poses(ROBOT, n_cal + n_val, np.random.default_rng(seed))
+    joints = ROBOT.inverse_kinematics(NOMINAL, targets)
+    measured = ROBOT.forward_kinematics(ACTUAL, joints, initial=targets)
+    return Recording(robot=ROBOT, noise=SensorNoise(paper.PAPER_NOISE_MM, 1e-5), t_s=np.arange(n_cal + n_val, dtype=float),
+                     joints=joints, measured=measured, sets=np.array(["calibration"] * n_cal + ["validation"] * n_val),
+                     meta={"scenario": "hostile-input base"})
+
+
+@pytest.fixture
+def work(tmp_path):
+    """``(csv_path, out_folder)``: a clean recording and an output folder holding an earlier result."""
+    csv_path, _ = write_recording(tmp_path / "rec.csv", clean_recording())
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "earlier.rrd").write_text("an earlier result")
+    (out / "earlier_summary.json").write_text("{}")
+    return csv_path, out
+
+
+def snapshot(folder: Path) -> dict:
+    return {p.name: p.read_bytes() if p.is_file() else "folder" for p in sorted(folder.iterdir())}
+
+
+def refused(argv, out: Path, capsys, *needles) -> str:
+    """Run ``main(argv)``: exit 2, one line on stderr holding every needle, the folder unchanged."""
+    before = snapshot(out)
+    capsys.readouterr()
+    code = main(argv + ([] if "--out" in argv else ["--out", str(out)]) + ["--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    assert snapshot(out) == before  # nothing written, nothing earlier replaced, no temporary file left
+    if os.environ.get("HOSTILE_LOG"):  # collect the messages (docs/real_data.md lists them)
+        with open(os.environ["HOSTILE_LOG"], "a") as log:
+            log.write(f"{os.environ.get('PYTEST_CURRENT_TEST', '').rsplit(' ', 1)[0]}\t{lines[0]}\n")
+    return lines[0]
+
+
+# --------------------------------------------------------------------------- the CSV
+
+def _lines(path: Path) -> list[str]:
+    return path.read_text().splitlines()
+
+
+def _write_lines(path: Path, lines: list[str]) -> None:
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _cell(path: Path, row: int, column: str, value: str) -> None:
+    """Set data row ``row`` (1-based) of ``column`` to ``value``."""
+    lines = _lines(path)
+    header = lines[0].split(",")
+    cells = lines[row].split(",")
+    cells[header.index(column)] = value
+    lines[row] = ",".join(cells)
+    _write_lines(path, lines)
+
+
+def _scale_columns(path: Path, columns, factor: float) -> None:
+    rec = read_recording(path)
+    joints, measured = rec.joints.copy(), rec.measured.copy()
+    names_j = [f"l{i + 1}_mm" for i in range(6)]
+    names_p = ["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"]
+    for c in columns:
+        if c in names_j:
+            joints[:, names_j.index(c)] *= factor
+        else:
+            measured[:, names_p.index(c)] *= factor
+    write_recording(path, replace(rec, joints=joints, measured=measured), overwrite=True)
+
+
+CSV_CASES = {
+    "empty file": (lambda p: p.write_text(""), ["rec.csv", "empty file"]),
+    "header only": (lambda p: _write_lines(p, _lines(p)[:1]), ["rec.csv", "no data rows"]),
+    "missing column": (lambda p: _write_lines(p, [",".join(c for i, c in enumerate(ln.split(",")) if i != 12)
+                                                  for ln in _lines(p)]),
+                       ["rec.csv", "header lacks column(s) gamma_rad"]),
+    "extra column": (lambda p: _write_lines(p, [ln + (",temperature_C" if k == 0 else ",21.5")
+                                                for k, ln in enumerate(_lines(p))]),
+                     ["rec.csv", "unknown column(s) temperature_C"]),
+    "column named twice": (lambda p: _write_lines(p, [_lines(p)[0].replace("y_mm", "x_mm")] + _lines(p)[1:]),
+                           ["rec.csv", "x_mm appear more than once"]),
+    "NaN cell": (lambda p: _cell(p, 4, "l4_mm", "nan"), ["rec.csv: row 4 (line 5), column 'l4_mm'", "not finite"]),
+    "inf cell": (lambda p: _cell(p, 2, "z_mm", "inf"), ["rec.csv: row 2 (line 3), column 'z_mm'", "not finite"]),
+    "text cell": (lambda p: _cell(p, 3, "y_mm", "abc"), ["rec.csv: row 3 (line 4), column 'y_mm'", "not a number"]),
+    "empty cell": (lambda p: _cell(p, 6, "alpha_rad", ""), ["row 6 (line 7), column 'alpha_rad'", "not a number"]),
+    "short row": (lambda p: _write_lines(p, _lines(p)[:5] + [_lines(p)[5].rsplit(",", 1)[0]] + _lines(p)[6:]),
+                  ["rec.csv: row 5 (line 6)", "expected 14 fields, got 13"]),
+    "unknown set": (lambda p: _cell(p, 2, "set", "test"), ["row 2 (line 3), column 'set'", "'test' is not one of"]),
+    "time backwards": (lambda p: _cell(p, 4, "t_s", "0.5"), ["row 4 (line 5), column 't_s'", "time goes backwards"]),
+    "blank line inside": (lambda p: _write_lines(p, _lines(p)[:4] + [""] + _lines(p)[4:]),
+                          ["rec.csv: row 4 (line 5)", "blank line inside the data"]),
+    "semicolons": (lambda p: _write_lines(p, [ln.replace(",", ";") for ln in _lines(p)]),
+                   ["rec.csv", "separated by ';'"]),
+    "tabs": (lambda p: _write_lines(p, [ln.replace(",", "\t") for ln in _lines(p)]), ["rec.csv", "separated by tabs"]),
+    "binary file": (lambda p: p.write_bytes(bytes(range(256)) * 4), ["rec.csv", "not a text file"]),
+    "latin-1 text": (lambda p: p.write_bytes("t_s,l1_mm\n0,233\xb5\n".encode("latin-1")), ["rec.csv", "not UTF-8"]),
+    "copied row": (lambda p: _write_lines(p, _lines(p)[:6] + [_lines(p)[3]] + _lines(p)[6:]),
+                   ["rec.csv: row 6 (line 7)", "repeats row 3 exactly"]),
+    "too few rows": (lambda p: _write_lines(p, _lines(p)[:4]), ["rec.csv", "3 calibration rows are too few", "at least 7"]),
+    "no calibration rows": (lambda p: _write_lines(p, [ln.replace(",calibration", ",validation") for ln in _lines(p)]),
+                            ["rec.csv", "no calibration rows"]),
+    "all-identical poses": (lambda p: _write_lines(p, _lines(p)[:1] + [
+        ",".join([f"{k}.0"] + _lines(p)[1].split(",")[1:]) for k in range(30)]),
+        ["rec.csv", "30 calibration poses (1 distinct) are too alike", "numerically singular", "condition number"]),
+    "unreachable leg length": (lambda p: _cell(p, 5, "l3_mm", "512.0"),
+                               ["rec.csv: row 5 (line 6), column 'l3_mm'", "outside the range", "cannot reach"]),
+    "1e300 leg length": (lambda p: _cell(p, 2, "l1_mm", "1e300"), ["row 2 (line 3), column 'l1_mm'", "outside the range"]),
+    "1e300 position": (lambda p: _cell(p, 7, "x_mm", "1e300"), ["row 7 (line 8), column 'x_mm'", "far beyond"]),
+    "1e300 angle": (lambda p: _cell(p, 7, "beta_rad", "1e300"), ["row 7 (line 8), column 'beta_rad'", "not an angle"]),
+    "leg lengths in metres": (lambda p: _scale_columns(p, [f"l{i}_mm" for i in range(1, 7)], 1e-3),
+                              ["rec.csv", "joint values seem to be in metres"]),
+    "positions in metres": (lambda p: _scale_columns(p, ["x_mm", "y_mm", "z_mm"], 1e-3),
+                            ["rec.csv", "positions seem to be in metres"]),
+    "angles in degrees": (lambda p: _scale_columns(p, ["alpha_rad", "beta_rad", "gamma_rad"], 180 / np.pi),
+                          ["rec.csv", "angles seem to be in degrees"]),
+}
+
+
+@pytest.mark.parametrize("case", list(CSV_CASES))
+def test_bad_csv_is_refused(case, work, capsys):
+    csv_path, out = work
+    edit, needles = CSV_CASES[case]
+    edit(csv_path)
+    refused(["--real", str(csv_path)], out, capsys, *needles)
+
+
+# --------------------------------------------------------------------------- the sidecar
+
+def _side(edit):
+    def apply(json_path: Path):
+        side = json.loads(json_path.read_text())
+        edit(side)
+        json_path.write_text(json.dumps(side))
+    return apply
+
+
+def _metres(side):
+    g = side["nominal_geometry"]
+    for k in ("base_joints_mm", "platform_joints_mm"):
+        g[k] = (np.array(g[k]) / 1000).tolist()
+    g["home_lengths_mm"] = (np.array(g["home_lengths_mm"]) / 1000).tolist()
+    g["home_pose"] = (np.array(g["home_pose"]) * [1e-3, 1e-3, 1e-3, 1, 1, 1]).tolist()
+    if "stroke_mm" in g:
+        g["stroke_mm"] = g["stroke_mm"] / 1000
+
+
+SIDECAR_CASES = {
+    "sidecar missing": (lambda j: j.unlink(), ["rec.json", "sidecar not found"]),
+    "sidecar a folder": (lambda j: (j.unlink(), j.mkdir()), ["rec.json", "is a folder"]),
+    "sidecar malformed": (lambda j: j.write_text('{"robot": "hexapod",'), ["rec.json", "not valid JSON"]),
+    "sidecar binary": (lambda j: j.write_bytes(b"\x00\x01\xff" * 10), ["rec.json", "not a text file"]),
+    "sidecar a list": (lambda j: j.write_text("[1, 2]"), ["rec.json", "top level must be an object, got list"]),
+    "missing key": (_side(lambda s: s.pop("declared_noise")), ["rec.json", "missing field 'declared_noise'"]),
+    "unknown key": (_side(lambda s: s.update(instrument="laser")), ["rec.json", "unknown field(s) 'instrument'"]),
+    "format wrong": (_side(lambda s: s.update(format="my lab csv")), ["rec.json", "field 'format' must be"]),
+    "format missing": (_side(lambda s: s.pop("format")), ["rec.json", "missing field 'format'"]),
+    "version wrong": (_side(lambda s: s.update(version=99)), ["rec.json", "field 'version' must be one of", "99"]),
+    "version a string": (_side(lambda s: s.update(version="2")), ["rec.json", "field 'version'", "'2'"]),
+    "unknown robot": (_side(lambda s: s.update(robot="tripod")), ["rec.json", "field 'robot' must be one of"]),
+    "robot not a string": (_side(lambda s: s.update(robot=["hexapod"])), ["rec.json", "field 'robot'"]),
+    "units in metres": (_side(lambda s: s["units"].update(length="m")), ["rec.json", "field 'units' must be"]),
+    "noise a string": (_side(lambda s: s.update(declared_noise="0.001")),
+                       ["rec.json", "field 'declared_noise' must be an object, got str"]),
+    "noise of wrong type": (_side(lambda s: s["declared_noise"].update(position_mm="small")),
+                            ["rec.json", "field 'declared_noise.position_mm' must be a number, got 'small'"]),
+    "noise negative": (_side(lambda s: s["declared_noise"].update(position_mm=-1)),
+                       ["rec.json", "field 'declared_noise': position_mm must be finite and >= 0"]),
+    "noise unknown key": (_side(lambda s: s["declared_noise"].update(temperature=3)),
+                          ["rec.json", "field 'declared_noise': unknown key 'temperature'"]),
+    "geometry a list": (_side(lambda s: s.update(nominal_geometry=[1, 2, 3])),
+                        ["rec.json", "field 'nominal_geometry' must be an object, got list"]),
+    "geometry wrong shape": (_side(lambda s: s["nominal_geometry"].update(base_joints_mm=[[0, 0, 0]])),
+                             ["rec.json", "field 'nominal_geometry'"]),
+    "geometry wrong type": (_side(lambda s: s["nominal_geometry"].update(base_joints_mm="abc")),
+                            ["rec.json", "field 'nominal_geometry'"]),
+    "geometry in metres": (_side(_metres), ["rec.json", "seems to be in metres"]),
+    "meta not an object": (_side(lambda s: s.update(meta=[1])), ["rec.json", "field 'meta' must be an object"]),
+    "meta.simulation not an object": (_side(lambda s: s["meta"].update(simulation="yes")),
+                                      ["rec.json", "field 'meta.simulation' must be an object"]),
+    "injected errors of unknown parameters": (_side(lambda s: s["meta"].update(simulation={"injected_errors": {"B9.q": 1}})),
+                                              ["rec.json", "meta.simulation.injected_errors"]),
+    "sidecar of another robot": (_side(lambda s: s.update(robot="delta")), ["rec.csv", "header lacks column(s)",
+                                                                            "a delta recording"]),
+}
+
+
+@pytest.mark.parametrize("case", list(SIDECAR_CASES))
+def test_bad_sidecar_is_refused(case, work, capsys):
+    csv_path, out = work
+    edit, needles = SIDECAR_CASES[case]
+    json_path = csv_path.with_suffix(".json")
+    if case == "sidecar of another robot":
+        from calib.robots import default_robot
+
+        side = json.loads(json_path.read_text())
+        side.update(robot="delta", nominal_geometry=default_robot("delta").description())
+        json_path.write_text(json.dumps(side))
+    else:
+        edit(json_path)
+    refused(["--real", str(csv_path)], out, capsys, *needles)
+
+
+# --------------------------------------------------------------------------- paths and flags
+
+def test_a_folder_as_the_recording(work, capsys):
+    csv_path, out = work
+    folder = csv_path.parent / "folder.csv"
+    folder.mkdir()
+    refused(["--real", str(folder)], out, capsys, "--real", "folder.csv", "is a folder")
+
+
+def test_a_missing_recording(work, capsys):
+    _, out = work
+    refused(["--real", str(out.parent / "none.csv")], out, capsys, "--real", "none.csv", "file not found")
+
+
+def test_an_unreadable_recording(work, capsys, monkeypatch):
+    csv_path, out = work
+    if os.geteuid() == 0:  # root reads anything: make the read itself fail as it would for a user
+        real = Path.read_bytes
+
+        def deny(self):
+            if self.name == csv_path.name:
+                raise PermissionError(13, "Permission denied", str(self))
+            return real(self)
+        monkeypatch.setattr(Path, "read_bytes", deny)
+    else:
+        csv_path.chmod(0)
+    refused(["--real", str(csv_path)], out, capsys, "rec.csv", "cannot read", "Permission denied")
+
+
+def test_a_recording_of_another_robot_than_named(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--robot", "delta"], out, capsys, "--robot delta", "rec.csv", "is of a hexapod")
+
+
+@pytest.mark.parametrize("argv,needles", [
+    (["--poses", "0"], ["--poses must be a positive integer"]),
+    (["--poses", "abc"], ["--poses must be 'reference', an integer or a .csv command file"]),
+    (["--poses", "-3"], ["--poses must be a positive integer"]),
+    (["--poses", "missing.csv"], ["--poses missing.csv", "file not found"]),
+    (["--noise-mm", "-1"], ["--noise-mm must be >= 0"]),
+    (["--noise-mm", "nan"], ["--noise-mm must be >= 0 and finite"]),
+    (["--noise-rad", "-0.1"], ["--noise-rad must be >= 0"]),
+    (["--noise-mm", "abc"], ["--noise-mm", "invalid float value"]),
+    (["--seed", "-1"], ["--seed must be >= 0"]),
+    (["--seed", "1.5"], ["--seed", "invalid int value"]),
+    (["--heldout", "-1"], ["--heldout must be >= 0"]),
+    (["--stiffness", "0"], ["--stiffness must be finite and > 0"]),
+    (["--robot", "tripod"], ["--robot", "invalid choice"]),
+    (["--method", "magic"], ["--method", "invalid choice"]),
+    (["--bogus"], ["unrecognized arguments: --bogus"]),
+])
+def test_bad_flags_are_refused(argv, needles, work, capsys):
+    _, out = work
+    refused(argv, out, capsys, *needles)
+
+
+def test_out_is_a_file(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--out", str(out / "earlier.rrd")], out, capsys, "--out", "is a file, not a folder")
+
+
+def test_out_cannot_be_created(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--out", str(out / "earlier.rrd" / "sub")], out, capsys, "--out", "cannot create")
+
+
+def test_summary_json_exists(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--summary-json", str(out / "earlier_summary.json")], out, capsys,
+            "--summary-json", "earlier_summary.json exists; pass --overwrite")
+
+
+def test_summary_json_in_a_missing_folder(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--summary-json", str(out / "nowhere" / "s.json")], out, capsys,
+            "--summary-json", "the folder", "does not exist")
+
+
+def test_summary_json_is_a_folder(work, capsys):
+    csv_path, out = work
+    (out / "sdir").mkdir()
+    refused(["--real", str(csv_path), "--summary-json", str(out / "sdir")], out, capsys, "--summary-json", "is a folder")
+
+
+def test_summary_json_cannot_be_written(work, capsys):
+    csv_path, out = work
+    refused(["--real", str(csv_path), "--summary-json", "/proc/summary.json"], out, capsys,
+            "--summary-json", "cannot write in the folder /proc")
+
+
+def test_an_explicit_name_taken_is_refused_before_any_work(work, capsys):
+    """A refused re-run publishes nothing (no new .csv/.json beside the old .rrd)."""
+    _, out = work
+    refused(["--heldout", "0", "--name", "earlier"], out, capsys, "--out", "earlier.rrd exists; pass --overwrite")
+
+
+def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, monkeypatch):
+    import pipeline.calibration as calibration
+
+    csv_path, out = work
+
+    def interrupt(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(calibration, "find_outliers", interrupt)
+    before = snapshot(out)
+    assert main(["--real", str(csv_path), "--out", str(out), "--summary-json", str(out / "s.json"), "--quiet"]) == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert snapshot(out) == before
+
+
+def test_concurrent_runs_into_one_folder_get_their_own_names(work):
+    from pipeline.calibration import NameReservation, RunSettings
+
+    csv_path, out = work
+    settings = RunSettings(real=csv_path, out=out)
+    first, second = NameReservation(out, settings), NameReservation(out, settings)
+    try:
+        assert first.name == "rec_calibrated" and second.name == "rec_calibrated_2"
+    finally:
+        first.release()
+        second.release()
+    assert not list(out.glob(".*lock"))
+
+
+# --------------------------------------------------------------------------- accepted variations
+
+ACCEPTED = {
+    "UTF-8 byte-order mark": lambda p: p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes()),
+    "CRLF line ends": lambda p: p.write_bytes(p.read_bytes().replace(b"\n", b"\r\n")),
+    "trailing blank lines": lambda p: p.write_text(p.read_text() + "\n\n  \n"),
+    "columns in another order": lambda p: _write_lines(p, [",".join(reversed(ln.split(","))) for ln in _lines(p)]),
+}
+
+
+@pytest.fixture(scope="module")
+def clean_result(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("clean")
+    csv_path, _ = write_recording(folder / "rec.csv", clean_recording())
+    return run(["--real", str(csv_path), "--out", str(folder), "--quiet"]).summary
+
+
+@pytest.mark.parametrize("case", list(ACCEPTED))
+def test_legitimate_variations_are_accepted(case, work, clean_result):
+    csv_path, out = work
+    ACCEPTED[case](csv_path)
+    s = run(["--real", str(csv_path), "--out", str(out), "--quiet"]).summary
+    assert s["identified_errors"] == clean_result["identified_errors"]
+    assert s["flagged_poses"] == [] and s["warnings"] == []
+
+
+def test_repeated_measurements_are_reported(work):
+    csv_path, out = work
+    lines = _lines(csv_path)
+    repeat = lines[3].split(",")
+    repeat[0] = "99.0"
+    _write_lines(csv_path, lines + [",".join(repeat)])
+    s = run(["--real", str(csv_path), "--out", str(out), "--quiet"]).summary
+    assert any("rows 18 (= 3) repeat the joints and pose" in w for w in s["warnings"])
+
+
+def test_flagged_rows_are_named_by_their_data_row_whatever_the_order_of_sets(work):
+    """Validation rows first, then calibration rows: the flagged row is still the data row number."""
+    csv_path, out = work
+    rec = read_recording(csv_path)
+    order = np.r_[12:17, 0:12]  # 5 validation rows, then the 12 calibration rows
+    measured = rec.measured[order].copy()
+    measured[9, :3] += [0.05, -0.05, 0.0]  # data row 10 (file line 11): the 5th calibration row
+    shuffled = replace(rec, joints=rec.joints[order], measured=measured, sets=rec.sets[order])
+    write_recording(csv_path, shuffled, overwrite=True)
+    s = run(["--real", str(csv_path), "--out", str(out), "--quiet"]).summary
+    assert s["flagged_poses"] == [10] and s["outliers"]["left_out"]
