@@ -540,13 +540,19 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
         raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
                              f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} of the nominal geometry: "
                              "the machine cannot reach it")
-    angle = robot.angle_pose_mask
     m = rec.measured
     nominal = robot.table.nominal
-    try:
-        fk = robot.forward_kinematics(nominal, q, initial=np.repeat(robot.home_pose[None], len(q), axis=0))
-    except KinematicsError:
+    targets = measurement_settings(rec.meta.get("measurement")).n_targets
+    if targets:  # target positions (columns t1_x_mm ...), in the instrument's frame: no pose checks
+        angle = np.zeros(m.shape[1], dtype=bool)
+        pose_cols = tuple(f"{n}_mm" for n in target_names(targets))
         fk = None
+    else:
+        angle = robot.angle_pose_mask
+        try:
+            fk = robot.forward_kinematics(nominal, q, initial=np.repeat(robot.home_pose[None], len(q), axis=0))
+        except KinematicsError:
+            fk = None
     if fk is not None:
         pos = ~angle
         e1 = np.median(np.abs(m[:, pos] - fk[:, pos]))
@@ -559,7 +565,10 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
         if angle.any():
             e = np.median(np.abs(m[:, angle] - fk[:, angle]))
             edeg = np.median(np.abs(np.deg2rad(m[:, angle]) - fk[:, angle]))
-            if e > 0.01 and edeg < 0.1 * e:
+            # Only where the positions say the poses are in the base frame (an instrument's
+            # frame turns the angles too), and only for a close match once converted.
+            in_base_frame = e1 < 0.05 * robot.length_scale_mm
+            if in_base_frame and e > 0.01 and edeg < 0.1 * e and edeg < 0.01:
                 cols = [c for c, a in zip(pose_cols, angle) if a]
                 raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to be in degrees "
                                      "(they match the joints once converted from degrees); a recording holds rad")
@@ -590,7 +599,7 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
         warnings.append(f"{path}: rows {', '.join(repeats)} repeat the joints and pose of an earlier row exactly "
                         "(at another time): each counts as a new measurement and shrinks the uncertainty")
     cal = rec.sets == "calibration"
-    if cal.sum() >= 2:
+    if cal.sum() >= 2 and not targets:
         free = robot.table.indices(robot.free_default)
         poses = fk[cal] if fk is not None else m[cal]
         std = rec.noise.pose_std(robot.pose_units)
