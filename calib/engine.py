@@ -233,17 +233,36 @@ def _gauss_newton(fun, jac, x0, max_iter, xtol):
     return x, max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
 
 
+#: Residual entry returned to Levenberg-Marquardt for a trial point the robot cannot evaluate
+#: (out of reach, singular, impossible geometry): far above any real residual, so the step is
+#: rejected and the trust region shrinks, as for a step that increases the cost.
+_REJECTED_RESIDUAL = 1e100
+
+
 def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
     """Run a solver; returns (x, iterations, success, message); never raises on a kinematics
-    failure (returns the start then)."""
+    failure: Levenberg-Marquardt rejects a trial point the robot cannot evaluate (the start
+    itself failing ends the fit, which returns the start), Gauss-Newton stops there."""
+    size = {}
+
     def logged(x):
         f = fun(x)
         history.append(0.5 * float(f @ f))
+        size["m"] = f.size
         return f
+
+    def guarded(x):
+        try:
+            return logged(x)
+        except KinematicsError:
+            if "m" not in size:  # the start: nothing to fall back on
+                raise
+            return np.full(size["m"], _REJECTED_RESIDUAL)
+
     try:
         if solver == "gn":
             return _gauss_newton(logged, jac, x0, max_iter, xtol)
-        sol = least_squares(logged, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
+        sol = least_squares(guarded, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
                             max_nfev=max_iter * (x0.size + 1), x_scale="jac")
         return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
     except (KinematicsError, np.linalg.LinAlgError) as exc:
@@ -448,9 +467,13 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                 for k, ix in enumerate(params):  # LAPACK's gelsd, one chain at a time
                     step[ix] = np.linalg.lstsq(A[k], -b[k], rcond=None)[0]
                 last.append((chains, A))
-            theta = theta + step
-            r = robot.closure(theta, joints, measured)
-            jac = robot.closure_jacobians(theta, joints, measured)
+            try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
+                r_new = robot.closure(theta + step, joints, measured)
+                jac_new = robot.closure_jacobians(theta + step, joints, measured)
+            except KinematicsError as exc:
+                message = f"the Gauss-Newton step left the workspace at iteration {iterations}: {exc}"
+                break
+            theta, r, jac = theta + step, r_new, jac_new
             try:
                 corrected = _corrected_poses(robot, theta, joints, measured, r, jac.pose)
             except KinematicsError as exc:

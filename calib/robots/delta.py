@@ -686,11 +686,19 @@ class Delta(Robot):
         except ValueError as exc:
             raise KinematicsError(str(exc), _row_of(exc)) from None
 
+    def _valid_params(self, theta: np.ndarray) -> DeltaParams:
+        """:meth:`params`, an impossible vector (``Lb <= 0``, zero arm; a fit's trial step may
+        propose one) raised as a :class:`KinematicsError`, as the engine expects of a robot."""
+        try:
+            return self.params(theta)
+        except ValueError as exc:
+            raise KinematicsError(f"theta: {exc}", 0) from None
+
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        return constraint_residuals(self.params(theta), joints, poses)
+        return constraint_residuals(self._valid_params(theta), joints, poses)
 
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
-        p = self.params(theta)
+        p = self._valid_params(theta)
         n = joints.shape[0]
         jp = np.zeros((n, 3, 3, 8))
         idx = np.arange(3)
