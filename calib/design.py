@@ -168,7 +168,7 @@ def scaled_condition(robot: Robot, theta, poses, joints=None) -> np.ndarray:
     theta, poses = _theta(robot, theta), _poses(robot, poses)
     if joints is None:
         joints = robot.inverse_kinematics(theta, poses)
-    J = robot.closure_jacobians(theta, joints, poses).pose
+    J = robot.closure_pose_jacobian(theta, joints, poses)
     with np.errstate(all="ignore"):
         return np.linalg.cond(J / robot.pose_scale())
 

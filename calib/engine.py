@@ -290,7 +290,9 @@ _NEWTON_TOL = inspect.signature(newton_forward_kinematics).parameters["tol"].def
 
 def _corrected_poses(robot: Robot, theta, joints, measured, r, jac_pose) -> np.ndarray:
     """The robot's forward kinematics of ``joints`` started from ``measured``, given the closure
-    ``r`` (N, C) and its pose Jacobian (N, C, D) at ``(theta, joints, measured)``.
+    ``r`` (N, C) and its pose Jacobian (N, C, D) at ``(theta, joints, measured)`` (the ``pose``
+    of :meth:`Robot.closure_jacobians`, equal bit for bit to :meth:`Robot.closure_pose_jacobian`,
+    which the default's Newton steps use).
 
     For a robot on the default forward kinematics (Newton on the closure), the first Newton step
     from ``measured`` needs exactly these, which the chain-wise iteration has computed anyway: it

@@ -246,6 +246,15 @@ class Robot(ABC):
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
         """Analytic derivatives of :meth:`closure` (see :class:`ClosureJacobians`)."""
 
+    def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """(N, C, D) ``dF_i / d pose_k`` alone: what the forward kinematics' Newton steps need.
+
+        Must equal ``closure_jacobians(theta, joints, poses).pose`` exactly (bit for bit); a
+        robot overrides it when the pose columns come cheaper than the whole set (the parameter
+        Jacobian is (N, C, P)). Default: taken from :meth:`closure_jacobians`.
+        """
+        return self.closure_jacobians(theta, joints, poses).pose
+
     @abstractmethod
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, C) joint values that bring the machine ``theta`` to ``poses``.
@@ -317,7 +326,7 @@ def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarra
     for _ in range(max_iter):
         p, q = poses[active], joints[active]
         r = robot.closure(theta, q, p)
-        J = robot.closure_jacobians(theta, q, p).pose
+        J = robot.closure_pose_jacobian(theta, q, p)
         done = np.max(np.abs(r), axis=1) <= tol
         if np.any(done):
             cond = np.linalg.cond(J[done] * scale)

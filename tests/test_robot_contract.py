@@ -55,6 +55,16 @@ def test_closure_jacobians_match_finite_differences(name):
 
 
 @pytest.mark.parametrize("name", NAMES)
+def test_pose_only_closure_jacobian_equals_the_pose_block_exactly(name):
+    robot, theta = _machine(name)
+    poses = reachable_poses(robot, 7, 4, theta=theta)
+    joints = robot.inverse_kinematics(theta, poses) + 1e-3  # off the closure on purpose
+    pose_only = robot.closure_pose_jacobian(theta, joints, poses)
+    assert pose_only.shape == (7, robot.n_chains, robot.pose_dim)
+    np.testing.assert_array_equal(pose_only, robot.closure_jacobians(theta, joints, poses).pose)
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_forward_parameter_jacobian_matches_finite_differences_of_fk(name):
     robot, theta = _machine(name)
     poses = reachable_poses(robot, 4, 3, theta=theta)

@@ -148,16 +148,25 @@ class Hexapod(Robot):
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
         return self.inverse_kinematics(theta, poses) - joints
 
-    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+    def _pose_jacobian(self, theta: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Jpose, u, R)``: (N, 6, 6) ``dF / d pose``, (N, 6, 3) unit leg vectors, (N, 3, 3)
+        rotations; one computation for :meth:`closure_jacobians` and :meth:`closure_pose_jacobian`."""
         _, _, P = self.legs(theta)
         L, R = self.leg_vectors(theta, poses)
         u = L / np.linalg.norm(L, axis=-1, keepdims=True)
-        n = poses.shape[0]
         dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
         dP = np.einsum("nkij,lj->nlki", dR, P)  # (N, 6 legs, 3 angles, 3)
-        Jpose = np.empty((n, 6, 6))
+        Jpose = np.empty((poses.shape[0], 6, 6))
         Jpose[:, :, 0:3] = u
         Jpose[:, :, 3:6] = np.einsum("nli,nlki->nlk", u, dP)
+        return Jpose, u, R
+
+    def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        return self._pose_jacobian(theta, poses)[0]
+
+    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+        Jpose, u, R = self._pose_jacobian(theta, poses)
+        n = poses.shape[0]
         Jleg = np.empty((n, 6, 7))
         Jleg[:, :, 0:3] = -u
         Jleg[:, :, 3] = -1.0

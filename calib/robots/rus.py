@@ -148,14 +148,25 @@ class RotaryHexapod(Robot):
         _, D, *_, p = self._geometry(theta, joints, poses)
         return np.linalg.norm(D, axis=-1) - p["s"][None]
 
-    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
-        _, D, R, e, w, phi, (u, v, a), p = self._geometry(theta, joints, poses)
-        n_rows = joints.shape[0]
+    def _pose_jacobian(self, theta, joints, poses):
+        """``(Jpose, n, geometry)``: (N, 6, 6) ``dF / d pose``, (N, 6, 3) unit rod directions and
+        :meth:`_geometry`'s tuple; one computation for :meth:`closure_jacobians` and
+        :meth:`closure_pose_jacobian`."""
+        geometry = self._geometry(theta, joints, poses)
+        D, p = geometry[1], geometry[-1]
         n = D / np.linalg.norm(D, axis=-1, keepdims=True)  # (N, 6, 3) unit rod directions
         dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
-        Jpose = np.empty((n_rows, 6, 6))
+        Jpose = np.empty((joints.shape[0], 6, 6))
         Jpose[:, :, 0:3] = n
         Jpose[:, :, 3:6] = np.einsum("nli,nkij,lj->nlk", n, dR, p["P"])
+        return Jpose, n, geometry
+
+    def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        return self._pose_jacobian(theta, joints, poses)[0]
+
+    def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
+        Jpose, n, (_, _, R, e, w, phi, (_, _, a), p) = self._pose_jacobian(theta, joints, poses)
+        n_rows = joints.shape[0]
         r = p["r"][None]
         dq = -r * np.einsum("nli,nli->nl", n, w)  # dF/dq = dF/dq0
         ca, sa = np.cos(p["az"]), np.sin(p["az"])
