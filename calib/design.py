@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, frozen_array
+from .validation import as_array, frozen_array
 from .noise import SensorNoise
 from .observability import free_indices, identification_jacobian, parameter_scale
 from .robot import KinematicsError, Robot

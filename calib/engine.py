@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import gammaincinv
 
-from ._validate import as_array
+from .validation import as_array
 from .noise import SensorNoise
 from .robot import (
     KinematicsError,

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, frozen_array
+from .validation import as_array, frozen_array
 from .engine import IdentificationResult, minimise, noise_verdict
 from .noise import SensorNoise
 from .observability import describe_combination

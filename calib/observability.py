@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_array, frozen_array
+from .validation import as_array, frozen_array
 from .engine import pose_whitening
 from .noise import SensorNoise
 from .robot import Robot, pose_jacobian_of_parameters

@@ -26,7 +26,7 @@ from typing import ClassVar, Iterator, Sequence
 
 import numpy as np
 
-from ._validate import as_array, frozen_array
+from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",

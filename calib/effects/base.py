@@ -26,7 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .._validate import as_array
+from ..validation import as_array
 from ..noise import SensorNoise
 from ..robot import Robot
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import paper
-from .._validate import as_array
+from ..validation import as_array
 from ..robot import ClosureJacobians, Parameter, ParameterTable, Robot
 from ..rotation import rotation_matrix, rotation_matrix_derivatives
 

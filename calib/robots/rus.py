@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_array
+from ..validation import as_array
 from ..robot import ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot
 from ..rotation import rotation_matrix, rotation_matrix_derivatives
 
