@@ -217,3 +217,11 @@ def test_cli_validation(argv, match, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert match in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_study_on_an_existing_cluster_by_address(dask_two_workers):
+    """--scheduler ADDRESS: the same numbers on a cluster the study did not start."""
+    robot, theta, poses, commanded = setup("delta")
+    a = monte_carlo(robot, theta, commanded, NOISE, 4, 3, workers=1, initial=poses)
+    b = monte_carlo(robot, theta, commanded, NOISE, 4, 3, scheduler=dask_two_workers.scheduler.address, initial=poses)
+    np.testing.assert_array_equal(a["forward"]["errors"], b["forward"]["errors"])
