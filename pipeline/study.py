@@ -6,7 +6,7 @@ Usage::
         [--noise-rad 1e-6] [--noise-joint 0] [--poses designed|reference|random|FILE.csv]
         [--n-poses 10] [--workspace full|default] [--criterion d|e]
         [--method forward|chainwise|both] [--errors reference|random] [--error-mm 0.05]
-        [--error-rad 0.001] [--heldout 100] [--seed 0] [--workers 2] [--geometry ROBOT.json]
+        [--error-rad 0.001] [--heldout 100] [--seed 0] [--workers 2] [--scheduler ADDRESS] [--geometry ROBOT.json]
         [--summary-json FILE] [--rrd FILE] [--overwrite]
 
 Each trial: the simulated machine (the robot's nominal parameters plus the true errors: the
@@ -29,9 +29,10 @@ the length it moves at the machine's size), bias, held-out position and orientat
 
 Trial ``k`` draws its pose noise from ``SeedSequence(seed, spawn_key=(k,))`` (joint noise from
 ``spawn_key=(k, 1)``), so the figures for a given seed are the same whatever ``--workers`` is.
-Trials run in chunks over a process pool (``--workers``, default the number of cores); the
-simulation of a chunk is vectorised (one forward-kinematics solve for all its trials), progress
-goes to stderr.
+Trials run in chunks on a Dask cluster (:mod:`pipeline.executor`: a local cluster of
+``--workers`` processes, default the number of cores, one BLAS thread each; ``--workers 1`` runs
+here; ``--scheduler ADDRESS`` runs on an existing cluster); the simulation of a chunk is
+vectorised (one forward-kinematics solve for all its trials), progress goes to stderr.
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +53,7 @@ from calib.observability import analyze_observability, free_indices, parameter_s
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
-from pipeline.parallel import spawn_pool
+from pipeline.executor import add_executor_arguments, run_tasks
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write
 
@@ -185,7 +185,7 @@ def _merge(parts: list[dict], methods) -> dict:
 
 def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials: int, seed: int, *,
                 methods=("forward",), heldout=None, workers: int | None = None, progress=None,
-                initial=None) -> dict:
+                initial=None, scheduler: str | None = None, client=None) -> dict:
     """Run ``trials`` Monte Carlo trials, in parallel, deterministically for a given seed.
 
     Args:
@@ -197,11 +197,16 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
         seed: master seed.
         methods: subset of :data:`METHODS`.
         heldout: (H, D) held-out target poses, or None.
-        workers: processes (default ``os.cpu_count()``); 1 runs in this process (set
-            ``OPENBLAS_NUM_THREADS=1`` for speed), more run in spawned processes with one BLAS
-            thread each.
+        workers: processes of the local Dask cluster (default ``os.cpu_count()``, one BLAS
+            thread each); 1 runs in this process (set ``OPENBLAS_NUM_THREADS=1`` for speed).
         progress: callable ``(done, total)`` or None.
         initial: (N, D) start of the forward kinematics (e.g. the target poses); default home.
+        scheduler: address of an existing Dask cluster to run on instead (``--scheduler``).
+        client: an open ``distributed.Client`` to run on (left open).
+
+    The trials run in chunks (:func:`run_trials`, eight a worker) on the executor of
+    :mod:`pipeline.executor`; trial ``k``'s noise depends on ``seed`` and ``k`` only, so the
+    figures are the same whatever runs them.
 
     Returns:
         ``{method: {"errors": (T, F), "success": (T,), "heldout_position_mm": (T,),
@@ -218,6 +223,8 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
     workers = int(workers or os.cpu_count() or 1)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if client is not None:
+        workers = max(1, sum(client.nthreads().values()))
     theta_true = np.asarray(theta_true, dtype=float)
     commanded = np.asarray(commanded, dtype=float)
     reached = robot.forward_kinematics(theta_true, commanded, initial=initial)
@@ -226,24 +233,17 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
     base = {"robot": robot.name, "description": robot.description(), "theta_true": theta_true,
             "commanded": commanded, "reached": reached, "noise": noise.to_dict(), "seed": int(seed),
             "methods": tuple(methods), "heldout": None if heldout is None else np.asarray(heldout, float)}
-    parts, done = [], 0
-    if workers == 1:
-        for c in chunks:
-            parts.append(run_trials({**base, "trials": c}))
-            done += len(c)
-            if progress:
-                progress(done, trials)
-    else:
-        # Spawned workers with one BLAS thread each (pipeline.parallel.spawn_pool).
-        from pipeline.study import run_trials as entry  # importable by name in the workers
+    # By name, so the workers import it (not pickled by value when this module runs as __main__).
+    from pipeline.study import run_trials as entry
 
-        with spawn_pool(workers) as ex:
-            futs = [ex.submit(entry, {**base, "trials": c}) for c in chunks]
-            for f in as_completed(futs):
-                parts.append(f.result())
-                done += len(parts[-1]["trials"])
-                if progress:
-                    progress(done, trials)
+    parts, done = [], 0
+
+    for _, part in run_tasks(entry, [{**base, "trials": c} for c in chunks], workers=workers,
+                             scheduler=scheduler, client=client):
+        parts.append(part)
+        done += len(part["trials"])
+        if progress:
+            progress(done, trials)
     return _merge(parts, methods)
 
 
@@ -313,7 +313,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--error-rad", type=float, default=DEFAULT_ERROR_RAD, help="random errors: half-width, rad")
     p.add_argument("--heldout", type=int, default=100, help="held-out poses (0: none)")
     p.add_argument("--seed", type=nonnegative_int, default=0)
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    add_executor_arguments(p)
     p.add_argument("--geometry", default=None, help="robot description JSON (Robot.description())")
     p.add_argument("--summary-json", default=None)
     p.add_argument("--rrd", default=None)
@@ -384,7 +384,8 @@ def _main(argv: list[str] | None = None) -> int:
               file=sys.stderr, flush=True)
 
     results = monte_carlo(robot, theta_true, commanded, noise, args.trials, args.seed, methods=methods,
-                          heldout=heldout, workers=args.workers, progress=progress, initial=targets)
+                          heldout=heldout, workers=args.workers, progress=progress, initial=targets,
+                          scheduler=args.scheduler)
     print(file=sys.stderr)
     figures = summarize(results, names, parameter_scale(robot)[analysis.indices], crb_var, args.trials)
     summary = {

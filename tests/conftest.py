@@ -22,3 +22,13 @@ def reference_tables() -> dict:
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def dask_two_workers():
+    """A Dask client on a local cluster of two worker processes (one thread, one BLAS thread
+    each), started once for the tests that need it (starting one costs seconds)."""
+    from pipeline.executor import dask_client
+
+    with dask_client(2) as client:
+        yield client

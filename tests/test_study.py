@@ -64,17 +64,27 @@ def test_true_errors(name):
 
 
 @pytest.mark.parametrize("name", ROBOTS)
-def test_results_independent_of_worker_count(name):
+def test_results_independent_of_worker_count(name, dask_two_workers):
+    """The study on a local Dask cluster of two workers gives the numbers of one worker (same seed)."""
+    assert len(dask_two_workers.nthreads()) == 2
     robot, theta, poses, commanded = setup(name)
     held = poses[:3]
     a = monte_carlo(robot, theta, commanded, NOISE, 6, 5, methods=("forward", "chainwise"), heldout=held,
                     workers=1, initial=poses)
     b = monte_carlo(robot, theta, commanded, NOISE, 6, 5, methods=("forward", "chainwise"), heldout=held,
-                    workers=2, initial=poses)
+                    client=dask_two_workers, initial=poses)
     for m in ("forward", "chainwise"):
         for k in a[m]:
             np.testing.assert_array_equal(a[m][k], b[m][k])
         assert a[m]["errors"].shape == (6, len(robot.free_default))
+
+
+def test_study_on_its_own_local_cluster():
+    """A local cluster started by the study itself (``workers=2``), and the study here, agree."""
+    robot, theta, poses, commanded = setup("hexapod")
+    a = monte_carlo(robot, theta, commanded, NOISE, 4, 9, workers=1, initial=poses)
+    b = monte_carlo(robot, theta, commanded, NOISE, 4, 9, workers=2, initial=poses)
+    np.testing.assert_array_equal(a["forward"]["errors"], b["forward"]["errors"])
 
 
 @pytest.mark.parametrize("name", ROBOTS)
@@ -207,3 +217,11 @@ def test_cli_validation(argv, match, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert match in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_study_on_an_existing_cluster_by_address(dask_two_workers):
+    """--scheduler ADDRESS: the same numbers on a cluster the study did not start."""
+    robot, theta, poses, commanded = setup("delta")
+    a = monte_carlo(robot, theta, commanded, NOISE, 4, 3, workers=1, initial=poses)
+    b = monte_carlo(robot, theta, commanded, NOISE, 4, 3, scheduler=dask_two_workers.scheduler.address, initial=poses)
+    np.testing.assert_array_equal(a["forward"]["errors"], b["forward"]["errors"])

@@ -1,0 +1,172 @@
+"""Scale curve of the Dask executor (figures of docs/scaling.md); prints them as JSON and markdown.
+
+Usage::
+
+    python benchmarks/scale.py [--trials 400] [--robot hexapod] [--machines 6] [--out FILE.json]
+
+Measured in one run:
+
+1. **Monte Carlo study** (:func:`pipeline.study.monte_carlo`, forward method, 10 designed poses,
+   20 held-out poses, Gaussian noise 1 um / 1 urad): in this process (``workers=1``), then on a
+   local Dask cluster of 1 and of 2 workers (cluster started beforehand; its start timed apart).
+   Per-trial cost, speed-up 1 -> 2 workers, and the scheduler's overhead per task:
+   ``(wall x workers - sum of the tasks' compute time) / tasks``, the compute times from Dask's
+   own task stream (:func:`distributed.get_task_stream`). Also checked: the three runs give the
+   same numbers.
+2. **Round trip of an empty task**: 500 no-op tasks on the 2-worker cluster, wall / tasks.
+3. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
+   over ``--machines`` recordings (one simulated per robot in MuJoCo, then copies).
+
+The numbers depend on what else runs on the machine: print ``os.getloadavg()`` with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# One BLAS thread here too (before numpy loads), as in the workers: the in-process figure is then
+# one core's, comparable with a worker's (multi-threaded BLAS on these small problems is slower).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from calib.design import design_poses, robot_workspace, sample_feasible_poses  # noqa: E402
+from calib.noise import SensorNoise  # noqa: E402
+from calib.robots import default_robot, reference_poses  # noqa: E402
+from pipeline.executor import dask_client  # noqa: E402
+from pipeline.recording import atomic_write  # noqa: E402
+from pipeline.study import monte_carlo, true_errors  # noqa: E402
+
+NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def noop(x):
+    return x
+
+
+def study_inputs(name: str):
+    robot = default_robot(name)
+    nominal = robot.table.nominal
+    kind = "reference" if reference_poses(robot) is not None else "random"
+    theta = nominal + true_errors(robot, kind, 0)
+    ws = robot_workspace(robot, "full")
+    poses = design_poses(robot, nominal, 10, ws, NOISE, seed=0, n_candidates=300).poses
+    held = sample_feasible_poses(robot, nominal, ws, 20, [0, 1])
+    return robot, theta, poses, robot.inverse_kinematics(nominal, poses), held
+
+
+def study_on(client, inputs, trials):
+    """(wall s, results, tasks, sum of the tasks' compute time s) of the study on ``client``."""
+    from distributed import get_task_stream
+
+    robot, theta, poses, commanded, held = inputs
+    with get_task_stream(client) as ts:
+        t0 = time.perf_counter()
+        r = monte_carlo(robot, theta, commanded, NOISE, trials, 0, heldout=held, client=client, initial=poses)
+        wall = time.perf_counter() - t0
+    compute = [sum(s["stop"] - s["start"] for s in t["startstops"] if s["action"] == "compute") for t in ts.data]
+    return wall, r, len(compute), float(sum(compute))
+
+
+def fleet_cost(n_machines: int) -> dict:
+    from pipeline.calibration import RunSettings, run_calibration
+    from pipeline.fleet import calibrate_machine, input_hash
+    from pipeline.recording import read_recording, write_recording
+
+    poses = {"hexapod": 12, "delta": 12, "rus": 20}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        files = []
+        for robot, n in poses.items():
+            run_calibration(RunSettings(robot=robot, poses=str(n), heldout=5, seed=3, out=tmp / "sim", name=robot))
+            rec = read_recording(tmp / "sim" / f"{robot}.csv")
+            for k in range(max(1, n_machines // 3)):
+                m = rec.measured.copy()
+                m[:, :3] += np.random.default_rng([k, 1]).uniform(-3e-4, 3e-4, (len(m), 3))
+                files.append(write_recording(tmp / "fleet" / f"{robot}_{k}.csv", dataclasses.replace(rec, measured=m))[0])
+        walls = {}
+        for f in files:
+            row = calibrate_machine({"machine": f.stem, "file": str(f), "out": str(tmp / "out"), "method": "chainwise",
+                                     "sha256": input_hash(f)})
+            assert row["status"] == "calibrated", row["error"]
+            walls.setdefault(row["robot"], []).append(row["wall_s"])
+    # The first machine of a process pays the imports (rerun, the observability...): reported apart.
+    first = [w[0] for w in walls.values()]
+    rest = [x for w in walls.values() for x in w[1:]]
+    return {"machines": len(files), "per_robot_mean_s": {k: float(np.mean(v[1:] or v)) for k, v in walls.items()},
+            "mean_s": float(np.mean(rest or first)), "first_in_process_s": float(first[0])}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default="hexapod")
+    p.add_argument("--trials", type=int, default=400)
+    p.add_argument("--machines", type=int, default=6, help="fleet machines timed (0: skip)")
+    p.add_argument("--out", default=None, help="write the figures as JSON here")
+    args = p.parse_args(argv)
+    fig = {"cpu_count": os.cpu_count(), "load_before": os.getloadavg(), "robot": args.robot, "trials": args.trials}
+    inputs = study_inputs(args.robot)
+    robot, theta, poses, commanded, held = inputs
+
+    log("study in this process...")
+    t0 = time.perf_counter()
+    here = monte_carlo(robot, theta, commanded, NOISE, args.trials, 0, heldout=held, workers=1, initial=poses)
+    fig["here_s"] = time.perf_counter() - t0
+    fig["per_trial_ms"] = 1e3 * fig["here_s"] / args.trials
+
+    for n in (1, 2):
+        log(f"local cluster of {n} worker(s)...")
+        t0 = time.perf_counter()
+        with dask_client(n) as client:
+            fig[f"start_{n}_s"] = time.perf_counter() - t0
+            # Warm the workers (their imports) with a tiny study, so the wall is the tasks' work.
+            study_on(client, inputs, 2 * n)
+            wall, r, tasks, compute = study_on(client, inputs, args.trials)
+            same = all(np.array_equal(here["forward"][k], r["forward"][k], equal_nan=True) for k in here["forward"])
+            fig[f"w{n}"] = {"wall_s": wall, "tasks": tasks, "task_compute_s": compute,
+                            "per_task_ms": 1e3 * compute / tasks,
+                            "overhead_per_task_ms": 1e3 * (wall * n - compute) / tasks, "same_numbers": same}
+            if n == 2:
+                t0 = time.perf_counter()
+                list(client.gather(client.map(noop, range(500), pure=False)))
+                fig["noop_round_trip_ms"] = 1e3 * (time.perf_counter() - t0) / 500
+    fig["speedup_1_to_2"] = fig["w1"]["wall_s"] / fig["w2"]["wall_s"]
+    for n in (1, 2):
+        w = fig[f"w{n}"]
+        w["overhead_fraction"] = w["overhead_per_task_ms"] / w["per_task_ms"]
+    if args.machines:
+        log("fleet machines in this process...")
+        fig["fleet"] = fleet_cost(args.machines)
+    fig["load_after"] = os.getloadavg()
+    print(json.dumps(fig, indent=1))
+    w1, w2 = fig["w1"], fig["w2"]
+    print(f"\n| | here | 1 worker | 2 workers |\n|---|---|---|---|\n"
+          f"| wall, {args.trials} trials (s) | {fig['here_s']:.2f} | {w1['wall_s']:.2f} | {w2['wall_s']:.2f} |\n"
+          f"| tasks (chunks of trials) | - | {w1['tasks']} | {w2['tasks']} |\n"
+          f"| compute per task (ms) | - | {w1['per_task_ms']:.1f} | {w2['per_task_ms']:.1f} |\n"
+          f"| overhead per task (ms) | - | {w1['overhead_per_task_ms']:.2f} | {w2['overhead_per_task_ms']:.2f} |\n"
+          f"| overhead / task cost | - | {100 * w1['overhead_fraction']:.1f}% | {100 * w2['overhead_fraction']:.1f}% |\n"
+          f"| cluster start (s) | - | {fig['start_1_s']:.1f} | {fig['start_2_s']:.1f} |\n\n"
+          f"per trial {fig['per_trial_ms']:.2f} ms; speed-up 1 -> 2 workers {fig['speedup_1_to_2']:.2f}x; "
+          f"empty-task round trip {fig['noop_round_trip_ms']:.2f} ms; load {fig['load_before']} -> {fig['load_after']}")
+    if args.out:
+        atomic_write(args.out, json.dumps(fig, indent=1) + "\n", overwrite=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,385 @@
+"""``python -m pipeline.fleet FOLDER``: calibrate every recording in a folder, one table for the fleet.
+
+Usage::
+
+    python -m pipeline.fleet FOLDER [--out DIR] [--method chainwise|forward] [--workers N]
+        [--scheduler ADDRESS] [--redo]
+
+Every ``*.csv`` in ``FOLDER`` (not its sub-folders) is one machine's recording (CSV + JSON
+sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is calibrated by
+:func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the analysis of
+``python -m pipeline.run --real FILE``), as one task of :mod:`pipeline.executor` (a local Dask
+cluster of ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``: a task
+reads its recording and writes its outputs by path, so the workers of a remote cluster must see
+``FOLDER`` and ``--out`` at the same paths, e.g. on a shared file system).
+
+Written to ``--out`` (default ``FOLDER/calibrated``):
+
+* ``<machine>.rrd`` and ``<machine>.summary.json`` per machine (the machine is the CSV's stem);
+* ``fleet.csv`` and ``fleet.md``: one row per machine (machine, robot, calibration poses used,
+  held-out position error before/after in um, flagged rows, ``explained``, wall time, status);
+  ``explained`` is ``n/a`` (effect discovery, :mod:`pipeline.discover`, is not run here);
+* ``fleet.json``: the same rows with each input's SHA-256 and the outputs' paths;
+* ``.rows/<machine>.json``: each machine's row, written as soon as it finishes: a rerun skips a
+  machine whose row is there with the same SHA-256 of its recording (CSV and sidecar) and method,
+  and whose outputs are still there (``--redo``: run all).
+
+A file that cannot be calibrated is reported on its row (``error``: the reason, one line) and the
+others go on. The three table files are rewritten (each atomically) after each machine finishes
+(less often when the table is so long that rewriting it would take more than a tenth of the
+time; always at the end, an interruption included), so an interrupted fleet keeps every
+machine that had finished, and a rerun does the rest. One fleet
+at a time writes to an output folder (a lock file holds it). Exit status 0 when every row is
+calibrated, 1 when some row is an error, 2 for a refused input or output.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from calib.engine import METHODS
+
+from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
+from .executor import add_executor_arguments, run_tasks
+from .recording import OutputError, atomic_write, sidecar_path
+
+__all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
+           "run_fleet", "main"]
+
+#: The ``format`` of ``fleet.json``.
+FLEET_FORMAT = "parallel-calib fleet"
+#: Columns of ``fleet.csv`` (``fleet.json`` adds ``file``, ``sha256``, ``method`` and the outputs).
+TABLE_COLUMNS = ("machine", "robot", "status", "poses", "poses_used", "heldout_before_um", "heldout_after_um",
+                 "flagged_rows", "explained", "wall_s", "error")
+#: What the ``explained`` column holds when discovery is not run.
+NOT_RUN = "n/a"
+TABLE_NAMES = {"json": "fleet.json", "csv": "fleet.csv", "md": "fleet.md"}
+LOCK_NAME = ".fleet.lock"
+#: Each finished machine's row, written as it lands (the truth a rerun reads; the table is its view).
+ROWS_DIR = ".rows"
+#: The table is rewritten after each machine unless the last rewrite took more than this share of
+#: the time since (then as soon as it does, and always at the end): a rewrite of 1,000 rows costs
+#: 0.08 s (measured), too much after each of thousands of machines on a large cluster.
+TABLE_SHARE = 0.1
+
+
+@dataclass
+class FleetReport:
+    """A fleet's rows (sorted by machine) and what this run did."""
+
+    rows: list[dict]
+    ran: list[str]
+    skipped: list[str]
+    table: dict
+
+
+def fleet_inputs(folder) -> list[Path]:
+    """The recordings of a fleet: every ``*.csv`` in ``folder`` (not its sub-folders), by name."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"{folder}: " + ("is a file, not a folder of recordings" if folder.exists()
+                                          else "folder not found"))
+    return sorted(p for p in folder.glob("*.csv") if p.is_file())
+
+
+def input_hash(csv_path) -> str:
+    """SHA-256 of a recording's CSV and its sidecar (an absent sidecar counts as empty)."""
+    h = hashlib.sha256()
+    for p in (Path(csv_path), sidecar_path(csv_path)):
+        h.update(p.name.encode() + b"\0")
+        try:
+            h.update(p.read_bytes())
+        except OSError:
+            h.update(b"\0missing")
+    return h.hexdigest()
+
+
+def _robot_named(csv_path) -> str | None:
+    """The robot a sidecar names, read loosely (for a row whose file cannot be calibrated)."""
+    try:
+        name = json.loads(sidecar_path(csv_path).read_text()).get("robot")
+    except Exception:  # noqa: BLE001 - any unreadable sidecar: no robot named
+        return None
+    return name if isinstance(name, str) else None
+
+
+def calibrate_machine(job: dict) -> dict:
+    """Calibrate one recording (a task of the fleet; plain data in and out).
+
+    Args:
+        job: ``machine``, ``file`` (the CSV), ``out`` (output folder), ``method``, ``sha256``.
+
+    Returns:
+        The machine's row (:data:`TABLE_COLUMNS` plus ``file``, ``sha256``, ``method``, ``rrd``,
+        ``summary``); a file that cannot be calibrated gives ``status="error"`` and ``error``, the
+        reason in one line.
+    """
+    from pipeline.calibration import RunSettings, run_calibration
+
+    t0 = time.perf_counter()
+    machine, out = job["machine"], Path(job["out"])
+    row = {"machine": machine, "file": job["file"], "sha256": job["sha256"], "method": job["method"],
+           "robot": None, "status": "error", "poses": None, "poses_used": None, "heldout_before_um": None,
+           "heldout_after_um": None, "flagged_rows": [], "explained": NOT_RUN, "wall_s": None, "error": None,
+           "rrd": None, "summary": None}
+    summary_path = out / f"{machine}.summary.json"
+    try:
+        result = run_calibration(RunSettings(real=Path(job["file"]), out=out, name=machine, overwrite=True,
+                                             method=job["method"], summary_json=summary_path))
+    except Exception as exc:  # noqa: BLE001 - a bad file is reported on its row, the fleet goes on
+        row["robot"] = _robot_named(job["file"])
+        text = one_line(exc)
+        row["error"] = text if isinstance(exc, (ValueError, OSError, KeyError)) else f"{type(exc).__name__}: {text}"
+    else:
+        s = result.summary
+        held = s.get("heldout_position_error_mm")
+        row.update(robot=s["robot"], status="calibrated", poses=s["calibration_poses"],
+                   poses_used=s["calibration_poses_used"], flagged_rows=list(s["flagged_poses"]),
+                   heldout_before_um=None if not held else 1e3 * held["before"],
+                   heldout_after_um=None if not held else 1e3 * held["after"],
+                   rrd=s.get("rrd"), summary=str(summary_path))
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def _cell(v, digits=4) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    if isinstance(v, list):
+        return " ".join(str(x) for x in v)
+    return str(v)
+
+
+def _csv_text(rows) -> str:
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TABLE_COLUMNS)
+    for r in rows:
+        w.writerow([_cell(r[c], 6) for c in TABLE_COLUMNS])
+    return buf.getvalue()
+
+
+def _md_text(rows, folder) -> str:
+    ok = sum(r["status"] == "calibrated" for r in rows)
+    lines = [f"# Fleet calibration of {folder}", "",
+             f"{len(rows)} machines: {ok} calibrated, {len(rows) - ok} not. Held-out: position error of the "
+             "recording's validation rows, before (nominal model) and after calibration. Flagged rows: "
+             "1-based data rows of the recording. explained: n/a (effect discovery not run).", "",
+             "| machine | robot | poses (used) | held-out before (um) | after (um) | flagged rows | explained "
+             "| wall (s) | status |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        poses = "" if r["poses"] is None else f"{r['poses']}" + (
+            f" ({r['poses_used']})" if r["poses_used"] != r["poses"] else "")
+        status = r["status"] if r["status"] != "error" else f"error: {r['error']}"
+        cells = [r["machine"], r["robot"] or "?", poses, _cell(r["heldout_before_um"]), _cell(r["heldout_after_um"]),
+                 _cell(r["flagged_rows"]) or "none" if r["status"] == "calibrated" else "",
+                 r["explained"], _cell(r["wall_s"], 3), status]
+        lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _write_tables(out: Path, folder: Path, rows_by_machine: dict) -> None:
+    rows = [rows_by_machine[m] for m in sorted(rows_by_machine)]
+    state = {"format": FLEET_FORMAT, "version": 1, "folder": str(folder), "rows": rows}
+    atomic_write(out / TABLE_NAMES["json"], json.dumps(state, indent=1) + "\n", overwrite=True)
+    atomic_write(out / TABLE_NAMES["csv"], _csv_text(rows), overwrite=True)
+    atomic_write(out / TABLE_NAMES["md"], _md_text(rows, folder), overwrite=True)
+
+
+def _row_path(out: Path, machine: str) -> Path:
+    return out / ROWS_DIR / f"{machine}.json"
+
+
+def _previous_row(out: Path, machine: str) -> dict | None:
+    """The row a previous run wrote for ``machine`` (None when absent or unreadable)."""
+    try:
+        row = json.loads(_row_path(out, machine).read_text())
+    except (OSError, ValueError):
+        return None
+    return row if isinstance(row, dict) and row.get("machine") == machine else None
+
+
+def _done(row: dict | None, sha: str, method: str) -> bool:
+    """A previous row stands: same input and method, and its outputs are still there."""
+    if row is None or row.get("sha256") != sha or row.get("method") != method:
+        return False
+    if row.get("status") == "calibrated":
+        return all(row.get(k) and Path(row[k]).is_file() for k in ("rrd", "summary"))
+    return row.get("status") == "error"
+
+
+class _FleetLock:
+    """``out/.fleet.lock`` holding this process's id; a lock whose process is gone is taken over."""
+
+    def __init__(self, out: Path):
+        self.path = out / LOCK_NAME
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                try:
+                    pid = int(self.path.read_text().strip() or "0")
+                except (OSError, ValueError):
+                    pid = 0
+                if pid and pid != os.getpid() and _alive(pid):
+                    raise OutputError(f"--out {out}: another fleet (process {pid}) is writing this folder now") from None
+                self.path.unlink(missing_ok=True)
+                continue
+            except OSError as exc:
+                raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+            return
+        raise OutputError(f"--out {out}: cannot take the lock {self.path}")
+
+    def release(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | None = None,
+              scheduler: str | None = None, client=None, redo: bool = False, progress=None) -> FleetReport:
+    """Calibrate every recording of ``folder`` (see the module docstring).
+
+    Args:
+        folder: the folder of recordings.
+        out: output folder (default ``folder/calibrated``).
+        method: identification method (:data:`calib.engine.METHODS`).
+        workers, scheduler, client: the executor (:func:`pipeline.executor.run_tasks`).
+        redo: calibrate every machine, even those whose row stands.
+        progress: ``progress(row, done, total)`` after each machine finished here.
+
+    Raises:
+        ValueError: ``folder`` is not a folder, ``method`` unknown, or ``out`` cannot be written
+            (:class:`pipeline.recording.OutputError`).
+    """
+    if method not in METHODS:
+        raise ValueError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+    folder = Path(folder)
+    inputs = fleet_inputs(folder)
+    out = Path(out) if out is not None else folder / "calibrated"
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    lock = _FleetLock(out)
+    rows, ran, skipped, dirty = {}, [], [], False
+    try:
+        (out / ROWS_DIR).mkdir(exist_ok=True)
+        jobs = []
+        for p in inputs:
+            machine, sha = p.stem, input_hash(p)
+            previous = None if redo else _previous_row(out, machine)
+            if _done(previous, sha, method):
+                rows[machine] = previous
+                skipped.append(machine)
+                continue
+            # A lock left by an interrupted run (this fleet holds the folder: no other run writes it).
+            (out / f".{machine}.lock").unlink(missing_ok=True)
+            jobs.append({"machine": machine, "file": str(p), "out": str(out), "method": method, "sha256": sha})
+        dirty, last, cost = True, time.monotonic(), 0.0
+        from pipeline.fleet import calibrate_machine as entry  # by name in the workers
+
+        for k, (_, row) in enumerate(run_tasks(entry, jobs, workers=workers, scheduler=scheduler, client=client)):
+            atomic_write(_row_path(out, row["machine"]), json.dumps(row, indent=1) + "\n", overwrite=True)
+            rows[row["machine"]] = row
+            ran.append(row["machine"])
+            dirty = True
+            if cost <= TABLE_SHARE * (time.monotonic() - last):
+                t = time.monotonic()
+                _write_tables(out, folder, rows)
+                dirty, last = False, time.monotonic()
+                cost = last - t
+            if progress:
+                progress(row, k + 1, len(jobs))
+    finally:
+        if dirty or not (out / TABLE_NAMES["json"]).exists():
+            _write_tables(out, folder, rows)
+        lock.release()
+    return FleetReport(rows=[rows[m] for m in sorted(rows)], ran=ran, skipped=skipped,
+                       table={k: str(out / v) for k, v in TABLE_NAMES.items()})
+
+
+def _parser():
+    p = ArgumentParser(prog="python -m pipeline.fleet", description=__doc__.split("\n\n")[0])
+    p.add_argument("folder", type=Path, help="folder of recordings (*.csv, each with its .json sidecar)")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default FOLDER/calibrated)")
+    p.add_argument("--method", choices=list(METHODS), default="chainwise",
+                   help="identification method (as python -m pipeline.run --method)")
+    add_executor_arguments(p)
+    p.add_argument("--redo", action="store_true", help="calibrate every machine, even those already done")
+    p.add_argument("--quiet", action="store_true", help="no line per machine")
+    return p
+
+
+def _report_line(row, done, total) -> str:
+    if row["status"] == "calibrated":
+        held = "" if row["heldout_after_um"] is None else \
+            f", held-out {row['heldout_before_um']:.4g} -> {row['heldout_after_um']:.4g} um"
+        what = f"calibrated ({row['robot']}, {row['poses']} poses{held})"
+    else:
+        what = f"error: {row['error']}"
+    return f"  [{done}/{total}] {row['machine']}: {what} ({row['wall_s']:.2f} s)"
+
+
+def _main(argv) -> int:
+    args = _parser().parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+
+    def progress(row, done, total):
+        if not args.quiet:
+            print(_report_line(row, done, total), file=sys.stderr, flush=True)
+
+    t0 = time.perf_counter()
+    try:
+        rep = run_fleet(args.folder, args.out, method=args.method, workers=args.workers, scheduler=args.scheduler,
+                        redo=args.redo, progress=progress)
+    except KeyboardInterrupt:
+        out = args.out or args.folder / "calibrated"
+        print(f"interrupted: the machines that had finished are in {out / TABLE_NAMES['md']}; "
+              "run again to do the rest", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    bad = [r for r in rep.rows if r["status"] != "calibrated"]
+    print(f"fleet {args.folder}: {len(rep.rows)} machines, {len(rep.rows) - len(bad)} calibrated, {len(bad)} not; "
+          f"ran {len(rep.ran)}, skipped {len(rep.skipped)} already done ({time.perf_counter() - t0:.1f} s)")
+    for r in bad:
+        print(f"  {r['machine']}: {r['error']}")
+    print(f"  wrote {rep.table['md']}, {rep.table['csv']}")
+    return 1 if bad else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input or output ends with one line on stderr and exit status 2."""
+    status = [0]
+
+    def run(a):
+        status[0] = _main(a)
+
+    return cli_main(run, argv) or status[0]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

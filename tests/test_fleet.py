@@ -1,0 +1,122 @@
+"""Fleet calibration (pipeline.fleet): a folder of recordings of mixed robots, two of them broken."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.calibration import RunSettings, run_calibration
+from pipeline.fleet import TABLE_COLUMNS, input_hash, main, run_fleet
+from pipeline.recording import read_recording, sidecar_path, write_recording
+
+#: Calibration poses simulated per robot (the rus has 66 parameters: 20 poses, twice its fewest).
+POSES = {"hexapod": 12, "delta": 12, "rus": 20}
+PER_ROBOT = 6
+
+
+@pytest.fixture(autouse=True)
+def _home(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+
+
+@pytest.fixture(scope="module")
+def fleet_folder(tmp_path_factory):
+    """20 recordings: 6 machines of each robot (one simulated in MuJoCo by pipeline.run's library,
+    five more with other sensor noise), a CSV without its sidecar and one with a broken cell."""
+    sims = tmp_path_factory.mktemp("sims")
+    folder = tmp_path_factory.mktemp("fleet")
+    for robot, n in POSES.items():
+        run_calibration(RunSettings(robot=robot, poses=str(n), heldout=5, seed=3, out=sims, name=robot))
+        rec = read_recording(sims / f"{robot}.csv")
+        for k in range(PER_ROBOT):
+            measured = rec.measured.copy()
+            measured[:, :3] += np.random.default_rng([k, 1]).uniform(-3e-4, 3e-4, (len(measured), 3))
+            write_recording(folder / f"{robot}_{k:02d}.csv", dataclasses.replace(rec, measured=measured))
+    # Broken: a CSV whose sidecar is missing, and a row with a cell that is not a number.
+    (folder / "orphan.csv").write_text((folder / "hexapod_00.csv").read_text())
+    lines = (folder / "delta_00.csv").read_text().splitlines()
+    cells = lines[3].split(",")
+    cells[2] = "12.3.4"
+    lines[3] = ",".join(cells)
+    (folder / "garbled.csv").write_text("\n".join(lines) + "\n")
+    sidecar_path(folder / "garbled.csv").write_text(sidecar_path(folder / "delta_00.csv").read_text())
+    return folder
+
+
+def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_folder, tmp_path, dask_two_workers,
+                                                                          capsys):
+    out = tmp_path / "out"
+    seen = []
+    rep = run_fleet(fleet_folder, out, client=dask_two_workers, progress=lambda row, d, t: seen.append(d))
+    assert len(rep.rows) == 20 and len(rep.ran) == 20 and not rep.skipped and seen == list(range(1, 21))
+    ok = [r for r in rep.rows if r["status"] == "calibrated"]
+    bad = {r["machine"]: r for r in rep.rows if r["status"] == "error"}
+    assert len(ok) == 18 and sorted(bad) == ["garbled", "orphan"]
+    assert "orphan.json: sidecar not found" in bad["orphan"]["error"]
+    assert "garbled.csv: row 3 (line 4)" in bad["garbled"]["error"] and "'12.3.4' is not a number" in bad["garbled"]["error"]
+    assert bad["garbled"]["robot"] == "delta" and bad["orphan"]["robot"] is None
+    assert {r["robot"] for r in ok} == set(POSES)
+    for r in ok:
+        assert r["poses"] == POSES[r["robot"]] and r["explained"] == "n/a"
+        assert 0 < r["heldout_after_um"] < r["heldout_before_um"]  # calibration helped on held-out rows
+        assert (out / f"{r['machine']}.rrd").is_file()
+        assert json.loads((out / f"{r['machine']}.summary.json").read_text())["robot"] == r["robot"]
+    # One table, CSV and markdown, a row per machine.
+    lines = (out / "fleet.csv").read_text().splitlines()
+    assert lines[0] == ",".join(TABLE_COLUMNS) and len(lines) == 21
+    md = (out / "fleet.md").read_text()
+    assert md.count("| calibrated |") == 18 and md.count("| error: ") == 2
+    assert not list(out.glob(".*.lock"))
+
+    # A second run with the folder unchanged redoes nothing (here in this process: --workers 1).
+    stamp = {p.name: p.stat().st_mtime_ns for p in out.glob("*.rrd")}
+    assert main([str(fleet_folder), "--out", str(out), "--workers", "1"]) == 1  # rows in error: status 1
+    text = capsys.readouterr()
+    assert "ran 0, skipped 20 already done" in text.out and "[1/" not in text.err
+    assert stamp == {p.name: p.stat().st_mtime_ns for p in out.glob("*.rrd")}
+
+    # A recording that changes is calibrated again, alone.
+    side = sidecar_path(fleet_folder / "orphan.csv")
+    side.write_text(sidecar_path(fleet_folder / "hexapod_00.csv").read_text())
+    try:
+        rep = run_fleet(fleet_folder, out, workers=1)
+    finally:
+        side.unlink()
+    assert rep.ran == ["orphan"] and len(rep.skipped) == 19
+    assert {r["machine"]: r["status"] for r in rep.rows}["orphan"] == "calibrated"
+
+
+def test_interrupted_fleet_keeps_what_finished(fleet_folder, tmp_path):
+    """Rows land as each machine finishes: a fleet stopped after two keeps them, and the rerun does the rest."""
+    out = tmp_path / "out"
+
+    class Stop(Exception):
+        pass
+
+    def stop_after_two(row, done, total):
+        if done == 2:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run_fleet(fleet_folder, out, workers=1, progress=stop_after_two)
+    state = json.loads((out / "fleet.json").read_text())
+    assert len(state["rows"]) == 2 and not (out / ".fleet.lock").exists()
+    rep = run_fleet(fleet_folder, out, workers=1)
+    assert len(rep.skipped) == 2 and len(rep.ran) == 18
+
+
+def test_input_hash_covers_the_sidecar(fleet_folder, tmp_path):
+    csv = tmp_path / "m.csv"
+    csv.write_text((fleet_folder / "rus_00.csv").read_text())
+    h0 = input_hash(csv)
+    sidecar_path(csv).write_text("{}")
+    assert input_hash(csv) != h0
+
+
+def test_fleet_refusals(tmp_path, capsys):
+    assert main([str(tmp_path / "nowhere")]) == 2
+    assert "folder not found" in capsys.readouterr().err
+    (tmp_path / "f").write_text("x")
+    assert main([str(tmp_path), "--out", str(tmp_path / "f")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
