@@ -34,6 +34,7 @@ from calib.measurement import measurement_settings, target_names
 from calib.noise import SensorNoise
 from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
+from calib.rotation import rotation_matrix
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns",
            "atomic_write", "publish", "writing", "ResultSet", "OutputError", "recording_texts", "sidecar_path",
@@ -503,6 +504,50 @@ def _condition_in_words(cond: float) -> str:
     return "poorly conditioned"
 
 
+#: The rotation convention of recordings (the project's).
+ROTATION_CONVENTION = "R = Rz(gamma) Ry(beta) Rx(alpha) (platform to base, angles in the columns alpha, beta, gamma)"
+
+
+def _other_rotation_convention(rec: Recording) -> str | None:
+    """The convention the recording's angles seem to follow when it is not the project's: the
+    geometry identified (forward method) with the angles read in another convention explains the
+    calibration rows at least ten times better (chi-square) than with the project's, which
+    misfits (chi-square above 4 per degree of freedom); None otherwise. Only then: for small
+    angles the conventions differ at second order, like a geometric error, so only a fit tells
+    them apart."""
+    from scipy.spatial.transform import Rotation
+
+    from calib.engine import identify_forward
+    from calib.rotation import euler_from_matrix
+
+    joints, measured = rec.subset("calibration")
+    robot = rec.robot
+    angle = robot.angle_pose_mask
+    angles = measured[:, angle]
+
+    def chi2(converted_angles) -> float:
+        poses = measured.copy()
+        poses[:, angle] = converted_angles
+        try:
+            fit = identify_forward(robot, joints, poses, rec.noise)
+        except (ValueError, ArithmeticError):  # KinematicsError is a ValueError
+            return float("inf")
+        value = fit.chi2 / max(fit.dof, 1)
+        return value if np.isfinite(value) else float("inf")
+
+    declared = chi2(angles)
+    if not declared > 4.0:
+        return None
+    candidates = {
+        "R = Rx(alpha) Ry(beta) Rz(gamma)": lambda: euler_from_matrix(Rotation.from_euler("XYZ", angles).as_matrix()),
+        "the inverse rotation (base to platform)": lambda: euler_from_matrix(np.swapaxes(rotation_matrix(angles), 1, 2)),
+        "the columns in the order gamma, beta, alpha": lambda: angles[:, ::-1],
+    }
+    misfit = {name: chi2(convert()) for name, convert in candidates.items()}
+    best = min(misfit, key=misfit.get)
+    return best if misfit[best] < 0.1 * declared else None
+
+
 def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
     """Check that the machine can have produced ``rec`` before anything is fitted.
 
@@ -572,6 +617,12 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
                 cols = [c for c, a in zip(pose_cols, angle) if a]
                 raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to be in degrees "
                                      "(they match the joints once converted from degrees); a recording holds rad")
+            if in_base_frame and int(angle.sum()) == 3 and int((rec.sets == "calibration").sum()) >= 2:
+                other = _other_rotation_convention(rec)
+                if other is not None:
+                    cols = [c for c, a in zip(pose_cols, angle) if a]
+                    raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to follow {other}; "
+                                         f"a recording holds {ROTATION_CONVENTION}")
     bound = np.where(angle, 2 * np.pi, 100.0 * robot.length_scale_mm)
     far = np.abs(m) > bound
     if far.any():

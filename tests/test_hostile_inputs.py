@@ -14,10 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from calib import paper
 from calib.noise import SensorNoise
 from calib.robots import paper_hexapod
+from calib.rotation import euler_from_matrix, rotation_matrix
 from calib.workspace import reachable_poses
 from pipeline.recording import Recording, read_recording, write_recording
 from pipeline.run import main, run
@@ -104,6 +106,14 @@ def _scale_columns(path: Path, columns, factor: float) -> None:
     write_recording(path, replace(rec, joints=joints, measured=measured), overwrite=True)
 
 
+def _convert_angles(path: Path, convert) -> None:
+    """Rewrite the measured angles as ``convert(R)`` gives them from the true rotations (N, 3, 3)."""
+    rec = read_recording(path)
+    measured = rec.measured.copy()
+    measured[:, 3:] = convert(rotation_matrix(measured[:, 3:]))
+    write_recording(path, replace(rec, measured=measured), overwrite=True)
+
+
 CSV_CASES = {
     "empty file": (lambda p: p.write_text(""), ["rec.csv", "empty file"]),
     "header only": (lambda p: _write_lines(p, _lines(p)[:1]), ["rec.csv", "no data rows"]),
@@ -149,6 +159,12 @@ CSV_CASES = {
                             ["rec.csv", "positions seem to be in metres"]),
     "angles in degrees": (lambda p: _scale_columns(p, ["alpha_rad", "beta_rad", "gamma_rad"], 180 / np.pi),
                           ["rec.csv", "angles seem to be in degrees"]),
+    "angles as R = Rx Ry Rz": (lambda p: _convert_angles(p, lambda R: Rotation.from_matrix(R).as_euler("XYZ")),
+                               ["rec.csv", "angles seem to follow R = Rx(alpha) Ry(beta) Rz(gamma)"]),
+    "angles of the inverse rotation": (lambda p: _convert_angles(p, lambda R: euler_from_matrix(np.swapaxes(R, 1, 2))),
+                                       ["rec.csv", "angles seem to follow the inverse rotation"]),
+    "angles in reversed columns": (lambda p: _convert_angles(p, lambda R: euler_from_matrix(R)[:, ::-1]),
+                                   ["rec.csv", "angles seem to follow the columns in the order gamma, beta, alpha"]),
 }
 
 
