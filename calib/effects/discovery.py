@@ -777,6 +777,42 @@ def _neighbour_sets(data: EffectData) -> list[np.ndarray]:
     return [np.argsort(d, axis=1, kind="stable")[:, :k] for d in (dt, dp, dd)]
 
 
+def _deleted(Q: np.ndarray, w: np.ndarray, bad: np.ndarray):
+    """Leave-one-out statistics with the rows ``bad`` left out of the fit, closed form.
+
+    ``Q`` (N C, r) orthonormal basis of the whitened design, ``w`` (N, C) whitened residuals.
+    With ``G = (I - H_BB)^-1`` the bad rows' joint deleted residuals are ``u = G w_B``
+    (covariance ``G``), the other rows' residuals of the fit without them
+    ``e = w + Q Q_B^T u``, and that fit's hat matrix ``Q (I + Q_B^T G Q_B) Q^T``.
+
+    Returns:
+        ``(statistic (N,), e (N, C), u (|B|, C))``: each row's chi-square(C) statistic (a
+        kept row's studentized deleted residual, a bad row's deleted residual against the fit
+        without every bad row).
+    """
+    n, C = w.shape
+    r = Q.shape[1]
+    idx = (bad[:, None] * C + np.arange(C)).ravel()
+    if idx.size:
+        QB = Q[idx]
+        G = np.linalg.inv(np.eye(idx.size) - QB @ QB.T)
+        u = G @ w.ravel()[idx]
+        e = (w.ravel() + Q @ (QB.T @ u)).reshape(n, C)
+        K = np.eye(r) + QB.T @ G @ QB
+    else:
+        G = u = np.zeros(0)
+        e, K = w, np.eye(r)
+    Qr = Q.reshape(n, C, r)
+    H = Qr @ K @ np.swapaxes(Qr, 1, 2)
+    d = np.linalg.solve(np.eye(C)[None] - H, e[..., None])[..., 0]
+    stat = np.einsum("ni,ni->n", e, d)
+    u = np.asarray(u).reshape(-1, C)
+    for b, j in enumerate(bad):
+        blk = G[b * C:(b + 1) * C, b * C:(b + 1) * C]
+        stat[j] = float(u[b] @ np.linalg.solve(blk, u[b]))
+    return stat, e, u
+
+
 def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALPHA,
                  max_bad_fraction: float = MAX_BAD_FRACTION) -> dict:
     """Rows that are gross and isolated (closed-form leave-one-out, no refits).
@@ -787,10 +823,12 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
     chi-square with C degrees of freedom for a consistent row. ``t`` is divided by a robust
     scale (its median over the median of chi-square(C), at least 1), so that "gross" means
     gross against the remainder's own spread. A row is bad when ``t`` exceeds the
-    Bonferroni-corrected ``alpha``; a bad row is an outlier only when it is isolated: the mean of
-    its neighbours' deleted residuals along its own (in time, in the workspace, in the direction
-    of motion; bad neighbours count when they point the same way) stays within
-    :data:`SHARED_Z` standard errors of zero. When more than ``max_bad_fraction`` of the rows are
+    Bonferroni-corrected ``alpha``, the statistics being recomputed with the bad rows left out
+    of the fit until the set settles (:func:`_deleted`, against masking and swamping). A bad row
+    is an outlier only when it is isolated: the sum of its good neighbours' residuals (the fit
+    without every bad row) along its own deleted residual, over the square root of their
+    number, stays below :data:`SHARED_Z` (in time, in the workspace, in the direction of
+    motion). When more than ``max_bad_fraction`` of the rows are
     bad, the model is wrong, not the data: nothing is flagged.
 
     Returns:
@@ -800,28 +838,30 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
     """
     n, C = data.n, data.robot.n_chains
     Q = _orth(fit.design)
-    Qr = Q.reshape(n, C, -1)
-    H = Qr @ np.swapaxes(Qr, 1, 2)
-    M = np.eye(C)[None] - H
     w = fit.whitened
-    d = np.linalg.solve(M, w[..., None])[..., 0]
-    stat = np.einsum("ni,ni->n", w, d)
+    stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
     scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))
     thr = float(chi2_dist.isf(alpha / n, C))
     bad = np.flatnonzero(stat / scale > thr)
+    # Masking and swamping: the statistics again with the bad rows left out of the fit, until the
+    # set of bad rows settles (closed form each time).
+    for _ in range(10):
+        if bad.size == 0 or bad.size > max(1, max_bad_fraction * n):
+            break
+        stat, clean, u = _deleted(Q, w, bad)
+        again = np.flatnonzero(stat / scale > thr)
+        if np.array_equal(again, bad):
+            break
+        bad = again
     out = {"statistic": (stat / scale).tolist(), "threshold": thr, "scale": scale, "bad": bad.tolist(),
            "flagged": [], "shared": {}, "model_wrong": False}
     if bad.size > max(1, max_bad_fraction * n):
         out["model_wrong"] = True
         return out
-    # Every bad row left out at once (closed form): the joint deleted residuals of the bad rows
-    # u_B = (I - H_BB)^-1 w_B, and the other rows' residuals w_k + Q_k Q_B^T u_B, so that the
-    # pull of the bad rows on the fit is not mistaken for a shared residual.
-    idx = (bad[:, None] * C + np.arange(C)).ravel()
-    QB = Q[idx]
-    u = np.linalg.solve(np.eye(idx.size) - QB @ QB.T, w.ravel()[idx])
-    clean = (w.ravel() + Q @ (QB.T @ u)).reshape(n, C) / np.sqrt(scale)
-    u = u.reshape(-1, C)
+    if bad.size == 0:
+        return out
+    stat, clean, u = _deleted(Q, w, bad)
+    clean = clean / np.sqrt(scale)
     bad_set = set(bad.tolist())
     flagged = []
     for b, j in enumerate(bad):
