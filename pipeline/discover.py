@@ -1,11 +1,13 @@
 """``python -m pipeline.discover --real FILE``: find the physics the geometric model left out.
 
-Calibrates the geometry, locates where the residuals concentrate, names the left-out effect
-from the registry of physical candidates (:mod:`calib.effects`), fits it jointly with the
-geometry, shows the held-out fit improve, and re-simulates the MuJoCo machine with the effect
-added (the effect's own :meth:`~calib.effects.Effect.machine_settings`), re-fitting its physical
-parameter there with ``mujoco.sysid``. ``--robot NAME --scenario EFFECT`` runs it on a seeded
-simulated recording instead (:func:`pipeline.scenarios.effect_recording`).
+Calibrates the geometry, locates where the residuals concentrate, names the left-out effects
+(up to three together) from the registry of physical candidates (:mod:`calib.effects`;
+``--candidates`` narrows it), fits them jointly with the geometry, says first whether what
+remains is consistent with the declared noise and, if not, what it is, where and what it follows;
+shows the held-out fit improve, and re-simulates the MuJoCo machine with the effects added (their
+own :meth:`~calib.effects.Effect.machine_settings`), re-fitting a physical parameter there with
+``mujoco.sysid``. ``--robot NAME --scenario EFFECT[,EFFECT]`` runs it on a seeded simulated
+recording instead (:func:`pipeline.scenarios.effect_recording`).
 
 Callable from Python as :func:`discover`. Nothing here depends on the robot or the effect.
 """
@@ -23,12 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.effects import EFFECTS, Discovery, Effect, EffectData, closure_noise_std, discover_effect, fit_effect
+from calib.effects import (EFFECTS, Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
+                           registered_effect, effects_for, fit_effects)
 from calib.robot import Robot
 from calib.robots import ROBOTS
 
 from .recording import Recording, atomic_write, read_recording
-from .scenarios import effect_recording, machine_context, merged_settings, recording_robot, simulate
+from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
 
 __all__ = ["discover", "DiscoveryReport", "resimulate", "main", "RESIMULATION_SETTLE_VELOCITY"]
 
@@ -45,12 +48,17 @@ class DiscoveryReport:
     summary: dict
 
 
-def _heldout(data: EffectData, effect: Effect, heldout_rows: np.ndarray, train_rows: np.ndarray, extra) -> dict:
-    """Held-out closure residual RMS (mm) of geometry only and geometry + effect, both fitted on
-    ``train_rows``, and the noise floor of the held-out residuals."""
+def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, train_rows: np.ndarray) -> dict:
+    """Held-out closure residual RMS (mm) of geometry only and geometry + the chosen effects,
+    both fitted on ``train_rows``, and the noise floor of the held-out residuals."""
     train, test = data.subset(train_rows), data.subset(heldout_rows)
-    before = fit_effect(train, "none").predict(test)[0]
-    after = fit_effect(train, effect, extra=extra).predict(test)[0] if effect.name != "none" else before
+    geo = fit_effects(train, ())
+    before = geo.predict(test)[0]
+    if chosen.models:
+        extras = {m.name: e for m, e in zip(chosen.models, chosen.extras) if e is not None}
+        after = fit_effects(train, chosen.models, extras=extras, start=geo.theta).predict(test)[0]
+    else:
+        after = before
     floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
     rms_b = float(np.sqrt(np.mean(before ** 2)))
     rms_a = float(np.sqrt(np.mean(after ** 2)))
@@ -69,10 +77,11 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     """Re-simulate the recorded commands on MuJoCo machines and compare with the recording.
 
     Before: the machine with the geometry identified alone. After: the machine with the
-    geometry identified jointly with the effect, and the effect's physics added (its
-    ``machine_settings``); where the effect names a physical parameter
-    (``physical_parameter``: servo stiffness, friction force, drift rate) it is then re-fitted
-    in MuJoCo with ``mujoco.sysid`` (confidence interval from its Jacobian). The transmission
+    geometry identified jointly with the named effects, and their physics added (their
+    ``machine_settings``, together: :func:`pipeline.scenarios.effects_settings`); the first
+    named effect that names a physical parameter (``physical_parameter``: servo stiffness,
+    friction force, drift rate) has it re-fitted in MuJoCo with ``mujoco.sysid`` (confidence
+    interval from its Jacobian). The transmission
     effects (scale, screw) enter the joints directly, so their calib-level fit already is the
     machine's parameter and they are simulated as fitted. The re-fit uses at most
     ``sysid_rows`` rows (every row for an effect that depends on the motion history, such as
@@ -102,16 +111,19 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
         return {"position_um": float(1e3 * np.sqrt(np.mean(np.sum(d[:, ~angle] ** 2, axis=1)))),
                 "orientation_urad": float(1e6 * np.sqrt(np.mean(np.sum(d[:, angle] ** 2, axis=1))))}
 
-    out = {"before": rms(run(disc.fits["none"].theta, merged_settings(context)))}
-    if disc.effect == "none":
+    out = {"before": rms(run(disc.geometry.theta, merged_settings(context)))}
+    if not disc.effects:
         out["after"] = out["before"]
         return out
     fit = disc.chosen
-    eff = fit.model
-    settings = merged_settings(context, eff.machine_settings(fit.coefficients, robot, context, fit.extra))
+    sl = fit.slices()
+    settings = effects_settings(robot, context, [(m, fit.coefficients[sl[m.name]], e)
+                                                 for m, e in zip(fit.models, fit.extras)])
     after = run(fit.theta, settings)
     out["after_calib_fit"] = rms(after)
-    param = eff.physical_parameter(robot)
+    # The first named effect that carries a machine parameter is re-fitted there.
+    eff, param = next(((m, m.physical_parameter(robot)) for m in fit.models if m.physical_parameter(robot)),
+                      (None, None))
     if sysid and param is not None:
         import mujoco.sysid as sysid_mod
 
@@ -154,13 +166,20 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         seed: seed of the held-out split and of the cross-validation folds.
         heldout_fraction: rows held out when the recording has no ``validation`` rows.
         resim, sysid: re-simulate on the MuJoCo machine, and re-fit there with ``mujoco.sysid``.
-        candidates: effect names to consider; default every effect that applies to the robot.
+        candidates: effect names (or :class:`calib.effects.Effect` objects) to consider; default
+            every effect that applies to the robot.
+
+    The summary's ``flagged_poses`` and ``outliers.bad_rows`` are 1-based data rows of the
+    recording (the first measurement is row 1).
     """
     t0 = time.perf_counter()
     robot = recording_robot(rec)
+    if candidates is None:
+        candidates = effects_for(robot)
+    names = [registered_effect(c).name for c in candidates]
     cal = np.flatnonzero(rec.sets == "calibration")
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
-    disc = discover_effect(data.subset(cal), candidates=candidates, seed=seed)
+    disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed)
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
@@ -173,21 +192,31 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         n_held = max(1, int(round(heldout_fraction * kept.size)))
         held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
         basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
-    h = _heldout(data, disc.chosen.model, held, train, disc.chosen.extra)
+    h = _heldout(data, disc.chosen, held, train)
+    scan = disc.outliers
     summary = {
         "robot": robot.name,
-        "effect": disc.effect,
-        "candidates": [c for c in disc.evidence if c != "geometry_chi2_test"],
-        "adequate": disc.adequate,
-        "evidence": disc.evidence,
+        "explained": disc.explained,
+        "verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining),
+        "remaining": disc.remaining,
+        "effects": list(disc.effects),
+        "partial": list(disc.partial),
+        "aliases": disc.aliases,
+        "candidates": [n for n in names if n != "none"],
+        "effect_parameters": disc.chosen.parameters(),
         "heldout_rms_before_mm": h["heldout_rms_before_mm"],
         "heldout_rms_after_mm": h["heldout_rms_after_mm"],
         "noise_floor_mm": h["noise_floor_mm"],
         "heldout_basis": basis,
-        "effect_parameters": disc.chosen.named_coefficients(),
+        "flagged_poses": [i + 1 for i in flagged],
+        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
+                     "model_wrong": bool(scan["model_wrong"]),
+                     "shared": {str(int(disc.kept[int(j)]) + 1): v for j, v in scan["shared"].items()},
+                     "threshold": scan["threshold"], "scale": scan["scale"]},
+        "tests": {"noise": disc.tests["noise"], "structure": disc.tests["structure"]},
+        "evidence": disc.evidence,
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "located": disc.located,
-        "flagged_poses": flagged,
         "rows": int(rec.joints.shape[0]),
     }
     if rec.meta.get("simulation", {}).get("effect") is not None:
@@ -200,23 +229,59 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     return DiscoveryReport(discovery=disc, summary=summary)
 
 
+def verdict_words(explained: bool, effects: list, remaining: dict) -> str:
+    """The verdict in one sentence (the first line the terminal prints)."""
+    model = "geometry + " + " + ".join(effects) if effects else "geometry alone"
+    if explained:
+        return f"Explained: {model} leaves {remaining['summary']}."
+    partial = (f" Named but partial: {', '.join(effects)} (structure remains)." if effects and remaining.get("follows")
+               else "")
+    return f"NOT explained: {model} leaves {remaining['summary']}.{partial}"
+
+
 def report_lines(s: dict) -> list[str]:
-    """The summary in plain words, one finding per line."""
+    """The summary in plain words, one finding per line; the verdict first."""
+    lines = [s["verdict"]]
     ev = s["evidence"]["geometry_chi2_test"]
-    lines = [f"Geometry alone: chi-square {ev['chi2']:.0f} on {ev['dof']} degrees of freedom, p = {ev['p_value']:.3g} "
-             f"({'consistent with' if ev['p_value'] > ev['alpha'] else 'NOT explained by'} the declared noise "
-             f"by this omnibus test)."]
-    lines += ["Where the mismatch is: " + t for t in s["located"]["summary"]]
+    lines.append(f"Geometry alone: chi-square {ev['chi2']:.0f} on {ev['dof']} degrees of freedom, p = {ev['p_value']:.3g} "
+                 f"({'consistent with' if ev['p_value'] > ev['alpha'] else 'NOT explained by'} the declared noise "
+                 f"by this omnibus test).")
+    lines += ["Where the geometry-only mismatch is: " + t for t in s["located"]["summary"]]
+    o = s["outliers"]
     if s["flagged_poses"]:
-        lines.append(f"Outlier rows (gross errors, not physics), left out: {', '.join(map(str, s['flagged_poses']))}")
-    if s["effect"] == "none":
-        lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
+        lines.append(f"Outlier rows (gross and isolated: not shared by neighbours in time, workspace or direction), "
+                     f"left out: {', '.join(map(str, s['flagged_poses']))} (1-based data rows)")
+    if o["model_wrong"]:
+        lines.append(f"{len(o['bad_rows'])} of {s['rows']} rows look bad (more than 5%): the model is wrong, not the "
+                     f"data; no row is left out.")
+    elif o["shared"]:
+        lines.append(f"Rows with large residuals kept as evidence (shared by their neighbours): "
+                     f"{'; '.join(k + ' (' + ', '.join(v) + ')' for k, v in o['shared'].items())}")
+    named = s["effects"]
+    if not named:
+        if s["explained"]:
+            lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
+        else:
+            lines.append(f"Left-out physics: none of the candidates ({', '.join(s['candidates']) or 'none given'}) earns "
+                         f"its place; what remains is not explained (see the verdict).")
     else:
-        e = s["evidence"][s["effect"]]
-        lines.append(f"Left-out physics: {s['effect']} (BIC {e['delta_bic_vs_none']:+.0f} vs geometry alone; "
-                     f"cross-validated whitened RMS {s['evidence']['none']['cv_whitened_rms']:.2f} -> {e['cv_whitened_rms']:.2f}).")
-        for k, v in s["effect_parameters"].items():
-            lines.append(f"  {k} = {v['value']:.6g} +- {v['std']:.2g} {v['unit']}")
+        status = "" if s["explained"] else " (partial: the remainder is not explained)"
+        lines.append(f"Left-out physics: {' + '.join(named)}{status}; cross-validated whitened RMS "
+                     f"{s['evidence']['none']['cv_whitened_rms']:.2f} -> {s['evidence']['cv_whitened_rms_chosen']:.2f}.")
+        for name in named:
+            params = s["effect_parameters"][name]
+            sig = params["significance"]
+            e = s["evidence"].get(name, {})
+            lines.append(f"  {name}: BIC lower by {e.get('delta_bic_when_added', float('nan')):.0f} when it entered; "
+                         f"non-zero at p = {sig['p_value']:.2g} (Wald chi-square {sig['wald_chi2']:.0f} on {sig['dof']})")
+            for k, v in params.items():
+                if k == "significance":
+                    continue
+                unc = f" +- {v['std']:.2g}" if np.isfinite(v["std"]) else ""
+                lines.append(f"    {k} = {v['value']:.6g}{unc} {v['unit']}")
+    for a in s["aliases"]:
+        lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']} (evidence within "
+                     f"{a['delta_bic']:.1f} BIC, regressor correlation {a['correlation']:.2f}); {a['named']} fitted.")
     lines.append(f"Held-out residual RMS: {1e3 * s['heldout_rms_before_mm']:.3f} um -> {1e3 * s['heldout_rms_after_mm']:.3f} um "
                  f"(noise floor {1e3 * s['noise_floor_mm']:.3f} um; {s['heldout_basis']}).")
     r = s.get("mujoco_resimulation")
@@ -236,7 +301,7 @@ def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, 
 
     disc, s = report.discovery, report.summary
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
-    before = disc.fits["none"].residuals
+    before = disc.geometry.residuals
     after = disc.chosen.residuals
     chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]
     candidates = s["candidates"]
@@ -253,11 +318,13 @@ def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, 
             r.log("residuals/rms_um/after", rr.Scalars(float(1e3 * np.sqrt(np.mean(after[k] ** 2)))))
         r.log("per_chain/rms_before_um", rr.BarChart(1e3 * np.sqrt(np.mean(before ** 2, axis=0))), static=True)
         r.log("per_chain/rms_after_um", rr.BarChart(1e3 * np.sqrt(np.mean(after ** 2, axis=0))), static=True)
-        bic = [s["evidence"][e]["delta_bic_vs_none"] for e in candidates]
+        bic = [s["evidence"].get(e, {}).get("delta_bic_vs_none", 0.0) for e in candidates]
         r.log("evidence/delta_bic", rr.BarChart(np.array(bic)), static=True)
         r.log("evidence/candidates", rr.TextDocument(", ".join(candidates)), static=True)
         md = "# Discovery\n\n" + "\n".join(f"- {line}" for line in report_lines(s))
         r.log("summary", rr.TextDocument(md, media_type=rr.MediaType.MARKDOWN), static=True)
+        r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
+        r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)
         r.log("stroke/direction", rr.BarChart(data.direction.mean(axis=0)), static=True)
 
     bp = rrb.Blueprint(rrb.Horizontal(
@@ -267,8 +334,18 @@ def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, 
         rrb.Vertical(rrb.BarChartView(origin="per_chain/rms_before_um", name=f"Per-{robot.chain_word} RMS before (um)"),
                      rrb.BarChartView(origin="per_chain/rms_after_um", name=f"Per-{robot.chain_word} RMS after (um)"),
                      rrb.BarChartView(origin="evidence/delta_bic", name="Delta BIC per candidate")),
-        rrb.TextDocumentView(origin="summary", name="Summary")), collapse_panels=True)
+        rrb.Vertical(rrb.TextDocumentView(origin="verdict", name="Verdict"),
+                     rrb.TextDocumentView(origin="summary", name="Summary"))), collapse_panels=True)
     return save_recording(path, log, overwrite=overwrite, bp=bp)
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """``"a,b"`` -> ``("a", "b")``, each a registered effect."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    for n in names:
+        if n not in EFFECTS:
+            raise argparse.ArgumentTypeError(f"unknown effect {n!r}: expected one of {', '.join(EFFECTS)}")
+    return names
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -280,12 +357,16 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--real", type=Path, help="recording to analyse (.csv with its .json sidecar)")
-    src.add_argument("--scenario", choices=tuple(EFFECTS), help="analyse a seeded simulated recording of --robot "
-                     "carrying this effect (pipeline.scenarios)")
+    src.add_argument("--scenario", type=_names, metavar="EFFECT[,EFFECT...]",
+                     help="analyse a seeded simulated recording of --robot carrying these effects (pipeline.scenarios; "
+                          f"comma-separated, from {', '.join(EFFECTS)})")
     p.add_argument("--robot", choices=tuple(ROBOTS), default=None,
                    help="the robot of --scenario (default hexapod); with --real, the robot the file must be of "
                         "(default: the one its sidecar names)")
     p.add_argument("--scenario-seed", type=int, default=0, help="seed of the --scenario recording")
+    p.add_argument("--candidates", type=_names, default=None, metavar="EFFECT[,EFFECT...]",
+                   help="narrow the library to these effects (comma-separated; default every effect that applies to "
+                        "the robot)")
     p.add_argument("--seed", type=int, default=0, help="seed of the held-out split and cross-validation folds")
     p.add_argument("--no-resim", action="store_true", help="skip the MuJoCo re-simulation")
     p.add_argument("--no-sysid", action="store_true", help="re-simulate without the mujoco.sysid re-fit")
@@ -305,11 +386,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             robot_name = args.robot or "hexapod"
             rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)
-            stem = f"{robot_name}_{args.scenario}_{args.scenario_seed}"
+            stem = f"{robot_name}_{'+'.join(args.scenario)}_{args.scenario_seed}"
         robot = recording_robot(rec)
         if args.robot is not None and robot.name != args.robot:
             raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
-        report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid)
+        report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid,
+                          candidates=args.candidates)
         name = args.name or f"{stem}_discover"
         rrd = _log_rrd(args.out / f"{name}.rrd", robot, rec, report, args.overwrite)
         report.summary["rrd"] = str(rrd)

@@ -1,10 +1,10 @@
-"""Seeded recordings of a simulated robot carrying one physical effect (for discovery).
+"""Seeded recordings of a simulated robot carrying physical effects (for discovery).
 
 Each recording: the machine's geometric errors, 60 to 120 poses drawn in random order over the
-discovery workspace, sensor noise of 1 um (normal, and 1 urad on angles), and at most one effect
-(:mod:`calib.effects`) whose largest contribution to the closure residuals is 3 to 10 times the
-position noise: small enough that the geometric errors absorb part of it (concealed). The effect
-draws its own true instance (:meth:`calib.effects.Effect.scenario`) and says how the MuJoCo
+discovery workspace, sensor noise of 1 um (normal, and 1 urad on angles), and effects
+(:mod:`calib.effects`; none, one or several at once), each with its largest contribution to the
+closure residuals 3 to 10 times the position noise: small enough that the geometric errors absorb
+part of it (concealed). Each effect draws its own true instance (:meth:`calib.effects.Effect.scenario`) and says how the MuJoCo
 machine produces it (:meth:`calib.effects.Effect.machine_settings`); nothing here depends on
 which effect it is.
 
@@ -15,7 +15,7 @@ converted to and from :class:`pipeline.recording.Recording` by :func:`make_recor
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -32,7 +32,7 @@ from .recording import Recording
 
 __all__ = ["DISCOVERY_NOISE", "DEFAULT_MOVING_MASS_KG", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "servo_stiffness", "make_recording", "recording_robot",
-           "effect_recording"]
+           "effects_settings", "effect_recording"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
@@ -181,49 +181,89 @@ def _draw_poses(robot: Robot, theta: np.ndarray, n: int, rng: np.random.Generato
     raise ValueError(f"could not draw {n} reachable poses in the workspace {workspace.tolist()}")
 
 
-def effect_recording(effect: str, seed: int, *, robot: Robot | str = "hexapod", theta: np.ndarray | None = None,
-                     n_poses: int | None = None, magnitude_noise: float | None = None,
-                     noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None) -> Recording:
-    """Simulate a blind recording of ``robot``'s MuJoCo machine with one effect.
+def effects_settings(robot: Robot, context: MachineContext, drawn: list) -> dict:
+    """The machine settings of several effects together, on the machine of ``context``.
 
     Args:
-        effect: a registered effect name that applies to the robot.
-        seed: seeds everything (poses, effect size and instance, noise).
+        drawn: ``[(effect, coefficients, extra), ...]``.
+
+    An effect that sets the servo stiffness itself (compliance) sets it for every effect: those
+    whose settings depend on it (a dead band is a friction force over the stiffness) are
+    computed again on the machine with that stiffness.
+    """
+    def merged(ctx):
+        out = {"options": {}, "effects": {}}
+        for eff, coef, extra in drawn:
+            s = eff.machine_settings(coef, robot, ctx, extra)
+            out["options"].update(s.get("options", {}))
+            out["effects"].update(s.get("effects", {}))
+        return out
+
+    own = [eff.machine_settings(coef, robot, context, extra).get("options", {}).get("actuator_stiffness")
+           for eff, coef, extra in drawn]
+    own = [k for k in own if k is not None and k != context.servo_stiffness]
+    if own:
+        context = replace(context, servo_stiffness=float(own[0]))
+    return merged_settings(context, merged(context))
+
+
+def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta: np.ndarray | None = None,
+                     n_poses: int | None = None, magnitude_noise: float | None = None,
+                     noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None) -> Recording:
+    """Simulate a blind recording of ``robot``'s MuJoCo machine with one effect or several.
+
+    Args:
+        effect: a registered effect name that applies to the robot, or a sequence of them
+            (several effects at once; ``"none"`` or an empty sequence for none).
+        seed: seeds everything (poses, effect sizes and instances, noise).
         robot: a robot or a registered name (its nominal geometry is what the recording carries).
         theta: (P,) the machine's true parameters; default the nominal plus the scenario
             machine's errors (:func:`scenario_machine`).
         n_poses: number of poses (default drawn in 60..120).
-        magnitude_noise: the effect's largest closure contribution in units of the position
-            noise (default drawn in 3..10).
+        magnitude_noise: each effect's largest closure contribution in units of the position
+            noise (default drawn in 3..10 for each effect).
         noise: sensor noise.
         workspace: (D, 2) low/high of the poses; default the scenario machine's.
 
     Returns:
-        The recording; its ``meta["simulation"]`` holds the truth (errors, the effect's
-        coefficients and the machine settings that produced it).
+        The recording; its ``meta["simulation"]`` holds the truth (errors, each effect's
+        coefficients and the machine settings that produced it; ``effect`` is the one effect's
+        name, or the names joined by ``+``, ``effects`` the list).
     """
     robot = default_robot(robot) if isinstance(robot, str) else robot
-    eff = registered_effect(effect)
-    if not eff.applies_to(robot):
-        raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}")
+    names = (effect,) if isinstance(effect, str) else tuple(effect)
+    effs = [registered_effect(e) for e in names]
+    effs = [e for e in effs if e.name != "none"] or [registered_effect("none")]
+    for eff in effs:
+        if not eff.applies_to(robot):
+            raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}")
     machine = scenario_machine(robot)
     nominal = robot.table.nominal
     theta = nominal + machine.errors(robot) if theta is None else np.asarray(theta, dtype=float)
     rng = np.random.default_rng(seed)
     n = int(n_poses) if n_poses is not None else int(rng.integers(60, 121))
     position_std = float(noise.pose_std(("mm",))[0])
-    magnitude = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * position_std
+    magnitudes = [float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * position_std
+                  for _ in effs]
     targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot) if workspace is None else workspace)
     planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
-    drawn = eff.scenario(robot, theta, planned, magnitude, rng, machine_context(robot))
-    settings = merged_settings(drawn.context, eff.machine_settings(drawn.coefficients, robot, drawn.context,
-                                                                     drawn.extra))
+    context = machine_context(robot)
+    drawn = []
+    for eff, magnitude in zip(effs, magnitudes):
+        sc = eff.scenario(robot, theta, planned, magnitude, rng, context)
+        context = sc.context
+        drawn.append((eff, sc.coefficients, sc.extra))
+    settings = effects_settings(robot, context, drawn)
     m = simulate(robot, theta, joints, settings, noise, seed=int(rng.integers(2**31)))
-    truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": eff.name,
-             "largest_contribution_mm": magnitude,
-             "coefficients": {c.name: float(v) for c, v in zip(eff.coefficients(robot), drawn.coefficients)},
+    real = [e for e in effs if e.name != "none"]
+    truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(),
+             "effect": "+".join(e.name for e in real) or "none", "effects": [e.name for e in real],
+             "largest_contribution_mm": max(magnitudes) if real else magnitudes[0],
+             "contributions_mm": {e.name: mag for e, mag in zip(effs, magnitudes) if e.name != "none"},
+             "coefficients": {c.name: float(v) for eff, coef, _ in drawn for c, v in zip(eff.coefficients(robot), coef)},
              "machine": settings}
-    if eff.searched is not None:
-        truth[eff.searched.name] = drawn.extra
+    for eff, _, extra in drawn:
+        if eff.searched is not None:
+            truth[eff.searched.name] = extra
     return make_recording(robot, m.t_s, joints, m.measured, noise,
-                          meta={"moving_mass_kg": drawn.context.moving_mass_kg, "seed": seed, "simulation": truth})
+                          meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})

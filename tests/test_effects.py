@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from calib import paper
-from calib.effects import (EFFECT_MODULES, EFFECTS, Effect, EffectData, MachineContext, discover_effect,
-                           effects_for, fit_effect)
+from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
+                           discover_effect, discover_effects, effects_for, fit_effect, fit_effects,
+                           regressor_correlation)
 from calib.noise import SensorNoise
 from calib.robot import pose_jacobian_of_joints
 from calib.robots import ROBOTS, default_robot
@@ -59,6 +60,7 @@ def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
+        assert name == "none" or eff.follows in FOLLOWED_QUANTITIES
         assert type(eff).applies_to.__doc__ or type(eff).__doc__  # the reason is written down
 
 
@@ -240,8 +242,10 @@ DISCOVERY_CASES = [
 def test_discovery_names_the_synthetic_effect(robot_name, effect, coef):
     d = discover_effect(synthetic(robot_name, effect, coef, seed=4, noise=NOISE))
     assert d.effect == effect
+    assert d.effects == (() if effect == "none" else (effect,))
+    assert d.explained and not d.remaining["present"]
     assert d.flagged == ()
-    assert set(d.evidence) == set(effects_for(default_robot(robot_name))) | {"geometry_chi2_test"}
+    assert set(effects_for(default_robot(robot_name))) <= set(d.evidence)
 
 
 @pytest.mark.parametrize("robot_name", ["hexapod", "delta"])
@@ -250,7 +254,7 @@ def test_a_gross_row_is_flagged_not_explained(robot_name):
     measured = data.measured.copy()
     measured[17, :3] += [0.02, -0.02, 0.0]
     d = discover_effect(data.with_measured(measured))
-    assert d.flagged == (17,) and d.effect == "none"
+    assert d.flagged == (17,) and d.effect == "none" and d.explained
 
 
 def test_located_mismatch_points_at_time_for_a_drift():
@@ -313,3 +317,69 @@ def test_an_effect_written_in_one_place_is_discovered_without_touching_the_engin
     d = discover_effect(data, candidates=tuple(effects_for(robot)) + (new,))
     assert d.effect == "squared_stroke"
     assert d.chosen.named_coefficients()["b"]["value"] == pytest.approx(1e-5, abs=5 * d.chosen.coefficient_std[0])
+
+
+# -------------------------------------------------------------------------- several effects, the verdict, rows
+
+
+def two_effects(seed=11, n=100):
+    """Friction and a thermal drift at once on the hexapod (exact truth through the forward
+    kinematics at the displaced joints), 1 um noise."""
+    robot, theta, workspace = machine("hexapod")
+    rng = np.random.default_rng(seed)
+    targets = workspace[:, 0] + rng.uniform(size=(n, 6)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    data = EffectData(robot, robot.table.nominal, joints, targets, np.cumsum(rng.uniform(0.5, 1.5, n)), NOISE)
+    dq = -0.004 * data.direction + 5e-5 * data.t_s[:, None]
+    reached = robot.forward_kinematics(theta, joints + dq, initial=targets)
+    return data.with_measured(reached + NOISE.sample(n, seed + 1, robot.pose_units))
+
+
+def test_two_effects_at_once_are_both_named_with_units_and_uncertainties():
+    d = discover_effects(two_effects())
+    assert set(d.effects) == {"joint_friction", "thermal_drift"} and d.explained
+    p = d.chosen.parameters()
+    assert p["joint_friction"]["dead_band"]["unit"] == "mm"
+    assert abs(p["joint_friction"]["dead_band"]["value"] - 0.004) < 5 * p["joint_friction"]["dead_band"]["std"]
+    assert abs(p["thermal_drift"]["growth_rate"]["value"] - 5e-5) < 5 * p["thermal_drift"]["growth_rate"]["std"]
+    assert all(v["significance"]["p_value"] < 1e-3 for v in p.values())
+    # The joint fit of both is the same with the multi-effect fit called directly.
+    f = fit_effects(two_effects(), ["joint_friction", "thermal_drift"])
+    np.testing.assert_allclose(f.coefficients, d.chosen.coefficients, rtol=1e-6)
+
+
+def test_an_effect_left_out_of_the_candidates_is_said_to_be_unknown_and_what_it_follows():
+    d = discover_effects(two_effects(), candidates=("compliance", "joint_friction", "actuator_scale"))
+    assert not d.explained and d.remaining["present"]
+    assert d.remaining["follows"][0] == "time"
+    assert "thermal_drift" not in d.effects and d.partial == d.effects
+    assert "following time" in d.remaining["summary"]
+    assert d.flagged == ()  # the rows that carry the drift are evidence, not outliers
+
+
+def test_noise_larger_than_declared_is_not_explained_and_names_nothing_insignificant():
+    data = synthetic("hexapod", "none", [], seed=12, n=80)
+    big = data.with_measured(data.measured + SensorNoise(0.01, 1e-5, "normal").sample(80, 3, data.robot.pose_units))
+    d = discover_effects(big)
+    assert not d.explained and not d.tests["noise"]["consistent"]
+    assert d.remaining["follows"] == []  # white: it follows nothing
+    for name in d.effects:
+        assert d.chosen.significance(name)["p_value"] < 1e-3
+    assert d.flagged == ()  # gross means gross against the remainder's own spread
+
+
+def test_three_gross_rows_are_flagged_and_nothing_else():
+    data = synthetic("hexapod", "joint_friction", [0.004], seed=13, n=90, noise=NOISE)
+    m = data.measured.copy()
+    for row, sign in ((5, 1), (40, -1), (41, 1)):
+        m[row, :3] += sign * np.array([0.02, -0.02, 0.0])
+    d = discover_effects(data.with_measured(m))
+    assert d.flagged == (5, 40, 41) and d.effects == ("joint_friction",) and d.explained
+
+
+def test_aliased_regressors_are_measured():
+    corr = regressor_correlation(synthetic("delta", "none", [], seed=4, n=60))
+    assert set(corr) == {("compliance", "joint_friction"), ("compliance", "actuator_scale"),
+                         ("joint_friction", "actuator_scale")}
+    assert all(0.0 <= c <= 1.0 for c in corr.values())
+    assert corr[("compliance", "actuator_scale")] > corr[("compliance", "joint_friction")]

@@ -12,12 +12,14 @@ from __future__ import annotations
 import importlib
 
 from ..robot import Robot
-from .base import (Coefficient, Effect, EffectData, EffectScenario, MachineContext, PhysicalParameter,
+from .base import (FOLLOWED_QUANTITIES, Coefficient, Effect, EffectData, EffectScenario, MachineContext, PhysicalParameter,
                    SearchedParameter)
 
 __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "EffectData", "Coefficient",
-           "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "MIN_DELTA_BIC",
-           "EffectFit", "Discovery", "fit_effect", "discover_effect", "locate_mismatch", "closure_noise_std"]
+           "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "FOLLOWED_QUANTITIES",
+           "MIN_DELTA_BIC", "MAX_EFFECTS", "EffectFit", "Discovery", "fit_effect", "fit_effects", "discover_effects",
+           "discover_effect", "remainder_tests", "outlier_scan", "regressor_correlation", "locate_mismatch",
+           "closure_noise_std"]
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
 EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error")
@@ -46,5 +48,6 @@ def effects_for(robot: Robot) -> tuple[str, ...]:
     return tuple(n for n, e in EFFECTS.items() if e.applies_to(robot))
 
 
-from .discovery import (MIN_DELTA_BIC, Discovery, EffectFit, closure_noise_std, discover_effect,  # noqa: E402
-                        fit_effect, locate_mismatch)
+from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, closure_noise_std,  # noqa: E402
+                        discover_effect, discover_effects, fit_effect, fit_effects, locate_mismatch, outlier_scan,
+                        regressor_correlation, remainder_tests)

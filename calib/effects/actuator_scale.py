@@ -19,6 +19,7 @@ class ActuatorScale(Effect):
 
     name = "actuator_scale"
     physics = "each actuator's stroke is scaled by 1 + s_i (transmission error)"
+    follows = "stroke"
 
     def coefficients(self, robot):
         return tuple(Coefficient(f"scale{i + 1}", "1") for i in range(robot.n_chains))

@@ -30,8 +30,14 @@ from ..validation import as_array
 from ..noise import SensorNoise
 from ..robot import Robot
 
-__all__ = ["Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
+__all__ = ["FOLLOWED_QUANTITIES", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
            "EffectData", "Effect", "closure_regressors", "scale_to_magnitude"]
+
+#: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
+#: time, the direction and size of each joint's last move, each joint's stroke from the centre
+#: of travel, the load each chain carries (statics of the platform's weight), and the position in
+#: the workspace (``"position <coordinate>"``).
+FOLLOWED_QUANTITIES = ("time", "direction of the last move", "size of the last move", "stroke", "load", "position")
 
 
 @dataclass(frozen=True)
@@ -141,6 +147,9 @@ class EffectData:
         direction: (N, C) direction (+1 increasing, -1 decreasing) in which each joint last
             moved before measurement j; default from the commands, the machine starting at its
             home pose (``robot.home_pose`` reached with ``theta``).
+        last_move: (N, C) signed change of each commanded joint in the move that ended at
+            measurement j, joint unit (0 for a joint that did not move); default from the
+            commands, from the same start.
     """
 
     robot: Robot
@@ -150,6 +159,7 @@ class EffectData:
     t_s: np.ndarray
     noise: SensorNoise
     direction: np.ndarray = field(default=None)
+    last_move: np.ndarray = field(default=None)
 
     def __post_init__(self) -> None:
         r = self.robot
@@ -166,8 +176,14 @@ class EffectData:
                              f"{q.shape[0]}, {m.shape[0]} and {t.shape[0]}")
         for name, value in (("theta", theta), ("joints", q), ("measured", m), ("t_s", t)):
             object.__setattr__(self, name, value)
-        if self.direction is None:
+        start = None
+        if self.direction is None or self.last_move is None:
             start = r.inverse_kinematics(theta, r.home_pose[None])[0]
+        if self.last_move is None:
+            object.__setattr__(self, "last_move", q - np.vstack([start, q[:-1]]))
+        else:
+            object.__setattr__(self, "last_move", as_array(self.last_move, "last_move", q.shape))
+        if self.direction is None:
             step = np.sign(q - np.vstack([start, q[:-1]]))
             d = np.zeros_like(q)
             last = np.zeros(r.n_chains)
@@ -196,11 +212,17 @@ class EffectData:
     def subset(self, rows: np.ndarray) -> "EffectData":
         """The same analysis restricted to ``rows`` (the motion history is kept)."""
         return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
-                          self.noise, self.direction[rows])
+                          self.noise, self.direction[rows], self.last_move[rows])
 
     def with_measured(self, measured: np.ndarray) -> "EffectData":
         """The same commands with other measured poses."""
-        return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction)
+        return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction,
+                          self.last_move)
+
+    def with_robot(self, robot: Robot, theta: np.ndarray | None = None) -> "EffectData":
+        """The same measurements read with another nominal robot (motion history kept)."""
+        return EffectData(robot, robot.table.nominal if theta is None else theta, self.joints, self.measured,
+                          self.t_s, self.noise, self.direction, self.last_move)
 
 
 def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.ndarray:
@@ -235,12 +257,16 @@ class Effect:
         searched: the nonlinear parameter found by search, or None.
         history_dependent: whether the machine's state depends on the motion history (the
             MuJoCo re-simulation must then replay every row in order).
+        follows: the measurable quantity the effect's residuals follow, one of
+            :data:`FOLLOWED_QUANTITIES` (what the remainder's structure tests should point at
+            when the effect is left out of the candidates).
     """
 
     name: ClassVar[str]
     physics: ClassVar[str]
     searched: ClassVar[SearchedParameter | None] = None
     history_dependent: ClassVar[bool] = False
+    follows: ClassVar[str] = ""
 
     def applies_to(self, robot: Robot) -> bool:
         """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""

@@ -48,6 +48,7 @@ class Compliance(Effect):
     name = "compliance"
     physics = ("each actuator gives way by its load over its stiffness; the loads come from the static "
                "equilibrium of the platform under the weight of platform and payload")
+    follows = "load"
 
     def applies_to(self, robot):
         angles = [u == "rad" for u in robot.pose_units]

@@ -6,45 +6,105 @@ the geometric model ``r_ij(theta) = F_i(theta, q_ij, QM_j)`` (mm; for a hexapod
 regressor times unknown coefficients, ``dq = Xq . phi`` (:mod:`calib.effects.base`), and the
 joint fit makes ``F(theta, q + Xq phi, QM)`` vanish to the noise: exactly, not only to first
 order (to first order the effect adds ``X phi``, ``X = -dF/dq Xq``, to the residual; for a
-hexapod, whose closure is linear in the leg length, the two are the same).
+hexapod, whose closure is linear in the leg length, the two are the same). Several effects fit
+together simply concatenate their regressors.
 The noise of ``r_j`` (C chains) comes from the pose sensor and the joint readings through the
 closure Jacobians, ``S_j = dF/dpose Sigma_pose dF/dpose^T + dF/dq Sigma_q dF/dq^T``; every fit
 is whitened by it (mm and rad never mixed by a raw norm), so that the sum of squares is
-chi-square distributed when the model is right. The geometry fitted with the effect is the
+chi-square distributed when the model is right. The geometry fitted with the effects is the
 robot's free parameters (``robot.free_default``).
+
+:func:`discover_effects` then
+
+1. chooses a subset of the candidates, up to :data:`MAX_EFFECTS`, by stepwise selection on the
+   joint fit linearised at the geometry-only solution (every subset fit is then one small
+   least-squares problem): each effect must lower the BIC by :data:`MIN_DELTA_BIC` (the
+   chi-square divided by the remainder's variance when that exceeds the declared noise, so that
+   an underestimated noise does not turn chance into evidence) and lower the cross-validated
+   residual (closed form: deleted residuals of each fold through the hat matrix); an effect the
+   later ones make redundant is dropped; effects the data cannot tell apart are reported as
+   aliases;
+2. fits the chosen effects and the geometry jointly (whitened Gauss-Newton) and keeps only
+   effects whose coefficients are significantly non-zero (Wald test);
+3. tests the remainder (:func:`remainder_tests`): chi-square against the declared noise overall
+   and per chain, and structure against time, the direction and size of each joint's last
+   move, its stroke, the load it carries and the position in the workspace. ``explained`` is
+   true only when every test passes;
+4. flags outliers (:func:`outlier_scan`): rows whose studentized deleted residual (closed-form
+   leave-one-out) is gross and not shared by their neighbours in time, in the workspace or in
+   the direction of motion. When more than :data:`MAX_BAD_FRACTION` of the rows look bad the
+   model is wrong, not the data, and nothing is flagged.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
+from scipy.stats import chi2 as chi2_dist, norm
 
 from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effects_for
 from .base import Effect, EffectData, closure_regressors
 
-__all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "EffectFit", "Discovery", "fit_effect", "discover_effect", "locate_mismatch",
-           "closure_noise_covariance", "closure_noise_std"]
+__all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC", "VERDICT_ALPHA",
+           "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
+           "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
+           "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation"]
 
-#: Evidence an effect needs over geometry alone: BIC lower by at least this ("very strong" on
+#: Evidence an effect needs to enter the model: BIC lower by at least this ("very strong" on
 #: the Kass-Raftery scale; a chance reduction of a one-parameter effect's chi-square by 16 has
 #: probability 5e-5).
 MIN_DELTA_BIC = 10.0
 #: Fewest measurements a discovery accepts.
 MIN_ROWS = 12
+#: Most effects named together.
+MAX_EFFECTS = 3
+#: Largest canonical correlation of two effects' whitened regressors (geometry projected out)
+#: above which this recording cannot tell them apart.
+ALIAS_CORRELATION = 0.95
+#: Two effects whose evidence at the same step differs by less than this BIC ("positive" on the
+#: Kass-Raftery scale), and of which only one enters, are reported as aliases.
+ALIAS_DELTA_BIC = 6.0
+#: Significance of the remainder's structure tests (Bonferroni-corrected over chains, quantities
+#: and statistics).
+VERDICT_ALPHA = 0.01
+#: Significance of the remainder's chi-square tests against the declared noise (overall; per
+#: chain Bonferroni-corrected). Stricter than the structure tests: the omnibus test also reacts to
+#: a declared noise a few percent off, which is no physics left out.
+NOISE_ALPHA = 0.001
+#: Family-wise significance of the outlier test (Bonferroni over the rows).
+OUTLIER_ALPHA = 1e-3
+#: More rows than this fraction looking bad: the model is wrong, not the data.
+MAX_BAD_FRACTION = 0.05
+#: A named effect's coefficients must differ from zero at this significance (Wald test).
+SIGNIFICANCE_ALPHA = 1e-3
+#: Gauss-Newton iterations at most; stops when an iteration lowers the chi-square by less than
+#: :data:`GN_TOLERANCE`.
+GN_ITERATIONS = 30
+GN_TOLERANCE = 1e-6
+#: Neighbours a row is compared with (in time, in the workspace, in the direction of motion).
+NEIGHBOURS = 6
+#: A row's residual is shared by its neighbours when their mean residual along it is this many
+#: standard errors from zero.
+SHARED_Z = 3.0
 
 
-def closure_noise_covariance(robot: Robot, theta: np.ndarray, data: EffectData) -> np.ndarray:
-    """(N, C, C) covariance of each measurement's closure residuals caused by the declared
-    noise: pose sensor noise and joint-reading noise through the closure Jacobians, mm^2."""
-    jac = robot.closure_jacobians(theta, data.joints, data.measured)
+# ----------------------------------------------------------------------------- noise and whitening
+
+
+def _noise_covariance(robot: Robot, jac, data: EffectData) -> np.ndarray:
     var = data.noise.pose_std(robot.pose_units) ** 2
     S = np.einsum("nik,k,njk->nij", jac.pose, var, jac.pose)
     if data.noise.joint_std > 0:
         S += data.noise.joint_std ** 2 * jac.joints @ np.swapaxes(jac.joints, 1, 2)
     return S
+
+
+def closure_noise_covariance(robot: Robot, theta: np.ndarray, data: EffectData) -> np.ndarray:
+    """(N, C, C) covariance of each measurement's closure residuals caused by the declared
+    noise: pose sensor noise and joint-reading noise through the closure Jacobians, mm^2."""
+    return _noise_covariance(robot, robot.closure_jacobians(theta, data.joints, data.measured), data)
 
 
 def closure_noise_std(robot: Robot, theta: np.ndarray, data: EffectData) -> np.ndarray:
@@ -69,39 +129,103 @@ def _free_indices(robot: Robot) -> np.ndarray:
     return np.sort(robot.table.indices(robot.free_default))
 
 
+def _orth(A: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+    """Orthonormal basis of the column space of ``A`` (columns scaled to unit norm first; rank
+    decided at ``rtol`` of the largest singular value)."""
+    if A.shape[1] == 0:
+        return A
+    scale = np.linalg.norm(A, axis=0)
+    keep = scale > 0
+    if not keep.any():
+        return A[:, :0]
+    U, s, _ = np.linalg.svd(A[:, keep] / scale[keep], full_matrices=False)
+    return U[:, s > rtol * s[0]]
+
+
+def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    return x / scale
+
+
+# ----------------------------------------------------------------------------- models
+
+
+def _as_models(effects) -> tuple[Effect, ...]:
+    """A model: a registered name, an :class:`Effect` or a sequence of them; ``none`` dropped."""
+    if effects is None:
+        return ()
+    if isinstance(effects, (str, Effect)):
+        effects = (effects,)
+    models = tuple(registered(e) for e in effects)
+    names = [m.name for m in models]
+    if len(set(names)) != len(names):
+        raise ValueError(f"an effect appears twice in {names}")
+    return tuple(m for m in models if m.name != "none")
+
+
+def _check_applies(eff: Effect, robot: Robot) -> None:
+    if not eff.applies_to(robot):
+        raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}: "
+                         f"{' '.join((type(eff).__doc__ or '').split())}")
+
+
 @dataclass(frozen=True, eq=False)
 class EffectFit:
-    """Geometry and one effect fitted jointly (whitened by the declared noise).
+    """Geometry and zero or more effects fitted jointly (whitened by the declared noise).
 
     Attributes:
-        model: the effect fitted (its ``name`` is :attr:`effect`).
+        models: the effects fitted (empty: geometry alone).
         robot: the robot.
         theta: (P,) identified parameters.
-        coefficients: (p,) effect coefficients (see ``Effect.coefficients``).
+        coefficients: (p,) the effects' coefficients, concatenated in the order of ``models``.
         coefficient_std: (p,) their standard uncertainties (declared noise, inflated by the
             reduced chi-square when it exceeds 1).
-        extra: the searched parameter's value (e.g. the screw pitch), else None.
+        extras: each model's searched parameter (e.g. the screw pitch), or None.
         residuals: (N, C) mm, closure residuals after the fit.
         whitened: (N, C) whitened residuals (unit variance under the declared noise).
         chi2: sum of squares of ``whitened``; dof = N C - n_params.
-        n_params: free geometric parameters + p (+1 for a searched parameter).
+        n_params: free geometric parameters + p (+1 per searched parameter).
+        design: (N C, free + p) whitened derivatives of the residuals at the solution (the
+            hat matrix of the leave-one-out tests).
+        coefficient_cov: (p, p) covariance of ``coefficients`` (same inflation as the std).
     """
 
-    model: Effect
+    models: tuple
     robot: Robot
     theta: np.ndarray
     coefficients: np.ndarray
     coefficient_std: np.ndarray
-    extra: float | None
+    extras: tuple
     residuals: np.ndarray
     whitened: np.ndarray
     chi2: float
     n_params: int
+    design: np.ndarray = field(repr=False, default=None)
+    coefficient_cov: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Names of the effects fitted."""
+        return tuple(m.name for m in self.models)
 
     @property
     def effect(self) -> str:
-        """The effect's name."""
-        return self.model.name
+        """``"none"``, the one effect's name, or the names joined by ``+``."""
+        return "+".join(self.effects) or "none"
+
+    @property
+    def model(self) -> Effect:
+        """The single effect fitted (``none`` for geometry alone)."""
+        if len(self.models) > 1:
+            raise ValueError(f"the fit holds several effects: {self.effects}")
+        return self.models[0] if self.models else EFFECTS["none"]
+
+    @property
+    def extra(self) -> float | None:
+        """The single effect's searched parameter."""
+        return self.extras[0] if len(self.extras) == 1 else None
 
     @property
     def errors(self) -> np.ndarray:
@@ -124,196 +248,734 @@ class EffectFit:
     def aic(self) -> float:
         return float(self.chi2 + 2 * self.n_params)
 
-    def named_coefficients(self) -> dict:
-        """``{name: {"value", "std", "unit"}}`` plus the searched parameter when there is one."""
-        eff = self.model
-        out = {c.name: {"value": float(v), "std": float(s), "unit": c.unit}
-               for c, v, s in zip(eff.coefficients(self.robot), self.coefficients, self.coefficient_std)}
-        if self.extra is not None:
-            out[eff.searched.name] = {"value": float(self.extra), "std": float("nan"), "unit": eff.searched.unit}
+    def slices(self) -> dict:
+        """name -> slice of each effect's coefficients in :attr:`coefficients`."""
+        out, k = {}, 0
+        for m in self.models:
+            p = len(m.coefficients(self.robot))
+            out[m.name] = slice(k, k + p)
+            k += p
         return out
+
+    def significance(self, name: str) -> dict:
+        """Wald test that effect ``name``'s coefficients are zero: ``{"wald_chi2", "dof",
+        "p_value"}``."""
+        s = self.slices()[name]
+        phi = self.coefficients[s]
+        cov = self.coefficient_cov[s, s]
+        w = float(phi @ np.linalg.pinv(cov, hermitian=True) @ phi)
+        return {"wald_chi2": w, "dof": int(phi.size), "p_value": float(chi2_dist.sf(w, phi.size))}
+
+    def parameters(self) -> dict:
+        """``{effect: {coefficient: {"value", "std", "unit"}}}``, with the searched parameter
+        where there is one, and each effect's significance under ``"significance"``."""
+        out = {}
+        for m, extra in zip(self.models, self.extras):
+            s = self.slices()[m.name]
+            d = {c.name: {"value": float(v), "std": float(sd), "unit": c.unit}
+                 for c, v, sd in zip(m.coefficients(self.robot), self.coefficients[s], self.coefficient_std[s])}
+            if extra is not None:
+                d[m.searched.name] = {"value": float(extra), "std": float("nan"), "unit": m.searched.unit}
+            d["significance"] = self.significance(m.name)
+            out[m.name] = d
+        return out
+
+    def named_coefficients(self) -> dict:
+        """``{name: {"value", "std", "unit"}}`` of every effect's coefficients (and searched
+        parameters), flat."""
+        out = {}
+        for d in self.parameters().values():
+            out.update({k: v for k, v in d.items() if k != "significance"})
+        return out
+
+    def joint_displacement(self, data: EffectData) -> np.ndarray:
+        """(N, C) joint displacement of the fitted effects on ``data``, joint unit."""
+        if not self.models:
+            return np.zeros_like(data.joints)
+        Xq = np.concatenate([m.joint_regressors(self.robot, self.theta, data, e)
+                             for m, e in zip(self.models, self.extras)], axis=-1)
+        return Xq @ self.coefficients
 
     def predict(self, data: EffectData) -> tuple[np.ndarray, np.ndarray]:
         """(N, C) residuals (mm) and whitened residuals of this fitted model on other data."""
-        Xq = self.model.joint_regressors(self.robot, self.theta, data, self.extra)
-        r = self.robot.closure(self.theta, data.joints + Xq @ self.coefficients, data.measured)
+        r = self.robot.closure(self.theta, data.joints + self.joint_displacement(data), data.measured)
         return r, _whiten(_whitening(self.robot, self.theta, data), r)
 
 
-def _design(eff: Effect, theta: np.ndarray, coef: np.ndarray, data: EffectData, free: np.ndarray, extra):
-    """Closure residuals (N, C) with the effect's joint displacement applied, and their
-    derivatives (N, C, free + p): geometry columns, then the effect's."""
+def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras):
+    """Closure residuals (N, C) with the effects' joint displacement applied, their derivatives
+    (N, C, free + p) (geometry columns, then the effects'), and the closure Jacobians."""
     robot = data.robot
-    Xq = eff.joint_regressors(robot, theta, data, extra)
+    if models:
+        Xq = np.concatenate([m.joint_regressors(robot, theta, data, e) for m, e in zip(models, extras)], axis=-1)
+    else:
+        Xq = np.zeros((data.n, robot.n_chains, 0))
     joints = data.joints + Xq @ coef
     r = robot.closure(theta, joints, data.measured)
     jac = robot.closure_jacobians(theta, joints, data.measured)
-    return r, np.concatenate([jac.parameters[:, :, free], jac.joints @ Xq], axis=-1)
+    return r, np.concatenate([jac.parameters[:, :, free], jac.joints @ Xq], axis=-1), jac
 
 
-def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
-    x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
-    return x / scale
-
-
-def _check_applies(eff: Effect, robot: Robot) -> None:
-    if not eff.applies_to(robot):
-        raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}: "
-                         f"{' '.join((type(eff).__doc__ or '').split())}")
-
-
-def fit_effect(data: EffectData, effect: str | Effect, *, extra: float | None = None, iterations: int = 3,
-               start: np.ndarray | None = None) -> EffectFit:
-    """Fit the robot's free geometric parameters and an effect's coefficients jointly
-    (whitened Gauss-Newton).
+def fit_effects(data: EffectData, effects=(), *, extras=None, iterations: int = GN_ITERATIONS,
+                start: np.ndarray | None = None) -> EffectFit:
+    """Fit the robot's free geometric parameters and several effects' coefficients jointly
+    (whitened Gauss-Newton, to convergence).
 
     Args:
         data: the measurements.
-        effect: a registered name or an :class:`Effect`.
-        extra: the searched parameter's value (e.g. the screw pitch); None searches it.
-        iterations: Gauss-Newton iterations (the problem is nearly linear near the nominal).
+        effects: registered names or :class:`Effect` objects (empty: geometry alone).
+        extras: ``{name: value}`` of searched parameters (e.g. the screw pitch); a searched
+            parameter not given is searched (the other effects' columns projected out).
+        iterations: Gauss-Newton iterations at most.
         start: (P,) starting parameters (default ``data.theta``).
 
     Raises:
         ValueError: unknown effect, or one that does not apply to the robot (says why).
     """
-    eff = registered(effect)
+    models = _as_models(effects)
     robot = data.robot
-    _check_applies(eff, robot)
+    for m in models:
+        _check_applies(m, robot)
     free = _free_indices(robot)
-    searched = False
-    if eff.searched is not None and extra is None:
-        base = start if start is not None else fit_effect(data, EFFECTS["none"]).theta
-        extra = _search(eff, data, base, free)
-        searched = True
-        start = base
+    extras = dict(extras or {})
+    n_searched = sum(m.searched is not None for m in models)
+    missing = [m for m in models if m.searched is not None and extras.get(m.name) is None]
+    if missing:
+        geo = fit_effects(data, (), start=start)
+        lin = _Linear(data, geo)
+        fixed = [lin.columns(m, None) for m in models if m.searched is None]
+        for m in missing:
+            extras[m.name] = lin.search(m, fixed)
+            fixed.append(lin.columns(m, extras[m.name]))
+        start = geo.theta
+    ex = tuple(extras.get(m.name) if m.searched is not None else None for m in models)
     theta = np.array(data.theta if start is None else start, dtype=float)
-    winv = _whitening(robot, theta, data)
     g = free.size
-    coef = np.zeros(len(eff.coefficients(robot)))
-    for _ in range(iterations):
-        r, D = _design(eff, theta, coef, data, free, extra)
-        x = _solve(_whiten(winv, D).reshape(-1, D.shape[-1]), -_whiten(winv, r).ravel())
+    coef = np.zeros(sum(len(m.coefficients(robot)) for m in models))
+    for _ in range(max(int(iterations), 1)):
+        r, D, jac = _design(models, theta, coef, data, free, ex)
+        winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
+        A = _whiten(winv, D).reshape(-1, D.shape[-1])
+        x = _solve(A, -_whiten(winv, r).ravel())
         theta[free] += x[:g]
         coef = coef + x[g:]
-    resid, D = _design(eff, theta, coef, data, free, extra)
+        if float(np.sum((A @ x) ** 2)) < GN_TOLERANCE:
+            break
+    resid, D, jac = _design(models, theta, coef, data, free, ex)
+    winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
     w = _whiten(winv, resid)
     chi2 = float(np.sum(w ** 2))
     A = _whiten(winv, D).reshape(-1, D.shape[-1])
-    n_params = D.shape[-1] + (1 if searched else 0)
+    n_params = D.shape[-1] + n_searched
     dof = resid.size - n_params
-    cov = np.linalg.pinv(A.T @ A) * max(1.0, chi2 / max(dof, 1))
-    std = np.sqrt(np.clip(np.diag(cov)[g:], 0, None))
-    return EffectFit(eff, robot, theta, coef, std, extra, resid, w, chi2, n_params)
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    cov = np.linalg.pinv((A / scale).T @ (A / scale), hermitian=True) / np.outer(scale, scale)
+    cov = cov * max(1.0, chi2 / max(dof, 1))
+    ccov = cov[g:, g:]
+    std = np.sqrt(np.clip(np.diag(ccov), 0, None))
+    return EffectFit(models, robot, theta, coef, std, ex, resid, w, chi2, n_params, A, ccov)
 
 
-def _search(eff: Effect, data: EffectData, base: np.ndarray, free: np.ndarray) -> float:
-    """The searched parameter minimising the chi-square of the linearised joint fit: on the
-    effect's grid of the search coordinate, refined by golden-section search between the best
-    grid point's neighbours."""
-    robot = data.robot
-    winv = _whitening(robot, base, data)
-    dF_dq = robot.closure_jacobians(base, data.joints, data.measured).joints
-    r, D = _design(EFFECTS["none"], base, np.zeros(0), data, free, None)
-    Ag = _whiten(winv, D).reshape(-1, D.shape[-1])
-    b = -_whiten(winv, r).ravel()
-    # Project the geometry out once; each value then costs one small least-squares problem.
-    Q, _ = np.linalg.qr(Ag / np.linalg.norm(Ag, axis=0))
-    b_perp = b - Q @ (Q.T @ b)
+def fit_effect(data: EffectData, effect: str | Effect = "none", *, extra: float | None = None,
+               iterations: int = GN_ITERATIONS, start: np.ndarray | None = None) -> EffectFit:
+    """Fit the robot's free geometric parameters and one effect's coefficients jointly
+    (:func:`fit_effects` with one effect; ``extra`` its searched parameter, None searches it)."""
+    models = _as_models(effect)
+    extras = {models[0].name: extra} if models and extra is not None else None
+    return fit_effects(data, models, extras=extras, iterations=iterations, start=start)
 
-    def cost(u):
-        X = closure_regressors(dF_dq, eff.joint_regressors(robot, base, data, eff.searched_value(u)))
-        Xw = _whiten(winv, X).reshape(-1, X.shape[-1])
-        Xp = Xw - Q @ (Q.T @ Xw)
-        x, *_ = np.linalg.lstsq(Xp, b_perp, rcond=None)
-        e = b_perp - Xp @ x
+
+# ----------------------------------------------------------------------------- linearised selection
+
+
+class _Linear:
+    """The joint fit linearised at the geometry-only solution: whitened residual ``b`` and
+    effect columns with the geometry projected out, so that a subset's fit is one small
+    least-squares problem and its cross-validation closed form."""
+
+    def __init__(self, data: EffectData, geometry: EffectFit):
+        robot = data.robot
+        self.data, self.theta = data, geometry.theta
+        jac = robot.closure_jacobians(self.theta, data.joints, data.measured)
+        self.winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
+        self.dF_dq = jac.joints
+        free = _free_indices(robot)
+        G = _whiten(self.winv, jac.parameters[:, :, free]).reshape(-1, free.size)
+        self.Qg = _orth(G)
+        self.b = self.perp(-_whiten(self.winv, robot.closure(self.theta, data.joints, data.measured)).ravel())
+        self.n = self.b.size
+        self.dof0 = self.n - self.Qg.shape[1]
+        self.C = robot.n_chains
+        self._cols: dict = {}
+
+    def perp(self, M: np.ndarray) -> np.ndarray:
+        return M - self.Qg @ (self.Qg.T @ M)
+
+    def columns(self, eff: Effect, extra) -> np.ndarray:
+        """(N C, p) whitened closure regressors of ``eff``, geometry projected out."""
+        key = (eff.name, id(eff), extra)
+        if key not in self._cols:
+            robot = self.data.robot
+            X = closure_regressors(self.dF_dq, eff.joint_regressors(robot, self.theta, self.data, extra))
+            self._cols[key] = self.perp(_whiten(self.winv, X).reshape(self.n, -1))
+        return self._cols[key]
+
+    def chi2(self, blocks: list) -> float:
+        if not blocks:
+            return float(self.b @ self.b)
+        A = np.hstack(blocks)
+        e = self.b - A @ _solve(A, self.b)
         return float(e @ e)
 
-    grid = eff.search_grid(data)
-    costs = np.array([cost(u) for u in grid])
-    k = int(np.argmin(costs))
-    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
-    g = (np.sqrt(5) - 1) / 2
-    a, b_ = lo, hi
-    c, d = b_ - g * (b_ - a), a + g * (b_ - a)
-    fc, fd = cost(c), cost(d)
-    for _ in range(40):
-        if fc < fd:
-            b_, d, fd = d, c, fc
-            c = b_ - g * (b_ - a)
-            fc = cost(c)
+    def search(self, eff: Effect, blocks: list) -> float:
+        """The searched parameter minimising the chi-square with ``blocks`` fitted too: on the
+        effect's grid of the search coordinate, refined by golden-section search between the
+        best grid point's neighbours."""
+        Q = _orth(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
+        b = self.b - Q @ (Q.T @ self.b)
+        robot = self.data.robot
+
+        def cost(u):
+            X = closure_regressors(self.dF_dq, eff.joint_regressors(robot, self.theta, self.data,
+                                                                     eff.searched_value(u)))
+            Xp = self.perp(_whiten(self.winv, X).reshape(self.n, -1))
+            Xp = Xp - Q @ (Q.T @ Xp)
+            x, *_ = np.linalg.lstsq(Xp, b, rcond=None)
+            e = b - Xp @ x
+            return float(e @ e)
+
+        grid = eff.search_grid(self.data)
+        costs = np.array([cost(u) for u in grid])
+        k = int(np.argmin(costs))
+        a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        g = (np.sqrt(5) - 1) / 2
+        c, d = b_ - g * (b_ - a), a + g * (b_ - a)
+        fc, fd = cost(c), cost(d)
+        for _ in range(30):
+            if fc < fd:
+                b_, d, fd = d, c, fc
+                c = b_ - g * (b_ - a)
+                fc = cost(c)
+            else:
+                a, c, fc = c, d, fd
+                d = a + g * (b_ - a)
+                fd = cost(d)
+        return eff.searched_value((a + b_) / 2)
+
+    def cv_rms(self, blocks: list, folds: int, seed: int) -> float:
+        """Whitened RMS of the deleted residuals of ``folds``-fold cross-validation (whole
+        measurements left out), closed form through the hat matrix."""
+        Q = self.Qg if not blocks else np.hstack([self.Qg, _orth(np.hstack(blocks))])
+        e = self.b - Q @ (Q.T @ self.b)
+        m = self.n // self.C
+        order = np.random.default_rng(seed).permutation(m)
+        ss = 0.0
+        for k in range(folds):
+            rows = np.sort(order[k::folds])
+            idx = (rows[:, None] * self.C + np.arange(self.C)).ravel()
+            Qi = Q[idx]
+            d = np.linalg.solve(np.eye(idx.size) - Qi @ Qi.T, e[idx])
+            ss += float(d @ d)
+        return float(np.sqrt(ss / self.n))
+
+
+def _canonical_correlation(A: np.ndarray, B: np.ndarray) -> float:
+    Qa, Qb = _orth(A), _orth(B)
+    if Qa.shape[1] == 0 or Qb.shape[1] == 0:
+        return 0.0
+    return float(np.clip(np.linalg.svd(Qa.T @ Qb, compute_uv=False)[0], 0.0, 1.0))
+
+
+def regressor_correlation(data: EffectData, candidates=None, extras=None) -> dict:
+    """``{(a, b): c}``: the largest canonical correlation between the whitened regressors of
+    each pair of effects, with the geometry projected out (1: the data cannot tell them apart).
+
+    Args:
+        data: the measurements (the linearisation point is the geometry-only fit).
+        candidates: effects (default every one that applies to the robot).
+        extras: ``{name: value}`` for searched parameters (default searched on ``data``).
+    """
+    models = _as_models(effects_for(data.robot) if candidates is None else candidates)
+    lin = _Linear(data, fit_effects(data, ()))
+    extras = dict(extras or {})
+    cols = {m.name: lin.columns(m, extras.get(m.name) if m.searched is None or m.name in extras
+                                else lin.search(m, [])) for m in models}
+    names = list(cols)
+    return {(a, b): _canonical_correlation(cols[a], cols[b]) for i, a in enumerate(names) for b in names[i + 1:]}
+
+
+def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int) -> dict:
+    """Stepwise selection (forward, with a backward check after each addition)."""
+    log_n = np.log(lin.n)
+    chosen: dict = {}  # name -> {"extra", "X", "k"}
+    excluded: set = set()
+    chi2_cur, p_cur = lin.chi2([]), 0
+    cv_cur = lin.cv_rms([], folds, seed)
+    steps, rivals, first = [], [], None
+    while len(chosen) < max_effects:
+        blocks = [c["X"] for c in chosen.values()]
+        trials = {}
+        for name, eff in models.items():
+            if name in chosen or name in excluded:
+                continue
+            extra = lin.search(eff, blocks) if eff.searched is not None else None
+            X = lin.columns(eff, extra)
+            chi2_new = lin.chi2(blocks + [X])
+            k = X.shape[1] + (eff.searched is not None)
+            s2 = max(1.0, chi2_new / max(lin.dof0 - p_cur - k, 1))
+            trials[name] = {"extra": extra, "X": X, "k": k, "chi2": chi2_new, "scale": s2,
+                            "delta_bic": (chi2_cur - chi2_new) / s2 - k * log_n}
+        if first is None:
+            first = {n: {"chi2": t["chi2"], "delta_bic_vs_none": t["delta_bic"], "n_params": t["k"],
+                         "extra": t["extra"],
+                         "cv_whitened_rms": lin.cv_rms([t["X"]], folds, seed)} for n, t in trials.items()}
+        order = sorted(trials, key=lambda c: -trials[c]["delta_bic"])
+        added, cv_new = None, None
+        for name in order:
+            t = trials[name]
+            if t["delta_bic"] < min_delta_bic:
+                break
+            cv_try = lin.cv_rms(blocks + [t["X"]], folds, seed)
+            if cv_try < cv_cur:
+                added, cv_new = name, cv_try
+                break
+        step = {"trials": {n: {"delta_bic": t["delta_bic"], "chi2": t["chi2"]} for n, t in trials.items()},
+                "added": added, "dropped": []}
+        steps.append(step)
+        if added is None:
+            break
+        t = trials[added]
+        for other in order:
+            if other != added and trials[other]["delta_bic"] >= min_delta_bic \
+                    and t["delta_bic"] - trials[other]["delta_bic"] < ALIAS_DELTA_BIC:
+                rivals.append((added, other, t["delta_bic"] - trials[other]["delta_bic"],
+                               _canonical_correlation(t["X"], trials[other]["X"])))
+        chosen[added] = {"extra": t["extra"], "X": t["X"], "k": t["k"]}
+        chi2_cur, p_cur, cv_cur = t["chi2"], p_cur + t["k"], cv_new
+        # Backward: an earlier effect the later ones make redundant leaves the model.
+        for name in [n for n in chosen if n != added]:
+            rest = [c["X"] for n, c in chosen.items() if n != name]
+            chi2_wo = lin.chi2(rest)
+            s2 = max(1.0, chi2_cur / max(lin.dof0 - p_cur, 1))
+            if (chi2_wo - chi2_cur) / s2 - chosen[name]["k"] * log_n < min_delta_bic:
+                p_cur -= chosen[name]["k"]
+                del chosen[name]
+                excluded.add(name)
+                chi2_cur = chi2_wo
+                cv_cur = lin.cv_rms(rest, folds, seed)
+                step["dropped"].append(name)
+    return {"chosen": {n: c["extra"] for n, c in chosen.items()}, "steps": steps, "rivals": rivals,
+            "single": first or {}, "cv_geometry": lin.cv_rms([], folds, seed), "cv_chosen": cv_cur}
+
+
+# ----------------------------------------------------------------------------- the remainder
+
+
+def _rms(v: np.ndarray, axis=None):
+    return np.sqrt(np.mean(v ** 2, axis=axis))
+
+
+def _features(data: EffectData) -> list[tuple[str, str, np.ndarray]]:
+    """``(quantity, kind, values (N, C))``: what a remainder is tested against."""
+    robot = data.robot
+    n, c = data.n, robot.n_chains
+    out = [("time", "ordered", np.broadcast_to(data.t_s[:, None], (n, c))),
+           ("direction of the last move", "binary", data.direction),
+           ("size of the last move", "ordered", np.abs(data.last_move)),
+           ("stroke", "ordered", data.stroke)]
+    load = EFFECTS.get("compliance")
+    if load is not None and load.applies_to(robot):
+        # The axial load of each chain under the platform's weight (statics, per unit weight).
+        out.append(("load", "ordered", load.joint_regressors(robot, data.theta, data)[..., 0]))
+    for k, name in enumerate(robot.pose_names):
+        out.append((f"position {name}", "ordered", np.broadcast_to(data.measured[:, k:k + 1], (n, c))))
+    return out
+
+
+def _lag1(z: np.ndarray, values: np.ndarray) -> float:
+    """Serial correlation of ``z`` ordered by ``values``, in standard errors (N(0, 1) when
+    ``z`` is white; large when ``z`` is a smooth function of ``values``)."""
+    zz = z[np.argsort(values, kind="stable")]
+    zz = zz - zz.mean()
+    den = float(zz @ zz)
+    if den <= 0:
+        return 0.0
+    return float(zz[:-1] @ zz[1:] / den * np.sqrt(zz.size))
+
+
+def _linear(z: np.ndarray, values: np.ndarray) -> float:
+    """t statistic of the slope of ``z`` on ``values`` (N(0, 1)-like when ``z`` is white)."""
+    v = values - values.mean()
+    zz = z - z.mean()
+    den = np.sqrt(float(v @ v) * float(zz @ zz))
+    if den <= 0:
+        return 0.0
+    r = float(v @ zz) / den
+    return float(r * np.sqrt(max(z.size - 2, 1)) / np.sqrt(max(1 - r * r, 1e-12)))
+
+
+def _two_groups(z: np.ndarray, groups: np.ndarray) -> float:
+    """Welch t of the mean of ``z`` where ``groups > 0`` minus where ``groups < 0``."""
+    a, b = z[groups > 0], z[groups < 0]
+    if a.size < 2 or b.size < 2:
+        return 0.0
+    se = np.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size)
+    return float((a.mean() - b.mean()) / se) if se > 0 else 0.0
+
+
+def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_ALPHA,
+                    noise_alpha: float = NOISE_ALPHA) -> dict:
+    """Test what the fitted model leaves against the declared noise and for structure.
+
+    Noise: the chi-square of the whitened residuals overall (at ``noise_alpha``), and per chain
+    the sum of squares of its standardised residuals (Bonferroni, ``noise_alpha / C``).
+
+    Structure, for each quantity (time, direction and size of each joint's last move, its
+    stroke, the load it carries, each pose coordinate):
+
+    - in proportion to it: the whitened remainder regressed on a generic effect, each chain's
+      joint displaced in proportion to the quantity (one coefficient per chain, mapped to the
+      closure like any effect and with the fitted model's columns projected out, so that what
+      the geometry absorbs is not counted); F test (the noise's scale estimated, so it speaks
+      also when the noise is larger than declared), per-chain t of the coefficients;
+    - smooth in it (ordered quantities): the standardised residuals' serial correlation when the
+      rows are sorted by the quantity (any smooth function shows, a periodic one included).
+
+    Bonferroni over every statistic, at ``alpha``.
+
+    Returns:
+        JSON-ready dict: ``explained`` (every test passes), ``noise`` (the chi-square tests),
+        ``structure`` (per quantity: statistics, corrected p-value, chains), ``remaining``
+        (what is left, in numbers and in words).
+    """
+    from scipy.stats import f as f_dist
+
+    robot = data.robot
+    C = robot.n_chains
+    std = closure_noise_std(robot, fit.theta, data)
+    z = fit.residuals / std
+    n = data.n
+    p_overall = fit.p_value
+    dof_chain = max(n - fit.n_params / C, 1.0)
+    chain_chi2 = np.sum(z ** 2, axis=0)
+    p_chain = chi2_dist.sf(chain_chi2, dof_chain)
+    chains_noisy = [int(i) for i in np.flatnonzero(p_chain < noise_alpha / C)]
+    noise_ok = p_overall > noise_alpha and not chains_noisy
+    # The generic effects' columns in the fitted model's whitened space.
+    jac = robot.closure_jacobians(fit.theta, data.joints + fit.joint_displacement(data), data.measured)
+    winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
+    Q = _orth(fit.design)
+    w = fit.whitened.ravel()
+    R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if n > 2 else np.eye(C)
+    feats = _features(data)
+    m_tests = len(feats) * (2 * C + 2)  # per quantity: F, combined serial, per chain t and serial
+    structure = {}
+    for name, kind, values in feats:
+        v = values - values.mean(axis=0)
+        Xq = np.zeros((n, C, C))
+        Xq[:, np.arange(C), np.arange(C)] = v
+        X = _whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, C)
+        X = X - Q @ (Q.T @ X)
+        keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
+        X = X[:, keep]
+        k = int(np.linalg.matrix_rank(X)) if X.size else 0
+        t_chain = np.zeros(C)
+        p_f = 1.0
+        if k > 0 and fit.dof - k > 0:
+            beta = _solve(X, w)
+            d2 = float(np.sum((X @ beta) ** 2))
+            rest = max(fit.chi2 - d2, 1e-300)
+            s2 = rest / (fit.dof - k)
+            F = (d2 / k) / s2
+            p_f = float(f_dist.sf(F, k, fit.dof - k))
+            cov = np.linalg.pinv(X.T @ X, hermitian=True) * s2
+            t_chain[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+        p_t = 2 * norm.sf(np.abs(t_chain))
+        if kind == "ordered":
+            lag = np.array([_lag1(z[:, c], values[:, c]) for c in range(C)])
+            comb = float(np.sum(lag) / np.sqrt(max(np.sum(R ** 2), 1e-12)))
+            p_lag = norm.sf(lag)
+            p_comb = float(norm.sf(comb))
         else:
-            a, c, fc = c, d, fd
-            d = a + g * (b_ - a)
-            fd = cost(d)
-    return eff.searched_value((a + b_) / 2)
+            lag, comb, p_lag, p_comb = np.zeros(C), 0.0, np.ones(C), 1.0
+        p_per = np.minimum(p_t, p_lag)
+        p_min = min(p_f, p_comb, float(p_per.min()))
+        structure[name] = {"p_value_proportional": p_f, "t_per_chain": t_chain.tolist(),
+                           "serial_correlation_per_chain": lag.tolist(), "serial_correlation_combined": comb,
+                           "p_value": min(1.0, p_min * m_tests),
+                           "chains": [int(c) for c in np.flatnonzero(p_per * m_tests < alpha)],
+                           "score": float(-np.log10(max(p_min, 1e-300)))}
+    follows = sorted((k for k, v in structure.items() if v["p_value"] < alpha), key=lambda k: -structure[k]["score"])
+    explained = bool(noise_ok and not follows)
+    floor = float(_rms(std))
+    rms = float(_rms(fit.residuals))
+    ratio = float(np.sqrt(fit.chi2 / max(fit.dof, 1)))
+    chains = sorted(set(chains_noisy) | {c for k in follows for c in structure[k]["chains"]})
+    chain = robot.chain_word
+    chain_rms = _rms(z, axis=0)
+    remaining = {
+        "present": not explained,
+        "noise_ratio": ratio,
+        "rms_mm": rms,
+        "noise_floor_mm": floor,
+        "excess_rms_mm": float(np.sqrt(max(rms ** 2 - floor ** 2, 0.0))),
+        "rms_per_chain_noise": chain_rms.tolist(),
+        "chains": [c + 1 for c in chains],
+        "follows": follows,
+        "does_not_follow": [k for k in ("time", "direction of the last move", "size of the last move", "stroke", "load")
+                            if k in structure and k not in follows],
+    }
+    remaining["summary"] = _remaining_words(remaining, chain, explained)
+    return {"explained": explained,
+            "noise": {"chi2": fit.chi2, "dof": fit.dof, "p_value": p_overall, "alpha": noise_alpha,
+                      "chi2_per_chain": chain_chi2.tolist(), "dof_per_chain": dof_chain,
+                      "p_value_per_chain": p_chain.tolist(), "chains_failing": [c + 1 for c in chains_noisy],
+                      "consistent": bool(noise_ok)},
+            "structure": structure, "remaining": remaining}
+
+
+def _chain_list(word: str, chains: list) -> str:
+    if not chains:
+        return ""
+    if len(chains) == 1:
+        return f"{word} {chains[0]}"
+    return f"{word}s {', '.join(map(str, chains[:-1]))} and {chains[-1]}"
+
+
+def _remaining_words(rem: dict, chain: str, explained: bool) -> str:
+    if explained:
+        return (f"nothing beyond the declared noise: residual {rem['noise_ratio']:.2f} x the noise, "
+                f"no structure in time, motion, stroke, load or workspace")
+    size = (f"a remainder of RMS {1e3 * rem['rms_mm']:.2f} um against a noise floor of "
+            f"{1e3 * rem['noise_floor_mm']:.2f} um (whitened: {rem['noise_ratio']:.1f} x the declared noise)")
+    where = _chain_list(chain, rem["chains"]) or f"every {chain} alike"
+    if rem["follows"]:
+        what = "following " + ", ".join(rem["follows"][:3])
+        if rem["does_not_follow"]:
+            what += "; not " + ", ".join(rem["does_not_follow"])
+    else:
+        what = ("following none of the quantities tested (time, motion, stroke, load, workspace): noise larger than "
+                "declared, or rows off at random")
+    return f"{size}, on {where}, {what}"
+
+
+# ----------------------------------------------------------------------------- outliers
+
+
+def _neighbour_sets(data: EffectData) -> list[np.ndarray]:
+    """(N, K) indices of each row's nearest neighbours in time, in the workspace (pose
+    coordinates scaled by their spread) and in the direction of motion (fewest joints moving
+    the other way, then nearest in the workspace)."""
+    n = data.n
+    k = min(NEIGHBOURS, n - 1)
+    t = data.t_s
+    dt = np.abs(t[:, None] - t[None, :])
+    np.fill_diagonal(dt, np.inf)
+    spread = data.measured.std(axis=0)
+    spread[spread == 0] = 1.0
+    p = data.measured / spread
+    dp = np.sqrt(((p[:, None, :] - p[None, :, :]) ** 2).sum(-1))
+    np.fill_diagonal(dp, np.inf)
+    dd = (data.direction[:, None, :] != data.direction[None, :, :]).sum(-1) + dp / (dp[np.isfinite(dp)].max() + 1)
+    np.fill_diagonal(dd, np.inf)
+    return [np.argsort(d, axis=1, kind="stable")[:, :k] for d in (dt, dp, dd)]
+
+
+def _deleted(Q: np.ndarray, w: np.ndarray, bad: np.ndarray):
+    """Leave-one-out statistics with the rows ``bad`` left out of the fit, closed form.
+
+    ``Q`` (N C, r) orthonormal basis of the whitened design, ``w`` (N, C) whitened residuals.
+    With ``G = (I - H_BB)^-1`` the bad rows' joint deleted residuals are ``u = G w_B``
+    (covariance ``G``), the other rows' residuals of the fit without them
+    ``e = w + Q Q_B^T u``, and that fit's hat matrix ``Q (I + Q_B^T G Q_B) Q^T``.
+
+    Returns:
+        ``(statistic (N,), e (N, C), u (|B|, C))``: each row's chi-square(C) statistic (a
+        kept row's studentized deleted residual, a bad row's deleted residual against the fit
+        without every bad row).
+    """
+    n, C = w.shape
+    r = Q.shape[1]
+    idx = (bad[:, None] * C + np.arange(C)).ravel()
+    if idx.size:
+        QB = Q[idx]
+        G = np.linalg.inv(np.eye(idx.size) - QB @ QB.T)
+        u = G @ w.ravel()[idx]
+        e = (w.ravel() + Q @ (QB.T @ u)).reshape(n, C)
+        K = np.eye(r) + QB.T @ G @ QB
+    else:
+        G = u = np.zeros(0)
+        e, K = w, np.eye(r)
+    Qr = Q.reshape(n, C, r)
+    H = Qr @ K @ np.swapaxes(Qr, 1, 2)
+    d = np.linalg.solve(np.eye(C)[None] - H, e[..., None])[..., 0]
+    stat = np.einsum("ni,ni->n", e, d)
+    u = np.asarray(u).reshape(-1, C)
+    for b, j in enumerate(bad):
+        blk = G[b * C:(b + 1) * C, b * C:(b + 1) * C]
+        stat[j] = float(u[b] @ np.linalg.solve(blk, u[b]))
+    return stat, e, u
+
+
+def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALPHA,
+                 max_bad_fraction: float = MAX_BAD_FRACTION) -> dict:
+    """Rows that are gross and isolated (closed-form leave-one-out, no refits).
+
+    With ``Q`` an orthonormal basis of the fit's whitened design, the hat matrix's block of row
+    j is ``H_jj = Q_j Q_j^T`` (C x C); the row's deleted residual (predicted by the model fitted
+    without it) is ``d_j = (I - H_jj)^-1 w_j`` and ``t_j = w_j^T (I - H_jj)^-1 w_j`` is
+    chi-square with C degrees of freedom for a consistent row. ``t`` is divided by a robust
+    scale (its median over the median of chi-square(C), at least 1), so that "gross" means
+    gross against the remainder's own spread. A row is bad when ``t`` exceeds the
+    Bonferroni-corrected ``alpha``, the statistics being recomputed with the bad rows left out
+    of the fit until the set settles (:func:`_deleted`, against masking and swamping). A bad row
+    is an outlier only when it is isolated: the sum of its good neighbours' residuals (the fit
+    without every bad row) along its own deleted residual, over the square root of their
+    number, stays below :data:`SHARED_Z` (in time, in the workspace, in the direction of
+    motion). When more than ``max_bad_fraction`` of the rows are
+    bad, the model is wrong, not the data: nothing is flagged.
+
+    Returns:
+        dict: ``statistic`` (N,), ``threshold``, ``scale``, ``bad`` and ``flagged`` (0-based
+        indices), ``shared`` (bad rows not flagged, with the neighbourhood that shares them),
+        ``model_wrong`` (bool).
+    """
+    n, C = data.n, data.robot.n_chains
+    Q = _orth(fit.design)
+    w = fit.whitened
+    stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
+    scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))
+    thr = float(chi2_dist.isf(alpha / n, C))
+    bad = np.flatnonzero(stat / scale > thr)
+    # Masking and swamping: the statistics again with the bad rows left out of the fit, until the
+    # set of bad rows settles (closed form each time).
+    for _ in range(10):
+        if bad.size == 0 or bad.size > max(1, max_bad_fraction * n):
+            break
+        stat, clean, u = _deleted(Q, w, bad)
+        again = np.flatnonzero(stat / scale > thr)
+        if np.array_equal(again, bad):
+            break
+        bad = again
+    out = {"statistic": (stat / scale).tolist(), "threshold": thr, "scale": scale, "bad": bad.tolist(),
+           "flagged": [], "shared": {}, "model_wrong": False}
+    if bad.size > max(1, max_bad_fraction * n):
+        out["model_wrong"] = True
+        return out
+    if bad.size == 0:
+        return out
+    stat, clean, u = _deleted(Q, w, bad)
+    clean = clean / np.sqrt(scale)
+    bad_set = set(bad.tolist())
+    flagged = []
+    for b, j in enumerate(bad):
+        unit = u[b] / np.linalg.norm(u[b])
+        shared = {}
+        for label, nb in zip(("time", "workspace", "direction of motion"), _neighbour_sets(data)):
+            others = [i for i in nb[j] if i not in bad_set]
+            if not others:
+                continue
+            score = float((clean[others] @ unit).sum() / np.sqrt(len(others)))
+            if score > SHARED_Z:
+                shared[label] = score
+        if shared:
+            out["shared"][int(j)] = shared
+        else:
+            flagged.append(int(j))
+    out["flagged"] = flagged
+    return out
+
+
+# ----------------------------------------------------------------------------- discovery
 
 
 @dataclass(frozen=True, eq=False)
 class Discovery:
-    """The outcome of :func:`discover_effect`.
+    """The outcome of :func:`discover_effects`.
 
     Attributes:
-        effect: the chosen effect (``"none"`` when geometry explains the data).
-        fits: every candidate's joint fit on the rows kept, by name.
-        evidence: per candidate: chi2, dof, p-value, BIC, delta BIC to geometry only,
-            cross-validated whitened RMS; and the geometry-only chi-square test.
-        chosen: the chosen fit.
-        flagged: indices of rows removed as outliers (gross errors, not physics).
+        effects: names of the effects named (empty: geometry alone).
+        explained: whether the remainder is consistent with the declared noise and shows no
+            structure (:func:`remainder_tests`).
+        remaining: what is left (numbers and ``summary`` in words; ``present`` False when
+            explained).
+        partial: names of named effects that leave structure behind (all of them when not
+            explained).
+        chosen: the chosen model's joint fit (on the rows kept).
+        geometry: the geometry-only fit (on the rows kept).
+        evidence: per candidate alone: chi2, BIC evidence, cross-validated whitened RMS; the
+            selection's steps; the geometry-only chi-square test.
+        tests: the remainder's tests (:func:`remainder_tests`).
+        aliases: pairs the data could not tell apart: ``{"named", "rival", "delta_bic",
+            "correlation"}``.
+        outliers: the outlier scan (:func:`outlier_scan`) of the last round.
+        flagged: indices of rows removed as outliers (gross and isolated).
         kept: indices of the rows used.
         located: where the geometry-only residuals concentrate (:func:`locate_mismatch`).
-        adequate: whether the chosen model passes the chi-square test.
     """
 
-    effect: str
-    fits: dict
-    evidence: dict
+    effects: tuple
+    explained: bool
+    remaining: dict
+    partial: tuple
     chosen: EffectFit
+    geometry: EffectFit
+    evidence: dict
+    tests: dict
+    aliases: list
+    outliers: dict
     flagged: tuple
     kept: np.ndarray
     located: dict
-    adequate: bool
+
+    @property
+    def effect(self) -> str:
+        """``"none"``, the one effect, or the names joined by ``+``."""
+        return "+".join(self.effects) or "none"
+
+    @property
+    def adequate(self) -> bool:
+        return self.explained
+
+    @property
+    def model_wrong(self) -> bool:
+        """More than :data:`MAX_BAD_FRACTION` of the rows looked bad."""
+        return bool(self.outliers.get("model_wrong"))
 
 
-def _cv_rms(data: EffectData, effect: Effect, folds: int, seed: int, extra: float | None) -> float:
-    order = np.random.default_rng(seed).permutation(data.n)
-    ss, cnt = 0.0, 0
-    for k in range(folds):
-        test = np.sort(order[k::folds])
-        train = np.setdiff1d(np.arange(data.n), test)
-        fit = fit_effect(data.subset(train), effect, extra=extra)
-        _, w = fit.predict(data.subset(test))
-        ss += float(np.sum(w ** 2))
-        cnt += w.size
-    return float(np.sqrt(ss / cnt))
+def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int):
+    geo = fit_effects(sub, ())
+    lin = _Linear(sub, geo)
+    sel = _select(lin, models, max_effects, min_delta_bic, folds, seed)
+    names = list(sel["chosen"])
+    fit = geo
+    while names:
+        fit = fit_effects(sub, [models[n] for n in names], extras=sel["chosen"], start=geo.theta)
+        weak = [n for n in names if fit.significance(n)["p_value"] > SIGNIFICANCE_ALPHA]
+        if not weak:
+            break
+        names.remove(max(weak, key=lambda n: fit.significance(n)["p_value"]))
+        sel.setdefault("insignificant", []).append(weak)
+        fit = geo
+    return geo, fit, sel
 
 
-def discover_effect(data: EffectData, *, candidates=None, alpha: float = 0.01, outlier_alpha: float = 1e-3,
-                    folds: int = 5, seed: int = 0, max_outliers: int = 5,
-                    min_delta_bic: float = MIN_DELTA_BIC) -> Discovery:
-    """Locate the mismatch, name the left-out physics, and fit it.
-
-    1. Gross rows: under the best model, a row whose whitened chi-square (C dof) exceeds the
-       Bonferroni-corrected ``outlier_alpha`` is removed as an outlier and everything is redone
-       (a physical effect is smooth over the workspace and cannot explain one wild row).
-    2. Each candidate is fitted jointly with the geometry; the one with the lowest BIC is
-       chosen if its BIC is at least ``min_delta_bic`` below that of geometry alone and it also
-       lowers the cross-validated residual (``folds``-fold): a richer model must earn its
-       parameters twice. Otherwise ``none``. (The omnibus chi-square test of geometry alone,
-       at ``alpha``, is reported as evidence and decides ``adequate``; against one specific
-       alternative such as a drift in time it is much weaker than the comparison of models.)
+def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
+                     outlier_alpha: float = OUTLIER_ALPHA, folds: int = 5, seed: int = 0, max_rounds: int = 3,
+                     min_delta_bic: float = MIN_DELTA_BIC) -> Discovery:
+    """Name the left-out physics (up to ``max_effects`` effects together), fit it, test what
+    remains, and isolate gross rows (see the module docstring).
 
     Args:
         data: the measurements.
-        candidates: effects to consider, registered names or :class:`Effect` objects
-            (``"none"`` is always included); default every registered effect that applies to
-            the robot.
-        alpha: significance of the geometry-only chi-square test.
+        candidates: effects to consider, registered names or :class:`Effect` objects (``none``
+            is always the reference); default every registered effect that applies to the robot.
+        max_effects: most effects named together.
+        alpha: significance of the remainder's tests.
         outlier_alpha: family-wise significance of the outlier test.
         folds, seed: cross-validation.
-        max_outliers: at most this many rows are removed.
+        max_rounds: outlier rounds (each removes the isolated gross rows and redoes the choice).
 
     Raises:
         ValueError: too few rows, an unknown candidate or one that does not apply to the robot.
@@ -321,46 +983,60 @@ def discover_effect(data: EffectData, *, candidates=None, alpha: float = 0.01, o
     robot = data.robot
     if candidates is None:
         candidates = effects_for(robot)
-    models = {e.name: e for e in [EFFECTS["none"]] + [registered(c) for c in candidates]}
-    cands = tuple(models)
-    for c in cands:
-        _check_applies(models[c], robot)
+    models = {m.name: m for m in _as_models(candidates)}
+    for m in models.values():
+        _check_applies(m, robot)
     if data.n < MIN_ROWS:
         raise ValueError(f"effect discovery needs at least {MIN_ROWS} measurements, got {data.n}")
     kept = np.arange(data.n)
     flagged: list[int] = []
-    while True:
+    for _ in range(max_rounds):
         sub = data.subset(kept)
-        fits = {c: fit_effect(sub, models[c]) for c in cands}
-        geo = fits["none"]
-        effect = min(cands, key=lambda c: fits[c].bic())
-        if fits[effect].bic() > geo.bic() - min_delta_bic:
-            effect = "none"
-        per_pose = np.sum(fits[effect].whitened ** 2, axis=1)
-        thr = float(chi2_dist.isf(outlier_alpha / kept.size, robot.n_chains))
-        worst = int(np.argmax(per_pose))
-        if per_pose[worst] > thr and len(flagged) < max_outliers and kept.size > MIN_ROWS:
-            flagged.append(int(kept[worst]))
-            kept = np.delete(kept, worst)
-            continue
-        break
-    sub = data.subset(kept)
-    evidence = {"geometry_chi2_test": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "alpha": alpha}}
-    cv = {}
-    for c in cands:
-        f = fits[c]
-        cv[c] = _cv_rms(sub, models[c], folds, seed, f.extra)
-        evidence[c] = {"chi2": f.chi2, "dof": f.dof, "p_value": f.p_value, "n_params": f.n_params, "bic": f.bic(),
-                       "delta_bic_vs_none": f.bic() - geo.bic(), "aic": f.aic(), "cv_whitened_rms": cv[c]}
-    if effect != "none" and not cv[effect] < cv["none"]:
-        effect = "none"
-    chosen = fits[effect]
-    return Discovery(effect=effect, fits=fits, evidence=evidence, chosen=chosen, flagged=tuple(sorted(flagged)),
-                     kept=kept, located=locate_mismatch(sub, geo), adequate=chosen.p_value > alpha)
+        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed)
+        scan = outlier_scan(sub, fit, alpha=outlier_alpha)
+        new = scan["flagged"]
+        if scan["model_wrong"] or not new or kept.size - len(new) < MIN_ROWS \
+                or len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
+            if not scan["model_wrong"] and new and len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
+                scan = dict(scan, model_wrong=True, flagged=[])
+            break
+        flagged += [int(kept[j]) for j in new]
+        kept = np.delete(kept, new)
+    else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
+        sub = data.subset(kept)
+        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed)
+        scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
+    tests = remainder_tests(sub, fit, alpha=alpha)
+    explained = tests["explained"]
+    aliases = [{"named": a, "rival": b, "delta_bic": gap, "correlation": corr}
+               for a, b, gap, corr in sel["rivals"] if a in fit.effects and b not in fit.effects]
+    evidence = {"geometry_chi2_test": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "alpha": alpha},
+                "none": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "n_params": geo.n_params,
+                         "bic": geo.bic(), "delta_bic_vs_none": 0.0, "cv_whitened_rms": sel["cv_geometry"]}}
+    for name, e in sel["single"].items():
+        evidence[name] = {"chi2_linearised": e["chi2"], "n_params": e["n_params"],
+                          "delta_bic_vs_none": e["delta_bic_vs_none"], "cv_whitened_rms": e["cv_whitened_rms"]}
+    for step in sel["steps"]:
+        if step["added"] in evidence:
+            evidence[step["added"]]["delta_bic_when_added"] = step["trials"][step["added"]]["delta_bic"]
+    evidence["steps"] = [{"added": s["added"], "dropped": s["dropped"],
+                          "delta_bic": {k: v["delta_bic"] for k, v in s["trials"].items()}} for s in sel["steps"]]
+    evidence["cv_whitened_rms_chosen"] = sel["cv_chosen"]
+    if sel.get("insignificant"):
+        evidence["dropped_not_significant"] = sel["insignificant"]
+    remaining = tests["remaining"]
+    if scan["model_wrong"]:
+        remaining = dict(remaining, bad_rows=len(scan["bad"]),
+                         summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
+                         f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
+    return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
+                     partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
+                     tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
+                     located=locate_mismatch(sub, geo))
 
 
-def _rms(v: np.ndarray, axis=None):
-    return np.sqrt(np.mean(v ** 2, axis=axis))
+#: The former name (one effect at a time); the same function.
+discover_effect = discover_effects
 
 
 def locate_mismatch(data: EffectData, geometry_fit: EffectFit) -> dict:

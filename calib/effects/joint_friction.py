@@ -21,6 +21,7 @@ class JointFriction(Effect):
     name = "joint_friction"
     physics = "a dead band: each actuator stops short of its target against the direction it last moved"
     history_dependent = True
+    follows = "direction of the last move"
 
     def coefficients(self, robot):
         return (Coefficient("dead_band", robot.joint_unit),)

@@ -28,6 +28,7 @@ class PeriodicScrewError(Effect):
     name = "periodic_screw_error"
     physics = "an error periodic in each leg's stroke, the same (unknown) pitch on every screw"
     searched = SearchedParameter("pitch", "mm")
+    follows = "stroke"
 
     def applies_to(self, robot):
         return robot.joint_unit == "mm"

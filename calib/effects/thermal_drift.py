@@ -21,6 +21,7 @@ class ThermalDrift(Effect):
 
     name = "thermal_drift"
     physics = "every leg grows at a constant rate with time"
+    follows = "time"
 
     def applies_to(self, robot):
         return robot.joint_unit == "mm"

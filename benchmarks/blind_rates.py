@@ -1,0 +1,54 @@
+"""Rates of the blind suite (docs/discovery.md): ``PYTHONPATH=. python benchmarks/blind_rates.py``.
+
+Hexapod: every single effect and none (``--seeds`` recordings each), each also analysed with its
+effect left out of the candidates, with three gross rows, with the noise 10 and 100 times the
+declared, with 30% gross rows and with the nominal geometry 10% off; every pair of effects
+(``--pair-seeds`` recordings each). Delta and rus: the single-effect suite (``--other-seeds``).
+Prints one Markdown table per robot and the failures; ``--json FILE`` keeps every result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from pipeline.blind import KINDS, rates_table, run_blind_suite
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--pair-seeds", type=int, default=10)
+    ap.add_argument("--other-seeds", type=int, default=5)
+    ap.add_argument("--robots", nargs="+", default=["hexapod", "delta", "rus"])
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args(argv)
+    everything = []
+    for robot in a.robots:
+        t0 = time.perf_counter()
+        if robot == "hexapod":
+            res = run_blind_suite(None, range(a.seeds), robot=robot, kinds=[k for k in KINDS if k != "pair"])
+            res += run_blind_suite(None, range(a.pair_seeds), robot=robot, kinds=("pair",))
+        else:
+            res = run_blind_suite(None, range(a.other_seeds), robot=robot, kinds=("single",))
+        print(f"\n## {robot} ({time.perf_counter() - t0:.0f} s)\n")
+        print(rates_table(res))
+        for r in res:
+            failed = [k for k, v in r["criteria"].items() if not v and k != "points_top3"]
+            if failed:
+                print(f"  {r['kind']} {'+'.join(r['effects']) or 'none'} seed {r['seed']}"
+                      f"{' left out ' + r['left_out'] if 'left_out' in r else ''}: {', '.join(failed)} failed; "
+                      f"named {r['named'] or 'none'}, explained {r['explained']}, follows {r['follows'][:3]}, "
+                      f"flagged {r['flagged']}")
+        sys.stdout.flush()
+        everything += [dict(r, robot=robot) for r in res]
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(everything, f, indent=1, default=str)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,53 @@
+"""Speed of discovery (docs/discovery.md): 120 poses, the full library, subsets up to three
+effects, no re-simulation, one core:
+``OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python benchmarks/discovery_speed.py``.
+
+The recordings are simulated first (not timed); then :func:`calib.effects.discover_effects`
+(selection, joint fit, remainder tests, outlier rounds) and the whole
+:func:`pipeline.discover.discover` without re-simulation (adds the held-out fits and the
+summary) are timed, best of ``--repeat``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+from calib.effects import EffectData, discover_effects
+from pipeline.discover import discover
+from pipeline.scenarios import effect_recording
+
+CASES = (("hexapod", ()), ("hexapod", ("joint_friction",)), ("hexapod", ("joint_friction", "thermal_drift")),
+         ("hexapod", ("compliance", "joint_friction", "periodic_screw_error")), ("delta", ("joint_friction",)))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--poses", type=int, default=120)
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args(argv)
+    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {a.poses} poses, full library, "
+          f"up to three effects")
+    print("| robot | truth | named | explained | discover_effects (s) | pipeline discover, no resim (s) |")
+    print("|---|---|---|---|---|---|")
+    for robot, effects in CASES:
+        rec = effect_recording(effects or "none", 5, robot=robot, n_poses=a.poses)
+        data = EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
+        t_core, t_all = [], []
+        for _ in range(a.repeat):
+            t0 = time.perf_counter()
+            d = discover_effects(data)
+            t_core.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            discover(rec, resim=False)
+            t_all.append(time.perf_counter() - t0)
+        print(f"| {robot} | {' + '.join(effects) or 'none'} | {' + '.join(d.effects) or 'none'} | {d.explained} | "
+              f"{np.min(t_core):.2f} | {np.min(t_all):.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
