@@ -164,6 +164,12 @@ class Machine:
         self._quat = model.sensor(SENSOR_QUAT).adr[0] if robot.pose_dim == 6 else None
 
     @property
+    def platform_mass_kg(self) -> float:
+        """Mass of the body that carries the platform site (the moving platform), kg."""
+        m = self.model
+        return float(m.body_mass[m.site_bodyid[m.site(PLATFORM_SITE).id]])
+
+    @property
     def servo_stiffness(self) -> np.ndarray:
         """(C,) stiffness of each chain's position servo at its joint, SI (N/m or N m/rad):
         the actuator gain times its gear squared."""

@@ -18,7 +18,7 @@ Kinds of recording (``--kinds``):
 
 The derived kinds reuse the single-effect recordings (no further simulation). Each result says
 whether its acceptance criterion holds (:func:`criteria`); :func:`rates_table` sums them up.
-Recordings run in parallel over the cores.
+Recordings run in parallel on the Dask executor (:mod:`pipeline.executor`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from calib.effects import EFFECTS, effects_for
 from calib.effects.discovery import MAX_BAD_FRACTION, SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
-from .parallel import spawn_pool
+from .executor import task_pool
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "rates_table",
            "main"]
@@ -204,7 +204,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
             if progress:
                 progress(k + 1, len(cases))
         return out
-    with spawn_pool(workers) as pool:
+    with task_pool(workers) as pool:
         for k, r in enumerate(pool.map(blind_case, cases)):
             out += r
             if progress:

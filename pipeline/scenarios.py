@@ -30,15 +30,12 @@ from mjcf.units import M_PER_MM
 
 from .recording import Recording
 
-__all__ = ["DISCOVERY_NOISE", "DEFAULT_MOVING_MASS_KG", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
+__all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "servo_stiffness", "make_recording", "recording_robot",
            "effects_settings", "effect_recording"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
-#: Moving mass (the platform, no payload) of the simulated machines, kg; discovery assumes it
-#: when a recording does not carry ``meta.moving_mass_kg``.
-DEFAULT_MOVING_MASS_KG = 2.0
 #: Mean simulated time a pose takes to settle, s (sizes a time-dependent effect beforehand).
 ESTIMATED_SETTLE_S = 0.35
 #: Errors of a robot without a :data:`SCENARIO_MACHINES` entry: uniform within +- these on its
@@ -89,12 +86,17 @@ def machine_context(robot: Robot, moving_mass_kg: float | None = None) -> Machin
 
     Args:
         robot: the robot.
-        moving_mass_kg: platform plus payload, kg; default :data:`DEFAULT_MOVING_MASS_KG`.
+        moving_mass_kg: platform plus payload, kg; default the platform of ``robot``'s nominal
+            MuJoCo machine (no payload).
     """
+    from mjcf import build_machine
+
+    nominal = build_machine(robot, robot.table.nominal)
+    platform = nominal.platform_mass_kg
     return MachineContext(
-        moving_mass_kg=float(DEFAULT_MOVING_MASS_KG if moving_mass_kg is None else moving_mass_kg),
-        platform_mass_kg=DEFAULT_MOVING_MASS_KG, payload_height_m=MachineOptions().payload_height_m,
-        gravity_m_s2=GRAVITY_M_S2, m_per_mm=M_PER_MM, servo_stiffness=servo_stiffness(robot))
+        moving_mass_kg=float(platform if moving_mass_kg is None else moving_mass_kg),
+        platform_mass_kg=platform, payload_height_m=MachineOptions().payload_height_m,
+        gravity_m_s2=GRAVITY_M_S2, m_per_mm=M_PER_MM, servo_stiffness=float(nominal.servo_stiffness.mean()))
 
 
 def merged_settings(context: MachineContext, settings: dict | None = None) -> dict:
