@@ -233,6 +233,75 @@ def _gauss_newton(fun, jac, x0, max_iter, xtol):
     return x, max_iter, False, f"Gauss-Newton: no convergence in {max_iter} iterations"
 
 
+#: Relative scaled step, taken and well predicted, after which :func:`_levenberg_marquardt` stops.
+_CONVERGED_STEP = 1e-9
+
+
+def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol):
+    """Levenberg-Marquardt (Marquardt's scaling by the diagonal of ``J^T J``, Nielsen's damping
+    update, started and kept near Gauss-Newton while steps succeed) on a small dense problem: one Jacobian and one ``(K, K)`` solve per iteration and no
+    call-back layer, the fast path of :func:`identify_forward`. Stops when both the actual and
+    the predicted reductions of the cost are at most ``ftol`` relative, when the scaled step is
+    at most ``xtol`` relative, or when a step the model predicts to help no longer lowers the
+    cost at rounding level (``1e-13`` relative: the minimum to machine precision). A trial
+    point the robot cannot evaluate (``KinematicsError``) is rejected like a step that raises
+    the cost. Returns ``(x, Jacobian evaluations, success, message)``."""
+    x = np.array(x0, dtype=float)
+    f = fun(x)
+    cost = float(f @ f)
+    J = jac(x)
+    njev = 1
+    A, g = J.T @ J, J.T @ f
+    scale = np.sqrt(np.diag(A)).copy()
+    scale[scale == 0] = 1.0
+    mu, nu = 1e-10, 2.0  # start as Gauss-Newton: these fits are nearly linear
+    while True:
+        scale = np.maximum(scale, np.sqrt(np.diag(A)))  # MINPACK keeps the largest seen
+        D2 = scale ** 2
+        try:
+            dx = np.linalg.solve(A + mu * np.diag(D2), -g)
+        except np.linalg.LinAlgError:
+            return x, njev, False, "Levenberg-Marquardt: singular normal equations"
+        pred = -float(2.0 * (g @ dx) + dx @ (A @ dx))
+        step = float(np.linalg.norm(scale * dx))
+        size = float(np.linalg.norm(scale * x))
+        if step <= xtol * (size + xtol):
+            return x, njev, True, f"the scaled step is below xtol = {xtol:g}"
+        if pred <= 0.0:
+            return x, njev, True, "no step reduces the cost any further (at the minimum to machine precision)"
+        x_new = x + dx
+        try:
+            f_new = fun(x_new)
+            cost_new = float(f_new @ f_new)
+        except KinematicsError:
+            cost_new = np.inf
+        actual = cost - cost_new
+        if np.isfinite(cost_new) and actual > 0:
+            rho = actual / pred
+            x, f, cost_old, cost = x_new, f_new, cost, cost_new
+            if actual <= ftol * cost_old and pred <= ftol * cost_old:
+                return x, njev, True, f"both actual and predicted relative reductions are below ftol = {ftol:g}"
+            if rho > 0.5 and step <= _CONVERGED_STEP * size:
+                # A full-size step of 1e-9 relative that the model predicted well: the next
+                # would be (quadratically, or at the linear rate of a small-residual fit) at
+                # rounding level.
+                return x, njev, True, f"converged: the last step was {step / size:.1e} relative"
+            if njev >= max_iter:
+                return x, njev, False, f"Levenberg-Marquardt: {max_iter} Jacobian evaluations reached"
+            J = jac(x)
+            njev += 1
+            A, g = J.T @ J, J.T @ f
+            mu *= max(0.1, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+        else:
+            if step <= 1e-13 * size or (np.isfinite(cost_new) and abs(actual) <= 1e-13 * cost):
+                return x, njev, True, "the cost is at its minimum to machine precision"
+            if nu > 1e12:
+                return x, njev, False, "Levenberg-Marquardt: no step lowers the cost"
+            mu = max(mu, 1e-4) * nu
+            nu *= 2.0
+
+
 #: Residual entry returned to Levenberg-Marquardt for a trial point the robot cannot evaluate
 #: (out of reach, singular, impossible geometry): far above any real residual, so the step is
 #: rejected and the trust region shrinks, as for a step that increases the cost.
@@ -354,36 +423,71 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     except KinematicsError as exc:
         raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
     winv = pose_whitening(robot, theta0, joints, start_poses, noise)
-    state = {"poses": start_poses}
+    # Without joint noise the whitening is the same diagonal for every pose: a product.
+    diag = np.diagonal(winv, axis1=1, axis2=2)
+    diagonal = bool(np.all(diag == diag[0]) and np.count_nonzero(winv) == np.count_nonzero(diag))
+    w = diag[0].copy()
+
+    def white(v):  # (N, D) -> whitened
+        return v * w if diagonal else np.einsum("nij,nj->ni", winv, v)
+
+    def white_jac(jp):  # (N, D, K) -> whitened, flattened to (N D, K)
+        jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv, jp)
+        return jw.reshape(n * d, jp.shape[2])
+
+    # The last forward kinematics: each evaluation starts from it (a small perturbation),
+    # moved to first order by the last Jacobian (Newton then has one step less to go), and the
+    # Jacobian at a point just evaluated (as the solvers ask for it) reuses its poses.
+    state = {"poses": start_poses, "x": theta0[idx].copy(), "dpose": None}
+    history: list[float] = []
 
     def full(x):
         th = theta0.copy()
         th[idx] = x
         return th
 
-    def reached(th):
-        # Warm start from the last solution: each evaluation is a small perturbation.
-        state["poses"] = robot.forward_kinematics(th, joints, initial=state["poses"])
+    def reached(x):
+        if not np.array_equal(state["x"], x):
+            initial = state["poses"]
+            if state["dpose"] is not None:
+                x_j, poses_j, dpose = state["dpose"]
+                initial = poses_j + dpose @ (x - x_j)
+            state["poses"] = robot.forward_kinematics(full(x), joints, initial=initial)
+            state["x"] = np.array(x)
         return state["poses"]
 
     def fun(x):
-        return np.einsum("nij,nj->ni", winv, measured - reached(full(x))).ravel()
+        f = white(measured - reached(x)).ravel()
+        history.append(0.5 * float(f @ f))
+        return f
+
+    def residual_jac(th, poses):  # (N, D, K) d (measured - FK) / d theta_free = (dF/dpose)^-1 dF/dtheta
+        jac_c = robot.closure_jacobians(th, joints, poses)
+        return np.linalg.inv(jac_c.pose) @ jac_c.parameters[:, :, idx]
 
     def jac(x):
-        th = full(x)
-        jp = pose_jacobian_of_parameters(robot, th, joints, reached(th))[:, :, idx]
-        return -np.einsum("nij,njk->nik", winv, jp).reshape(n * d, idx.size)
+        poses = reached(x)
+        rj = residual_jac(full(x), poses)
+        state["dpose"] = (np.array(x), poses, -rj)
+        return white_jac(rj)
 
-    history: list[float] = []
-    x, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, history)
+    if solver == "lm":
+        try:
+            x, iters, ok, msg = _levenberg_marquardt(fun, jac, theta0[idx], max_iter, xtol, ftol)
+        except (KinematicsError, np.linalg.LinAlgError) as exc:
+            x, iters, ok, msg = theta0[idx], 0, False, f"the fit left the workspace: {exc}"
+    else:
+        x, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, [])
     theta = full(x)
-    predicted = _predicted(robot, theta, joints, measured)
+    if state["x"] is not None and np.array_equal(state["x"], x):
+        predicted = state["poses"]  # the forward kinematics at the solution, already done
+    else:
+        predicted = _predicted(robot, theta, joints, measured)
     res = measured - predicted
     cov = np.zeros((robot.n_parameters,) * 2)
     if np.all(np.isfinite(res)):
-        jp = pose_jacobian_of_parameters(robot, theta, joints, predicted)[:, :, idx]
-        J = -np.einsum("nij,njk->nik", winv, jp).reshape(n * d, idx.size)
-        r = np.einsum("nij,nj->ni", winv, res).ravel()
+        J = white_jac(residual_jac(theta, predicted))
+        r = white(res).ravel()
         chi2, cond = float(r @ r), np.array([_column_scaled_cond(J)])
         cov[np.ix_(idx, idx)] = np.linalg.pinv(J.T @ J, hermitian=True)
     else:

@@ -30,7 +30,7 @@ from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
-           "check_joint_limits", "SINGULAR_CONDITION"]
+           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -255,6 +255,14 @@ class Robot(ABC):
         """
         return self.closure_jacobians(theta, joints, poses).pose
 
+    def closure_and_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray,
+                                  poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(closure, pose Jacobian)``, (N, C) and (N, C, D), in one call: what each Newton step
+        of the forward kinematics needs. The Jacobian may be a strided view (e.g. a transposed
+        one). Default: :meth:`closure` and :meth:`closure_pose_jacobian`; a robot overrides it
+        when the two share most of their work (the hexapod's leg vectors)."""
+        return self.closure(theta, joints, poses), self.closure_pose_jacobian(theta, joints, poses)
+
     @abstractmethod
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, C) joint values that bring the machine ``theta`` to ``poses``.
@@ -296,12 +304,17 @@ def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarra
                               max_iter: int = 50) -> np.ndarray:
     """Forward kinematics by Newton's method on the closure, vectorised over rows.
 
+    Each step takes the closure and its pose Jacobian in one call
+    (:meth:`Robot.closure_and_pose_jacobian`) and solves the rows' (C, C) systems in one batched
+    LAPACK call; rows leave the iteration as they converge.
+
     Args:
         robot: the robot.
         theta: (P,) parameter vector.
         joints: (N, C) joint values.
         initial: (N, D) or (D,) start; default the robot's home pose. Newton's method finds the
-            assembly mode nearest the start.
+            assembly mode nearest the start: pass poses near the answer (the measured or
+            commanded ones) to save iterations.
         tol: converged when every closure residual is below ``tol`` mm.
         max_iter: iterations before giving up.
 
@@ -322,37 +335,95 @@ def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarra
     # Singularity is judged with the angle columns scaled to lengths, so that the threshold
     # does not depend on the units of the pose coordinates.
     scale = 1.0 / robot.pose_scale()
-    active = np.arange(n)
+    # Blocks of rows small enough for the temporaries to stay in cache: about twice as fast
+    # as one pass over 10,000 rows, and the same iterates.
+    for start in range(0, n, NEWTON_BLOCK_ROWS):
+        block = slice(start, start + NEWTON_BLOCK_ROWS)
+        poses[block] = _newton_block(robot, theta, joints[block], poses[block], tol, max_iter, scale, start)
+    return poses
+
+
+#: Rows the forward kinematics' Newton iteration handles at a time.
+NEWTON_BLOCK_ROWS = 2048
+
+
+def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> np.ndarray:
+    """Newton's iteration on rows ``offset ...`` of :func:`newton_forward_kinematics`."""
+    n, d = poses.shape
+    active = None  # rows still iterating (None: all of them, no gathering)
+    p, q = poses, joints
     for _ in range(max_iter):
-        p, q = poses[active], joints[active]
-        r = robot.closure(theta, q, p)
-        J = robot.closure_pose_jacobian(theta, q, p)
+        r, J = robot.closure_and_pose_jacobian(theta, q, p)
         done = np.max(np.abs(r), axis=1) <= tol
-        if np.any(done):
-            cond = np.linalg.cond(J[done] * scale)
-            singular = ~(cond < SINGULAR_CONDITION)
-            if np.any(singular):
-                k = int(active[done][np.argmax(singular)])
-                raise KinematicsError(
-                    f"forward kinematics met a singular configuration at row {k} (scaled condition "
-                    f"number of the pose Jacobian {cond[np.argmax(singular)]:.3g})", k)
-        active, p, r, J = active[~done], p[~done], r[~done], J[~done]
-        if active.size == 0:
-            return poses
+        n_done = int(np.count_nonzero(done))
+        if n_done:
+            rows = np.arange(n) + offset if active is None else active
+            _raise_if_singular(J[done] if n_done < done.size else J, scale, rows[done])
+            if n_done == done.size:
+                if active is not None:
+                    poses[active - offset] = p
+                return poses
+            keep = ~done
+            if active is not None:
+                poses[active - offset] = p
+            active, p, q, r, J = rows[keep], p[keep], q[keep], r[keep], J[keep]
         try:
-            poses[active] = p - np.linalg.solve(J, r[..., None])[..., 0]
+            p = p - np.linalg.solve(J, r[..., None])[..., 0]
         except np.linalg.LinAlgError:
+            rows = np.arange(n) + offset if active is None else active
             bad = np.linalg.matrix_rank(J * scale) < d
-            k = int(active[np.argmax(bad)])
+            k = int(rows[np.argmax(bad)])
             raise KinematicsError(f"forward kinematics met a singular configuration at row {k}", k) from None
-        finite = np.all(np.isfinite(poses[active]), axis=1)
-        if not np.all(finite):
-            k = int(active[np.argmax(~finite)])
+        finite = np.isfinite(p).all(axis=1)
+        if not finite.all():
+            rows = np.arange(n) + offset if active is None else active
+            k = int(rows[np.argmax(~finite)])
             raise KinematicsError(f"forward kinematics diverged at row {k}", k)
-    k = int(active[0])
+        if active is None:
+            poses = p
+    k = int(offset if active is None else active[0])
     raise KinematicsError(
         f"forward kinematics did not converge for row {k} in {max_iter} iterations "
-        f"(joints {np.array2string(joints[k], precision=4)}): no assembly near the start pose", k)
+        f"(joints {np.array2string(joints[k - offset], precision=4)}): no assembly near the start pose", k)
+
+
+def _raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> None:
+    """Raise :class:`KinematicsError` for the first of the (M, C, D) pose Jacobians ``J`` (rows
+    ``rows``) whose column-scaled condition number reaches :data:`SINGULAR_CONDITION`.
+
+    An exact condition number is an SVD per matrix; most rows are cleared by a cheap rigorous
+    bound instead: with ``A`` the scaled Jacobian of the first row, ``H = A^-1`` and ``E = I - H
+    Js``, ``Js = A (I - E)`` gives ``cond(Js) <= cond(A) (1 + e) / (1 - e)`` for ``e =
+    |E|_F < 1`` (one matrix product for all rows). Rows the bound does not clear get the SVD."""
+    m, c, dd = J.shape
+    # (M, D, C) transposed and scaled, contiguous (free for a robot that returns a transposed view)
+    JsT = np.ascontiguousarray(np.swapaxes(J, 1, 2)) * scale[:, None]
+    unsure = np.ones(m, dtype=bool)
+    if c == dd:
+        A = JsT[0].T
+        try:
+            cond_a = float(np.linalg.cond(A))
+            H = np.linalg.inv(A) if cond_a < SINGULAR_CONDITION else None
+        except np.linalg.LinAlgError:
+            H = None
+        if H is not None:
+            ET = (JsT.reshape(-1, c) @ H.T).reshape(m, dd, dd)  # (H Js)^T
+            ET -= np.eye(dd)
+            e = np.sqrt(np.einsum("nij,nij->n", ET, ET))
+            with np.errstate(divide="ignore"):
+                bound = cond_a * (1.0 + e) / (1.0 - e)
+            unsure = ~((e < 1.0) & (bound < SINGULAR_CONDITION))
+    if not unsure.any():
+        return
+    cond = np.full(m, 0.0)
+    cond[unsure] = np.linalg.cond(np.swapaxes(JsT[unsure], 1, 2))
+    singular = ~(cond < SINGULAR_CONDITION)
+    if np.any(singular):
+        i = int(np.argmax(singular))
+        k = int(rows[i])
+        raise KinematicsError(
+            f"forward kinematics met a singular configuration at row {k} (scaled condition "
+            f"number of the pose Jacobian {cond[i]:.3g})", k)
 
 
 def pose_jacobian_of_joints(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:

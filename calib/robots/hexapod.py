@@ -15,7 +15,7 @@ import numpy as np
 from .. import paper
 from ..validation import as_array
 from ..robot import ClosureJacobians, Parameter, ParameterTable, Robot
-from ..rotation import rotation_matrix, rotation_matrix_derivatives
+from ..rotation import rotation_matrix
 
 __all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS",
            "FULL_WORKSPACE_OFFSETS"]
@@ -142,27 +142,76 @@ class Hexapod(Robot):
 
     # -- kinematics -----------------------------------------------------------------------
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        L, _ = self.leg_vectors(theta, poses)
-        return np.linalg.norm(L, axis=-1) - self.legs(theta)[1][None]
+        return self._leg_geometry(theta, poses)[3] - self.legs(theta)[1]
 
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
         return self.inverse_kinematics(theta, poses) - joints
 
+    def _leg_geometry(self, theta: np.ndarray, poses: np.ndarray):
+        """``(R, w, L, norm, sg, cg)``: (N, 3, 3) rotations, ``w = R P_i`` and leg vectors
+        ``L = R P_i + t - B_i`` as three (N, 6) coordinate arrays each, (N, 6) leg lengths
+        ``|L|`` and (N, 1) ``sin``/``cos`` of gamma. Written coordinate by coordinate on (N, 6)
+        arrays, the fastest numpy layout for these small vectors."""
+        B, _, P = self.legs(theta)
+        n = poses.shape[0]
+        c, s = np.cos(poses[:, 3:6]), np.sin(poses[:, 3:6])
+        ca, cb, cg = c[:, 0:1], c[:, 1:2], c[:, 2:3]  # (N, 1) columns, broadcast over the legs
+        sa, sb, sg = s[:, 0:1], s[:, 1:2], s[:, 2:3]
+        R = np.empty((n, 3, 3))
+        R[:, 0, 0:1] = cg * cb
+        R[:, 0, 1:2] = cg * sb * sa - sg * ca
+        R[:, 0, 2:3] = cg * sb * ca + sg * sa
+        R[:, 1, 0:1] = sg * cb
+        R[:, 1, 1:2] = sg * sb * sa + cg * ca
+        R[:, 1, 2:3] = sg * sb * ca - cg * sa
+        R[:, 2, 0:1] = -sb
+        R[:, 2, 1:2] = cb * sa
+        R[:, 2, 2:3] = cb * ca
+        Px, Py, Pz = P[:, 0], P[:, 1], P[:, 2]
+        w = [R[:, i, 0:1] * Px + R[:, i, 1:2] * Py + R[:, i, 2:3] * Pz for i in range(3)]
+        L = [w[i] + (poses[:, i:i + 1] - B[:, i]) for i in range(3)]
+        norm = np.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
+        return R, w, L, norm, sg, cg
+
+    def _legs_and_pose_jacobian(self, theta: np.ndarray, poses: np.ndarray, closure_of=None):
+        """One pass over the legs: ``(Jt, R, r)``: (N, 6, 6) ``dF / d pose`` *transposed*
+        (``Jt[n, k, i] = dF_i / d pose_k``; ``Jt[:, 0:3]`` are the unit leg vectors), (N, 3, 3)
+        rotations and, when ``closure_of`` (the joints, (N, 6)) is given, (N, 6) closure
+        residuals (else None).
+
+        With ``w_i = R P_i`` and ``R = Rz Ry Rx``, the angle columns are
+        ``dF_i/d alpha = (R e_x) . (w_i x u_i)``, ``dF_i/d beta = (Rz e_y) . (w_i x u_i)``,
+        ``dF_i/d gamma = e_z . (w_i x u_i)`` (as ``dR/d alpha = R [e_x]x``, ``dR/d beta =
+        [Rz e_y]x R``, ``dR/d gamma = [e_z]x R``): no derivative matrices, one cross product."""
+        R, w, L, norm, sg, cg = self._leg_geometry(theta, poses)
+        inv = 1.0 / norm
+        Jt = np.empty((poses.shape[0], 6, 6))
+        for i in range(3):
+            np.multiply(L[i], inv, out=Jt[:, i])
+        ux, uy, uz = Jt[:, 0], Jt[:, 1], Jt[:, 2]
+        mx = w[1] * uz - w[2] * uy  # m = w x u
+        my = w[2] * ux - w[0] * uz
+        mz = w[0] * uy - w[1] * ux
+        Jt[:, 3] = R[:, 0, 0:1] * mx + R[:, 1, 0:1] * my + R[:, 2, 0:1] * mz
+        Jt[:, 4] = cg * my - sg * mx
+        Jt[:, 5] = mz
+        r = None if closure_of is None else (norm - self.legs(theta)[1]) - closure_of
+        return Jt, R, r
+
     def _pose_jacobian(self, theta: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(Jpose, u, R)``: (N, 6, 6) ``dF / d pose``, (N, 6, 3) unit leg vectors, (N, 3, 3)
         rotations; one computation for :meth:`closure_jacobians` and :meth:`closure_pose_jacobian`."""
-        _, _, P = self.legs(theta)
-        L, R = self.leg_vectors(theta, poses)
-        u = L / np.linalg.norm(L, axis=-1, keepdims=True)
-        dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
-        dP = np.einsum("nkij,lj->nlki", dR, P)  # (N, 6 legs, 3 angles, 3)
-        Jpose = np.empty((poses.shape[0], 6, 6))
-        Jpose[:, :, 0:3] = u
-        Jpose[:, :, 3:6] = np.einsum("nli,nlki->nlk", u, dP)
-        return Jpose, u, R
+        Jt, R, _ = self._legs_and_pose_jacobian(theta, poses)
+        J = np.ascontiguousarray(Jt.transpose(0, 2, 1))
+        return J, J[:, :, 0:3], R
 
     def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
         return self._pose_jacobian(theta, poses)[0]
+
+    def closure_and_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray,
+                                  poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Jt, _, r = self._legs_and_pose_jacobian(theta, poses, closure_of=joints)
+        return r, Jt.transpose(0, 2, 1)
 
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
         Jpose, u, R = self._pose_jacobian(theta, poses)
