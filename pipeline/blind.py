@@ -35,9 +35,10 @@ from calib.effects import EFFECTS, effects_for
 from calib.effects.discovery import MAX_BAD_FRACTION, SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
+from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
 from .executor import task_pool
 
-__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "rates_table",
+__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "rates_table", "run",
            "main"]
 
 #: The kinds of recording (see the module docstring).
@@ -234,30 +235,30 @@ def rates_table(results: list[dict]) -> str:
     return "\n".join(rows)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m pipeline.blind", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+def run(argv: list[str] | None = None) -> list[dict]:
+    """Parse ``argv``, run the suite, print the rates; raises on bad input (see :func:`main`)."""
+    ap = ArgumentParser(prog="python -m pipeline.blind", description=__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robot", choices=tuple(ROBOTS), default="hexapod", help="the robot simulated")
     ap.add_argument("--effects", nargs="+", default=None,
                     help="single-effect recordings (default every effect that applies to the robot, and none)")
     ap.add_argument("--kinds", nargs="+", default=["single"], choices=KINDS, help="analyses to run")
     ap.add_argument("--pairs", nargs="+", default=None, metavar="A,B", help="pairs for --kinds pair (default all)")
-    ap.add_argument("--seeds", type=int, default=20, help="recordings per effect (or pair)")
-    ap.add_argument("--first-seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--seeds", type=positive_int, default=20, help="recordings per effect (or pair)")
+    ap.add_argument("--first-seed", type=nonnegative_int, default=0)
+    ap.add_argument("--workers", type=positive_int, default=None)
     a = ap.parse_args(argv)
 
     def progress(done, total):
         if done == total or done % max(1, total // 10) == 0:
             print(f"  {done}/{total} recordings", file=sys.stderr, flush=True)
 
+    pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:
-        pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
         res = run_blind_suite(a.effects, range(a.first_seed, a.first_seed + a.seeds), robot=a.robot, kinds=a.kinds,
                               pairs=pairs, workers=a.workers, progress=progress)
-    except (ValueError, NotImplementedError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except NotImplementedError as exc:
+        raise ValueError(str(exc)) from None
     print(f"robot: {a.robot}")
     print(rates_table(res))
     for r in res:
@@ -265,7 +266,12 @@ def main(argv: list[str] | None = None) -> int:
         if failed:
             print(f"  {_group(r)} seed {r['seed']}: {', '.join(failed)} failed; named {r['named'] or 'none'}, "
                   f"explained {r['explained']}, follows {r['follows'][:3]}, flagged {r['flagged']}")
-    return 0
+    return res
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.blind``: exit 2 and one line on a bad input."""
+    return cli_main(run, argv)
 
 
 if __name__ == "__main__":

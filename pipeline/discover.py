@@ -30,10 +30,11 @@ from calib.effects import (EFFECTS, Discovery, EffectData, EffectFit, closure_no
 from calib.robot import Robot
 from calib.robots import ROBOTS
 
+from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from .recording import Recording, atomic_write, read_recording
 from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
 
-__all__ = ["discover", "DiscoveryReport", "resimulate", "main", "RESIMULATION_SETTLE_VELOCITY"]
+__all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY"]
 
 #: At rest to 1e-7 m/s (or rad/s) is ample for micrometre comparisons (the settled pose is then
 #: within about 1e-10 m), and several times faster than the testbed's default.
@@ -349,7 +350,7 @@ def _names(text: str) -> tuple[str, ...]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = ArgumentParser(
         prog="python -m pipeline.discover",
         description="Find the physics a robot's geometric model leaves out: calibrate the geometry, locate "
                     f"the mismatch, name the effect ({', '.join(EFFECTS)}; those that apply to the robot), fit it, "
@@ -363,11 +364,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", choices=tuple(ROBOTS), default=None,
                    help="the robot of --scenario (default hexapod); with --real, the robot the file must be of "
                         "(default: the one its sidecar names)")
-    p.add_argument("--scenario-seed", type=int, default=0, help="seed of the --scenario recording")
+    p.add_argument("--scenario-seed", type=nonnegative_int, default=0, help="seed of the --scenario recording")
     p.add_argument("--candidates", type=_names, default=None, metavar="EFFECT[,EFFECT...]",
                    help="narrow the library to these effects (comma-separated; default every effect that applies to "
                         "the robot)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the held-out split and cross-validation folds")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the held-out split and cross-validation folds")
     p.add_argument("--no-resim", action="store_true", help="skip the MuJoCo re-simulation")
     p.add_argument("--no-sysid", action="store_true", help="re-simulate without the mujoco.sysid re-fit")
     p.add_argument("--out", type=Path, default=Path("recordings"), help="folder of the .rrd")
@@ -377,33 +378,41 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def run(argv: list[str] | None = None) -> DiscoveryReport:
+    """Parse ``argv``, analyse, write the ``.rrd`` (and ``--summary-json``), print the report;
+    raises on bad input (see :func:`main`)."""
     args = build_parser().parse_args(argv)
-    try:
-        if args.real is not None:
-            rec = read_recording(args.real)
-            stem = args.real.stem
-        else:
-            robot_name = args.robot or "hexapod"
-            rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)
-            stem = f"{robot_name}_{'+'.join(args.scenario)}_{args.scenario_seed}"
-        robot = recording_robot(rec)
-        if args.robot is not None and robot.name != args.robot:
-            raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
-        report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid,
-                          candidates=args.candidates)
-        name = args.name or f"{stem}_discover"
-        rrd = _log_rrd(args.out / f"{name}.rrd", robot, rec, report, args.overwrite)
-        report.summary["rrd"] = str(rrd)
-        if args.summary_json is not None:
-            atomic_write(args.summary_json, json.dumps(report.summary, indent=1), overwrite=True)
-    except (FileExistsError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    if args.real is not None:
+        rec = read_recording(args.real)
+        stem = args.real.stem
+    else:
+        robot_name = args.robot or "hexapod"
+        stem = f"{robot_name}_{'+'.join(args.scenario)}_{args.scenario_seed}"
+        rec = None
+    name = args.name or f"{stem}_discover"
+    rrd_path = args.out / f"{name}.rrd"
+    # Every output is checked before the analysis (which can take a minute with re-simulation).
+    check_outputs({"--out": rrd_path, "--summary-json": args.summary_json}, overwrite=args.overwrite)
+    if rec is None:
+        rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)
+    robot = recording_robot(rec)
+    if args.robot is not None and robot.name != args.robot:
+        raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
+    report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid,
+                      candidates=args.candidates)
+    rrd = _log_rrd(rrd_path, robot, rec, report, args.overwrite)
+    report.summary["rrd"] = str(rrd)
+    if args.summary_json is not None:
+        atomic_write(args.summary_json, json.dumps(report.summary, indent=1), overwrite=args.overwrite)
     for line in report_lines(report.summary):
         print(line)
     print(f"wrote {report.summary['rrd']}")
-    return 0
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.discover``: exit 2 and one line on a bad input or output."""
+    return cli_main(run, argv)
 
 
 if __name__ == "__main__":

@@ -179,6 +179,15 @@ def test_cli_candidates_narrow_the_library_and_the_unknown_is_said_first(tmp_pat
 
 
 def test_cli_refuses_an_unknown_candidate(tmp_path, capsys):
-    with pytest.raises(SystemExit):
-        main(["--scenario", "none", "--no-resim", "--out", str(tmp_path), "--candidates", "magic"])
+    assert main(["--scenario", "none", "--no-resim", "--out", str(tmp_path), "--candidates", "magic"]) == 2
     assert "unknown effect 'magic'" in capsys.readouterr().err
+
+
+def test_cli_never_replaces_a_summary_and_checks_outputs_before_the_analysis(tmp_path, capsys, monkeypatch):
+    import pipeline.discover
+
+    summary = tmp_path / "s.json"
+    summary.write_text("{}")
+    monkeypatch.setattr(pipeline.discover, "effect_recording", lambda *a, **k: pytest.fail("analysis started"))
+    assert main(["--scenario", "none", "--no-resim", "--out", str(tmp_path), "--summary-json", str(summary)]) == 2
+    assert "--summary-json" in capsys.readouterr().err and summary.read_text() == "{}"

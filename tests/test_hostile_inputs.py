@@ -423,3 +423,31 @@ def test_flagged_rows_are_named_by_their_data_row_whatever_the_order_of_sets(wor
     write_recording(csv_path, shuffled, overwrite=True)
     s = run(["--real", str(csv_path), "--out", str(out), "--quiet"]).summary
     assert s["flagged_poses"] == [10] and s["outliers"]["left_out"]
+
+
+# --------------------------------------------------------------------------- the other command lines
+
+
+@pytest.mark.parametrize("module,argv,needle", [
+    ("pipeline.blind", ["--seeds", "0"], "--seeds: expected an integer >= 1, got 0"),
+    ("pipeline.blind", ["--seeds", "-1"], "--seeds: expected an integer >= 1, got -1"),
+    ("pipeline.blind", ["--first-seed", "-1"], "--first-seed: expected an integer >= 0, got -1"),
+    ("pipeline.blind", ["--workers", "0"], "--workers: expected an integer >= 1, got 0"),
+    ("pipeline.discover", ["--real", "MISSING"], "file not found"),
+    ("pipeline.discover", ["--real", "FOLDER"], "is a folder"),
+    ("pipeline.discover", ["--real", "REC", "--candidates", "moon_phase"], "unknown effect 'moon_phase'"),
+])
+def test_other_command_lines_refuse_bad_input(module, argv, needle, work, capsys):
+    """Exit 2, one line, no traceback, before any work (the blind suite would otherwise run)."""
+    import importlib
+
+    csv_path, out = work
+    argv = [{"MISSING": str(out / "none.csv"), "FOLDER": str(out), "REC": str(csv_path)}.get(a, a) for a in argv]
+    before = snapshot(out)
+    capsys.readouterr()
+    code = importlib.import_module(module).main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err and needle in lines[0], err
+    assert snapshot(out) == before
