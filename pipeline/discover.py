@@ -30,6 +30,8 @@ from calib.effects import (EFFECTS, Discovery, EffectData, EffectFit, closure_no
 from calib.robot import Robot
 from calib.robots import ROBOTS
 
+from calib.effects.discovery import MIN_ROWS
+
 from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from .recording import Recording, atomic_write, read_recording
 from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
@@ -179,12 +181,15 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         candidates = effects_for(robot)
     names = [registered_effect(c).name for c in candidates]
     cal = np.flatnonzero(rec.sets == "calibration")
+    val = np.flatnonzero(rec.sets == "validation")
+    analysed_all = cal.size < MIN_ROWS <= len(rec.sets)
+    if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
+        cal, val = np.arange(len(rec.sets)), np.zeros(0, dtype=int)
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
     disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed)
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
-    val = np.flatnonzero(rec.sets == "validation")
     if val.size:
         held, train = val, kept
         basis = "recorded validation rows"
@@ -193,6 +198,9 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         n_held = max(1, int(round(heldout_fraction * kept.size)))
         held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
         basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
+        if analysed_all:
+            basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
+                      f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
     h = _heldout(data, disc.chosen, held, train)
     scan = disc.outliers
     summary = {
@@ -392,6 +400,12 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     name = args.name or f"{stem}_discover"
     rrd_path = args.out / f"{name}.rrd"
     # Every output is checked before the analysis (which can take a minute with re-simulation).
+    if args.out.exists() and not args.out.is_dir():
+        raise ValueError(f"--out {args.out}: is a file, not a folder")
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out {args.out}: cannot create the folder: {exc.strerror or exc}") from None
     check_outputs({"--out": rrd_path, "--summary-json": args.summary_json}, overwrite=args.overwrite)
     if rec is None:
         rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)

@@ -191,3 +191,13 @@ def test_cli_never_replaces_a_summary_and_checks_outputs_before_the_analysis(tmp
     monkeypatch.setattr(pipeline.discover, "effect_recording", lambda *a, **k: pytest.fail("analysis started"))
     assert main(["--scenario", "none", "--no-resim", "--out", str(tmp_path), "--summary-json", str(summary)]) == 2
     assert "--summary-json" in capsys.readouterr().err and summary.read_text() == "{}"
+
+
+def test_a_run_recording_with_few_calibration_rows_is_analysed_whole(tmp_path):
+    """A pipeline.run recording (10 calibration + 50 validation rows): every row is evidence."""
+    from pipeline.run import run
+
+    run(["--heldout", "20", "--out", str(tmp_path), "--name", "r", "--quiet"])
+    rep = discover(read_recording(tmp_path / "r.csv"), resim=False)
+    assert rep.summary["explained"] and rep.summary["effects"] == []
+    assert "every row analysed" in rep.summary["heldout_basis"]
