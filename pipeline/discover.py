@@ -36,7 +36,9 @@ from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from .recording import Recording, atomic_write, read_recording
 from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
 
-__all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY"]
+__all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY",
+           "PLOTTED_QUANTITIES", "quantity_values", "verdict_quantity", "discovery_markdown", "verdict_words",
+           "report_lines", "write_rrd", "model_words"]
 
 #: At rest to 1e-7 m/s (or rad/s) is ample for micrometre comparisons (the settled pose is then
 #: within about 1e-10 m), and several times faster than the testbed's default.
@@ -238,9 +240,14 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     return DiscoveryReport(discovery=disc, summary=summary)
 
 
+def model_words(effects) -> str:
+    """``geometry alone`` or ``geometry + a + b``."""
+    return "geometry + " + " + ".join(effects) if effects else "geometry alone"
+
+
 def verdict_words(explained: bool, effects: list, remaining: dict) -> str:
     """The verdict in one sentence (the first line the terminal prints)."""
-    model = "geometry + " + " + ".join(effects) if effects else "geometry alone"
+    model = model_words(effects)
     if explained:
         return f"Explained: {model} leaves {remaining['summary']}."
     partial = (f" Named but partial: {', '.join(effects)} (structure remains)." if effects and remaining.get("follows")
@@ -302,50 +309,199 @@ def report_lines(s: dict) -> list[str]:
     return lines
 
 
-def _log_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, overwrite: bool) -> Path:
+#: The quantities the discovery file always plots the residuals against (the fourth chart is the
+#: one the verdict names); names as in :data:`calib.effects.FOLLOWED_QUANTITIES`.
+PLOTTED_QUANTITIES = ("time", "stroke", "direction of the last move")
+
+
+#: Size of each residual plot of the discovery file (2D view units, about pixels at 1600x900).
+CHART_W, CHART_H = 600.0, 160.0
+
+
+def quantity_values(data: EffectData, name: str) -> tuple[np.ndarray, str]:
+    """(N, C) values of a quantity the remainder is tested against (``remaining['follows']``,
+    an effect's ``follows``: time, the direction or size of each joint's last move, its stroke,
+    the load it carries, ``position <coordinate>``) and the axis label that says its unit."""
+    robot, n, c = data.robot, data.n, data.robot.n_chains
+    unit = robot.joint_unit
+    if name == "time":
+        span = float(np.ptp(data.t_s)) if n else 0.0
+        scale, word = (60.0, "min") if span > 600 else (1.0, "s")
+        return np.broadcast_to(data.t_s[:, None] / scale, (n, c)), f"time ({word})"
+    if name == "direction of the last move":
+        # -1 decreasing, +1 increasing; each side spread by row order so that the points do not pile up.
+        spread = 0.6 * (np.arange(n) / max(n - 1, 1) - 0.5)
+        return data.direction + spread[:, None], "last move: -1 decreasing, +1 increasing (spread by row)"
+    if name == "size of the last move":
+        return np.abs(data.last_move), f"size of the last move ({unit})"
+    if name == "stroke":
+        return data.stroke, f"stroke from the centre of travel ({unit})"
+    if name == "load":
+        load = EFFECTS["compliance"].joint_regressors(robot, data.theta, data)[..., 0]
+        what = "axial share of the platform's weight" if unit == "mm" else "joint torque per unit platform weight (mm)"
+        return load, f"load: {what}"
+    if name.startswith("position "):
+        k = robot.pose_names.index(name.split(" ", 1)[1])
+        unit_k = "rad" if robot.angle_pose_mask[k] else "mm"
+        return np.broadcast_to(data.measured[:, k:k + 1], (n, c)), f"{name} ({unit_k})"
+    raise ValueError(f"unknown quantity {name!r}")
+
+
+def verdict_quantity(s: dict) -> tuple[str, str]:
+    """The quantity the discovery file plots beside time, stroke and direction, and why: what the
+    remainder follows, else what a named effect follows, else the quantity whose structure test is
+    the strongest (the size of the last move or the load before a pose coordinate)."""
+    fixed = set(PLOTTED_QUANTITIES)
+    for q in s["remaining"].get("follows", []):
+        if q not in fixed:
+            return q, "the remainder follows it"
+    for e in s["effects"]:
+        q = EFFECTS[e].follows
+        if q and q not in fixed:
+            return q, f"{e} follows it"
+    structure = s["tests"]["structure"]  # the physical quantities first, then the pose coordinates
+    rest = sorted((q for q in structure if q not in fixed), key=lambda q: (q.startswith("position "),
+                                                                         -structure[q]["score"]))
+    if rest:
+        p = structure[rest[0]]["p_value"]
+        return rest[0], f"strongest test left, p = {p:.2g}"
+    return "stroke", "no other quantity tested"
+
+
+def _um(v_mm: float) -> str:
+    return f"{1e3 * v_mm:.2f}"
+
+
+def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
+    """The discovery file's summary panel: the verdict first, then short tables."""
+    rem = s["remaining"]
+    model = model_words(s["effects"])
+    lines = [f"# {'Explained' if s['explained'] else 'NOT explained'}", "", s["verdict"], "",
+             "| what remains | |", "|---|---|",
+             f"| model | {model} |",
+             f"| residual RMS | {_um(rem['rms_mm'])} um (noise floor {_um(rem['noise_floor_mm'])} um) |",
+             f"| whitened | {rem['noise_ratio']:.2f} x the declared noise |",
+             f"| follows | {', '.join(rem['follows']) or 'none of the quantities tested'} |",
+             f"| on {chain_word}s | {', '.join(map(str, rem['chains'])) or 'none'} |",
+             f"| held-out RMS | {_um(s['heldout_rms_before_mm'])} -> {_um(s['heldout_rms_after_mm'])} um |",
+             f"| flagged rows | {', '.join(map(str, s['flagged_poses'])) or 'none'} |"]
+    if s["outliers"]["model_wrong"]:
+        lines.append(f"| bad rows | {len(s['outliers']['bad_rows'])} of {s['rows']}: model wrong, none left out |")
+    if s["effects"]:
+        lines += ["", "| effect | coefficient | value | +- | unit |", "|---|---|---|---|---|"]
+        for e in s["effects"]:
+            for k, v in s["effect_parameters"][e].items():
+                if k != "significance":
+                    unc = f"{v['std']:.2g}" if np.isfinite(v["std"]) else ""
+                    lines.append(f"| {e} | {k} | {v['value']:.4g} | {unc} | {v['unit']} |")
+    ev = s["evidence"]
+    lines += ["", "| candidate | BIC drop alone | CV RMS | named |", "|---|---|---|---|",
+              f"| (geometry) | 0 | {ev['none']['cv_whitened_rms']:.2f} | |"]
+    for c in s["candidates"]:
+        e = ev.get(c, {})
+        lines.append(f"| {c} | {e.get('delta_bic_vs_none', float('nan')):.0f} | "
+                     f"{e.get('cv_whitened_rms', float('nan')):.2f} | {'yes' if c in s['effects'] else ''} |")
+    lines += ["", "BIC drop: evidence against geometry alone (an effect needs 10 to enter); CV RMS: "
+              "cross-validated whitened residual (1 = the noise)."]
+    for a in s["aliases"]:
+        lines += ["", f"Cannot tell apart: {a['named']} and {a['rival']} (within {a['delta_bic']:.1f} BIC)."]
+    r = s.get("mujoco_resimulation")
+    if r:
+        lines += ["", f"MuJoCo re-simulation, position RMS: {r['before']['position_um']:.2f} -> "
+                      f"{r['after']['position_um']:.2f} um."]
+    lines += ["", "Geometry alone, where the mismatch is:"] + [f"- {t}" for t in s["located"]["summary"]]
+    return "\n".join(lines)
+
+
+def write_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport, *, overwrite: bool = False) -> Path:
+    """The discovery file: the verdict first, the residuals before and after against time, stroke,
+    the direction of the last move and the quantity the verdict names, the candidates' evidence
+    by name, flagged rows marked (see docs/rerun_views.md)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from .rerun_log import save_recording
+    from .rerun_log import (APP_IDS, FLAG_COLOR, MACHINE_COLORS, chain_colors, chart_view, log_named_bars,
+                            log_residual_scatter, save_recording)
 
     disc, s = report.discovery, report.summary
-    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(disc.kept)
-    before = disc.geometry.residuals
-    after = disc.chosen.residuals
+    rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(rows)
+    before = 1e3 * disc.geometry.predict(data)[0]
+    after = 1e3 * disc.chosen.predict(data)[0]
+    flagged = [int(i) for i in np.flatnonzero(np.isin(rows, disc.flagged))]
     chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]
+    model = model_words(s["effects"])
+    models = ("geometry alone", f"{model}, own scale")
+    follows = set(s["remaining"].get("follows", []))
+    extra, why = verdict_quantity(s)
+    charts = [(q, "the remainder follows it" if q in follows else "") for q in PLOTTED_QUANTITIES] + [(extra, why)]
     candidates = s["candidates"]
+    ev = s["evidence"]
+
+    def signed_log(v):
+        v = np.asarray(v, dtype=float)
+        return np.sign(v) * np.log10(1.0 + np.abs(v))
 
     def log(r):
-        r.log("residuals/before_um", rr.SeriesLines(names=chains), static=True)
-        r.log("residuals/after_um", rr.SeriesLines(names=chains), static=True)
-        for k, j in enumerate(disc.kept):
-            r.set_time("measurement", sequence=int(j))
-            r.set_time("time", duration=float(rec.t_s[j]))
-            r.log("residuals/before_um", rr.Scalars(1e3 * before[k]))
-            r.log("residuals/after_um", rr.Scalars(1e3 * after[k]))
-            r.log("residuals/rms_um/before", rr.Scalars(float(1e3 * np.sqrt(np.mean(before[k] ** 2)))))
-            r.log("residuals/rms_um/after", rr.Scalars(float(1e3 * np.sqrt(np.mean(after[k] ** 2)))))
-        r.log("per_chain/rms_before_um", rr.BarChart(1e3 * np.sqrt(np.mean(before ** 2, axis=0))), static=True)
-        r.log("per_chain/rms_after_um", rr.BarChart(1e3 * np.sqrt(np.mean(after ** 2, axis=0))), static=True)
-        bic = [s["evidence"].get(e, {}).get("delta_bic_vs_none", 0.0) for e in candidates]
-        r.log("evidence/delta_bic", rr.BarChart(np.array(bic)), static=True)
-        r.log("evidence/candidates", rr.TextDocument(", ".join(candidates)), static=True)
-        md = "# Discovery\n\n" + "\n".join(f"- {line}" for line in report_lines(s))
-        r.log("summary", rr.TextDocument(md, media_type=rr.MediaType.MARKDOWN), static=True)
+        for q, _ in charts:
+            x, label = quantity_values(data, q)
+            path = f"vs/{q.replace(' ', '_')}"
+            log_residual_scatter(r, path, x, before, after, x_label=label, chain_names=chains,
+                                 flagged=flagged, rows=rows + 1, models=models, width=CHART_W, height=CHART_H,
+                                 same_scale=False)
+            # The colour key of the chains under the charts (the same colours as in the run file).
+            r.log(f"{path}/chain_key", rr.Points2D([(60 + (CHART_W - 120) * j / max(len(chains) - 1, 1),
+                                                     2 * CHART_H + 38)
+                                                    for j in range(len(chains))], radii=3.0,
+                                                   colors=chain_colors(len(chains)), labels=chains,
+                                                   show_labels=True), static=True)
+        named = set(s["effects"])
+        order = [c for c in candidates if c in named] + [c for c in candidates if c not in named]
+        alone = [ev.get(c, {}).get("delta_bic_vs_none", np.nan) for c in order]
+        entered = [ev.get(c, {}).get("delta_bic_when_added", np.nan) for c in order]
+        log_named_bars(r, "evidence", order, [("alone (vs geometry)", signed_log(alone), (235, 205, 60)),
+                                              ("when it entered", signed_log(entered), MACHINE_COLORS["calibrated"])],
+                       unit="signed log10(1 + |BIC drop|)", groups=[1 if c in named else 0 for c in order],
+                       group_names=["not named", "named (in the model)"], title="Evidence per candidate",
+                       note="an effect needs a BIC drop of 10 (1.04 here) and a lower CV residual", name_px=130.0)
+        r.log("summary", rr.TextDocument(discovery_markdown(s, robot.chain_word), media_type=rr.MediaType.MARKDOWN),
+              static=True)
         r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
         r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)
-        r.log("stroke/direction", rr.BarChart(data.direction.mean(axis=0)), static=True)
+        # The RMS of each row's residual on the `measurement` timeline (the recording's 1-based row).
+        grey, blue = MACHINE_COLORS["nominal"], MACHINE_COLORS["calibrated"]
+        r.log("per_row/rms_um", rr.SeriesLines(names=["geometry alone", model], colors=[grey, blue]), static=True)
+        rms = np.c_[np.sqrt(np.mean(before ** 2, axis=1)), np.sqrt(np.mean(after ** 2, axis=1))]
+        r.send_columns("per_row/rms_um", indexes=[rr.TimeColumn("measurement", sequence=rows + 1)],
+                       columns=rr.Scalars.columns(scalars=rms))
+        if flagged:
+            r.log("per_row/rms_um/flagged", rr.SeriesPoints(colors=FLAG_COLOR, names="flagged row", marker_sizes=6.0),
+                  static=True)
+            r.send_columns("per_row/rms_um/flagged", indexes=[rr.TimeColumn("measurement", sequence=rows[flagged] + 1)],
+                           columns=rr.Scalars.columns(scalars=rms[flagged, 0]))
 
-    bp = rrb.Blueprint(rrb.Horizontal(
-        rrb.Vertical(rrb.TimeSeriesView(origin="residuals/before_um", name="Closure residuals before (um)"),
-                     rrb.TimeSeriesView(origin="residuals/after_um", name="Closure residuals after (um)"),
-                     rrb.TimeSeriesView(origin="residuals/rms_um", name="Per-measurement RMS (um)")),
-        rrb.Vertical(rrb.BarChartView(origin="per_chain/rms_before_um", name=f"Per-{robot.chain_word} RMS before (um)"),
-                     rrb.BarChartView(origin="per_chain/rms_after_um", name=f"Per-{robot.chain_word} RMS after (um)"),
-                     rrb.BarChartView(origin="evidence/delta_bic", name="Delta BIC per candidate")),
-        rrb.Vertical(rrb.TextDocumentView(origin="verdict", name="Verdict"),
-                     rrb.TextDocumentView(origin="summary", name="Summary"))), collapse_panels=True)
-    return save_recording(path, log, overwrite=overwrite, bp=bp)
+    def view(q, note):  # framed on the two plots and the key (the default bounds leave wide margins)
+        return rrb.Spatial2DView(origin=f"vs/{q.replace(' ', '_')}",
+                                 name=f"Closure residual vs {q}" + (f" ({note})" if note else ""),
+                                 background=(18, 18, 18),
+                                 visual_bounds=rrb.VisualBounds2D(x_range=[-5.0, CHART_W + 5.0],
+                                                                  y_range=[-10.0, 2 * CHART_H + 55.0]))
+
+    views = [view(q, note) for q, note in charts]
+    bp = rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(rrb.TextDocumentView(origin="summary", name="Verdict and summary"),
+                         rrb.Tabs(chart_view("evidence", "Evidence per candidate (BIC drop, named)"),
+                                  rrb.TimeSeriesView(origin="per_row/rms_um",
+                                                     name="Residual RMS per row (um) vs measurement row")),
+                         row_shares=[2, 1]),
+            rrb.Vertical(rrb.Horizontal(views[0], views[1]), rrb.Horizontal(views[2], views[3])),
+            column_shares=[1.2, 2.6]),
+        rrb.TimePanel(timeline="measurement", play_state="paused", state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        collapse_panels=True)
+    return save_recording(path, log, application_id=APP_IDS["discover"], overwrite=overwrite, bp=bp)
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -414,7 +570,7 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
         raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
     report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid,
                       candidates=args.candidates)
-    rrd = _log_rrd(rrd_path, robot, rec, report, args.overwrite)
+    rrd = write_rrd(rrd_path, robot, rec, report, overwrite=args.overwrite)
     report.summary["rrd"] = str(rrd)
     if args.summary_json is not None:
         atomic_write(args.summary_json, json.dumps(report.summary, indent=1), overwrite=args.overwrite)

@@ -289,18 +289,19 @@ def log_plot(rec: rr.RecordingStream, path: str, series, *, x_label: str, y_labe
 
     grid, tick_xy, ticks = [], [], []
     ystep = 1.0 if log_y else nice_step(yhi - ylo, 3)
-    yticks = np.arange(np.ceil(ylo / ystep) * ystep, yhi + ystep / 2, ystep) if (yhi - ylo) / ystep < 40 else [ylo, yhi]
+    yticks = (np.arange(np.ceil(ylo / ystep) * ystep, yhi + 1e-9 * ystep, ystep) if (yhi - ylo) / ystep < 40
+              else [ylo, yhi])  # ticks inside the axes
     for t in yticks:
         p = to_px([xlo, xhi], [t, t])
         grid.append(p)
         tick_xy.append((ox + left / 2, p[0, 1]))
         ticks.append(f"1e{int(round(t))}" if log_y else _fmt(0.0 if abs(t) < 1e-9 * (yhi - ylo) else t))
     xstep = nice_step(xhi - xlo, 4)
-    for t in np.arange(np.ceil(xlo / xstep) * xstep, xhi + xstep / 2, xstep):
+    for t in np.arange(np.ceil(xlo / xstep) * xstep, xhi + 1e-9 * xstep, xstep):  # ticks inside the axes
         p = to_px([t, t], [ylo, yhi])
         grid.append(p)
         tick_xy.append((p[0, 0], oy + up + ph + 10))
-        ticks.append(_fmt(t))
+        ticks.append(_fmt(0.0 if abs(t) < 1e-9 * (xhi - xlo) else t))
     rec.log(f"{path}/grid", rr.LineStrips2D(grid, radii=0.5, colors=GRID_COLOR), static=True)
     _text(rec, f"{path}/ticks", tick_xy, ticks, (160, 160, 160))
     _text(rec, f"{path}/labels", [(ox + left + pw / 2, oy + up + ph + 25), (ox + left + pw / 2, oy + 8)],
@@ -328,12 +329,18 @@ def log_plot(rec: rr.RecordingStream, path: str, series, *, x_label: str, y_labe
 
 
 def log_residual_scatter(rec: rr.RecordingStream, path: str, x, before, after, *, x_label: str,
-                         chain_names, flagged=(), unit: str = "um", title: str = "") -> None:
+                         chain_names, flagged=(), unit: str = "um", title: str = "", rows=None,
+                         models=("before", "after"), width: float = 420.0, height: float = 220.0,
+                         same_scale: bool = True) -> None:
     """Residuals of each chain against a quantity, before (top) and after (bottom), one y scale.
 
     For the discovery file: residuals against time, stroke, direction of the last move, or the
     quantity the verdict names. ``before``/``after``: (N, C) in ``unit``; ``x``: (N,) or (N, C)
-    (per chain, e.g. the stroke of each chain); ``flagged``: row indices to mark.
+    (per chain, e.g. the stroke of each chain); ``flagged``: row indices to mark; ``rows``: (N,)
+    the number written on a marked row (default its index + 1); ``models``: what the top and
+    the bottom residuals are of (their y labels); ``width``, ``height``: of each of the two plots
+    (drawn ``height + 20`` apart); ``same_scale``: one y scale for both (else each its own, so
+    that a remainder much smaller than the residual before still shows its shape).
     """
     before, after = np.asarray(before, float), np.asarray(after, float)
     n, c = before.shape
@@ -341,12 +348,21 @@ def log_residual_scatter(rec: rr.RecordingStream, path: str, x, before, after, *
     both = np.concatenate([before.ravel(), after.ravel()])
     both = both[np.isfinite(both)]
     lim = float(np.abs(both).max()) if both.size else 1.0
+    lims = {"before": lim, "after": lim}
+    if not same_scale:
+        for name, res in (("before", before), ("after", after)):
+            v = np.abs(res[np.isfinite(res)])
+            lims[name] = float(v.max()) if v.size and v.max() > 0 else 1.0
+    for name, v in lims.items():  # up to log_plot's tick step when that is larger (else no tick but 0)
+        lims[name] = max(v, nice_step(2 * v, 3))
+    number = np.arange(1, n + 1) if rows is None else np.asarray(rows, dtype=int).reshape(n)
     for k, (name, res) in enumerate((("before", before), ("after", after))):
         series = [(chain_names[j], xx[:, j], res[:, j], chain_color(j)) for j in range(c)]
         marks = [(xx[i, int(np.nanargmax(np.abs(res[i])))], res[i, int(np.nanargmax(np.abs(res[i])))],
-                  f"flagged row {i + 1}") for i in flagged]
-        log_plot(rec, f"{path}/{name}", series, x_label=x_label, y_label=f"residual {name} ({unit})",
-                 title=title, marks=marks, y_range=(-lim, lim), origin=(0.0, k * 240.0), lines=False)
+                  f"flagged row {number[i]}") for i in flagged]
+        log_plot(rec, f"{path}/{name}", series, x_label=x_label, y_label=f"residual {models[k]} ({unit})",
+                 title=title, marks=marks, y_range=(-lims[name], lims[name]), origin=(0.0, k * (height + 20.0)),
+                 lines=False, width=width, height=height)
 
 
 def log_series_by_pose(rec: rr.RecordingStream, path: str, values, names, colors=None, *, start: int = 0) -> None:

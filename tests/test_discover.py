@@ -138,8 +138,8 @@ def test_cli_names_fits_resimulates_and_logs(tmp_path, capsys):
     friction_n = rec.meta["simulation"]["machine"]["options"]["joint_friction"]
     assert abs(r["sysid"]["value"] - friction_n) < r["sysid"]["interval_95"] + 0.01
     ents = rrd_entities(tmp_path / "friction_discover.rrd")
-    assert {"/residuals/before_um", "/residuals/after_um", "/per_chain/rms_before_um", "/summary", "/verdict",
-            "/remaining"} <= ents
+    assert {"/vs/time/before/series/leg_1", "/vs/stroke/after/series/leg_6", "/evidence/names", "/per_row/rms_um",
+            "/vs/direction_of_the_last_move/before/grid", "/summary", "/verdict", "/remaining"} <= ents
 
 
 def test_cli_bad_file(tmp_path, capsys):

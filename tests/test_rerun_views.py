@@ -1,6 +1,8 @@
 """The Rerun files read back: every view of the default blueprint shows data on the timeline active
 at open, parameter bars carry names, each tool has its own application id, the snapshot command."""
 
+import json
+
 import numpy as np
 import pytest
 import rerun as rr
@@ -100,14 +102,73 @@ def test_run_and_discovery_files_keep_their_own_layouts(robot_run, tmp_path):
     assert rrd_labels(disc, "/stroke/before/marks") == ["flagged row 4"]
 
 
-@pytest.mark.xfail(strict=False, reason="pipeline.discover is being rewritten; it must pass "
-                                        "application_id=APP_IDS['discover'] to save_recording")
 def test_discover_writes_under_its_own_application_id():
     import inspect
 
     import pipeline.discover
 
     assert 'APP_IDS["discover"]' in inspect.getsource(pipeline.discover)
+
+
+def _text(rrd, entity):
+    from rerun.chunk import RrdReader
+
+    chunk = next(c for c in RrdReader(str(rrd)).stream().to_chunks() if str(c.entity_path) == entity)
+    return chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+
+
+def test_discovery_file_read_back(tmp_path):
+    """The discovery file as the CLI writes it: its own application id, the `measurement` timeline
+    active (no time axis), every view with data, the verdict first, residuals against time,
+    stroke, direction and the verdict's quantity, candidate bars named by effect."""
+    from calib.effects import EFFECTS
+    from pipeline.discover import main as discover_main
+
+    summary = tmp_path / "s.json"
+    assert discover_main(["--scenario", "thermal_drift", "--scenario-seed", "3", "--no-resim", "--out", str(tmp_path),
+                          "--name", "d", "--candidates", "joint_friction,actuator_scale",
+                          "--summary-json", str(summary)]) == 0
+    s = json.loads(summary.read_text())
+    rrd = tmp_path / "d.rrd"
+    assert rrd_application_ids(rrd) == {APP_IDS["discover"]}
+    bp = rrd_blueprint(rrd)
+    assert bp["timeline"] == "measurement"
+    assert empty_views(rrd) == []
+    origins = {v["origin"] for v in bp["views"]}
+    assert {"summary", "evidence", "per_row/rms_um", "vs/time", "vs/stroke", "vs/direction_of_the_last_move"} <= origins
+    assert len([o for o in origins if o.startswith("vs/")]) == 4
+    names = {v["origin"]: v["name"] for v in bp["views"]}
+    assert not s["explained"] and s["remaining"]["follows"][0] == "time"
+    assert "the remainder follows it" in names["vs/time"]
+    text = _text(rrd, "/summary")
+    assert text.startswith("# NOT explained") and s["verdict"] in text.splitlines()[2]
+    bars = rrd_labels(rrd, "/evidence/bars/alone_vs_geometry")
+    assert sorted(bars) == sorted(s["candidates"]) and set(bars) <= set(EFFECTS)
+    assert rrd_labels(rrd, "/evidence/names") == bars
+    ents = rrd_entities(rrd)
+    for q in ("time", "stroke", "direction_of_the_last_move"):
+        for part in ("before", "after"):
+            assert f"/vs/{q}/{part}/series/leg_1" in ents
+
+
+def test_discovery_file_marks_flagged_rows(tmp_path):
+    from dataclasses import replace
+
+    from pipeline.discover import discover, write_rrd
+    from pipeline.scenarios import effect_recording, recording_robot
+
+    rec = effect_recording("joint_friction", 3, n_poses=60)
+    m = rec.measured.copy()
+    m[[10, 30, 47], :3] += np.array([0.02, -0.02, 0.0])  # three rows 28 um off
+    rec = replace(rec, measured=m)
+    rep = discover(rec, resim=False)
+    assert rep.summary["flagged_poses"] == [11, 31, 48]
+    rrd = write_rrd(tmp_path / "g.rrd", recording_robot(rec), rec, rep)
+    assert empty_views(rrd) == []
+    for q in ("time", "stroke"):
+        assert rrd_labels(rrd, f"/vs/{q}/before/marks") == ["flagged row 11", "flagged row 31", "flagged row 48"]
+    assert "| flagged rows | 11, 31, 48 |" in _text(rrd, "/summary")
+    assert "/per_row/rms_um/flagged" in rrd_entities(rrd)
 
 
 def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys):
