@@ -598,6 +598,7 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
             fk = robot.forward_kinematics(nominal, q, initial=np.repeat(robot.home_pose[None], len(q), axis=0))
         except KinematicsError:
             fk = None
+    check_convention = False
     if fk is not None:
         pos = ~angle
         e1 = np.median(np.abs(m[:, pos] - fk[:, pos]))
@@ -617,18 +618,19 @@ def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
                 cols = [c for c, a in zip(pose_cols, angle) if a]
                 raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to be in degrees "
                                      "(they match the joints once converted from degrees); a recording holds rad")
-            if in_base_frame and int(angle.sum()) == 3 and int((rec.sets == "calibration").sum()) >= 2:
-                other = _other_rotation_convention(rec)
-                if other is not None:
-                    cols = [c for c, a in zip(pose_cols, angle) if a]
-                    raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to follow {other}; "
-                                         f"a recording holds {ROTATION_CONVENTION}")
+            check_convention = in_base_frame and int(angle.sum()) == 3 and int((rec.sets == "calibration").sum()) >= 2
     bound = np.where(angle, 2 * np.pi, 100.0 * robot.length_scale_mm)
     far = np.abs(m) > bound
     if far.any():
         r, c = np.argwhere(far)[0]
         what = "not an angle in rad" if angle[c] else f"far beyond the {robot.name}'s reach"
         raise RecordingError(f"{_row(path, r)}, column {pose_cols[c]!r}: {m[r, c]:.6g} is {what}")
+    if fk is not None and angle.any() and check_convention:  # after the magnitudes: a fit needs sane values
+        other = _other_rotation_convention(rec)
+        if other is not None:
+            cols = [c for c, a in zip(pose_cols, angle) if a]
+            raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to follow {other}; "
+                                 f"a recording holds {ROTATION_CONVENTION}")
     full = np.column_stack([rec.t_s, q, m])
     body = np.column_stack([q, m])
     first: dict[bytes, int] = {}
