@@ -34,6 +34,9 @@ MAX_BATCH_STEPS = 512
 #: Assembly (the warm start): Gauss-Newton on the closures until every residual is below this, m.
 ASSEMBLY_TOLERANCE_M = 1e-13
 ASSEMBLY_MAX_ITERATIONS = 30
+#: ... the damping of its normal equations, relative to their largest diagonal entry (directions
+#: the closures leave free, e.g. a rod's spin, get no step).
+ASSEMBLY_DAMPING = 1e-12
 #: ... and, while the platform is steered onto its branch, until it is this close to its pose (m, rad).
 ASSEMBLY_POSE_TOLERANCE = 1e-9
 #: Loaded machine (gravity, payload): Newton to the rest point, at most this many steps, the
@@ -178,7 +181,9 @@ class Testbed:
                                     or np.any(m.actuator_gear[:, 0] == 0))
                            else np.setdiff1d(np.arange(m.nv), m.jnt_dofadr[m.actuator_trnid[:, 0]]))
         self._actuated_qpos = m.jnt_qposadr[m.actuator_trnid[:, 0]]
+        self._actuated_gear = m.actuator_gear[:, 0].copy()
         self._site = m.site(PLATFORM_SITE).id
+        self._rest_inverse = None
 
     def servo_reference(self, joints: np.ndarray, time_s: float) -> np.ndarray:
         """(C,) the joint values the servos are sent for commanded ``joints`` at ``time_s``:
@@ -299,7 +304,7 @@ class Testbed:
         if free is None:
             return False
         ctrl = mc.ctrl(self.servo_reference(np.asarray(joints, dtype=float), 0.0))
-        data.qpos[self._actuated_qpos] = ctrl / m.actuator_gear[:, 0]
+        data.qpos[self._actuated_qpos] = ctrl / self._actuated_gear
         if pose is not None:
             pose = np.asarray(pose, dtype=float)
             target_pos = mm_to_m(pose[:3])
@@ -309,9 +314,9 @@ class Testbed:
         step = np.zeros(m.nv)
         for _ in range(ASSEMBLY_MAX_ITERATIONS):
             mujoco.mj_fwdPosition(m, data)
-            eq = data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-            res = -data.efc_pos[eq]
-            jac = data.efc_J.reshape(data.nefc, m.nv)[eq]
+            ne = data.ne  # the equality rows come first
+            res = -data.efc_pos[:ne]
+            jac = data.efc_J[:ne * m.nv].reshape(ne, m.nv)
             if pose is not None:
                 site = self._site
                 err = target_pos - data.site_xpos[site]
@@ -322,19 +327,23 @@ class Testbed:
                     err, rows = np.concatenate([err, err_rot]), np.concatenate([jacp, jacr])
                 else:
                     rows = jacp
-                if np.max(np.abs(err)) < ASSEMBLY_POSE_TOLERANCE:
+                if abs(err).max() < ASSEMBLY_POSE_TOLERANCE:
                     pose = None  # on the branch: the closures alone from here
                 else:
                     res, jac = np.concatenate([res, err]), np.concatenate([jac, rows])
-            if pose is None and (res.size == 0 or np.max(np.abs(res)) < ASSEMBLY_TOLERANCE_M):
+            if pose is None and (res.size == 0 or abs(res).max() < ASSEMBLY_TOLERANCE_M):
                 data.qvel[:] = 0.0
                 return True
             jac = jac[:, free]
-            # Damped least squares (minimum norm where the closures leave freedom, e.g. a rod's spin).
+            # Least squares; minimum norm where the closures leave freedom.
+            # Cholesky by MuJoCo (small matrices: numpy's per-call overhead would dominate).
             wide = jac.shape[0] <= jac.shape[1]
             a = jac @ jac.T if wide else jac.T @ jac
-            a.flat[::len(a) + 1] += 1e-14 * np.trace(a)
-            step[free] = jac.T @ np.linalg.solve(a, res) if wide else np.linalg.solve(a, jac.T @ res)
+            a.flat[::len(a) + 1] += ASSEMBLY_DAMPING * a.diagonal().max()
+            mujoco.mju_cholFactor(a, 0.0)
+            x = np.empty(len(a))
+            mujoco.mju_cholSolve(x, a, res if wide else jac.T @ res)
+            step[free] = jac.T @ x if wide else x
             mujoco.mj_integratePos(m, data.qpos, step, 1.0)
         mc.reset(data)
         return False
@@ -359,7 +368,8 @@ class Testbed:
         limit = self.settle_velocity / m.opt.timestep
         acc = data.qacc.copy()
         first = np.max(np.abs(acc))
-        norm, inverse = first, None
+        # Start from the previous pose's stiffness (poses differ little in it); fresh when stale.
+        norm, inverse, fresh = first, self._rest_inverse, False
         stiffness, unit = np.empty((nv, nv)), np.zeros(nv)
         for _ in range(REST_MAX_ITERATIONS):
             if norm < limit:
@@ -374,15 +384,24 @@ class Testbed:
                     mujoco.mj_forward(m, data)
                     stiffness[:, i] = (data.qacc - acc) / eps
                 data.qpos[:] = here
-                inverse = np.linalg.pinv(stiffness, rcond=REST_RCOND)
+                inverse = self._rest_inverse = np.linalg.pinv(stiffness, rcond=REST_RCOND)
+                fresh = True
+            before = data.qpos.copy()
             mujoco.mj_integratePos(m, data.qpos, -inverse @ acc, 1.0)
             mujoco.mj_forward(m, data)
-            acc, previous = data.qacc.copy(), norm
-            norm = np.max(np.abs(acc))
+            previous = norm
+            norm = np.max(np.abs(data.qacc))
+            if not fresh and not norm < 0.1 * previous:  # a stale stiffness: undo, measure it here
+                data.qpos[:] = before
+                mujoco.mj_forward(m, data)
+                norm, inverse = previous, None
+                continue
+            acc = data.qacc.copy()
             if not np.isfinite(norm) or norm > 1e3 * first:
                 break
             if norm > 0.1 * previous:
                 inverse = None
+            fresh = False
         if norm < limit:
             return True
         data.qpos[:] = start
@@ -406,7 +425,7 @@ class Testbed:
         scratch = mujoco.MjData(m)
         start = np.empty((n, nstate))
         # The platform's pose at the actuated joints' unloaded values picks each pose's branch.
-        at = ctrl / m.actuator_gear[:, 0] / mc.joint_scale + mc.joint_offset
+        at = ctrl / self._actuated_gear / mc.joint_scale + mc.joint_offset
         try:
             poses = self.robot.forward_kinematics(mc.theta, at)
         except (ValueError, ArithmeticError):  # no solution found: the closures alone
