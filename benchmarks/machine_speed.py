@@ -160,9 +160,11 @@ def main(argv: list[str] | None = None) -> int:
             # What the default run cannot go below: the libraries it needs, nothing else.
             w = c = np.inf
             for _ in range(a.repeats):
-                wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.optimize, mujoco, rerun"], {"MUJOCO_GL": "disable"})
+                wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.optimize, mujoco, rerun"],
+                                      {"MUJOCO_GL": "disable"})
                 w, c = min(w, wi), min(c, ci)
-            print(f"  {'floor':<12} import numpy, scipy.optimize, mujoco (no OpenGL), rerun: {w:.2f} s wall ({c:.2f} s CPU)")
+            print(f"  {'floor':<12} import numpy, scipy.optimize, mujoco (no OpenGL), rerun: "
+                  f"{w:.2f} s wall ({c:.2f} s CPU)")
     print(f"\n{load()}")
     return 0
 

@@ -3,7 +3,9 @@ the platform pose sensors, add seeded sensor noise.
 
 The machine is built by :func:`mjcf.build_machine` from the robot and its true parameter vector;
 the conversion between the project's units (mm, rad) and MuJoCo's SI happens in the
-:class:`mjcf.machine.Machine` it returns (through :mod:`mjcf.units`).
+:class:`mjcf.machine.Machine` it returns (through :mod:`mjcf.units`). Poses without history
+(no friction, drift or screw error) settle together in ``mujoco.rollout`` from warm starts;
+the others one after another (see :class:`Testbed`, "Settling").
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ import numpy as np
 
 from calib.noise import SensorNoise
 from calib.robot import Robot
-from mjcf import build_machine
 from calib.rotation import rotation_matrix
+from mjcf import build_machine
 from mjcf.machine import PLATFORM_SITE, MachineEffects, MachineOptions
 from mjcf.units import mm_to_m
 
@@ -121,12 +123,16 @@ class Testbed:
 
     Settling. ``sequential``: each pose starts from the previous pose's settled state, one after
     another (the history the friction's hysteresis and the drift's clock need). ``rollout``: the
-    poses are independent, so each starts from the machine assembled at its own command (the
-    closures solved by Gauss-Newton with the actuated joints at their servo references: a warm
-    start at rest, no physics) and all are stepped together, on every core, by
-    ``mujoco.rollout`` in batches of steps (8, 16, 32, ...) until each is at rest; physics
-    still settles each pose (gravity and payload load the servos from there). The settled poses
-    agree with the sequential ones to within what the settle velocity leaves (tests/test_testbed.py).
+    poses are independent, so each starts at rest from a warm start of its own
+    (:meth:`assemble`: the closures solved by Gauss-Newton with the actuated joints at their
+    servo references and the platform steered onto its branch by the forward kinematics; for a
+    loaded machine, :meth:`rest`: Newton on MuJoCo's own accelerations to where gravity, payload,
+    servos and closures balance), and all are stepped together, on every core, by
+    ``mujoco.rollout`` in batches of steps (8, 16, 32, ...) until each is at rest by the same
+    test as the sequential settle (at least :data:`MIN_SETTLE_STEPS` steps, every joint speed
+    below ``settle_velocity``): physics decides where each pose rests. The settled poses agree
+    with the sequential ones to within what the settle velocity leaves, about 1e-8 mm and
+    1e-10 rad (tests/test_testbed.py), in about 6 steps a pose instead of 350-650.
     ``auto`` uses the rollout when the physics has no history: no joint friction, no drift, no
     screw error and no ``times_s`` given; the sequential path otherwise. In the rollout, ``t_s``
     is the time the machine spends settling the poses one after another from the warm start.
@@ -177,9 +183,9 @@ class Testbed:
         m = self.model
         #: dofs the assembly solves (all but the actuated ones); None when the warm start is
         #: unavailable (an actuator not on a joint, a zero gear, a sparse constraint Jacobian).
-        self._free_dofs = (None if (np.any(m.actuator_trntype != mujoco.mjtTrn.mjTRN_JOINT) or mujoco.mj_isSparse(m)
-                                    or np.any(m.actuator_gear[:, 0] == 0))
-                           else np.setdiff1d(np.arange(m.nv), m.jnt_dofadr[m.actuator_trnid[:, 0]]))
+        warm = not (np.any(m.actuator_trntype != int(mujoco.mjtTrn.mjTRN_JOINT)) or mujoco.mj_isSparse(m)
+                    or np.any(m.actuator_gear[:, 0] == 0))
+        self._free_dofs = np.setdiff1d(np.arange(m.nv), m.jnt_dofadr[m.actuator_trnid[:, 0]]) if warm else None
         self._actuated_qpos = m.jnt_qposadr[m.actuator_trnid[:, 0]]
         self._actuated_gear = m.actuator_gear[:, 0].copy()
         self._site = m.site(PLATFORM_SITE).id
