@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from .engine import identify_forward
 from .noise import SensorNoise
@@ -94,7 +94,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
     if n * d <= p + d:
         raise ValueError(f"outlier detection needs more than {(p + d) // d} poses for {p} parameters "
                          f"(one left out), got {n}")
-    thr = float(chi2.ppf(1 - alpha, d))
+    thr = float(2.0 * gammaincinv(d / 2.0, 1 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, d), bit for bit
     most = max(1, math.floor(max_fraction * n))
     std = noise.pose_std(robot.pose_units)
     kept = np.ones(n, dtype=bool)

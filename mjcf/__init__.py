@@ -3,28 +3,56 @@
 
 Adding a robot: write its builder module (``build_machine(robot, theta, options) -> Machine``, the
 contract of :mod:`mjcf.machine`) and add one line to :data:`MACHINES`.
+
+MuJoCo and the builder modules are imported when first used: ``import mjcf.units`` does not load
+MuJoCo.
 """
 
-from calib.robot import Robot
+from __future__ import annotations
 
-from . import delta, hexapod, rus
-from .machine import GRAVITY_M_S2, Machine, MachineEffects, MachineOptions
+import importlib
+from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING
+
 from .units import M_PER_MM, m_to_mm, mm_to_m
+
+if TYPE_CHECKING:
+    from calib.robot import Robot
+
+    from .machine import Machine, MachineOptions
 
 __all__ = ["MACHINES", "build_machine", "Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2",
            "M_PER_MM", "m_to_mm", "mm_to_m"]
 
-#: robot name -> its builder ``build_machine(robot, theta, options) -> Machine``.
-MACHINES = {
-    "hexapod": hexapod.build_machine,
-    "delta": delta.build_machine,
-    "rus": rus.build_machine,
-}
+
+class _Builders(Mapping):
+    """robot name -> builder function, each builder module imported on first use."""
+
+    def __init__(self, modules: dict[str, str]):
+        self._modules = dict(modules)
+
+    def __getitem__(self, name: str):
+        return importlib.import_module(f".{self._modules[name]}", __name__).build_machine
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._modules)
+
+    def __len__(self) -> int:
+        return len(self._modules)
 
 
-def build_machine(robot: Robot, theta, options: MachineOptions = MachineOptions()) -> Machine:
+#: robot name -> its builder ``build_machine(robot, theta, options) -> Machine`` (module ``mjcf.<name>``).
+MACHINES: Mapping = _Builders({
+    "hexapod": "hexapod",
+    "delta": "delta",
+    "rus": "rus",
+})
+
+
+def build_machine(robot: Robot, theta, options: MachineOptions | None = None) -> Machine:
     """The compiled machine of ``robot`` (a :class:`calib.robot.Robot`) with parameters ``theta``
-    ((P,), mm and rad), built by the builder registered under ``robot.name``.
+    ((P,), mm and rad), built by the builder registered under ``robot.name``; ``options`` a
+    :class:`mjcf.machine.MachineOptions` (default: the defaults).
 
     Raises:
         KeyError: no builder for this robot (the message lists the registered ones).
@@ -34,4 +62,16 @@ def build_machine(robot: Robot, theta, options: MachineOptions = MachineOptions(
     except KeyError:
         raise KeyError(f"no MuJoCo machine for robot {robot.name!r}: machines exist for "
                        f"{', '.join(sorted(MACHINES))}") from None
+    if options is None:
+        from .machine import MachineOptions
+
+        options = MachineOptions()
     return builder(robot, theta, options)
+
+
+def __getattr__(name: str):
+    if name in ("Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2"):
+        value = getattr(importlib.import_module(".machine", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'mjcf' has no attribute {name!r}")

@@ -1,21 +1,26 @@
 """``python -m pipeline.run``: calibrate any registered robot, simulated or from a recording.
 
 Thin: parses the flags, calls :func:`pipeline.calibration.run_calibration`, prints the summary.
+The calibration (and with it MuJoCo and Rerun) is imported when a run starts, not for ``--help``.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from calib import paper
 from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
-from .calibration import RunResult, RunSettings, run_calibration
 from .cli import ArgumentParser, cli_main
+
+if TYPE_CHECKING:
+    from .calibration import RunResult, RunSettings
 
 __all__ = ["main", "build_parser", "settings_from_args", "run", "print_summary"]
 
@@ -97,6 +102,8 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
     if args.real is not None and not args.real.is_file():
         raise ValueError(f"--real {args.real}: " + ("is a folder, not a recording" if args.real.is_dir()
                                                      else "file not found"))
+    from .calibration import RunSettings
+
     fields = {k: v for k, v in vars(args).items() if k != "quiet"}
     return RunSettings(**fields)
 
@@ -159,6 +166,8 @@ def print_summary(s: dict) -> None:
 def run(argv: list[str] | None = None) -> RunResult:
     """Parse ``argv`` and run (for Python callers and tests); raises on bad input."""
     args = build_parser().parse_args(argv)
+    from .calibration import run_calibration
+
     result = run_calibration(settings_from_args(args), progress=_progress(not args.quiet))
     if args.summary_json is not None:
         result.summary["summary_json"] = str(args.summary_json)
@@ -168,7 +177,12 @@ def run(argv: list[str] | None = None) -> RunResult:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run; a bad input or output ends with one line on stderr and exit status 2."""
+    """Run; a bad input or output ends with one line on stderr and exit status 2.
+
+    The command renders nothing: unless ``MUJOCO_GL`` says otherwise, MuJoCo is imported without
+    its OpenGL backend (a third of MuJoCo's import time).
+    """
+    os.environ.setdefault("MUJOCO_GL", "disable")
     return cli_main(run, argv)
 
 

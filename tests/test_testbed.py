@@ -5,7 +5,9 @@ import pytest
 
 from calib.noise import SensorNoise
 from calib.paper import TABLE3_ERRORS
+from calib.robots import default_robot, reference_errors
 from calib.robots.hexapod import paper_hexapod
+from calib.workspace import reachable_poses
 from mjcf.machine import MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
 from pipeline.testbed import SettleError, Testbed
@@ -106,9 +108,12 @@ def test_transmission_scale_moves_the_legs_1_plus_s_times_the_stroke():
 
 
 def test_step_cap_raises_a_clear_error():
-    bed = Testbed(ROBOT, ACTUAL, max_steps=20)
+    bed = Testbed(ROBOT, ACTUAL, max_steps=20, settle="sequential")
     with pytest.raises(SettleError, match=r"did not settle within 20 steps .* mm: max joint speed"):
         bed.measure(commands(1, 3))
+    # The rollout starts at rest but still steps MIN_SETTLE_STEPS before it may call a pose settled.
+    with pytest.raises(SettleError, match=r"did not settle within 5 steps .* mm: max joint speed"):
+        Testbed(ROBOT, ACTUAL, max_steps=5, settle="rollout").measure(commands(3, 3))
 
 
 def test_validation():
@@ -122,3 +127,69 @@ def test_validation():
         Testbed(ROBOT, ACTUAL, settle_velocity=0.0)
     with pytest.raises(ValueError, match="max_steps must be a positive integer, got 0"):
         Testbed(ROBOT, ACTUAL, max_steps=0)
+
+
+@pytest.mark.parametrize("robot_name, options", [
+    ("hexapod", MachineOptions()),
+    ("hexapod", MachineOptions(gravity=True, payload_kg=5.0)),
+    ("hexapod", MachineOptions(transmission_scale=(1e-3, -2e-3, 0.0, 5e-4, 0.0, -1e-3))),
+    ("delta", MachineOptions()),
+    ("delta", MachineOptions(gravity=True, payload_kg=2.0)),
+    ("rus", MachineOptions()),
+    ("rus", MachineOptions(gravity=True)),
+])
+def test_rollout_settles_where_the_sequential_settle_does(robot_name, options):
+    robot = default_robot(robot_name)
+    theta = robot.table.nominal + reference_errors(robot, 0)
+    joints = robot.inverse_kinematics(robot.table.nominal, reachable_poses(robot, 8, 3))
+    noise = SensorNoise(0.001, 1e-6 if robot.pose_dim == 6 else 0.0, joint=1e-4)
+    seq = Testbed(robot, theta, options=options, noise=noise, seed=5, settle="sequential")
+    par = Testbed(robot, theta, options=options, noise=noise, seed=5, settle="rollout", threads=2)
+    assert Testbed(robot, theta, options=options).uses_rollout() and not seq.uses_rollout()
+    a, b = seq.measure(joints), par.measure(joints)
+    # The same rest: the settle velocity (1e-9 m/s, rad/s) leaves nanometres.
+    np.testing.assert_allclose(b.true_poses[:, :3], a.true_poses[:, :3], rtol=0, atol=1e-6)  # mm
+    np.testing.assert_allclose(b.true_poses[:, 3:], a.true_poses[:, 3:], rtol=0, atol=1e-9)  # rad
+    np.testing.assert_allclose(b.settled_joints, a.settled_joints, rtol=0, atol=1e-6)
+    # The same noise draws, to the bit.
+    np.testing.assert_array_equal(b.measured - b.true_poses, a.measured - a.true_poses)
+    np.testing.assert_array_equal(b.encoders, a.encoders)
+    # Fewer steps (from the warm start), still at least MIN_SETTLE_STEPS; time runs on.
+    assert b.steps.min() >= 6 and b.steps.sum() < a.steps.sum() / 5
+    assert np.all(np.diff(b.t_s) > 0)
+    # A second measurement continues the noise stream and the clock, as the sequential one does.
+    c, d = par.measure(joints[:2]), seq.measure(joints[:2])
+    assert c.t_s[0] > b.t_s[-1]
+    np.testing.assert_array_equal(c.measured - c.true_poses, d.measured - d.true_poses)
+
+
+def test_history_effects_settle_one_pose_after_another():
+    fric = Testbed(ROBOT, ACTUAL, options=MachineOptions(joint_friction=1.0))
+    drift = Testbed(ROBOT, ACTUAL, effects=MachineEffects(joint_drift_per_s=1e-4))
+    screw = Testbed(ROBOT, ACTUAL, effects=MachineEffects(screw_amplitude=[1e-3] * 6, screw_phase_rad=[0.0] * 6))
+    plain = Testbed(ROBOT, ACTUAL)
+    assert not fric.uses_rollout() and not drift.uses_rollout() and not screw.uses_rollout()
+    assert plain.uses_rollout() and not plain.uses_rollout(np.zeros(3))
+    for kw in (dict(options=MachineOptions(joint_friction=1.0)), dict(effects=MachineEffects(joint_drift_per_s=1e-4))):
+        with pytest.raises(ValueError, match="settle='rollout' needs physics without history"):
+            Testbed(ROBOT, ACTUAL, settle="rollout", **kw)
+    with pytest.raises(ValueError, match="times_s needs the sequential settle"):
+        Testbed(ROBOT, ACTUAL, settle="rollout").measure(commands(2, 0), times_s=np.zeros(2))
+    with pytest.raises(ValueError, match="settle must be one of auto, rollout, sequential"):
+        Testbed(ROBOT, ACTUAL, settle="parallel")
+    with pytest.raises(ValueError, match="threads must be a positive integer"):
+        Testbed(ROBOT, ACTUAL, threads=0)
+    empty = plain.measure(np.zeros((0, 6)))
+    assert empty.true_poses.shape == (0, 6) and empty.steps.shape == (0,)
+
+
+def test_after_a_rollout_the_machine_rests_at_the_last_pose():
+    joints = commands(3, 4)
+    bed = Testbed(ROBOT, ACTUAL, settle="rollout")
+    m = bed.measure(joints)
+    np.testing.assert_allclose(bed.machine.read_pose(bed.data), m.true_poses[-1], atol=1e-9)
+    assert bed.data.time == pytest.approx(m.t_s[-1])
+    # A sequential settle of the same command from there is already at rest.
+    pose, steps = bed.settle(joints[-1])
+    assert steps == 6
+    np.testing.assert_allclose(pose, m.true_poses[-1], atol=1e-9)
