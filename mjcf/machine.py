@@ -148,16 +148,23 @@ class Machine:
         joint_offset: (C,) joint value (robot unit) at actuated-joint ``qpos = 0``.
         joint_scale: (C,) SI per robot joint unit (``1e-3`` for mm, 1 for rad).
         actuated_joints: (C,) names of the actuated joints, chain order.
+        chain_point_masses_kg: the chains' own masses lumped at their points (every chain alike):
+            one mass per point of :meth:`calib.robot.Robot.chain_points` after the base joint,
+            the last at the platform joint, kg (a link of mass m whose centre of mass sits a
+            fraction f of the way from its inner to its outer point puts ``(1 - f) m`` on the
+            inner point and ``f m`` on the outer one: the same weight torques on the joints);
+            empty where the builder does not lump them.
     """
 
     def __init__(self, robot: Robot, theta: np.ndarray, model: mujoco.MjModel, joint_offset, joint_scale,
-                 actuated_joints: tuple[str, ...]):
+                 actuated_joints: tuple[str, ...], chain_point_masses_kg: tuple = ()):
         self.robot = robot
         self.theta = np.array(theta, dtype=float)
         self.model = model
         self.joint_offset = np.asarray(joint_offset, dtype=float)
         self.joint_scale = np.asarray(joint_scale, dtype=float)
         self.actuated_joints = tuple(actuated_joints)
+        self.chain_point_masses_kg = tuple(float(m) for m in chain_point_masses_kg)
         self.qpos_index = np.array([model.joint(n).qposadr[0] for n in actuated_joints])
         self.dof_index = np.array([model.joint(n).dofadr[0] for n in actuated_joints])
         self._pos = model.sensor(SENSOR_POS).adr[0]

@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 from calib import paper
+from calib.effects.base import unabsorbed
+from calib.effects.compliance import interior_points
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
                            discover_effect, discover_effects, effects_for, fit_effect, fit_effects,
                            regressor_correlation)
@@ -161,6 +163,21 @@ def test_compliance_is_the_gradient_of_the_potential_energy_by_finite_difference
     # The generic statics use the pose Jacobian of the closure (implicit function theorem).
     J = pose_jacobian_of_joints(robot, theta, q, poses)
     np.testing.assert_allclose(Xq[:, :, 0], -J[:, robot.pose_names.index("z"), :], rtol=1e-12)
+    # The chains' own weight, lumped at their interior points (a Delta's elbows, a 6-RUS's crank
+    # tips; none on a hexapod): V = m g sum_i z(point_i(q, FK(q))).
+    k = interior_points(robot)
+    assert Xq.shape[2] == (2 if rotates else 1) + k
+    assert k == (0 if robot_name == "hexapod" else 1)
+
+    def z_points(qq):
+        pose = robot.forward_kinematics(theta, qq, initial=poses)
+        return robot.chain_points(theta, qq, pose)[:, :, 1:-1, 2].sum(axis=1)
+
+    for c in range(robot.n_chains):
+        dq = np.zeros_like(q)
+        dq[:, c] = h * 100
+        grad = (z_points(q + dq) - z_points(q - dq)) / (200 * h)
+        np.testing.assert_allclose(Xq[:, c, Xq.shape[2] - k:], -grad, rtol=1e-5, atol=1e-7)
 
 
 # -------------------------------------------------------------------------- mapping to the MuJoCo machine
@@ -191,7 +208,11 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
     data = synthetic(robot_name, "none", [], n=30)
     eff = EFFECTS[effect]
     sc = eff.scenario(robot, theta, data, 0.005, np.random.default_rng(1), CONTEXT)
-    largest = np.abs(eff.regressors(robot, theta, data, sc.extra) @ sc.coefficients).max()
+    X = eff.regressors(robot, theta, data, sc.extra)
+    if effect == "actuator_scale" and robot.joint_unit == "rad":
+        X = unabsorbed(robot, theta, data, X)  # a revolute scale is nearly a crank length: sized by what is left
+        assert np.abs(eff.regressors(robot, theta, data) @ sc.coefficients).max() > 10 * 0.005
+    largest = np.abs(X @ sc.coefficients).max()
     assert largest == pytest.approx(0.005, rel=1e-9) if not eff.searched else 0.0025 < largest <= 0.005 + 1e-12
 
 
@@ -200,7 +221,7 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
 INJECTED = {
     "hexapod": {"joint_friction": [0.004], "thermal_drift": [5e-5],
                 "actuator_scale": [1e-4, -2e-4, 3e-4, -1e-4, 2e-4, 5e-5], "compliance": [0.01, 0.002]},
-    "delta": {"joint_friction": [2e-5], "actuator_scale": [1e-4, -2e-4, 3e-4], "compliance": [2e-6]},
+    "delta": {"joint_friction": [2e-5], "actuator_scale": [1e-4, -2e-4, 3e-4], "compliance": [2e-6, 1e-6]},
 }
 FIT_CASES = [(r, e, c) for r, d in INJECTED.items() for e, c in d.items()]
 
@@ -234,7 +255,7 @@ DISCOVERY_CASES = [
     # 97% of the Delta's scale regressor lies in the span of its geometry (the joint offsets and
     # arm lengths absorb it): only a large scale error is told apart.
     ("delta", "actuator_scale", [2e-4, -2e-4, 2e-4]),
-    ("delta", "compliance", [2e-7]),
+    ("delta", "compliance", [2e-7, 1e-7]),
 ]
 
 
