@@ -118,24 +118,32 @@ class MachineEffects:
             its encoder says, ``stroke`` the command minus the home joint value.
         screw_phase_rad: (C,) phase of each chain's periodic error, rad.
         screw_pitch: period of the error in stroke, joint unit.
+        instrument_drift_mm_per_s: (3,) velocity of the measuring instrument's frame, mm/s: the
+            testbed adds ``v t`` to every measured position (the machine does not move); empty
+            for none.
     """
 
     joint_drift_per_s: float = 0.0
     screw_amplitude: tuple = ()
     screw_phase_rad: tuple = ()
     screw_pitch: float = 5.0
+    instrument_drift_mm_per_s: tuple = ()
 
     def __post_init__(self) -> None:
-        for name in ("screw_amplitude", "screw_phase_rad"):
+        for name in ("screw_amplitude", "screw_phase_rad", "instrument_drift_mm_per_s"):
             object.__setattr__(self, name, tuple(float(x) for x in getattr(self, name)))
         if len(self.screw_amplitude) != len(self.screw_phase_rad):
             raise ValueError("screw_amplitude and screw_phase_rad must have the same length")
         if not self.screw_pitch > 0:
             raise ValueError(f"screw_pitch must be > 0, got {self.screw_pitch!r}")
+        if len(self.instrument_drift_mm_per_s) not in (0, 3):
+            raise ValueError(f"instrument_drift_mm_per_s must have 3 values (x, y, z), "
+                             f"got {len(self.instrument_drift_mm_per_s)}")
 
     def to_dict(self) -> dict:
         return {"joint_drift_per_s": self.joint_drift_per_s, "screw_amplitude": list(self.screw_amplitude),
-                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch}
+                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch,
+                "instrument_drift_mm_per_s": list(self.instrument_drift_mm_per_s)}
 
 
 class Machine:

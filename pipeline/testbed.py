@@ -81,7 +81,9 @@ class Testbed:
       by friction / stiffness: a dead band whose sign is the direction in which the chain last
       moved (hysteresis). It is applied as a joint force on the actuated dof. MuJoCo's own
       ``frictionloss`` (which the builders write, for the viewer and the dynamics) is a soft
-      constraint: it creeps to the target and leaves no dead band.
+      constraint: it creeps to the target and leaves no dead band;
+    * instrument drift: ``effects.instrument_drift_mm_per_s * t`` added to the measured
+      positions (x, y, z: the first three pose coordinates of every robot), the machine untouched.
 
     Noise: pose noise ``noise.sample`` is drawn after the poses settle, then joint noise
     ``noise.sample_joints`` from the same stream (not drawn at all when ``noise.joint`` is 0).
@@ -187,6 +189,8 @@ class Testbed:
             if progress is not None:
                 progress(k + 1, n)
         measured = true + self.noise.sample(n, self._rng, self.robot.pose_units)
+        if self.effects.instrument_drift_mm_per_s:
+            measured[:, :3] += t[:, None] * np.asarray(self.effects.instrument_drift_mm_per_s)
         encoders = joints.copy()
         if self.noise.joint > 0:
             encoders += self.noise.sample_joints(n, c, self._rng)

@@ -58,7 +58,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
 
 def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
-                             "periodic_screw_error"]
+                             "periodic_screw_error", "instrument_drift"]
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
@@ -69,7 +69,8 @@ def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
 def test_which_effects_apply_to_which_robot():
     assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
     # Rotary motors: no leg grows, no lead screw.
-    assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale")
+    assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale",
+                                                     "instrument_drift")
     for name in ROBOTS:
         assert effects_for(default_robot(name))[0] == "none"
 
@@ -400,7 +401,51 @@ def test_three_gross_rows_are_flagged_and_nothing_else():
 
 def test_aliased_regressors_are_measured():
     corr = regressor_correlation(synthetic("delta", "none", [], seed=4, n=60))
-    assert set(corr) == {("compliance", "joint_friction"), ("compliance", "actuator_scale"),
-                         ("joint_friction", "actuator_scale")}
+    names = effects_for(default_robot("delta"))[1:]
+    assert set(corr) == {(a, b) for i, a in enumerate(names) for b in names[i + 1:]}
     assert all(0.0 <= c <= 1.0 for c in corr.values())
     assert corr[("compliance", "actuator_scale")] > corr[("compliance", "joint_friction")]
+
+
+# -------------------------------------------------------------------------- instrument drift
+
+
+@pytest.mark.parametrize("robot_name", ["hexapod", "delta", "rus"])
+def test_instrument_drift_is_a_moving_frame_not_moving_joints(robot_name):
+    """Independent truth: the machine at its commanded joints, every measured position off by
+    ``v t``; the joint regressors reproduce it to first order and discovery names it."""
+    robot, theta, workspace = machine(robot_name)
+    rng = np.random.default_rng(8)
+    n = 80
+    targets = workspace[:, 0] + rng.uniform(size=(n, robot.pose_dim)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n))
+    true = robot.forward_kinematics(theta, joints, initial=targets)
+    v = np.array([4e-5, -3e-5, 5e-5])  # mm/s: up to 6 um over the recording
+    measured = true.copy()
+    measured[:, :3] += t[:, None] * v
+    eff = EFFECTS["instrument_drift"]
+    # First order: the joints that would put the machine at the measured pose.
+    data = EffectData(robot, robot.table.nominal, joints, measured, t, NOISE)
+    dq = eff.joint_regressors(robot, theta, data) @ v
+    moved = robot.forward_kinematics(theta, joints + dq, initial=measured)
+    assert np.abs(moved - measured)[:, :3].max() < 1e-6
+    noisy = data.with_measured(measured + NOISE.sample(n, 3, robot.pose_units))
+    d = discover_effects(noisy)
+    assert list(d.effects) == ["instrument_drift"] and d.explained, d.verdict
+    fit = d.chosen
+    np.testing.assert_allclose(fit.coefficients, v, atol=5 * fit.coefficient_std.max() + 1e-7)
+
+
+def test_the_testbed_moves_the_measured_positions_only():
+    from mjcf.machine import MachineEffects
+    from pipeline.testbed import Testbed
+
+    robot = default_robot("delta")
+    q = robot.inverse_kinematics(robot.table.nominal, robot.workspace_bounds().mean(axis=1)[None] + [[0, 0, 0], [20, 0, 0]])
+    v = (1e-3, -2e-3, 3e-3)
+    plain = Testbed(robot, robot.table.nominal).measure(q, times_s=np.array([10.0, 20.0]))
+    drift = Testbed(robot, robot.table.nominal, effects=MachineEffects(instrument_drift_mm_per_s=v)).measure(
+        q, times_s=np.array([10.0, 20.0]))
+    np.testing.assert_allclose(drift.settled_joints, plain.settled_joints, atol=1e-12)
+    np.testing.assert_allclose(drift.measured - plain.measured, np.outer([10.0, 20.0], v), atol=1e-12)
