@@ -90,7 +90,9 @@ OTHER_ROBOT_CASES = [(r, e) for r in ("delta", "rus") for e in effects_for(defau
 
 @pytest.mark.parametrize("robot_name,effect", OTHER_ROBOT_CASES)
 def test_every_effect_of_the_delta_and_the_rus_is_named_through_mujoco(robot_name, effect):
-    rec = effect_recording(effect, 3, robot=robot_name, n_poses=40, magnitude_noise=8.0)
+    # 60 poses at 10 x the noise: on the Delta the geometry absorbs 90% of the compliance (a
+    # translating platform), fewer poses or smaller sizes miss it now and then.
+    rec = effect_recording(effect, 3, robot=robot_name, n_poses=60, magnitude_noise=10.0)
     s = discover(rec, resim=False).summary
     assert s["effects"] == ([] if effect == "none" else [effect]), s["verdict"]
     assert s["explained"], s["verdict"]
