@@ -49,11 +49,17 @@ DEFAULT_PLATFORM_MASS_KG = 0.3
 ARM_MASS_KG, ARM_INERTIA = 0.3, 0.002
 #: Forearm (bar) mass, kg.
 FOREARM_MASS_KG = 0.1
+#: The chain's masses lumped at its elbow and at its plate joint, kg: the arm's centre of mass is
+#: half-way to the elbow, the forearm's half-way along the bar (see ``Machine.chain_point_masses_kg``).
+CHAIN_POINT_MASSES_KG = (ARM_MASS_KG / 2 + FOREARM_MASS_KG / 2, FOREARM_MASS_KG / 2)
 #: Damping of the actuated hinge (N m s/rad) and of the passive joints (forearm hinges
 #: N m s/rad, plate slides N s/m).
 ARM_DAMPING, PASSIVE_DAMPING = 0.1, 2.0
-#: Time constant of the closures' soft constraint, s.
-CLOSURE_TIME_CONSTANT_S = 0.005
+#: Soft-constraint impedance of the closures (MuJoCo ``solimp``); their time constant is two
+#: integration steps (MuJoCo's stable minimum). With a time constant of 5 ms instead, the plate
+#: sagged 0.1-0.8 mm under gravity (0-5 kg payload) at the closures, a softness the real
+#: mechanism does not have and that swamped the servo compliance.
+CLOSURE_SOLIMP = (0.99, 0.999, 0.0001, 0.5, 2.0)
 
 
 def _rz(t: float) -> np.ndarray:
@@ -160,7 +166,8 @@ def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = Machin
                       rgba=[0.8, 0.5, 0.2, 1.0])
         fore.add_site(name=f"fa{k}_end", pos=[0.0, 0.0, lb], size=[0.008, 0, 0])
         spec.add_equality(name=f"close{k}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                          name1=f"fa{k}_end", name2=f"plate_c{k}", solref=[CLOSURE_TIME_CONSTANT_S, 1.0])
+                          name1=f"fa{k}_end", name2=f"plate_c{k}", solref=[2 * step, 1.0],
+                          solimp=list(CLOSURE_SOLIMP))
         g = 1.0 / (1.0 + scale[i])
         act = spec.add_actuator(name=f"motor{k}", target=ARM_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT,
                                 gear=[g, 0, 0, 0, 0, 0])
@@ -179,4 +186,5 @@ def build_machine(robot: Delta, theta: np.ndarray, options: MachineOptions = Mac
     Joint values are the arm angles read at the hinges, rad: ``ctrl = q``.
     """
     model = build_spec(robot, theta, options).compile()
-    return Machine(robot, theta, model, joint_offset=np.zeros(3), joint_scale=np.ones(3), actuated_joints=ARM_JOINTS)
+    return Machine(robot, theta, model, joint_offset=np.zeros(3), joint_scale=np.ones(3), actuated_joints=ARM_JOINTS,
+                   chain_point_masses_kg=CHAIN_POINT_MASSES_KG)

@@ -118,24 +118,32 @@ class MachineEffects:
             its encoder says, ``stroke`` the command minus the home joint value.
         screw_phase_rad: (C,) phase of each chain's periodic error, rad.
         screw_pitch: period of the error in stroke, joint unit.
+        instrument_drift_mm_per_s: (3,) velocity of the measuring instrument's frame, mm/s: the
+            testbed adds ``v t`` to every measured position (the machine does not move); empty
+            for none.
     """
 
     joint_drift_per_s: float = 0.0
     screw_amplitude: tuple = ()
     screw_phase_rad: tuple = ()
     screw_pitch: float = 5.0
+    instrument_drift_mm_per_s: tuple = ()
 
     def __post_init__(self) -> None:
-        for name in ("screw_amplitude", "screw_phase_rad"):
+        for name in ("screw_amplitude", "screw_phase_rad", "instrument_drift_mm_per_s"):
             object.__setattr__(self, name, tuple(float(x) for x in getattr(self, name)))
         if len(self.screw_amplitude) != len(self.screw_phase_rad):
             raise ValueError("screw_amplitude and screw_phase_rad must have the same length")
         if not self.screw_pitch > 0:
             raise ValueError(f"screw_pitch must be > 0, got {self.screw_pitch!r}")
+        if len(self.instrument_drift_mm_per_s) not in (0, 3):
+            raise ValueError(f"instrument_drift_mm_per_s must have 3 values (x, y, z), "
+                             f"got {len(self.instrument_drift_mm_per_s)}")
 
     def to_dict(self) -> dict:
         return {"joint_drift_per_s": self.joint_drift_per_s, "screw_amplitude": list(self.screw_amplitude),
-                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch}
+                "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch,
+                "instrument_drift_mm_per_s": list(self.instrument_drift_mm_per_s)}
 
 
 class Machine:
@@ -148,16 +156,23 @@ class Machine:
         joint_offset: (C,) joint value (robot unit) at actuated-joint ``qpos = 0``.
         joint_scale: (C,) SI per robot joint unit (``1e-3`` for mm, 1 for rad).
         actuated_joints: (C,) names of the actuated joints, chain order.
+        chain_point_masses_kg: the chains' own masses lumped at their points (every chain alike):
+            one mass per point of :meth:`calib.robot.Robot.chain_points` after the base joint,
+            the last at the platform joint, kg (a link of mass m whose centre of mass sits a
+            fraction f of the way from its inner to its outer point puts ``(1 - f) m`` on the
+            inner point and ``f m`` on the outer one: the same weight torques on the joints);
+            empty where the builder does not lump them.
     """
 
     def __init__(self, robot: Robot, theta: np.ndarray, model: mujoco.MjModel, joint_offset, joint_scale,
-                 actuated_joints: tuple[str, ...]):
+                 actuated_joints: tuple[str, ...], chain_point_masses_kg: tuple = ()):
         self.robot = robot
         self.theta = np.array(theta, dtype=float)
         self.model = model
         self.joint_offset = np.asarray(joint_offset, dtype=float)
         self.joint_scale = np.asarray(joint_scale, dtype=float)
         self.actuated_joints = tuple(actuated_joints)
+        self.chain_point_masses_kg = tuple(float(m) for m in chain_point_masses_kg)
         self.qpos_index = np.array([model.joint(n).qposadr[0] for n in actuated_joints])
         self.dof_index = np.array([model.joint(n).dofadr[0] for n in actuated_joints])
         self._pos = model.sensor(SENSOR_POS).adr[0]

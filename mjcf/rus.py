@@ -32,6 +32,9 @@ MOTOR_ARMATURE_KG_M2 = 1e-3
 DEFAULT_PLATFORM_MASS_KG = 1.0
 #: Masses of each crank and each rod, kg.
 CRANK_MASS_KG, ROD_MASS_KG = 0.05, 0.02
+#: The chain's masses lumped at its crank tip and at its platform joint, kg: the crank's centre of
+#: mass is half-way to its tip, the rod's half-way along it (see ``Machine.chain_point_masses_kg``).
+CHAIN_POINT_MASSES_KG = (CRANK_MASS_KG / 2 + ROD_MASS_KG / 2, ROD_MASS_KG / 2)
 #: Damping of each rod's ball joint (settles the rod's free spin about its own axis), N m s/rad.
 BALL_DAMPING = 1e-4
 
@@ -136,4 +139,4 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
     gears = 1.0 / (1.0 + np.asarray(scale))
     spec.add_key(name=HOME_KEY, qpos=qpos, ctrl=q_home * gears)
     return Machine(robot, theta, spec.compile(), joint_offset=np.zeros(6), joint_scale=np.ones(6),
-                   actuated_joints=motors)
+                   actuated_joints=motors, chain_point_masses_kg=CHAIN_POINT_MASSES_KG)

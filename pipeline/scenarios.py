@@ -96,7 +96,8 @@ def machine_context(robot: Robot, moving_mass_kg: float | None = None) -> Machin
     return MachineContext(
         moving_mass_kg=float(platform if moving_mass_kg is None else moving_mass_kg),
         platform_mass_kg=platform, payload_height_m=MachineOptions().payload_height_m,
-        gravity_m_s2=GRAVITY_M_S2, m_per_mm=M_PER_MM, servo_stiffness=float(nominal.servo_stiffness.mean()))
+        gravity_m_s2=GRAVITY_M_S2, m_per_mm=M_PER_MM, servo_stiffness=float(nominal.servo_stiffness.mean()),
+        chain_point_masses_kg=nominal.chain_point_masses_kg)
 
 
 def merged_settings(context: MachineContext, settings: dict | None = None) -> dict:

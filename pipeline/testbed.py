@@ -119,7 +119,9 @@ class Testbed:
       by friction / stiffness: a dead band whose sign is the direction in which the chain last
       moved (hysteresis). It is applied as a joint force on the actuated dof. MuJoCo's own
       ``frictionloss`` (which the builders write, for the viewer and the dynamics) is a soft
-      constraint: it creeps to the target and leaves no dead band.
+      constraint: it creeps to the target and leaves no dead band;
+    * instrument drift: ``effects.instrument_drift_mm_per_s * t`` added to the measured
+      positions (x, y, z: the first three pose coordinates of every robot), the machine untouched.
 
     Settling. ``sequential``: each pose starts from the previous pose's settled state, one after
     another (the history the friction's hysteresis and the drift's clock need). ``rollout``: the
@@ -134,7 +136,7 @@ class Testbed:
     with the sequential ones to within what the settle velocity leaves, about 1e-8 mm and
     1e-10 rad (tests/test_testbed.py), in about 6 steps a pose instead of 350-650.
     ``auto`` uses the rollout when the physics has no history: no joint friction, no drift, no
-    screw error and no ``times_s`` given; the sequential path otherwise. In the rollout, ``t_s``
+    instrument drift, no screw error and no ``times_s`` given; the sequential path otherwise. In the rollout, ``t_s``
     is the time the machine spends settling the poses one after another from the warm start.
 
     Noise: pose noise ``noise.sample`` is drawn after the poses settle, then joint noise
@@ -174,10 +176,10 @@ class Testbed:
         self._last_ctrl = self.data.ctrl.copy()
         self._direction = np.zeros(c)
         self.history_free = (options.joint_friction == 0 and effects.joint_drift_per_s == 0
-                             and not np.any(self._screw_amplitude))
+                             and not np.any(self._screw_amplitude) and not np.any(effects.instrument_drift_mm_per_s))
         if settle == "rollout" and not self.history_free:
-            raise ValueError("settle='rollout' needs physics without history (no joint friction, drift or "
-                             "screw error): use 'sequential' or 'auto'")
+            raise ValueError("settle='rollout' needs physics without history (no joint friction, drift, "
+                             "instrument drift or screw error): use 'sequential' or 'auto'")
         self.settle_mode = settle
         self.threads = int(threads) if threads is not None else available_cores()
         m = self.model
@@ -258,6 +260,8 @@ class Testbed:
         else:
             true, read, t, steps = self._settle_sequential(joints, times_s, progress)
         measured = true + self.noise.sample(n, self._rng, self.robot.pose_units)
+        if np.any(self.effects.instrument_drift_mm_per_s):
+            measured[:, :3] += t[:, None] * np.asarray(self.effects.instrument_drift_mm_per_s)
         encoders = joints.copy()
         if self.noise.joint > 0:
             encoders += self.noise.sample_joints(n, c, self._rng)

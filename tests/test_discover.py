@@ -83,6 +83,22 @@ def test_blind_verdict_never_contradicts_its_tests_under_stress():
     assert not _failures(rs, "rows")
 
 
+#: One short recording per effect on the robots other than the hexapod (their rates over many
+#: seeds are measured by benchmarks/blind_rates.py and written in docs/discovery.md).
+OTHER_ROBOT_CASES = [(r, e) for r in ("delta", "rus") for e in effects_for(default_robot(r))]
+
+
+@pytest.mark.parametrize("robot_name,effect", OTHER_ROBOT_CASES)
+def test_every_effect_of_the_delta_and_the_rus_is_named_through_mujoco(robot_name, effect):
+    # 60 poses at 10 x the noise: on the Delta the geometry absorbs 90% of the compliance (a
+    # translating platform), fewer poses or smaller sizes miss it now and then.
+    rec = effect_recording(effect, 3, robot=robot_name, n_poses=60, magnitude_noise=10.0)
+    s = discover(rec, resim=False).summary
+    assert s["effects"] == ([] if effect == "none" else [effect]), s["verdict"]
+    assert s["explained"], s["verdict"]
+    assert len(s["flagged_poses"]) <= 1
+
+
 def other_hexapod() -> Hexapod:
     """A hexapod the tool did not build: larger base, smaller rotated platform, higher home."""
     paper = paper_hexapod()

@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 from calib import paper
+from calib.effects.base import unabsorbed
+from calib.effects.compliance import interior_points
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
                            discover_effect, discover_effects, effects_for, fit_effect, fit_effects,
                            regressor_correlation)
@@ -56,7 +58,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
 
 def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
-                             "periodic_screw_error"]
+                             "periodic_screw_error", "instrument_drift"]
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
@@ -67,7 +69,8 @@ def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
 def test_which_effects_apply_to_which_robot():
     assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
     # Rotary motors: no leg grows, no lead screw.
-    assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale")
+    assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale",
+                                                     "instrument_drift")
     for name in ROBOTS:
         assert effects_for(default_robot(name))[0] == "none"
 
@@ -161,6 +164,21 @@ def test_compliance_is_the_gradient_of_the_potential_energy_by_finite_difference
     # The generic statics use the pose Jacobian of the closure (implicit function theorem).
     J = pose_jacobian_of_joints(robot, theta, q, poses)
     np.testing.assert_allclose(Xq[:, :, 0], -J[:, robot.pose_names.index("z"), :], rtol=1e-12)
+    # The chains' own weight, lumped at their interior points (a Delta's elbows, a 6-RUS's crank
+    # tips; none on a hexapod): V = m g sum_i z(point_i(q, FK(q))).
+    k = interior_points(robot)
+    assert Xq.shape[2] == (2 if rotates else 1) + k
+    assert k == (0 if robot_name == "hexapod" else 1)
+
+    def z_points(qq):
+        pose = robot.forward_kinematics(theta, qq, initial=poses)
+        return robot.chain_points(theta, qq, pose)[:, :, 1:-1, 2].sum(axis=1)
+
+    for c in range(robot.n_chains):
+        dq = np.zeros_like(q)
+        dq[:, c] = h * 100
+        grad = (z_points(q + dq) - z_points(q - dq)) / (200 * h)
+        np.testing.assert_allclose(Xq[:, c, Xq.shape[2] - k:], -grad, rtol=1e-5, atol=1e-7)
 
 
 # -------------------------------------------------------------------------- mapping to the MuJoCo machine
@@ -191,7 +209,11 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
     data = synthetic(robot_name, "none", [], n=30)
     eff = EFFECTS[effect]
     sc = eff.scenario(robot, theta, data, 0.005, np.random.default_rng(1), CONTEXT)
-    largest = np.abs(eff.regressors(robot, theta, data, sc.extra) @ sc.coefficients).max()
+    X = eff.regressors(robot, theta, data, sc.extra)
+    if effect == "actuator_scale" and robot.joint_unit == "rad":
+        X = unabsorbed(robot, theta, data, X)  # a revolute scale is nearly a crank length: sized by what is left
+        assert np.abs(eff.regressors(robot, theta, data) @ sc.coefficients).max() > 10 * 0.005
+    largest = np.abs(X @ sc.coefficients).max()
     assert largest == pytest.approx(0.005, rel=1e-9) if not eff.searched else 0.0025 < largest <= 0.005 + 1e-12
 
 
@@ -200,7 +222,7 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
 INJECTED = {
     "hexapod": {"joint_friction": [0.004], "thermal_drift": [5e-5],
                 "actuator_scale": [1e-4, -2e-4, 3e-4, -1e-4, 2e-4, 5e-5], "compliance": [0.01, 0.002]},
-    "delta": {"joint_friction": [2e-5], "actuator_scale": [1e-4, -2e-4, 3e-4], "compliance": [2e-6]},
+    "delta": {"joint_friction": [2e-5], "actuator_scale": [1e-4, -2e-4, 3e-4], "compliance": [2e-6, 1e-6]},
 }
 FIT_CASES = [(r, e, c) for r, d in INJECTED.items() for e, c in d.items()]
 
@@ -234,7 +256,7 @@ DISCOVERY_CASES = [
     # 97% of the Delta's scale regressor lies in the span of its geometry (the joint offsets and
     # arm lengths absorb it): only a large scale error is told apart.
     ("delta", "actuator_scale", [2e-4, -2e-4, 2e-4]),
-    ("delta", "compliance", [2e-7]),
+    ("delta", "compliance", [2e-7, 1e-7]),
 ]
 
 
@@ -379,7 +401,51 @@ def test_three_gross_rows_are_flagged_and_nothing_else():
 
 def test_aliased_regressors_are_measured():
     corr = regressor_correlation(synthetic("delta", "none", [], seed=4, n=60))
-    assert set(corr) == {("compliance", "joint_friction"), ("compliance", "actuator_scale"),
-                         ("joint_friction", "actuator_scale")}
+    names = effects_for(default_robot("delta"))[1:]
+    assert set(corr) == {(a, b) for i, a in enumerate(names) for b in names[i + 1:]}
     assert all(0.0 <= c <= 1.0 for c in corr.values())
     assert corr[("compliance", "actuator_scale")] > corr[("compliance", "joint_friction")]
+
+
+# -------------------------------------------------------------------------- instrument drift
+
+
+@pytest.mark.parametrize("robot_name", ["hexapod", "delta", "rus"])
+def test_instrument_drift_is_a_moving_frame_not_moving_joints(robot_name):
+    """Independent truth: the machine at its commanded joints, every measured position off by
+    ``v t``; the joint regressors reproduce it to first order and discovery names it."""
+    robot, theta, workspace = machine(robot_name)
+    rng = np.random.default_rng(8)
+    n = 80
+    targets = workspace[:, 0] + rng.uniform(size=(n, robot.pose_dim)) * np.ptp(workspace, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n))
+    true = robot.forward_kinematics(theta, joints, initial=targets)
+    v = np.array([4e-5, -3e-5, 5e-5])  # mm/s: up to 6 um over the recording
+    measured = true.copy()
+    measured[:, :3] += t[:, None] * v
+    eff = EFFECTS["instrument_drift"]
+    # First order: the joints that would put the machine at the measured pose.
+    data = EffectData(robot, robot.table.nominal, joints, measured, t, NOISE)
+    dq = eff.joint_regressors(robot, theta, data) @ v
+    moved = robot.forward_kinematics(theta, joints + dq, initial=measured)
+    assert np.abs(moved - measured)[:, :3].max() < 1e-6
+    noisy = data.with_measured(measured + NOISE.sample(n, 3, robot.pose_units))
+    d = discover_effects(noisy)
+    assert list(d.effects) == ["instrument_drift"] and d.explained, d.verdict
+    fit = d.chosen
+    np.testing.assert_allclose(fit.coefficients, v, atol=5 * fit.coefficient_std.max() + 1e-7)
+
+
+def test_the_testbed_moves_the_measured_positions_only():
+    from mjcf.machine import MachineEffects
+    from pipeline.testbed import Testbed
+
+    robot = default_robot("delta")
+    q = robot.inverse_kinematics(robot.table.nominal, robot.workspace_bounds().mean(axis=1)[None] + [[0, 0, 0], [20, 0, 0]])
+    v = (1e-3, -2e-3, 3e-3)
+    plain = Testbed(robot, robot.table.nominal).measure(q, times_s=np.array([10.0, 20.0]))
+    drift = Testbed(robot, robot.table.nominal, effects=MachineEffects(instrument_drift_mm_per_s=v)).measure(
+        q, times_s=np.array([10.0, 20.0]))
+    np.testing.assert_allclose(drift.settled_joints, plain.settled_joints, atol=1e-12)
+    np.testing.assert_allclose(drift.measured - plain.measured, np.outer([10.0, 20.0], v), atol=1e-12)

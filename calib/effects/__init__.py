@@ -22,7 +22,8 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "Effe
            "closure_noise_std"]
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
-EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error")
+EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error",
+                  "instrument_drift")
 
 #: name -> effect, in the order of :data:`EFFECT_MODULES`.
 EFFECTS: dict[str, Effect] = {

@@ -31,7 +31,7 @@ from ..noise import SensorNoise
 from ..robot import Robot
 
 __all__ = ["FOLLOWED_QUANTITIES", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
-           "EffectData", "Effect", "closure_regressors", "scale_to_magnitude"]
+           "EffectData", "Effect", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
 #: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
 #: time, the direction and size of each joint's last move, each joint's stroke from the centre
@@ -96,6 +96,9 @@ class MachineContext:
         m_per_mm: metres per millimetre.
         servo_stiffness: stiffness of each actuator's position servo, SI (N/m for a prismatic
             joint, N m/rad for a revolute one): it turns a dead band into a friction force.
+        chain_point_masses_kg: each chain's own mass lumped at its points after the base joint
+            (those of ``Robot.chain_points``; the last at the platform joint), kg; empty when
+            the machine does not say (the chains' weight is then left out).
     """
 
     moving_mass_kg: float
@@ -104,6 +107,7 @@ class MachineContext:
     gravity_m_s2: float
     m_per_mm: float
     servo_stiffness: float
+    chain_point_masses_kg: tuple = ()
 
     def si_per_joint_unit(self, robot: Robot) -> float:
         """SI units (m or rad) per joint unit of ``robot`` (mm or rad)."""
@@ -233,6 +237,18 @@ def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.nd
         joint_regressors: (N, C, p) joint displacement per unit coefficient, joint unit.
     """
     return -dF_dq @ joint_regressors
+
+
+def unabsorbed(robot: Robot, theta: np.ndarray, data: "EffectData", X: np.ndarray) -> np.ndarray:
+    """(N, C, p) the part of regressors ``X`` that the robot's free geometric parameters cannot
+    absorb: ``X`` with the closure's parameter columns ``dF/dtheta`` projected out (least squares
+    over every measurement and chain at once)."""
+    G = robot.closure_jacobians(theta, data.joints, data.measured).parameters[:, :, robot.table.indices(robot.free_default)]
+    G = G.reshape(-1, G.shape[-1])
+    U, s, _ = np.linalg.svd(G, full_matrices=False)
+    U = U[:, s > s[0] * 1e-10]
+    x = X.reshape(-1, X.shape[-1])
+    return (x - U @ (U.T @ x)).reshape(X.shape)
 
 
 def scale_to_magnitude(X: np.ndarray, coefficients: np.ndarray, magnitude_mm: float) -> np.ndarray:

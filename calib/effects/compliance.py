@@ -1,5 +1,6 @@
 """``compliance``: each actuator gives way under the load it carries (servo of finite stiffness),
-the loads following from the static equilibrium of the platform under its weight."""
+the loads following from the static equilibrium of the platform under its weight and of the
+chains under their own weight."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from ..robot import Robot, pose_jacobian_of_joints
 from ..rotation import rotation_matrix_derivatives
 from .base import Coefficient, Effect, EffectScenario, PhysicalParameter, scale_to_magnitude
 
-__all__ = ["EFFECT", "Compliance", "COM_HEIGHT_REF_MM", "PAYLOAD_RANGE_KG"]
+__all__ = ["EFFECT", "Compliance", "COM_HEIGHT_REF_MM", "PAYLOAD_RANGE_KG", "interior_points", "chain_point_height_gradient"]
 
 #: Unit of the centre-of-mass height in the second coefficient, mm (conditioning).
 COM_HEIGHT_REF_MM = 100.0
@@ -20,8 +21,52 @@ PAYLOAD_RANGE_KG = (0.0, 5.0)
 EULER_ANGLES = ("alpha", "beta", "gamma")
 
 
+#: Finite-difference steps of the chain points' heights: per joint or pose unit (mm, rad).
+FD_STEP_MM, FD_STEP_RAD = 1e-4, 1e-6
+
+
 def _angle_columns(robot: Robot) -> list[int]:
     return [robot.pose_names.index(a) for a in EULER_ANGLES if a in robot.pose_names]
+
+
+def interior_points(robot: Robot) -> int:
+    """Number of points of each chain between its base joint and its platform joint."""
+    theta = robot.table.nominal
+    home = robot.home_pose[None]
+    return robot.chain_points(theta, robot.inverse_kinematics(theta, home), home).shape[2] - 2
+
+
+def _step(unit: str) -> float:
+    return FD_STEP_RAD if unit == "rad" else FD_STEP_MM
+
+
+def chain_point_height_gradient(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray,
+                                pose_jacobian: np.ndarray) -> np.ndarray:
+    """(N, C, K) ``sum_j d z_jk / d q_i`` along the mechanism (the pose following the joints):
+    the height gradient of the chains' interior points k, mm per joint unit (central differences
+    on :meth:`~calib.robot.Robot.chain_points`).
+
+    Args:
+        pose_jacobian: (N, D, C) ``d pose / d q`` at the same configurations.
+    """
+    def z(q, x):
+        return robot.chain_points(theta, q, x)[:, :, 1:-1, 2].sum(axis=1)  # (N, K) summed over chains
+
+    n, c = joints.shape
+    k = interior_points(robot)
+    hq = _step(robot.joint_unit)
+    direct = np.empty((n, c, k))
+    for i in range(c):
+        e = np.zeros(c)
+        e[i] = hq
+        direct[:, i] = (z(joints + e, poses) - z(joints - e, poses)) / (2 * hq)
+    via_pose = np.zeros((n, robot.pose_dim, k))
+    for d, unit in enumerate(robot.pose_units):
+        h = _step(unit)
+        e = np.zeros(robot.pose_dim)
+        e[d] = h
+        via_pose[:, d] = (z(joints, poses + e) - z(joints, poses - e)) / (2 * h)
+    return direct + np.einsum("ndc,ndk->nck", pose_jacobian, via_pose)
 
 
 class Compliance(Effect):
@@ -36,9 +81,15 @@ class Compliance(Effect):
     ``dq = J^T Q / k``. Linear in ``m g / k`` and ``m g h / k``: two coefficients (the second
     only for a platform that rotates; a translating platform's ``R`` is fixed).
 
-    (A leg's own weight would add a regressor, but one the geometric errors absorb: on a
-    hexapod it is exactly the derivative of the leg length with respect to its base joint's
-    height. It is left out.)
+    The chains' own weight (the legs' masses): lumped at the chain's points
+    (:meth:`calib.robot.Robot.chain_points`), a mass ``m`` at an interior point ``p_ik`` (a
+    Delta's elbow, a 6-RUS crank tip) adds ``m g p_ik,z`` to the potential energy, hence
+    ``dq = -(m g / k) d p_ik,z / dq`` (total derivative, through the pose): one more coefficient
+    per interior point, whose load follows the chain's own orientation, not the platform's.
+    Masses lumped at the platform joints only add to the platform's weight. A hexapod leg has no
+    interior point (base joint to platform joint): its weight along its axis is proportional to
+    the leg's vertical direction cosine, exactly the derivative of the leg length with respect to
+    its base joint's height, which the geometric errors absorb; it has no coefficient.
 
     Applies to robots whose pose has a height ``z`` along gravity (base z up) and, if it
     rotates, the Euler angles ``alpha, beta, gamma`` of :mod:`calib.rotation`: every robot of
@@ -65,14 +116,19 @@ class Compliance(Effect):
         out = (Coefficient("weight_over_stiffness", unit),)
         if self._rotates(robot):
             out += (Coefficient("weight_x_com_height_over_stiffness", f"{unit} x {COM_HEIGHT_REF_MM:g} mm"),)
+        k = interior_points(robot)
+        out += tuple(Coefficient(f"chain_weight_over_stiffness{'' if k == 1 else j + 1}", unit) for j in range(k))
         return out
+
+    def _n_platform(self, robot: Robot) -> int:
+        return 2 if self._rotates(robot) else 1
 
     def generalised_weight(self, robot: Robot, poses: np.ndarray) -> np.ndarray:
         """(N, D, p) generalised force of a unit weight on the pose coordinates, per coefficient:
         at the platform origin (``-grad z``), and per :data:`COM_HEIGHT_REF_MM` of centre-of-mass
         height (``-grad (R e_z)_z``, mm per rad)."""
         n = poses.shape[0]
-        Q = np.zeros((n, robot.pose_dim, len(self.coefficients(robot))))
+        Q = np.zeros((n, robot.pose_dim, self._n_platform(robot)))
         Q[:, robot.pose_names.index("z"), 0] = -1.0
         if self._rotates(robot):
             cols = _angle_columns(robot)
@@ -82,12 +138,16 @@ class Compliance(Effect):
 
     def joint_regressors(self, robot, theta, data, extra=None):
         J = pose_jacobian_of_joints(robot, theta, data.joints, data.measured)  # (N, D, C)
-        return np.einsum("ndc,ndp->ncp", J, self.generalised_weight(robot, data.measured))
+        X = np.einsum("ndc,ndp->ncp", J, self.generalised_weight(robot, data.measured))
+        if interior_points(robot) == 0:
+            return X
+        return np.concatenate([X, -chain_point_height_gradient(robot, theta, data.joints, data.measured, J)], axis=2)
 
     def machine_settings(self, coefficients, robot, context, extra=None):
         # dq [joint unit] = c0 * (J^T Q); in SI tau = W (J^T Q) m_per_mm / s and dq_SI = tau / k,
-        # s the SI per joint unit: k = W m_per_mm / (s^2 c0).
-        weight = context.moving_mass_kg * context.gravity_m_s2
+        # s the SI per joint unit: k = W m_per_mm / (s^2 c0). W: what the platform carries,
+        # its payload and the chains' masses lumped at the platform joints.
+        weight = _platform_load_kg(robot, context) * context.gravity_m_s2
         s = context.si_per_joint_unit(robot)
         c0 = max(float(coefficients[0]), 1e-12)
         return {"options": {"gravity": True, "payload_kg": context.payload_kg,
@@ -102,12 +162,33 @@ class Compliance(Effect):
     def scenario(self, robot, theta, data, magnitude_mm, rng, context):
         loaded = context.with_payload(rng.uniform(*PAYLOAD_RANGE_KG))
         shape = np.ones(len(self.coefficients(robot)))
+        load = _platform_load_kg(robot, loaded)
         if self._rotates(robot):
-            # The platform's own centre of mass at its origin, the payload's at payload_height_m.
-            com_mm = loaded.payload_height_m / loaded.m_per_mm * loaded.payload_kg / loaded.moving_mass_kg
+            # The platform's own centre of mass at its origin (the lumped joint masses too, the
+            # joints about its origin), the payload's at payload_height_m.
+            com_mm = loaded.payload_height_m / loaded.m_per_mm * loaded.payload_kg / load
             shape[1] = com_mm / COM_HEIGHT_REF_MM
+        k = interior_points(robot)
+        if k:
+            # Every coefficient is a weight over the same stiffness: their ratios are the masses'.
+            masses = _chain_masses(robot, loaded)
+            shape[self._n_platform(robot):] = masses[:k] / load
         X = self.regressors(robot, theta, data)
         return EffectScenario(scale_to_magnitude(X, shape, magnitude_mm), None, loaded)
+
+
+def _chain_masses(robot: Robot, context) -> np.ndarray:
+    """(K + 1,) the chains' lumped masses at their interior points and platform joint, kg
+    (zeros when the machine does not say)."""
+    m = np.asarray(context.chain_point_masses_kg, dtype=float)
+    k = interior_points(robot)
+    return m if m.size == k + 1 else np.zeros(k + 1)
+
+
+def _platform_load_kg(robot: Robot, context) -> float:
+    """Mass the platform's weight coefficient stands for: platform, payload and every chain's
+    mass lumped at its platform joint, kg."""
+    return context.moving_mass_kg + robot.n_chains * float(_chain_masses(robot, context)[-1])
 
 
 EFFECT = Compliance()
