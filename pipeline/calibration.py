@@ -26,7 +26,7 @@ from calib.outliers import find_outliers
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.recording import OutputError
+from pipeline.recording import OutputError, output_folder
 
 __all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "NameReservation", "default_name", "OUTPUT_EXTENSIONS"]
@@ -280,12 +280,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         warnings += plausibility(rec, settings.real)
     # Every output is checked before any work, and the files are published together at the end.
     out = Path(settings.out)
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out}: is a file, not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    output_folder(out)
     reservation = NameReservation(out, settings)
     try:
         name = reservation.name

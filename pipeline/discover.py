@@ -33,7 +33,7 @@ from calib.robots import ROBOTS
 from calib.effects.discovery import MIN_ROWS
 
 from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
-from .recording import Recording, atomic_write, read_recording
+from .recording import Recording, atomic_write, output_folder, read_recording
 from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
 
 __all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY",
@@ -556,12 +556,7 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     name = args.name or f"{stem}_discover"
     rrd_path = args.out / f"{name}.rrd"
     # Every output is checked before the analysis (which can take a minute with re-simulation).
-    if args.out.exists() and not args.out.is_dir():
-        raise ValueError(f"--out {args.out}: is a file, not a folder")
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out {args.out}: cannot create the folder: {exc.strerror or exc}") from None
+    output_folder(args.out)
     check_outputs({"--out": rrd_path, "--summary-json": args.summary_json}, overwrite=args.overwrite)
     if rec is None:
         rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)

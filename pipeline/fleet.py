@@ -49,7 +49,7 @@ from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
 from .executor import add_executor_arguments, run_tasks
-from .recording import OutputError, atomic_write, sidecar_path
+from .recording import OutputError, atomic_write, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
            "run_fleet", "main"]
@@ -278,12 +278,7 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
     folder = Path(folder)
     inputs = fleet_inputs(folder)
     out = Path(out) if out is not None else folder / "calibrated"
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out}: is a file, not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    output_folder(out)
     lock = _FleetLock(out)
     rows, ran, skipped, dirty = {}, [], [], False
     try:

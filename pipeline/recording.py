@@ -36,7 +36,7 @@ from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
 from calib.rotation import rotation_matrix
 
-__all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns",
+__all__ = ["output_folder", "RecordingError", "Recording", "write_recording", "read_recording", "columns",
            "atomic_write", "publish", "writing", "ResultSet", "OutputError", "recording_texts", "sidecar_path",
            "plausibility", "FORMAT", "FORMAT_VERSION",
            "SIDECAR_FIELDS", "READABLE_VERSIONS", "MIN_ROBOT_SIZE_MM", "REFUSED_CONDITION", "WARNED_CONDITION"]
@@ -210,6 +210,22 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
 
 class OutputError(ValueError):
     """An output path cannot be written; the message names it (and the flag that gave it)."""
+
+
+def output_folder(out: str | Path) -> Path:
+    """The output folder ``out`` (flag ``--out``), created if missing.
+
+    Raises:
+        OutputError: it is a file, or it cannot be created (the message names the flag).
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
+    return out
 
 
 class ResultSet:
