@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["snapshot", "renderer_available", "main", "SnapshotError"]
+__all__ = ["snapshot", "renderer_available", "viewer_executable", "main", "SnapshotError"]
 
 #: Logical window size of the headless viewer (points; one pixel a point).
 DEFAULT_SIZE = "1600x900"
@@ -38,10 +38,19 @@ class SnapshotError(RuntimeError):
     """The recording could not be rendered (the message says why, in one line)."""
 
 
+def viewer_executable() -> str | None:
+    """The ``rerun`` viewer of this Python's environment (beside its interpreter, so that an
+    environment that is not activated still finds its own), else the one on PATH, else None."""
+    beside = Path(sys.executable).with_name("rerun")
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return str(beside)
+    return shutil.which("rerun")
+
+
 def renderer_available() -> str | None:
     """None if the headless viewer can draw here, else why not (one line)."""
-    if shutil.which("rerun") is None:
-        return "the rerun viewer executable is not on PATH (pip install rerun-sdk)"
+    if viewer_executable() is None:
+        return "the rerun viewer executable is not installed beside this Python or on PATH (pip install rerun-sdk)"
     if os.environ.get("VK_ICD_FILENAMES") or os.environ.get("VK_DRIVER_FILES"):
         return None
     if not any(glob.glob(g) for g in VULKAN_ICD_GLOBS):
@@ -95,7 +104,7 @@ def snapshot(paths, out: str | Path, *, size: str = DEFAULT_SIZE, timeout_s: flo
     env.setdefault("XDG_RUNTIME_DIR", home)
     env["HOME"] = home
     log = open(Path(home) / "viewer.log", "w+b")  # noqa: SIM115 - closed in finally
-    cmd = ["rerun", "--headless", "--hide-welcome-screen", "--window-size", size, "--port", str(port)]
+    cmd = [viewer_executable(), "--headless", "--hide-welcome-screen", "--window-size", size, "--port", str(port)]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=log,
                             start_new_session=True)
     try:
