@@ -58,7 +58,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
 
 def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
-                             "periodic_screw_error", "instrument_drift"]
+                             "periodic_screw_error", "instrument_drift", "lost_count", "thermal_warmup"]
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
@@ -70,7 +70,7 @@ def test_which_effects_apply_to_which_robot():
     assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
     # Rotary motors: no leg grows, no lead screw.
     assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale",
-                                                     "instrument_drift")
+                                                     "instrument_drift", "lost_count")
     for name in ROBOTS:
         assert effects_for(default_robot(name))[0] == "none"
 
