@@ -14,7 +14,7 @@ import json
 import sys
 import time
 
-from pipeline.blind import KINDS, rates_table, run_blind_suite
+from pipeline.blind import KINDS, failure_lines, rates_table, run_blind_suite
 
 
 def main(argv=None) -> int:
@@ -35,13 +35,8 @@ def main(argv=None) -> int:
             res = run_blind_suite(None, range(a.other_seeds), robot=robot, kinds=("single",))
         print(f"\n## {robot} ({time.perf_counter() - t0:.0f} s)\n")
         print(rates_table(res))
-        for r in res:
-            failed = [k for k, v in r["criteria"].items() if not v and k != "points_top3"]
-            if failed:
-                print(f"  {r['kind']} {'+'.join(r['effects']) or 'none'} seed {r['seed']}"
-                      f"{' left out ' + r['left_out'] if 'left_out' in r else ''}: {', '.join(failed)} failed; "
-                      f"named {r['named'] or 'none'}, explained {r['explained']}, follows {r['follows'][:3]}, "
-                      f"flagged {r['flagged']}")
+        for line in failure_lines(res):
+            print(line)
         sys.stdout.flush()
         everything += [dict(r, robot=robot) for r in res]
     if a.json:

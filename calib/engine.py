@@ -34,7 +34,6 @@ from .robot import (
     Robot,
     newton_forward_kinematics,
     pose_jacobian_of_joints,
-    pose_jacobian_of_parameters,
 )
 from .workspace import reachable_poses
 

@@ -32,13 +32,13 @@ from itertools import combinations
 import numpy as np
 
 from calib.effects import EFFECTS, effects_for
-from calib.effects.discovery import MAX_BAD_FRACTION, SIGNIFICANCE_ALPHA
+from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
 from .executor import task_pool
 
-__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "rates_table", "run",
+__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
 
 #: The kinds of recording (see the module docstring).
@@ -219,6 +219,17 @@ def _group(r: dict) -> str:
     return f"{r['kind']}: {' + '.join(r['effects']) or 'none'}"
 
 
+def failure_lines(results: list[dict]) -> list[str]:
+    """One line per recording that failed a criterion: what was expected, what was found."""
+    lines = []
+    for r in results:
+        failed = [k for k, v in r["criteria"].items() if not v and k != "points_top3"]
+        if failed:
+            lines.append(f"  {_group(r)} seed {r['seed']}: {', '.join(failed)} failed; named {r['named'] or 'none'}, "
+                         f"explained {r['explained']}, follows {r['follows'][:3]}, flagged {r['flagged']}")
+    return lines
+
+
 def rates_table(results: list[dict]) -> str:
     """Markdown table: per kind and truth, the rate of each criterion met."""
     names = ("named", "unknown", "points", "points_top3", "rows", "consistent")
@@ -261,11 +272,8 @@ def run(argv: list[str] | None = None) -> list[dict]:
         raise ValueError(str(exc)) from None
     print(f"robot: {a.robot}")
     print(rates_table(res))
-    for r in res:
-        failed = [k for k, v in r["criteria"].items() if not v and k != "points_top3"]
-        if failed:
-            print(f"  {_group(r)} seed {r['seed']}: {', '.join(failed)} failed; named {r['named'] or 'none'}, "
-                  f"explained {r['explained']}, follows {r['follows'][:3]}, flagged {r['flagged']}")
+    for line in failure_lines(res):
+        print(line)
     return res
 
 

@@ -202,9 +202,14 @@ def _instrument_heldout(robot: Robot, fit, val_joints, val_meas):
     nominal = robot.forward_kinematics(robot.table.nominal, val_joints)
     before = measurement_residuals(robot, val_meas, instrument_measurements(robot, nominal, start_frame, start_targets), k)
     after = measurement_residuals(robot, val_meas, fit.predict(val_joints), k)
-    what = "target positions" if k else "poses"
-    return before, after, len(val_joints), (f"recorded validation rows: measured {what} minus model prediction, "
-                                            "instrument frame (includes sensor noise)")
+    return before, after
+
+
+def _instrument_basis(fit) -> str:
+    """What the held-out errors of :func:`_instrument_heldout` are."""
+    what = "target positions" if fit.n_targets else "poses"
+    return (f"recorded validation rows: measured {what} minus model prediction, instrument frame "
+            "(includes sensor noise)")
 
 
 def _instrument_block(fit, before, after) -> dict:
@@ -393,7 +398,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
                 "measuring held-out poses (compensated commands)", d, t))
             return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
         if instrument is not None and len(val_joints):
-            return _instrument_heldout(robot, instrument, val_joints, val_meas)[:2]
+            return _instrument_heldout(robot, instrument, val_joints, val_meas)
         if sim is None and len(val_joints):
             # A recording holds the validation poses measured under nominal commands only: the
             # identified model's prediction error there stands for the compensated error (equal to
@@ -416,7 +421,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
                          "(before: nominal commands)") if sim is not None else \
             "recorded validation rows: measured minus model prediction (includes sensor noise)"
         if instrument is not None:
-            heldout_basis = _instrument_heldout(robot, instrument, val_joints, val_meas)[3]
+            heldout_basis = _instrument_basis(instrument)
     split["simulate"] += time.perf_counter() - t2
 
     free = result.free_names

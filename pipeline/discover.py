@@ -18,7 +18,6 @@ import argparse
 import contextlib
 import io
 import json
-import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -34,7 +33,7 @@ from calib.effects.discovery import MIN_ROWS
 
 from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from .recording import Recording, atomic_write, output_folder, read_recording
-from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, recording_robot, simulate
+from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, simulate
 
 __all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY",
            "PLOTTED_QUANTITIES", "quantity_values", "verdict_quantity", "discovery_markdown", "verdict_words",
@@ -97,7 +96,7 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
         urad for angles), before and after, the machine settings and the re-fitted parameter
         with its 95% interval.
     """
-    robot = recording_robot(rec)
+    robot = rec.robot
     rows = disc.kept
     std = rec.noise.pose_std(robot.pose_units)
     angle = robot.angle_pose_mask
@@ -178,7 +177,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     recording (the first measurement is row 1).
     """
     t0 = time.perf_counter()
-    robot = recording_robot(rec)
+    robot = rec.robot
     if candidates is None:
         candidates = effects_for(robot)
     names = [registered_effect(c).name for c in candidates]
@@ -560,7 +559,7 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     check_outputs({"--out": rrd_path, "--summary-json": args.summary_json}, overwrite=args.overwrite)
     if rec is None:
         rec = effect_recording(args.scenario, args.scenario_seed, robot=robot_name)
-    robot = recording_robot(rec)
+    robot = rec.robot
     if args.robot is not None and robot.name != args.robot:
         raise ValueError(f"{args.real} is a recording of the {robot.name}, not of the {args.robot} (--robot)")
     report = discover(rec, seed=args.seed, resim=not args.no_resim, sysid=not args.no_sysid,

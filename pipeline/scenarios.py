@@ -9,8 +9,8 @@ machine produces it (:meth:`calib.effects.Effect.machine_settings`); nothing her
 which effect it is.
 
 The MuJoCo machine is reached through one function, :func:`simulate`, and recordings are
-converted to and from :class:`pipeline.recording.Recording` by :func:`make_recording` and
-:func:`recording_robot` only.
+made into a :class:`pipeline.recording.Recording` by :func:`make_recording` only (a recording
+carries its robot, ``rec.robot``).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from mjcf.units import M_PER_MM
 from .recording import Recording
 
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
-           "machine_context", "merged_settings", "simulate", "servo_stiffness", "make_recording", "recording_robot",
+           "machine_context", "merged_settings", "simulate", "make_recording",
            "effects_settings", "effect_recording"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
@@ -111,14 +111,6 @@ def merged_settings(context: MachineContext, settings: dict | None = None) -> di
 # The functions below are the only ones that know the testbed and the recording type.
 
 
-def servo_stiffness(robot: Robot) -> float:
-    """The actuator servo stiffness of ``robot``'s MuJoCo machine by default, SI (N/m for a
-    prismatic chain, N m/rad for a revolute one), read from its nominal machine."""
-    from mjcf import build_machine
-
-    return float(build_machine(robot, robot.table.nominal).servo_stiffness.mean())
-
-
 def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict, noise: SensorNoise = SensorNoise(),
              seed: int = 0, times_s: np.ndarray | None = None, *, settle_velocity: float | None = None):
     """Measure the MuJoCo machine ``theta`` of ``robot`` at commanded ``joints``.
@@ -152,12 +144,6 @@ def make_recording(robot: Robot, t_s: np.ndarray, joints: np.ndarray, measured: 
     return Recording(robot=robot, noise=noise, t_s=np.asarray(t_s, dtype=float), joints=np.asarray(joints, dtype=float),
                      measured=np.asarray(measured, dtype=float),
                      sets=np.array(["calibration"] * n) if sets is None else sets, meta=meta)
-
-
-def recording_robot(rec: Recording) -> Robot:
-    """The robot (nominal geometry) a :class:`Recording` was measured on; its joints are
-    ``rec.joints``."""
-    return rec.robot
 
 
 # ----------------------------------------------------------------------------- scenarios

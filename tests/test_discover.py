@@ -13,7 +13,7 @@ from pipeline.blind import run_blind_suite
 from pipeline.discover import discover, main
 from pipeline.recording import read_recording, write_recording
 from pipeline.rerun_log import rrd_entities
-from pipeline.scenarios import effect_recording, recording_robot
+from pipeline.scenarios import effect_recording
 
 #: Robots whose blind suite runs in the tests (the Delta's and the third robot's single-effect
 #: rates are measured by benchmarks/blind_rates.py: their MuJoCo recordings take several times
@@ -119,7 +119,7 @@ def test_recordings_of_another_hexapod_work_the_same(effect, tmp_path):
     rec = effect_recording(effect, 11, robot=robot, theta=theta)
     path, _ = write_recording(tmp_path / "other.csv", rec)
     back = read_recording(path)  # the geometry travels in the sidecar only
-    np.testing.assert_array_equal(recording_robot(back).base_joints, robot.base_joints)
+    np.testing.assert_array_equal(back.robot.base_joints, robot.base_joints)
     rep = discover(back, resim=False)
     assert rep.summary["effects"] == ([] if effect == "none" else [effect])
     assert rep.summary["heldout_rms_after_mm"] <= 1.5 * rep.summary["noise_floor_mm"]

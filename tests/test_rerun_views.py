@@ -155,7 +155,7 @@ def test_discovery_file_marks_flagged_rows(tmp_path):
     from dataclasses import replace
 
     from pipeline.discover import discover, write_rrd
-    from pipeline.scenarios import effect_recording, recording_robot
+    from pipeline.scenarios import effect_recording
 
     rec = effect_recording("joint_friction", 3, n_poses=60)
     m = rec.measured.copy()
@@ -163,7 +163,7 @@ def test_discovery_file_marks_flagged_rows(tmp_path):
     rec = replace(rec, measured=m)
     rep = discover(rec, resim=False)
     assert rep.summary["flagged_poses"] == [11, 31, 48]
-    rrd = write_rrd(tmp_path / "g.rrd", recording_robot(rec), rec, rep)
+    rrd = write_rrd(tmp_path / "g.rrd", rec.robot, rec, rep)
     assert empty_views(rrd) == []
     for q in ("time", "stroke"):
         assert rrd_labels(rrd, f"/vs/{q}/before/marks") == ["flagged row 11", "flagged row 31", "flagged row 48"]

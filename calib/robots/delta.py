@@ -145,6 +145,14 @@ def _check_params(params) -> None:
         raise ValueError(f"params must be a DeltaParams, got {type(params).__name__}")
 
 
+def _closure_arguments(params, q, positions) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, positions)`` as (N, 3) arrays, checked with ``params`` (one place for every closure function)."""
+    _check_params(params)
+    q, positions = _joints(q), _positions(positions)
+    _check_same_n(q, positions)
+    return q, positions
+
+
 def _check_same_n(q: np.ndarray, positions: np.ndarray) -> None:
     if q.shape[0] != positions.shape[0]:
         raise ValueError(
@@ -341,9 +349,7 @@ def constraint_residuals(params: DeltaParams, q, positions) -> np.ndarray:
     Returns:
         Shape (N, 3), mm; zero for consistent data.
     """
-    _check_params(params)
-    q, positions = _joints(q), _positions(positions)
-    _check_same_n(q, positions)
+    q, positions = _closure_arguments(params, q, positions)
     b = elbow_positions(params, q)
     return np.linalg.norm(positions[:, None, :] - b, axis=-1) - params.Lb[None, :]
 
@@ -370,9 +376,7 @@ def constraint_jacobian_position(params: DeltaParams, q, positions) -> np.ndarra
     Returns:
         Shape (N, 3, 3) [config, chain, xyz], dimensionless (the paper's ``J_chi``).
     """
-    _check_params(params)
-    q, positions = _joints(q), _positions(positions)
-    _check_same_n(q, positions)
+    q, positions = _closure_arguments(params, q, positions)
     return _unit_forearm(params, q, positions)[0]
 
 
@@ -387,9 +391,7 @@ def constraint_jacobian_joints(params: DeltaParams, q, positions) -> np.ndarray:
     Returns:
         Shape (N, 3), mm/rad.
     """
-    _check_params(params)
-    q, positions = _joints(q), _positions(positions)
-    _check_same_n(q, positions)
+    q, positions = _closure_arguments(params, q, positions)
     u, _, darm, _, _ = _unit_forearm(params, q, positions)
     return -np.einsum("nic,nic->ni", u, darm)
 
@@ -406,9 +408,7 @@ def constraint_jacobian_params(params: DeltaParams, q, positions) -> np.ndarray:
         Shape (N, 3, 8) [config, chain, parameter in Eq. 3.6 order]; units mm/mm for
         lengths, mm/rad for angles (the rows of the paper's Eq. 3.21).
     """
-    _check_params(params)
-    q, positions = _joints(q), _positions(positions)
-    _check_same_n(q, positions)
+    q, positions = _closure_arguments(params, q, positions)
     u, arm, darm, dlax, dlay = _unit_forearm(params, q, positions)
     ez = np.array([0.0, 0.0, 1.0])
     dtheta = np.cross(ez[None, None, :], arm)  # d(arm)/dtheta = ez x arm

@@ -170,7 +170,7 @@ class RotaryHexapod(Robot):
         r = p["r"][None]
         dq = -r * np.einsum("nli,nli->nl", n, w)  # dF/dq = dF/dq0
         ca, sa = np.cos(p["az"]), np.sin(p["az"])
-        se, ce = np.sin(p["el"]), np.cos(p["el"])
+        se = np.sin(p["el"])
         du_daz = np.stack([-ca, -sa, np.zeros(6)], -1)
         dv_daz = np.stack([se * sa, -se * ca, np.zeros(6)], -1)
         c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
