@@ -263,6 +263,13 @@ class Robot(ABC):
         when the two share most of their work (the hexapod's leg vectors)."""
         return self.closure(theta, joints, poses), self.closure_pose_jacobian(theta, joints, poses)
 
+    def closure_with_jacobians(self, theta: np.ndarray, joints: np.ndarray,
+                               poses: np.ndarray) -> tuple[np.ndarray, ClosureJacobians]:
+        """``(closure, Jacobians)``, (N, C) and :class:`ClosureJacobians`, in one call: what each
+        iteration of the identification needs. Default: :meth:`closure` and
+        :meth:`closure_jacobians`; a robot overrides it when the two share their work."""
+        return self.closure(theta, joints, poses), self.closure_jacobians(theta, joints, poses)
+
     @abstractmethod
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, C) joint values that bring the machine ``theta`` to ``poses``.

@@ -142,89 +142,89 @@ class Hexapod(Robot):
 
     # -- kinematics -----------------------------------------------------------------------
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        return self._leg_geometry(theta, poses)[3] - self.legs(theta)[1]
+        return self._legs(theta, poses)[0].T
 
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        return self.inverse_kinematics(theta, poses) - joints
+        return self._legs(theta, poses, joints)[0].T
 
-    def _leg_geometry(self, theta: np.ndarray, poses: np.ndarray):
-        """``(R, w, L, norm, sg, cg)``: (N, 3, 3) rotations, ``w = R P_i`` and leg vectors
-        ``L = R P_i + t - B_i`` as three (N, 6) coordinate arrays each, (N, 6) leg lengths
-        ``|L|`` and (N, 1) ``sin``/``cos`` of gamma. Written coordinate by coordinate on (N, 6)
-        arrays, the fastest numpy layout for these small vectors."""
-        B, _, P = self.legs(theta)
-        n = poses.shape[0]
-        c, s = np.cos(poses[:, 3:6]), np.sin(poses[:, 3:6])
-        ca, cb, cg = c[:, 0:1], c[:, 1:2], c[:, 2:3]  # (N, 1) columns, broadcast over the legs
-        sa, sb, sg = s[:, 0:1], s[:, 1:2], s[:, 2:3]
-        R = np.empty((n, 3, 3))
-        R[:, 0, 0:1] = cg * cb
-        R[:, 0, 1:2] = cg * sb * sa - sg * ca
-        R[:, 0, 2:3] = cg * sb * ca + sg * sa
-        R[:, 1, 0:1] = sg * cb
-        R[:, 1, 1:2] = sg * sb * sa + cg * ca
-        R[:, 1, 2:3] = sg * sb * ca - cg * sa
-        R[:, 2, 0:1] = -sb
-        R[:, 2, 1:2] = cb * sa
-        R[:, 2, 2:3] = cb * ca
-        Px, Py, Pz = P[:, 0], P[:, 1], P[:, 2]
-        w = [R[:, i, 0:1] * Px + R[:, i, 1:2] * Py + R[:, i, 2:3] * Pz for i in range(3)]
-        L = [w[i] + (poses[:, i:i + 1] - B[:, i]) for i in range(3)]
+    def _legs(self, theta: np.ndarray, poses: np.ndarray, joints: np.ndarray | None = None,
+              jacobian: bool = False, parameters: bool = False):
+        """One pass over the six legs at N poses, leg-major (each quantity a contiguous (6, N)
+        array: numpy's inner loops then run over the poses, several times faster than over the
+        legs of an (N, 6) array).
+
+        Returns ``(F, Jt, Jleg)``:
+
+        * ``F`` (6, N) mm: the closure ``|R P_i + t - B_i| - dl_i - joints`` (the inverse
+          kinematics ``|...| - dl_i`` when ``joints`` is None);
+        * ``Jt`` (6, 6, N) (``jacobian``; else None): ``Jt[i, k, n] = dF_i / d pose_k`` at pose
+          n. With ``w_i = R P_i``, ``u_i`` the unit leg vector, ``m_i = w_i x u_i`` and ``R = Rz
+          Ry Rx``: ``dF_i/d t = u_i``, ``dF_i/d alpha = (R e_x) . m_i``, ``dF_i/d beta = (Rz e_y)
+          . m_i``, ``dF_i/d gamma = e_z . m_i`` (as ``dR/d alpha = R [e_x]x``, ``dR/d beta = [Rz
+          e_y]x R``, ``dR/d gamma = [e_z]x R``);
+        * ``Jleg`` (6, 7, N) (``parameters``; else None): ``dF_i / d`` leg i's own seven
+          parameters ``(B_i, dl_i, P_i)``: ``-u_i``, ``-1``, ``R^T u_i``.
+        """
+        B, dl, P = self.legs(theta)
+        p = np.ascontiguousarray(np.asarray(poses, dtype=float).T)  # (6, N)
+        c, s = np.cos(p[3:6]), np.sin(p[3:6])
+        ca, cb, cg = c
+        sa, sb, sg = s
+        sbsa, sbca = sb * sa, sb * ca
+        R = ((cg * cb, cg * sbsa - sg * ca, cg * sbca + sg * sa),
+             (sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa),
+             (-sb, cb * sa, cb * ca))
+        Pc = [P[:, k, None] for k in range(3)]  # (6, 1) columns, broadcast over the poses
+        w = [R[i][0] * Pc[0] + R[i][1] * Pc[1] + R[i][2] * Pc[2] for i in range(3)]  # R P_i, (6, N)
+        L = [w[i] + (p[i] - B[:, i, None]) for i in range(3)]
         norm = np.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
-        return R, w, L, norm, sg, cg
-
-    def _legs_and_pose_jacobian(self, theta: np.ndarray, poses: np.ndarray, closure_of=None):
-        """One pass over the legs: ``(Jt, R, r)``: (N, 6, 6) ``dF / d pose`` *transposed*
-        (``Jt[n, k, i] = dF_i / d pose_k``; ``Jt[:, 0:3]`` are the unit leg vectors), (N, 3, 3)
-        rotations and, when ``closure_of`` (the joints, (N, 6)) is given, (N, 6) closure
-        residuals (else None).
-
-        With ``w_i = R P_i`` and ``R = Rz Ry Rx``, the angle columns are
-        ``dF_i/d alpha = (R e_x) . (w_i x u_i)``, ``dF_i/d beta = (Rz e_y) . (w_i x u_i)``,
-        ``dF_i/d gamma = e_z . (w_i x u_i)`` (as ``dR/d alpha = R [e_x]x``, ``dR/d beta =
-        [Rz e_y]x R``, ``dR/d gamma = [e_z]x R``): no derivative matrices, one cross product."""
-        R, w, L, norm, sg, cg = self._leg_geometry(theta, poses)
+        F = norm - dl[:, None]
+        if joints is not None:
+            F -= np.asarray(joints, dtype=float).T
+        if not (jacobian or parameters):
+            return F, None, None
         inv = 1.0 / norm
-        Jt = np.empty((poses.shape[0], 6, 6))
-        for i in range(3):
-            np.multiply(L[i], inv, out=Jt[:, i])
-        ux, uy, uz = Jt[:, 0], Jt[:, 1], Jt[:, 2]
-        mx = w[1] * uz - w[2] * uy  # m = w x u
-        my = w[2] * ux - w[0] * uz
-        mz = w[0] * uy - w[1] * ux
-        Jt[:, 3] = R[:, 0, 0:1] * mx + R[:, 1, 0:1] * my + R[:, 2, 0:1] * mz
-        Jt[:, 4] = cg * my - sg * mx
-        Jt[:, 5] = mz
-        r = None if closure_of is None else (norm - self.legs(theta)[1]) - closure_of
-        return Jt, R, r
-
-    def _pose_jacobian(self, theta: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(Jpose, u, R)``: (N, 6, 6) ``dF / d pose``, (N, 6, 3) unit leg vectors, (N, 3, 3)
-        rotations; one computation for :meth:`closure_jacobians` and :meth:`closure_pose_jacobian`."""
-        Jt, R, _ = self._legs_and_pose_jacobian(theta, poses)
-        J = np.ascontiguousarray(Jt.transpose(0, 2, 1))
-        return J, J[:, :, 0:3], R
+        u = [L[i] * inv for i in range(3)]
+        Jt = Jleg = None
+        if jacobian:
+            Jt = np.empty((6, 6, p.shape[1]))
+            for i in range(3):
+                Jt[:, i] = u[i]
+            mx = w[1] * u[2] - w[2] * u[1]
+            my = w[2] * u[0] - w[0] * u[2]
+            mz = w[0] * u[1] - w[1] * u[0]
+            Jt[:, 3] = R[0][0] * mx + R[1][0] * my + R[2][0] * mz
+            Jt[:, 4] = cg * my - sg * mx
+            Jt[:, 5] = mz
+        if parameters:
+            Jleg = np.empty((6, 7, p.shape[1]))
+            for i in range(3):
+                np.negative(u[i], out=Jleg[:, i])
+                Jleg[:, 4 + i] = R[0][i] * u[0] + R[1][i] * u[1] + R[2][i] * u[2]  # (R^T u)_i
+            Jleg[:, 3] = -1.0
+        return F, Jt, Jleg
 
     def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        return self._pose_jacobian(theta, poses)[0]
+        return self._legs(theta, poses, jacobian=True)[1].transpose(2, 0, 1)
 
     def closure_and_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray,
                                   poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        Jt, _, r = self._legs_and_pose_jacobian(theta, poses, closure_of=joints)
-        return r, Jt.transpose(0, 2, 1)
+        F, Jt, _ = self._legs(theta, poses, joints, jacobian=True)
+        return F.T, Jt.transpose(2, 0, 1)
 
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
-        Jpose, u, R = self._pose_jacobian(theta, poses)
-        n = poses.shape[0]
-        Jleg = np.empty((n, 6, 7))
-        Jleg[:, :, 0:3] = -u
-        Jleg[:, :, 3] = -1.0
-        Jleg[:, :, 4:7] = np.einsum("nji,nlj->nli", R, u)  # R^T u
+        return self.closure_with_jacobians(theta, joints, poses)[1]
+
+    def closure_with_jacobians(self, theta: np.ndarray, joints: np.ndarray,
+                               poses: np.ndarray) -> tuple[np.ndarray, ClosureJacobians]:
+        F, Jt, Jleg = self._legs(theta, poses, joints, jacobian=True, parameters=True)
+        n = F.shape[1]
         Jtheta = np.zeros((n, 6, 6, 7))
         idx = np.arange(6)
-        Jtheta[:, idx, idx] = Jleg
-        return ClosureJacobians(pose=Jpose, joints=np.broadcast_to(-np.eye(6), (n, 6, 6)).copy(),
-                                parameters=Jtheta.reshape(n, 6, 42))
+        Jtheta[:, idx, idx] = Jleg.transpose(2, 0, 1)
+        return F.T, ClosureJacobians(pose=Jt.transpose(2, 0, 1),
+                                     joints=np.broadcast_to(-np.eye(6), (n, 6, 6)).copy(),
+                                     parameters=Jtheta.reshape(n, 6, 42))
 
 
 def paper_hexapod() -> Hexapod:
