@@ -30,7 +30,7 @@ from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
-           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS"]
+           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -354,13 +354,30 @@ def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarra
 NEWTON_BLOCK_ROWS = 2048
 
 
+#: Largest Newton step (mm, angles scaled to lengths by :meth:`Robot.pose_scale`) after which the
+#: next step reuses the pose Jacobian (a chord step): a step this small changes the Jacobian by
+#: about step / machine size (1e-4 here), so the chord step still cuts the residual by that factor
+#: (1e-9 mm to 1e-13 mm), at the price of the closure alone instead of closure and Jacobian.
+CHORD_STEP_MM = 1e-2
+
+
 def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> np.ndarray:
-    """Newton's iteration on rows ``offset ...`` of :func:`newton_forward_kinematics`."""
+    """Newton's iteration on rows ``offset ...`` of :func:`newton_forward_kinematics`.
+
+    Full Newton steps while the steps are large; once every remaining row's last step is below
+    :data:`CHORD_STEP_MM`, chord steps (the last pose Jacobian kept, the closure alone
+    re-evaluated). A converged row's singularity is judged on the last Jacobian evaluated for it
+    (at most :data:`CHORD_STEP_MM` away)."""
     n, d = poses.shape
     active = None  # rows still iterating (None: all of them, no gathering)
     p, q = poses, joints
+    J = None
+    chord = False
     for _ in range(max_iter):
-        r, J = robot.closure_and_pose_jacobian(theta, q, p)
+        if chord:
+            r = robot.closure(theta, q, p)
+        else:
+            r, J = robot.closure_and_pose_jacobian(theta, q, p)
         done = np.max(np.abs(r), axis=1) <= tol
         n_done = int(np.count_nonzero(done))
         if n_done:
@@ -375,17 +392,19 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
                 poses[active - offset] = p
             active, p, q, r, J = rows[keep], p[keep], q[keep], r[keep], J[keep]
         try:
-            p = p - np.linalg.solve(J, r[..., None])[..., 0]
+            step = np.linalg.solve(J, r[..., None])[..., 0]
         except np.linalg.LinAlgError:
             rows = np.arange(n) + offset if active is None else active
             bad = np.linalg.matrix_rank(J * scale) < d
             k = int(rows[np.argmax(bad)])
             raise KinematicsError(f"forward kinematics met a singular configuration at row {k}", k) from None
+        p = p - step
         finite = np.isfinite(p).all(axis=1)
         if not finite.all():
             rows = np.arange(n) + offset if active is None else active
             k = int(rows[np.argmax(~finite)])
             raise KinematicsError(f"forward kinematics diverged at row {k}", k)
+        chord = bool(np.max(np.abs(step) / scale) <= CHORD_STEP_MM)
         if active is None:
             poses = p
     k = int(offset if active is None else active[0])
