@@ -20,7 +20,6 @@ when they do not converge.
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +31,6 @@ from .noise import SensorNoise
 from .robot import (
     KinematicsError,
     Robot,
-    newton_forward_kinematics,
     pose_jacobian_of_joints,
 )
 from .workspace import reachable_poses
@@ -69,7 +67,10 @@ class IdentificationResult:
         chi2: sum of squared whitened residuals (declared noise) at the solution.
         dof: degrees of freedom of ``chi2`` (residuals minus free parameters).
         iterations: outer iterations (Gauss-Newton) or Jacobian evaluations (LM, summed).
-        history: max dQint after each iteration (chain-wise GN), or cost per evaluation.
+        history: max dQint after each iteration (chain-wise GN; from the corrected poses to
+            second order, one Newton step of the forward kinematics from the measured ones, and
+            exact, from the forward kinematics, where a stopping rule is judged), or cost per
+            evaluation.
         success: whether a stopping criterion was met.
         message: which criterion stopped it, in words.
         condition_numbers: column-scaled condition numbers of the identification Jacobian:
@@ -219,6 +220,31 @@ def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: n
     return A, b
 
 
+#: Column-scaled condition number of a chain's system beyond which its step is taken by LAPACK's
+#: SVD-based least squares (minimum norm on a rank-deficient chain) instead of the normal equations.
+NORMAL_EQUATIONS_CONDITION = 1e6
+
+
+def _chain_steps(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M, K) least-squares steps ``argmin |A_m x + b_m|`` of a stack of chain systems (``A``
+    (M, N, K), ``b`` (M, N)), in one batched solve of the column-scaled normal equations; a
+    stack with a chain whose (Cholesky-estimated) column-scaled condition number exceeds
+    :data:`NORMAL_EQUATIONS_CONDITION` (or is rank deficient) is solved chain by chain by
+    ``numpy.linalg.lstsq`` instead (the normal equations square the condition number)."""
+    norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A))
+    if np.all(norms > 0):
+        As = A / norms[:, None, :]
+        G = np.swapaxes(As, 1, 2) @ As
+        g = np.einsum("mnk,mn->mk", As, b)
+        try:
+            d = np.diagonal(np.linalg.cholesky(G), axis1=1, axis2=2)
+            if np.all(d.max(axis=1) <= NORMAL_EQUATIONS_CONDITION * d.min(axis=1)):
+                return -np.linalg.solve(G, g[..., None])[..., 0] / norms
+        except np.linalg.LinAlgError:
+            pass
+    return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])])
+
+
 def _gauss_newton(fun, jac, x0, max_iter, xtol):
     """Plain Gauss-Newton with a relative step test; returns (x, iterations, success, message)."""
     x = x0.copy()
@@ -350,36 +376,6 @@ def minimise(fun, jac, x0, *, solver: str = "lm", max_iter: int = 100, xtol: flo
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     return _least_squares(fun, jac, np.asarray(x0, dtype=float), solver, max_iter, xtol, ftol,
                           [] if history is None else history)
-
-
-#: Residual (mm) below which the default forward kinematics takes a row as converged.
-_NEWTON_TOL = inspect.signature(newton_forward_kinematics).parameters["tol"].default
-
-
-def _corrected_poses(robot: Robot, theta, joints, measured, r, jac_pose) -> np.ndarray:
-    """The robot's forward kinematics of ``joints`` started from ``measured``, given the closure
-    ``r`` (N, C) and its pose Jacobian (N, C, D) at ``(theta, joints, measured)`` (the ``pose``
-    of :meth:`Robot.closure_jacobians`, equal bit for bit to :meth:`Robot.closure_pose_jacobian`,
-    which the default's Newton steps use).
-
-    For a robot on the default forward kinematics (Newton on the closure), the first Newton step
-    from ``measured`` needs exactly these, which the chain-wise iteration has computed anyway: it
-    is taken here (on the rows not yet converged, as the default does) and the robot's forward
-    kinematics goes on from there: the same iterates, one closure Jacobian fewer. Any trouble
-    on that step (singular, non-finite) is left to the robot's forward kinematics to report.
-    """
-    start = measured
-    if type(robot).forward_kinematics is Robot.forward_kinematics:
-        rows = np.max(np.abs(r), axis=1) > _NEWTON_TOL
-        if np.any(rows):
-            try:
-                stepped = measured[rows] - np.linalg.solve(jac_pose[rows], r[rows][..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                stepped = None
-            if stepped is not None and np.all(np.isfinite(stepped)):
-                start = measured.copy()
-                start[rows] = stepped
-    return robot.forward_kinematics(theta, joints, initial=start)
 
 
 def _predicted(robot, theta, joints, measured) -> np.ndarray:
@@ -555,48 +551,61 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     cond = np.full(robot.n_chains, np.nan)
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
-    corrected = measured.copy()
     if solver == "gn":
         last = None  # the last iteration's systems: their condition numbers are reported
         # The closure and its Jacobians at the measured poses, for the current vector: computed
-        # once per vector, they serve its Gauss-Newton step, the first Newton step of the forward
-        # kinematics that follows the previous one, and, for the final vector, the result.
-        r = robot.closure(theta, joints, measured)
-        jac = robot.closure_jacobians(theta, joints, measured)
+        # once per vector, they serve its Gauss-Newton step, the integrated error of the
+        # corrected model and, for the final vector, the result.
+        r, jac = robot.closure_with_jacobians(theta, joints, measured)
+        corrected = None
         for iterations in range(1, max_iter + 1):
             J = jac.parameters
             step = np.zeros_like(theta)
             last = []
             for chains, params in groups:
                 A, b = _chain_systems(J, r, w, chains, params)
-                for k, ix in enumerate(params):  # LAPACK's gelsd, one chain at a time
-                    step[ix] = np.linalg.lstsq(A[k], -b[k], rcond=None)[0]
+                step[params] = _chain_steps(A, b)
                 last.append((chains, A))
             try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
-                r_new = robot.closure(theta + step, joints, measured)
-                jac_new = robot.closure_jacobians(theta + step, joints, measured)
+                r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
             except KinematicsError as exc:
                 message = f"the Gauss-Newton step left the workspace at iteration {iterations}: {exc}"
                 break
             theta, r, jac = theta + step, r_new, jac_new
+            # The corrected poses QC to second order: one Newton step of the forward kinematics
+            # from the measured ones, dQ = (dF/dpose)^-1 F (exact to |dQ|^2 / machine size).
             try:
-                corrected = _corrected_poses(robot, theta, joints, measured, r, jac.pose)
+                dQ = np.linalg.solve(jac.pose, r[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                dQ = np.full(measured.shape, np.inf)
+            history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
+            small_step = np.max(np.abs(step)) <= step_tol
+            if not (history[-1] <= epsilon or small_step):
+                continue
+            # A stopping rule holds to second order: decide on the exact forward kinematics.
+            try:
+                corrected = robot.forward_kinematics(
+                    theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
             except KinematicsError as exc:
+                corrected = None
                 message = f"forward kinematics of the corrected model failed: {exc}"
                 break
-            history.append(float(integrated_error(robot, measured - corrected)[2].max()))
+            history[-1] = float(integrated_error(robot, measured - corrected)[2].max())
             if history[-1] <= epsilon:
                 success = True
                 message = f"paper's criterion met: max dQint = {history[-1]:.3g} <= epsilon = {epsilon:g}"
                 break
-            if np.max(np.abs(step)) <= step_tol:
+            if small_step:
                 success = True
                 message = (f"parameter update {np.max(np.abs(step)):.3g} <= step_tol = {step_tol:g}; the "
                            f"paper's criterion is not reachable: max dQint stays at {history[-1]:.3g} "
                            f"(> epsilon = {epsilon:g})")
                 break
+            corrected = None
         for chains, A in last or ():
             cond[chains] = _column_scaled_conds(A)
+        if corrected is None:
+            corrected = _predicted(robot, theta, joints, measured)
     else:
         messages, oks = [], []
         in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
@@ -622,8 +631,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
             messages.append(f"{robot.chain_word} {c + 1}: {msg}")
         success, message = all(oks), "; ".join(messages)
         corrected = _predicted(robot, theta, joints, measured)
-        r = robot.closure(theta, joints, measured)
-        jac = robot.closure_jacobians(theta, joints, measured)
+        r, jac = robot.closure_with_jacobians(theta, joints, measured)
     jac_final = jac
     J = jac_final.parameters
     cov = np.zeros((robot.n_parameters,) * 2)

@@ -124,6 +124,42 @@ def test_chainwise_corrected_poses_are_the_forward_kinematics_from_the_measured_
     np.testing.assert_allclose(fit.residuals, ROBOT.closure(fit.theta, commanded, noisy), rtol=0, atol=0)
 
 
+def test_chainwise_history_is_the_integrated_error_and_its_last_entry_exact():
+    """Each iteration's max dQint comes from one Newton step of the forward kinematics (second
+    order); the entry on which the loop stops is the corrected model's forward kinematics."""
+    commanded, measured = _paper_data()
+    noise = SensorNoise(paper.PAPER_NOISE_MM)
+    noisy = measured + noise.sample(10, 0)
+    fit = identify_chainwise(ROBOT, commanded, noisy, noise)
+    from calib.engine import integrated_error
+
+    exact = integrated_error(ROBOT, fit.pose_residuals)[2].max()
+    assert fit.history[-1] == exact
+    # the second-order entries: within (1 um)^2 / 100 mm of the exact ones
+    steps = [identify_chainwise(ROBOT, commanded, noisy, noise, max_iter=k) for k in range(1, fit.iterations)]
+    for k, partial in enumerate(steps):
+        exact_k = integrated_error(ROBOT, partial.pose_residuals)[2].max()
+        assert abs(fit.history[k] - exact_k) < 1e-6 * max(exact_k, 1e-3)
+
+
+def test_chainwise_rank_deficient_chain_gets_the_minimum_norm_step():
+    """At constant orientation a leg's B and P enter only as P - B: each chain's system is rank
+    deficient; the step is LAPACK's minimum-norm least squares, not a blown-up normal equation."""
+    from calib.workspace import reachable_poses
+
+    targets = reachable_poses(ROBOT, 30, np.random.default_rng(5))
+    targets[:, 3:] = 0.0
+    joints = ROBOT.inverse_kinematics(ACTUAL, targets)
+    fit = identify_chainwise(ROBOT, joints, targets, SensorNoise(paper.PAPER_NOISE_MM), max_iter=3)
+    assert np.all(np.isfinite(fit.theta))
+    assert np.abs(fit.residuals).max() < 1e-9
+    t, tn = fit.theta.reshape(6, 7), NOMINAL.reshape(6, 7)
+    # P - B and the offsets' combination are identified; the minimum-norm step splits the rest evenly
+    true = ACTUAL.reshape(6, 7)
+    np.testing.assert_allclose(t[:, 4:7] - t[:, 0:3], true[:, 4:7] - true[:, 0:3], atol=1e-6)
+    np.testing.assert_allclose((t - tn)[:, 4:7], -(t - tn)[:, 0:3], atol=1e-6)
+
+
 def _two_hundred_poses(seed=3):
     from calib.workspace import reachable_poses
 
