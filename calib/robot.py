@@ -299,8 +299,13 @@ class Robot(ABC):
 
     def pose_scale(self) -> np.ndarray:
         """(D,) multiplies pose coordinates to make them comparable: 1 for mm, the machine's
-        size for rad."""
-        return np.where(self.angle_pose_mask, self.length_scale_mm, 1.0)
+        size for rad (computed once per robot, read-only)."""
+        scale = self.__dict__.get("_pose_scale")
+        if scale is None:
+            scale = np.where(self.angle_pose_mask, self.length_scale_mm, 1.0)
+            scale.setflags(write=False)
+            self.__dict__["_pose_scale"] = scale
+        return scale
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}: {self.n_parameters} parameters, {self.n_chains} chains>"
@@ -420,17 +425,20 @@ def _raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> No
     An exact condition number is an SVD per matrix; most rows are cleared by a cheap rigorous
     bound instead: with ``A`` the scaled Jacobian of the first row, ``H = A^-1`` and ``E = I - H
     Js``, ``Js = A (I - E)`` gives ``cond(Js) <= cond(A) (1 + e) / (1 - e)`` for ``e =
-    |E|_F < 1`` (one matrix product for all rows). Rows the bound does not clear get the SVD."""
+    |E|_F < 1`` (one matrix product for all rows), with ``cond(A) <= |A|_F |H|_F``. Rows the
+    bound does not clear get the SVD."""
     m, c, dd = J.shape
     # (M, D, C) transposed and scaled, contiguous (free for a robot that returns a transposed view)
     JsT = np.ascontiguousarray(np.swapaxes(J, 1, 2)) * scale[:, None]
     unsure = np.ones(m, dtype=bool)
     if c == dd:
         A = JsT[0].T
-        try:
-            cond_a = float(np.linalg.cond(A))
-            H = np.linalg.inv(A) if cond_a < SINGULAR_CONDITION else None
+        try:  # cond(A) <= |A|_F |A^-1|_F: no SVD for the reference row either
+            H = np.linalg.inv(A)
+            cond_a = float(np.linalg.norm(A) * np.linalg.norm(H))
         except np.linalg.LinAlgError:
+            H = None
+        if H is not None and not cond_a < SINGULAR_CONDITION:
             H = None
         if H is not None:
             ET = (JsT.reshape(-1, c) @ H.T).reshape(m, dd, dd)  # (H Js)^T
