@@ -114,14 +114,32 @@ def snapshot(paths, out: str | Path, *, size: str = DEFAULT_SIZE, timeout_s: flo
     except Exception as exc:  # noqa: BLE001 - the viewer died or stopped answering: say why
         raise SnapshotError(_why_viewer_failed(log, exc)) from exc
     finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        _stop_session(proc)
         log.close()
         shutil.rmtree(home, ignore_errors=True)
+
+
+def _stop_session(proc: subprocess.Popen) -> None:
+    """Stop the viewer and every process it started: the ``rerun`` launcher beside the
+    interpreter runs the viewer binary as its child, which outlives a plain ``terminate`` of the
+    launcher. The viewer was started in a session of its own, so its process group is signalled."""
+    import signal
+
+    for sig, wait_s in ((signal.SIGTERM, 5), (signal.SIGKILL, 5)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:  # the whole group is gone
+            break
+        try:
+            proc.wait(timeout=wait_s)
+        except subprocess.TimeoutExpired:
+            continue
+        try:  # the launcher is gone; give the rest of its group a moment
+            for _ in range(50):
+                os.killpg(proc.pid, 0)
+                time.sleep(0.1)
+        except ProcessLookupError:
+            break
 
 
 def _why_viewer_failed(log, exc: Exception) -> str:

@@ -171,9 +171,21 @@ def test_discovery_file_marks_flagged_rows(tmp_path):
     assert "/per_row/rms_um/flagged" in rrd_entities(rrd)
 
 
-def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys):
+def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys, monkeypatch):
+    import os
+    import subprocess
+
+    import pipeline.snapshot as snapshot
     from pipeline.snapshot import main, renderer_available
 
+    started = []
+
+    class Recorded(subprocess.Popen):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self.pid)
+
+    monkeypatch.setattr(snapshot.subprocess, "Popen", Recorded)
     run(["--heldout", "5", "--out", str(tmp_path), "--name", "r", "--quiet"])
     rrd = tmp_path / "r.rrd"
     png = tmp_path / "v.png"
@@ -181,6 +193,11 @@ def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys):
     err = capsys.readouterr().err
     if renderer_available() is None:
         assert code == 0 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        # the viewer and whatever its launcher started are gone (its own session's group)
+        assert started
+        for pid in started:
+            with pytest.raises(ProcessLookupError):
+                os.killpg(pid, 0)
     else:
         assert code == 2 and len(err.strip().splitlines()) == 1 and "error:" in err
     assert main([str(tmp_path / "missing.rrd"), "--out", str(png)]) == 2
