@@ -14,7 +14,9 @@
    ``python -m pipeline.run --help``: wall time of the whole process, best of ``--repeats``, this
    tree and (with ``--baseline-ref``) the baseline's, alternated in one run; beside them the
    import-only time: a process that imports what the default run imports (:data:`RUN_IMPORTS`)
-   and runs nothing; and the floor: the libraries alone (numpy, scipy.optimize, mujoco, rerun).
+   and runs nothing; the run's own split (simulate, identify, log: importing Rerun and writing
+   the .rrd) from its summary; and the floor: the libraries alone (numpy, scipy.optimize,
+   mujoco, rerun).
    ``--command-only`` skips part 1. Python compiles this package's modules in every process when
    bytecode caching is off (``PYTHONDONTWRITEBYTECODE`` set, as on the machine these figures were
    first taken on): ``--bytecode`` compiles both trees first and lets the children use the cache,
@@ -192,15 +194,19 @@ def main(argv: list[str] | None = None) -> int:
                     ("its imports", ["-c", RUN_IMPORTS]))
             wall = {label: {} for label, _ in runs}
             cpu = {label: {} for label, _ in runs}
+            split: dict[str, dict] = {}  # the run's own split (simulate, identify, log), best of each
             for _ in range(a.repeats):  # every variant once a repeat: the load moves them alike
                 for label, args in runs:
                     for name, tree in trees:
                         out = tmp / f"out-{name.replace(' ', '_')}"
                         argv_ = args or ["-m", "pipeline.run", "--out", str(out), "--overwrite", "--name", "bench",
-                                         "--quiet"]
+                                         "--quiet", "--summary-json", str(out / "summary.json")]
                         w, c = time_process(tree, argv_, {"MUJOCO_GL": "disable"} if label == "its imports" else None)
                         wall[label][name] = min(wall[label].get(name, np.inf), w)
                         cpu[label][name] = min(cpu[label].get(name, np.inf), c)
+                        if args is None:
+                            got = json.loads((out / "summary.json").read_text())["wall_time_split_s"]
+                            split[name] = {k: min(v, split.get(name, {}).get(k, np.inf)) for k, v in got.items()}
             for label, _ in runs:
                 line = ", ".join(f"{name} {wall[label][name]:.2f} s wall ({cpu[label][name]:.2f} s CPU)"
                                  for name, _ in trees)
@@ -209,7 +215,9 @@ def main(argv: list[str] | None = None) -> int:
             for name, _ in trees:
                 w = wall["default run"][name]
                 print(f"  {name}: default run {w:.2f} s wall, of which its imports {wall['its imports'][name]:.2f} s "
-                      f"and the rest {w - wall['its imports'][name]:.2f} s")
+                      f"and the rest {w - wall['its imports'][name]:.2f} s; the run's own split (best of each): "
+                      + ", ".join(f"{k} {v:.3f} s" for k, v in split[name].items())
+                      + " (log: importing Rerun and writing the .rrd)")
             # What the default run cannot go below: the libraries it needs, nothing else.
             w = c = np.inf
             for _ in range(a.repeats):
