@@ -1,7 +1,7 @@
 """Speed of the simulated machine and of the default command, as ratios measured in one run.
 
     PYTHONPATH=. python benchmarks/machine_speed.py [--poses 100] [--repeats 3] [--robots hexapod,delta,rus]
-        [--gravity] [--baseline-ref REF]
+        [--gravity] [--baseline-ref REF] [--command-only] [--bytecode]
 
 1. The testbed settling ``--poses`` poses of each robot (its reference errors injected, reachable
    poses commanded through the nominal inverse kinematics): one pose after another
@@ -12,8 +12,15 @@
    sequential ones is printed with each.
 2. The default ``python -m pipeline.run`` (simulated hexapod, writes .rrd, .csv, .json) and
    ``python -m pipeline.run --help``: wall time of the whole process, best of ``--repeats``, this
-   tree and (with ``--baseline-ref``) the baseline's, alternated; and the floor: the time to
-   import the libraries the default run needs (numpy, scipy.optimize, mujoco, rerun), nothing else.
+   tree and (with ``--baseline-ref``) the baseline's, alternated in one run; beside them the
+   import-only time: a process that imports what the default run imports (:data:`RUN_IMPORTS`)
+   and runs nothing; the run's own split (simulate, identify, log: importing Rerun and writing
+   the .rrd) from its summary; and the floor: the libraries alone (numpy, scipy.optimize,
+   mujoco, rerun).
+   ``--command-only`` skips part 1. Python compiles this package's modules in every process when
+   bytecode caching is off (``PYTHONDONTWRITEBYTECODE`` set, as on the machine these figures were
+   first taken on): ``--bytecode`` compiles both trees first and lets the children use the cache,
+   as an installed package does.
 
 The machine's load (``os.getloadavg``) is printed before and after: on a shared machine the
 ratios are the figures to quote, the absolute times move with the load.
@@ -25,6 +32,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -61,10 +69,34 @@ print(json.dumps({"s": wall, "steps": float(m.steps.mean())}))
 """
 
 
+#: What the default run imports (its modules, and through them the libraries), nothing run.
+RUN_IMPORTS = ("import pipeline.run, pipeline.calibration, pipeline.recording, pipeline.testbed, "
+               "pipeline.rerun_log, calib.observability, mjcf.hexapod")
+#: Whether the children may use compiled bytecode (``--bytecode``).
+BYTECODE = {"on": False}
+
+
 def child_env(pythonpath: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(pythonpath), OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
                MKL_NUM_THREADS="1")
+    if BYTECODE["on"]:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
     return env
+
+
+def copy_tree(into: Path) -> Path:
+    """A copy of this working tree's packages without their bytecode (``__pycache__``), so that it
+    and the baseline export start alike."""
+    dest = into / "this_tree"
+    for pkg in ("calib", "mjcf", "pipeline"):
+        shutil.copytree(ROOT / pkg, dest / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    return dest
+
+
+def compile_tree(tree: Path) -> None:
+    """Compile the tree's packages to bytecode (``__pycache__``, ignored by git)."""
+    for pkg in ("calib", "mjcf", "pipeline"):
+        subprocess.run([sys.executable, "-m", "compileall", "-q", str(tree / pkg)], check=True)
 
 
 def load() -> str:
@@ -118,17 +150,29 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--gravity", action="store_true", help="the machine with gravity (loaded servos)")
     p.add_argument("--baseline-ref", default=None, help="git revision to compare with (e.g. main)")
     p.add_argument("--skip-command", action="store_true", help="only the testbed")
+    p.add_argument("--command-only", action="store_true", help="only the command (part 2)")
+    p.add_argument("--bytecode", action="store_true",
+                   help="compile both trees first and let the children use bytecode (as an installed package)")
     a = p.parse_args(argv)
-    print(f"machine_speed: {a.poses} poses, best of {a.repeats}, one BLAS thread; {load()}")
+    BYTECODE["on"] = a.bytecode
+    caching = "on (--bytecode)" if a.bytecode else ("off (PYTHONDONTWRITEBYTECODE)" if os.environ.get(
+        "PYTHONDONTWRITEBYTECODE") else "as Python does by default")
+    print(f"machine_speed: {a.poses} poses, best of {a.repeats}, one BLAS thread; bytecode cache {caching}; {load()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         base = export_revision(a.baseline_ref, tmp) if a.baseline_ref else None
+        here = copy_tree(tmp)
+        if a.bytecode:
+            for tree in ([base] if base else []) + [here]:
+                compile_tree(tree)
         variants = (["baseline"] if base else []) + ["sequential", "rollout-1thread", "rollout"]
-        print(f"\n1. testbed, {a.poses} poses, gravity {'on' if a.gravity else 'off'} "
-              f"(rollout: {os.cpu_count()} threads; rollout-1thread: the warm start alone)")
-        print(f"  {'robot':<8}{'variant':<17}{'best ms':>9}{'steps/pose':>12}{'vs sequential':>15}"
-              f"{'vs baseline':>13}{'max |d pose|':>14}")
-        for robot in a.robots.split(","):
+        robots = [] if a.command_only else a.robots.split(",")
+        if robots:
+            print(f"\n1. testbed, {a.poses} poses, gravity {'on' if a.gravity else 'off'} "
+                  f"(rollout: {os.cpu_count()} threads; rollout-1thread: the warm start alone)")
+            print(f"  {'robot':<8}{'variant':<17}{'best ms':>9}{'steps/pose':>12}{'vs sequential':>15}"
+                  f"{'vs baseline':>13}{'max |d pose|':>14}")
+        for robot in robots:
             best: dict[str, float] = {}
             steps: dict[str, float] = {}
             for _ in range(a.repeats):
@@ -145,18 +189,35 @@ def main(argv: list[str] | None = None) -> int:
         if not a.skip_command:
             print("\n2. python -m pipeline.run, wall time of the process (best of "
                   f"{a.repeats}; {'this tree and ' + a.baseline_ref if base else 'this tree'})")
-            trees = ([("baseline", base)] if base else []) + [("this tree", ROOT)]
-            for label, args in (("--help", ["--help"]), ("default run", None)):
-                wall, cpu = {}, {}
-                for _ in range(a.repeats):
+            trees = ([("baseline", base)] if base else []) + [("this tree", here)]
+            runs = (("--help", ["-m", "pipeline.run", "--help"]), ("default run", None),
+                    ("its imports", ["-c", RUN_IMPORTS]))
+            wall = {label: {} for label, _ in runs}
+            cpu = {label: {} for label, _ in runs}
+            split: dict[str, dict] = {}  # the run's own split (simulate, identify, log), best of each
+            for _ in range(a.repeats):  # every variant once a repeat: the load moves them alike
+                for label, args in runs:
                     for name, tree in trees:
                         out = tmp / f"out-{name.replace(' ', '_')}"
-                        argv_ = args or ["--out", str(out), "--overwrite", "--name", "bench", "--quiet"]
-                        w, c = time_process(tree, ["-m", "pipeline.run", *argv_])
-                        wall[name], cpu[name] = min(wall.get(name, np.inf), w), min(cpu.get(name, np.inf), c)
-                line = ", ".join(f"{name} {wall[name]:.2f} s wall ({cpu[name]:.2f} s CPU)" for name, _ in trees)
-                ratio = f"  {wall['baseline'] / wall['this tree']:.1f}x wall" if base else ""
+                        argv_ = args or ["-m", "pipeline.run", "--out", str(out), "--overwrite", "--name", "bench",
+                                         "--quiet", "--summary-json", str(out / "summary.json")]
+                        w, c = time_process(tree, argv_, {"MUJOCO_GL": "disable"} if label == "its imports" else None)
+                        wall[label][name] = min(wall[label].get(name, np.inf), w)
+                        cpu[label][name] = min(cpu[label].get(name, np.inf), c)
+                        if args is None:
+                            got = json.loads((out / "summary.json").read_text())["wall_time_split_s"]
+                            split[name] = {k: min(v, split.get(name, {}).get(k, np.inf)) for k, v in got.items()}
+            for label, _ in runs:
+                line = ", ".join(f"{name} {wall[label][name]:.2f} s wall ({cpu[label][name]:.2f} s CPU)"
+                                 for name, _ in trees)
+                ratio = f"  {wall[label]['baseline'] / wall[label]['this tree']:.2f}x wall" if base else ""
                 print(f"  {label:<12} {line}{ratio}")
+            for name, _ in trees:
+                w = wall["default run"][name]
+                print(f"  {name}: default run {w:.2f} s wall, of which its imports {wall['its imports'][name]:.2f} s "
+                      f"and the rest {w - wall['its imports'][name]:.2f} s; the run's own split (best of each): "
+                      + ", ".join(f"{k} {v:.3f} s" for k, v in split[name].items())
+                      + " (log: importing Rerun and writing the .rrd)")
             # What the default run cannot go below: the libraries it needs, nothing else.
             w = c = np.inf
             for _ in range(a.repeats):

@@ -2,7 +2,8 @@
 
 Usage::
 
-    python benchmarks/scale.py [--trials 400] [--robot hexapod] [--machines 6] [--out FILE.json]
+    python benchmarks/scale.py [--trials 400] [--robot hexapod] [--blind-seeds 5] [--blind-threads-compare]
+        [--machines 6] [--out FILE.json]
 
 Measured in one run:
 
@@ -14,7 +15,15 @@ Measured in one run:
    own task stream (:func:`distributed.get_task_stream`). Also checked: the three runs give the
    same numbers.
 2. **Round trip of an empty task**: 500 no-op tasks on the 2-worker cluster, wall / tasks.
-3. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
+3. **Blind suite** (:func:`pipeline.blind.blind_case`, the cases of
+   ``run_blind_suite(seeds=range(S), kinds=("single",))``: every single effect that applies to
+   the robot and none, ``--blind-seeds`` S seeds each; each case simulates its recording in
+   MuJoCo and runs discovery on it): on a local cluster of 1 and of 2 workers (started
+   beforehand, warmed by one case each), the same measurements as the study, each task's CPU time
+   (all its threads) beside its wall time, and a check that both give the same results. With
+   ``--blind-threads-compare``, the 2-worker cluster again with each task's testbed allowed every
+   core (``THREADS_VAR`` raised in the task: the executor's setting before it limited it).
+4. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
    over ``--machines`` recordings (one simulated per robot in MuJoCo, then copies).
 
 The numbers depend on what else runs on the machine: print ``os.getloadavg()`` with them.
@@ -43,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calib.design import design_poses, robot_workspace, sample_feasible_poses  # noqa: E402
 from calib.noise import SensorNoise  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
-from pipeline.executor import dask_client  # noqa: E402
+from pipeline.executor import THREADS_VAR, dask_client, run_tasks  # noqa: E402
 from pipeline.recording import atomic_write  # noqa: E402
 from pipeline.study import monte_carlo, true_errors  # noqa: E402
 
@@ -56,6 +65,68 @@ def log(msg):
 
 def noop(x):
     return x
+
+
+def blind_task(job):
+    """A blind-suite case and what it cost: (results, CPU s of the worker process, wall s).
+
+    ``job``: (case, threads) with ``threads`` the testbed threads the task may use (None: the
+    worker's setting)."""
+    from pipeline.blind import blind_case
+
+    case, threads = job
+    if threads is not None:
+        os.environ[THREADS_VAR] = str(threads)
+    c0, t0 = time.process_time(), time.perf_counter()
+    out = blind_case(case)
+    return out, time.process_time() - c0, time.perf_counter() - t0
+
+
+def blind_cases(robot: str, seeds: int) -> list:
+    """The cases of the single-effect blind suite of ``robot`` (as ``run_blind_suite`` makes them)."""
+    from calib.effects import effects_for
+
+    return [(robot, () if e == "none" else (e,), s, ("single",))
+            for e in effects_for(default_robot(robot)) for s in range(seeds)]
+
+
+def blind_on(client, cases, threads=None) -> dict:
+    """The blind suite on ``client``: wall, per-task compute (Dask's task stream) and overhead."""
+    from distributed import get_task_stream
+
+    n = len(client.scheduler_info()["workers"])
+    list(run_tasks(blind_task, [((cases[0][0], (), 99, ("single",)), threads)] * n, client=client))  # warm
+    with get_task_stream(client) as ts:
+        t0 = time.perf_counter()
+        out = dict(run_tasks(blind_task, [(c, threads) for c in cases], client=client))
+        wall = time.perf_counter() - t0
+    compute = [sum(s["stop"] - s["start"] for s in t["startstops"] if s["action"] == "compute") for t in ts.data]
+    results = [out[i][0] for i in range(len(cases))]
+    cpu, task_wall = sum(out[i][1] for i in out), sum(out[i][2] for i in out)
+    per_task = sum(compute) / len(compute)
+    overhead = (wall * n - sum(compute)) / len(compute)
+    return {"workers": n, "wall_s": wall, "tasks": len(compute), "task_compute_s": float(sum(compute)),
+            "per_task_s": per_task, "overhead_per_task_ms": 1e3 * overhead, "overhead_fraction": overhead / per_task,
+            "cores_per_task": cpu / task_wall, "results": json.dumps(results, sort_keys=True, default=str)}
+
+
+def blind_scale(robot: str, seeds: int, compare_threads: bool) -> dict:
+    cases = blind_cases(robot, seeds)
+    fig = {"cases": len(cases), "seeds": seeds}
+    for n in (1, 2):
+        log(f"blind suite, {len(cases)} cases, local cluster of {n} worker(s)...")
+        with dask_client(n) as client:
+            fig[f"w{n}"] = blind_on(client, cases)
+            if n == 2 and compare_threads:
+                log("blind suite, 2 workers, each task's testbed on every core...")
+                fig["w2_every_core"] = blind_on(client, cases, threads=os.cpu_count())
+    fig["same_results"] = fig["w1"]["results"] == fig["w2"]["results"]
+    assert fig["same_results"], "the blind suite's results differ between 1 and 2 workers"
+    fig["speedup_1_to_2"] = fig["w1"]["wall_s"] / fig["w2"]["wall_s"]
+    for w in fig.values():
+        if isinstance(w, dict):
+            w.pop("results", None)
+    return fig
 
 
 def study_inputs(name: str):
@@ -111,14 +182,7 @@ def fleet_cost(n_machines: int) -> dict:
             "mean_s": float(np.mean(rest or first)), "first_in_process_s": float(first[0])}
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--robot", default="hexapod")
-    p.add_argument("--trials", type=int, default=400)
-    p.add_argument("--machines", type=int, default=6, help="fleet machines timed (0: skip)")
-    p.add_argument("--out", default=None, help="write the figures as JSON here")
-    args = p.parse_args(argv)
-    fig = {"cpu_count": os.cpu_count(), "load_before": os.getloadavg(), "robot": args.robot, "trials": args.trials}
+def study_scale(args, fig: dict) -> None:
     inputs = study_inputs(args.robot)
     robot, theta, poses, commanded, held = inputs
 
@@ -148,21 +212,54 @@ def main(argv=None) -> int:
     for n in (1, 2):
         w = fig[f"w{n}"]
         w["overhead_fraction"] = w["overhead_per_task_ms"] / w["per_task_ms"]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--robot", default="hexapod")
+    p.add_argument("--trials", type=int, default=400, help="Monte Carlo trials (0: skip the study)")
+    p.add_argument("--blind-seeds", type=int, default=5, help="seeds of each blind-suite case (0: skip the blind suite)")
+    p.add_argument("--blind-threads-compare", action="store_true",
+                   help="also run the blind suite on 2 workers with each task's testbed on every core")
+    p.add_argument("--machines", type=int, default=6, help="fleet machines timed (0: skip)")
+    p.add_argument("--out", default=None, help="write the figures as JSON here")
+    args = p.parse_args(argv)
+    fig = {"cpu_count": os.cpu_count(), "load_before": os.getloadavg(), "robot": args.robot, "trials": args.trials}
+    if args.trials:
+        study_scale(args, fig)
+    if args.blind_seeds:
+        fig["blind"] = blind_scale(args.robot, args.blind_seeds, args.blind_threads_compare)
     if args.machines:
         log("fleet machines in this process...")
         fig["fleet"] = fleet_cost(args.machines)
     fig["load_after"] = os.getloadavg()
     print(json.dumps(fig, indent=1))
-    w1, w2 = fig["w1"], fig["w2"]
-    print(f"\n| | here | 1 worker | 2 workers |\n|---|---|---|---|\n"
-          f"| wall, {args.trials} trials (s) | {fig['here_s']:.2f} | {w1['wall_s']:.2f} | {w2['wall_s']:.2f} |\n"
-          f"| tasks (chunks of trials) | - | {w1['tasks']} | {w2['tasks']} |\n"
-          f"| compute per task (ms) | - | {w1['per_task_ms']:.1f} | {w2['per_task_ms']:.1f} |\n"
-          f"| overhead per task (ms) | - | {w1['overhead_per_task_ms']:.2f} | {w2['overhead_per_task_ms']:.2f} |\n"
-          f"| overhead / task cost | - | {100 * w1['overhead_fraction']:.1f}% | {100 * w2['overhead_fraction']:.1f}% |\n"
-          f"| cluster start (s) | - | {fig['start_1_s']:.1f} | {fig['start_2_s']:.1f} |\n\n"
-          f"per trial {fig['per_trial_ms']:.2f} ms; speed-up 1 -> 2 workers {fig['speedup_1_to_2']:.2f}x; "
-          f"empty-task round trip {fig['noop_round_trip_ms']:.2f} ms; load {fig['load_before']} -> {fig['load_after']}")
+    if args.trials:
+        w1, w2 = fig["w1"], fig["w2"]
+        print(f"\n| study | here | 1 worker | 2 workers |\n|---|---|---|---|\n"
+              f"| wall, {args.trials} trials (s) | {fig['here_s']:.2f} | {w1['wall_s']:.2f} | {w2['wall_s']:.2f} |\n"
+              f"| tasks (chunks of trials) | - | {w1['tasks']} | {w2['tasks']} |\n"
+              f"| compute per task (ms) | - | {w1['per_task_ms']:.1f} | {w2['per_task_ms']:.1f} |\n"
+              f"| overhead per task (ms) | - | {w1['overhead_per_task_ms']:.2f} | {w2['overhead_per_task_ms']:.2f} |\n"
+              f"| overhead / task cost | - | {100 * w1['overhead_fraction']:.1f}% | {100 * w2['overhead_fraction']:.1f}% |\n"
+              f"| cluster start (s) | - | {fig['start_1_s']:.1f} | {fig['start_2_s']:.1f} |\n\n"
+              f"per trial {fig['per_trial_ms']:.2f} ms; speed-up 1 -> 2 workers {fig['speedup_1_to_2']:.2f}x; "
+              f"empty-task round trip {fig['noop_round_trip_ms']:.2f} ms")
+    if args.blind_seeds:
+        b = fig["blind"]
+        runs = [("1 worker", b["w1"]), ("2 workers", b["w2"])] + (
+            [("2 workers, every core a task", b["w2_every_core"])] if "w2_every_core" in b else [])
+        print(f"\n| blind suite, {b['cases']} cases | " + " | ".join(k for k, _ in runs) + " |\n" + "|---" * (len(runs) + 1)
+              + "|\n" + "".join(f"| {label} | " + " | ".join(fmt(w) for _, w in runs) + " |\n" for label, fmt in (
+                  ("wall (s)", lambda w: f"{w['wall_s']:.1f}"),
+                  ("compute per task (s)", lambda w: f"{w['per_task_s']:.2f}"),
+                  ("cores a task uses (CPU / wall)", lambda w: f"{w['cores_per_task']:.2f}"),
+                  ("overhead per task (ms)", lambda w: f"{w['overhead_per_task_ms']:.1f}"),
+                  ("overhead / task cost", lambda w: f"{100 * w['overhead_fraction']:.1f}%")))
+              + f"\nspeed-up 1 -> 2 workers {b['speedup_1_to_2']:.2f}x"
+              + (f" ({b['w1']['wall_s'] / b['w2_every_core']['wall_s']:.2f}x with every core a task)"
+                 if "w2_every_core" in b else "") + f"; same results on 1 and 2 workers: {b['same_results']}")
+    print(f"load {fig['load_before']} -> {fig['load_after']}")
     if args.out:
         atomic_write(args.out, json.dumps(fig, indent=1) + "\n", overwrite=True)
     return 0

@@ -4,12 +4,15 @@ A job of many independent tasks (the Monte Carlo study's chunks of trials, a fle
 the blind suite's recordings) runs on a Dask cluster:
 
 * by default a **local cluster** started for the job: ``workers`` processes on this machine, one
-  thread each, each with one BLAS thread (``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` /
-  ``MKL_NUM_THREADS`` = 1 set before the worker starts: the problems are small, and several
-  workers each running a multi-threaded BLAS on a few cores thrash);
+  thread each, each computing on one core (:data:`WORKER_ENV`, set before the worker starts:
+  ``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` / ``MKL_NUM_THREADS`` = 1 for BLAS, and
+  :data:`THREADS_VAR` = 1 for this package's own threads, the MuJoCo testbed's ``mujoco.rollout``
+  (:func:`pipeline.testbed.available_cores`): a worker using every core would leave none to the
+  others, and several multi-threaded workers on a few cores thrash);
 * or an **existing cluster** (``scheduler="tcp://host:8786"``, the ``--scheduler`` flag), started
-  with ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1`` on machines where this package
-  is installed (Dask's own worker default already sets the BLAS variables to 1);
+  with ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1`` on machines where this package is installed (Dask's
+  worker sets the BLAS variables to 1; set :data:`THREADS_VAR` = 1 in the workers' environment too,
+  e.g. ``PARALLEL_CALIB_THREADS=1 dask worker ...``, when a node runs one worker per core);
 * or, with one worker and no scheduler, **this process**, one task after another (no cluster to
   start: the cheapest for small jobs and the one debuggers and profilers see).
 
@@ -25,10 +28,16 @@ import logging
 import os
 from collections.abc import Callable, Iterable, Iterator
 
-__all__ = ["BLAS_ENV", "dask_client", "run_tasks", "task_pool", "add_executor_arguments", "default_workers"]
+__all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "task_pool", "add_executor_arguments",
+           "default_workers"]
 
-#: Set in every local worker before it starts (one BLAS thread each).
+#: One BLAS thread.
 BLAS_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: The threads this package's own multi-threaded code may run in this process (the testbed's
+#: rollout; :func:`pipeline.testbed.available_cores`); unset: every core the process may use.
+THREADS_VAR = "PARALLEL_CALIB_THREADS"
+#: Set in every local worker before it starts: each worker computes on one core.
+WORKER_ENV = {**BLAS_ENV, THREADS_VAR: "1"}
 
 
 def default_workers() -> int:
@@ -41,7 +50,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     """A ``distributed.Client``: on the cluster at ``scheduler``, or on a local cluster started here.
 
     Args:
-        workers: local cluster size (processes, one thread and one BLAS thread each); default the
+        workers: local cluster size (processes, one thread each, computing on one core); default the
             cores of this machine. Ignored with ``scheduler``.
         scheduler: address of a running Dask scheduler (``tcp://host:8786``), or None.
 
@@ -62,7 +71,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         raise ValueError(f"workers must be >= 1, got {workers}")
     saved = dict(os.environ)
     try:
-        environ = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in BLAS_ENV.items()}
+        environ = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()}
         with dask.config.set(environ):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)

@@ -376,10 +376,17 @@ def log_series_by_pose(rec: rr.RecordingStream, path: str, values, names, colors
 
 # -- the calibration run -------------------------------------------------------------------------
 def _log_machine(rec: rr.RecordingStream, path: str, points: np.ndarray, color, radius: float) -> None:
-    """``points``: (C, K, 3) chain polylines of one pose; the platform joins their last points."""
-    rec.log(f"{path}/chains", rr.LineStrips3D(list(points), colors=color, radii=radius))
-    tips = points[:, -1]
-    rec.log(f"{path}/platform", rr.LineStrips3D([np.vstack([tips, tips[:1]])], colors=color, radii=radius))
+    """``points``: (N, C, K, 3) chain polylines of N poses, one pose a step of the ``pose``
+    timeline (sent as columns: one call per entity, not one per pose); the platform joins the
+    chains' last points."""
+    n, c = points.shape[:2]
+    tips = points[:, :, -1]
+    platform = np.concatenate([tips, tips[:, :1]], axis=1)  # (N, C + 1, 3): one closed strip a pose
+    index = [rr.TimeColumn("pose", sequence=np.arange(n))]
+    style = rr.LineStrips3D.columns(colors=[color] * n, radii=[radius] * n)
+    for part, strips, per_pose in (("chains", points.reshape(n * c, *points.shape[2:]), c), ("platform", platform, 1)):
+        rec.send_columns(f"{path}/{part}", indexes=index,
+                         columns=[*rr.LineStrips3D.columns(strips=strips).partition([per_pose] * n), *style])
 
 
 def _eye(points: np.ndarray) -> rrb.EyeControls3D:
@@ -538,7 +545,7 @@ def log_calibration_run(
     m = magnified if magnified is not None else run_magnification(robot, nominal, actual, identified, targets,
                                                                   measured)
 
-    # 3D machine, one pose at a time on the `pose` timeline.
+    # 3D machine, one pose a step of the `pose` timeline.
     rec.log("machine", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     nominal_joints = robot.inverse_kinematics(nominal, targets)
     nom = robot.chain_points(nominal, nominal_joints, targets)
@@ -546,15 +553,13 @@ def log_calibration_run(
     act = robot.chain_points(drawn, joints, measured)
     cal = robot.chain_points(identified, joints, predicted)
     size = float(np.ptp(nom.reshape(-1, 3), axis=0).max())
-    for k in range(n):
-        rec.set_time("pose", sequence=k)
-        _log_machine(rec, "machine/nominal", nom[k], MACHINE_COLORS["nominal"], size * 0.006)
-        _log_machine(rec, "machine/actual", nom[k] + m * (act[k] - nom[k]), MACHINE_COLORS["actual"], size * 0.004)
-        _log_machine(rec, "machine/calibrated", nom[k] + m * (cal[k] - nom[k]), MACHINE_COLORS["calibrated"],
-                     size * 0.0022)
-        rec.log("machine/chain_labels", rr.Points3D(nom[k, :, 0], radii=size * 0.012, colors=colors, labels=chains,
-                                                    show_labels=True))
-    rec.reset_time()
+    _log_machine(rec, "machine/nominal", nom, MACHINE_COLORS["nominal"], size * 0.006)
+    _log_machine(rec, "machine/actual", nom + m * (act - nom), MACHINE_COLORS["actual"], size * 0.004)
+    _log_machine(rec, "machine/calibrated", nom + m * (cal - nom), MACHINE_COLORS["calibrated"], size * 0.0022)
+    per_chain = rr.Points3D.columns(positions=nom[:, :, 0].reshape(-1, 3), labels=chains * n,
+                                    colors=np.tile(np.asarray(colors, dtype=np.uint8), (n, 1))).partition([c] * n)
+    rec.send_columns("machine/chain_labels", indexes=[rr.TimeColumn("pose", sequence=np.arange(n))],
+                     columns=[*per_chain, *rr.Points3D.columns(radii=[size * 0.012] * n, show_labels=[True] * n)])
     pos = ~angle
     centre = targets[:, pos][:, :3]
     before = (measured - targets)[:, pos][:, :3]

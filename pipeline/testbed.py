@@ -23,6 +23,8 @@ from mjcf import build_machine
 from mjcf.machine import PLATFORM_SITE, MachineEffects, MachineOptions
 from mjcf.units import mm_to_m
 
+from .executor import THREADS_VAR
+
 __all__ = ["SettleError", "Measurements", "Testbed", "SETTLE_MODES", "available_cores"]
 
 #: How :meth:`Testbed.measure` settles the poses: ``auto`` (rollout when the physics has no
@@ -49,11 +51,21 @@ REST_RCOND = 1e-6
 
 
 def available_cores() -> int:
-    """CPU cores this process may run on."""
+    """CPU cores this process may run on, at most :data:`pipeline.executor.THREADS_VAR` when set
+    (a Dask worker of the local cluster: 1, so that each worker computes on its own core)."""
     try:
-        return len(os.sched_getaffinity(0))
+        cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
+        cores = os.cpu_count() or 1
+    limit = os.environ.get(THREADS_VAR, "").strip()
+    if limit:
+        try:
+            cores = min(cores, int(limit))
+        except ValueError:
+            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}") from None
+        if cores < 1:
+            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}")
+    return cores
 
 
 class SettleError(RuntimeError):
@@ -102,7 +114,8 @@ class Testbed:
         max_steps: step cap per pose; beyond it :class:`SettleError` is raised.
         settle: ``"auto"`` (default), ``"rollout"`` or ``"sequential"`` (:data:`SETTLE_MODES`);
             see "Settling" below.
-        threads: threads of the rollout; default every core this process may use.
+        threads: threads of the rollout; default :func:`available_cores` (every core this process
+            may use, one in a worker of the local Dask cluster).
 
     Each measurement commands the servo references ``machine.ctrl(joints + effects)`` and steps
     until at rest. The effects, per actuated chain, in the robot's joint unit:

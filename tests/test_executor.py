@@ -5,11 +5,13 @@ import os
 
 import pytest
 
-from pipeline.executor import BLAS_ENV, run_tasks, task_pool
+from pipeline.executor import THREADS_VAR, WORKER_ENV, run_tasks, task_pool
 
 
-def blas_threads(_):
-    return {k: os.environ.get(k) for k in BLAS_ENV}
+def worker_threads(_):
+    from pipeline.testbed import available_cores
+
+    return {k: os.environ.get(k) for k in WORKER_ENV}, available_cores()
 
 
 def fails_on_three(x):
@@ -26,9 +28,24 @@ def test_run_tasks_here_and_on_a_cluster(dask_two_workers):
     assert there == [(0, 1.0), (1, 2.0), (2, 3.0), (3, 4.0), (4, 5.0)]
     # By the scheduler's address, as --scheduler does.
     assert sorted(run_tasks(math.sqrt, [4, 9], scheduler=dask_two_workers.scheduler.address)) == [(0, 2.0), (1, 3.0)]
-    # Every worker runs one BLAS thread.
-    for _, env in run_tasks(blas_threads, range(4), client=dask_two_workers):
-        assert env == BLAS_ENV
+    # Every worker computes on one core: one BLAS thread, one thread of the testbed's rollout.
+    for _, (env, cores) in run_tasks(worker_threads, range(4), client=dask_two_workers):
+        assert env == WORKER_ENV and cores == 1
+
+
+def test_available_cores_honours_the_thread_limit(monkeypatch):
+    from pipeline.testbed import available_cores
+
+    monkeypatch.delenv(THREADS_VAR, raising=False)
+    every = available_cores()
+    monkeypatch.setenv(THREADS_VAR, "1")
+    assert available_cores() == 1
+    monkeypatch.setenv(THREADS_VAR, "64")
+    assert available_cores() == every
+    for bad in ("0", "two"):
+        monkeypatch.setenv(THREADS_VAR, bad)
+        with pytest.raises(ValueError, match=THREADS_VAR):
+            available_cores()
 
 
 def test_a_failing_task_stops_the_job(dask_two_workers):

@@ -40,6 +40,34 @@ def test_every_view_has_data_on_the_timeline_active_at_open(robot_run):
         assert e in ents, e
 
 
+def test_machine_is_drawn_at_every_calibration_pose(robot_run):
+    """The machine (sent as columns, one call per entity) has one row per calibration pose on the
+    ``pose`` timeline, every chain in it, and the chain labels beside it."""
+    from rerun.chunk import RrdReader
+
+    name, rrd, res = robot_run
+    n, c = res.summary["calibration_poses"], default_robot(name).n_chains
+    rows = {}
+    for chunk in RrdReader(str(rrd)).stream().to_chunks():
+        b = chunk.to_record_batch()
+        for comp in ("LineStrips3D:strips", "Points3D:labels"):
+            if comp in b.schema.names and "pose" in b.schema.names:
+                rows[str(chunk.entity_path)] = dict(zip(b.column("pose").to_pylist(), b.column(comp).to_pylist()))
+    for machine in ("nominal", "actual", "calibrated"):
+        assert sorted(rows[f"/machine/{machine}/chains"]) == list(range(n))
+        assert all(len(strips) == c for strips in rows[f"/machine/{machine}/chains"].values())
+        assert all(len(strip[0]) == c + 1 for strip in rows[f"/machine/{machine}/platform"].values())
+    assert rows["/machine/chain_labels"][n - 1] == [f"{default_robot(name).chain_word} {i + 1}" for i in range(c)]
+
+
+def test_bar_values_are_the_array_rerun_builds():
+    """The bar chart's tensor assembled in Arrow (no pyarrow.compute) is Rerun's own."""
+    from pipeline.obs_log import bar_values
+
+    v = np.array([3.0, -1.5, 0.0, 2e-9])
+    assert rr.BarChart(bar_values(v)).values.pa_array.equals(rr.BarChart(v).values.pa_array)
+
+
 def test_parameter_bars_are_named_identified_beside_injected(robot_run):
     name, rrd, res = robot_run
     names = list(default_robot(name).table.names)
