@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.special import gammaincinv
 
 from .validation import as_array
@@ -356,6 +355,8 @@ def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
     try:
         if solver == "gn":
             return _gauss_newton(logged, jac, x0, max_iter, xtol)
+        from scipy.optimize import least_squares  # imported here: ~0.3 s the default run never needs
+
         sol = least_squares(guarded, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
                             max_nfev=max_iter * (x0.size + 1), x_scale="jac")
         return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
