@@ -72,8 +72,8 @@ class IdentificationResult:
             evaluation.
         success: whether a stopping criterion was met.
         message: which criterion stopped it, in words.
-        condition_numbers: column-scaled condition numbers of the identification Jacobian:
-            (C,) one per chain (chain-wise) or (1,) (forward).
+        condition_numbers: column-scaled condition numbers of the identification Jacobian at
+            the solution: (C,) one per chain (chain-wise) or (1,) (forward).
     """
 
     method: str
@@ -179,21 +179,39 @@ def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
     return np.sqrt(var)
 
 
-def _column_scaled_cond(A: np.ndarray) -> float:
-    norms = np.linalg.norm(A, axis=0)
-    if A.size == 0 or np.any(norms == 0):
-        return float("inf")
-    return float(np.linalg.cond(A / norms))
+#: Smallest eigenvalue, relative to the largest, of a column-scaled Gram matrix ``As^T As``
+#: whose square-root ratio is taken as the condition number of ``As``; below it (a condition
+#: number above 1e5, where the Gram matrix's eigenvalues lose their digits) the SVD of ``As`` is used.
+GRAM_CONDITION_FLOOR = 1e-10
 
 
-def _column_scaled_conds(A: np.ndarray) -> np.ndarray:
-    """(M,) :func:`_column_scaled_cond` of each matrix of a stack (M, N, K), in one batched SVD."""
-    norms = np.linalg.norm(A, axis=1, keepdims=True)
-    zero = np.any(norms == 0, axis=(1, 2))
-    if A.shape[1] == 0 or A.shape[2] == 0:
-        return np.full(A.shape[0], np.inf)
-    cond = np.linalg.cond(A / np.where(norms == 0, 1.0, norms))
-    return np.where(zero, np.inf, cond)
+def _covariance_and_conditions(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(pinv(A^T A), cond(A scaled))`` of each matrix of a stack ``A`` (M, N, K): (M, K, K) and (M,).
+
+    One symmetric eigendecomposition of each column-scaled Gram matrix ``Gs = D^-1 A^T A D^-1``
+    (``D`` the column norms) gives both: ``pinv(A^T A) = D^-1 pinv(Gs) D^-1`` (eigenvalues below
+    ``1e-15`` of the largest dropped, as ``numpy.linalg.pinv(hermitian=True)`` does) and the
+    column-scaled condition number ``sqrt(lambda_max / lambda_min)``; the SVD of ``A D^-1`` only
+    where that ratio is beyond :data:`GRAM_CONDITION_FLOOR`. A zero column: condition number inf,
+    variance 0 for its parameter."""
+    m, n, k = A.shape
+    if n == 0 or k == 0:
+        return np.zeros((m, k, k)), np.full(m, np.inf)
+    norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A))
+    zero = np.any(norms == 0, axis=1)
+    s = np.where(norms == 0, 1.0, norms)
+    As = A / s[:, None, :]
+    lam, V = np.linalg.eigh(np.swapaxes(As, 1, 2) @ As)  # ascending eigenvalues
+    top = lam[:, -1:]
+    keep = lam > 1e-15 * top
+    inverse = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
+    cov = (V * inverse[:, None, :]) @ np.swapaxes(V, 1, 2) / (s[:, :, None] * s[:, None, :])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cond = np.sqrt(top[:, 0] / lam[:, 0])
+    exact = ~(lam[:, 0] > GRAM_CONDITION_FLOOR * top[:, 0]) & ~zero
+    if np.any(exact):
+        cond[exact] = np.linalg.cond(As[exact])
+    return cov, np.where(zero, np.inf, cond)
 
 
 def _chain_groups(robot: Robot, idx: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -484,8 +502,9 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     if np.all(np.isfinite(res)):
         J = white_jac(residual_jac(theta, predicted))
         r = white(res).ravel()
-        chi2, cond = float(r @ r), np.array([_column_scaled_cond(J)])
-        cov[np.ix_(idx, idx)] = np.linalg.pinv(J.T @ J, hermitian=True)
+        block, cond = _covariance_and_conditions(J[None])
+        chi2 = float(r @ r)
+        cov[np.ix_(idx, idx)] = block[0]
     else:
         chi2, cond = float("nan"), np.array([np.nan])
         cov[np.ix_(idx, idx)] = np.nan
@@ -553,7 +572,6 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
     if solver == "gn":
-        last = None  # the last iteration's systems: their condition numbers are reported
         # The closure and its Jacobians at the measured poses, for the current vector: computed
         # once per vector, they serve its Gauss-Newton step, the integrated error of the
         # corrected model and, for the final vector, the result.
@@ -562,11 +580,9 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         for iterations in range(1, max_iter + 1):
             J = jac.parameters
             step = np.zeros_like(theta)
-            last = []
             for chains, params in groups:
                 A, b = _chain_systems(J, r, w, chains, params)
                 step[params] = _chain_steps(A, b)
-                last.append((chains, A))
             try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
                 r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
             except KinematicsError as exc:
@@ -603,8 +619,6 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                            f"(> epsilon = {epsilon:g})")
                 break
             corrected = None
-        for chains, A in last or ():
-            cond[chains] = _column_scaled_conds(A)
         if corrected is None:
             corrected = _predicted(robot, theta, joints, measured)
     else:
@@ -638,12 +652,8 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     cov = np.zeros((robot.n_parameters,) * 2)
     for chains, params in groups:
         A, _ = _chain_systems(J, r, w, chains, params)
-        if solver == "lm":
-            # Chain c's closure involves only its own parameters, so its Jacobian at the final
-            # vector is the one at the end of its own fit.
-            cond[chains] = _column_scaled_conds(A)
+        block, cond[chains] = _covariance_and_conditions(A)  # (M, K, K) and (M,), per chain
         dof = n - params.shape[1]
-        block = np.linalg.pinv(np.swapaxes(A, 1, 2) @ A, hermitian=True)  # (M, K, K), per chain
         if not weighted:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
             rc = r[:, chains]
             block = block * (np.einsum("nm,nm->m", rc, rc) / dof)[:, None, None] if dof > 0 else \

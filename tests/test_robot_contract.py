@@ -187,3 +187,35 @@ def test_run_noise_free_compensates_to_1e4_mm_and_real_reproduces_it(name, tmp_p
     for key in sim.summary["identified_errors"]:
         assert abs(real.summary["identified_errors"][key] - sim.summary["identified_errors"][key]) <= 1e-6
     assert real.summary["injected_errors"] == sim.summary["injected_errors"]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_identification_covariance_and_conditions_are_those_of_the_fisher_information(name):
+    """A second method: the forward fit's covariance at a noise-free solution is the inverse
+    Fisher information of calib.observability (same poses, noise and free parameters), and its
+    condition number that of the column-scaled identification Jacobian by SVD; the chain-wise
+    fit's, chain by chain, pinv(A^T A) s^2 and the SVD of each chain's column-scaled system."""
+    from calib.observability import analyze_observability, identification_jacobian
+
+    robot, theta = _machine(name)
+    poses = reachable_poses(robot, 40, np.random.default_rng(7), theta=theta)
+    joints = robot.inverse_kinematics(theta, poses)
+    noise = SensorNoise(1e-3, 1e-6)
+    fit = identify_forward(robot, joints, poses, noise)
+    a = analyze_observability(robot, fit.theta, poses, noise, joints=joints)
+    idx = robot.table.indices(fit.free_names)
+    np.testing.assert_allclose(fit.covariance[np.ix_(idx, idx)], a.crb, rtol=1e-6,
+                               atol=1e-9 * np.abs(a.crb).max())
+    J = identification_jacobian(robot, fit.theta, poses, noise, joints=joints)
+    J = J.reshape(-1, J.shape[-1])
+    assert fit.condition_numbers[0] == pytest.approx(np.linalg.cond(J / np.linalg.norm(J, axis=0)), rel=1e-6)
+    noisy = poses + noise.sample(len(poses), 3, robot.pose_units)
+    chain = identify_chainwise(robot, joints, noisy, noise)
+    P = robot.closure_jacobians(chain.theta, joints, noisy).parameters
+    for c in range(robot.n_chains):
+        ix = np.intersect1d(robot.table.chain_indices(c), idx)
+        A = P[:, c, ix]
+        s2 = chain.residuals[:, c] @ chain.residuals[:, c] / (len(poses) - ix.size)
+        np.testing.assert_allclose(chain.covariance[np.ix_(ix, ix)], np.linalg.pinv(A.T @ A) * s2, rtol=1e-6,
+                                   atol=1e-9 * np.abs(chain.covariance[np.ix_(ix, ix)]).max())
+        assert chain.condition_numbers[c] == pytest.approx(np.linalg.cond(A / np.linalg.norm(A, axis=0)), rel=1e-6)
