@@ -58,7 +58,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
 
 def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
-                             "periodic_screw_error", "instrument_drift"]
+                             "periodic_screw_error", "instrument_drift", "lost_count", "thermal_warmup"]
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
@@ -70,7 +70,7 @@ def test_which_effects_apply_to_which_robot():
     assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
     # Rotary motors: no leg grows, no lead screw.
     assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale",
-                                                     "instrument_drift")
+                                                     "instrument_drift", "lost_count")
     for name in ROBOTS:
         assert effects_for(default_robot(name))[0] == "none"
 
@@ -449,3 +449,75 @@ def test_the_testbed_moves_the_measured_positions_only():
         q, times_s=np.array([10.0, 20.0]))
     np.testing.assert_allclose(drift.settled_joints, plain.settled_joints, atol=1e-12)
     np.testing.assert_allclose(drift.measured - plain.measured, np.outer([10.0, 20.0], v), atol=1e-12)
+
+
+# -------------------------------------------------------------------------- lost count, thermal warm-up
+
+
+def test_lost_count_regressor_is_a_step_of_one_joint_at_the_step_time():
+    """Independent truth: the joints read ``dq_i`` off from ``t0`` on, nothing before."""
+    data = synthetic("hexapod", "none", [], n=20)
+    t0 = float((data.t_s[9] + data.t_s[10]) / 2)
+    Xq = EFFECTS["lost_count"].joint_regressors(data.robot, data.theta, data, t0)
+    step = np.array([0.0, 0.0, 0.003, 0.0, 0.0, 0.0])
+    expected = np.zeros((20, 6))
+    expected[10:, 2] = 0.003
+    np.testing.assert_array_equal(Xq @ step, expected)
+    grid = EFFECTS["lost_count"].search_grid(data)
+    t = data.t_s
+    assert np.all([np.any((t[:-1] < g) & (g < t[1:])) for g in grid])  # never on a measurement
+    assert np.isclose(grid[:, None], (t[:-1] + t[1:]) / 2).any(axis=1).all()
+
+
+def test_thermal_warmup_regressor_is_the_exponential_approach_and_becomes_the_drift():
+    data = synthetic("hexapod", "none", [], n=20)
+    eff, tau = EFFECTS["thermal_warmup"], 7.0
+    Xq = eff.joint_regressors(data.robot, data.theta, data, tau)
+    t = data.t_s
+    growth = np.array([5e-5 * tau * (1 - np.exp(-ti / tau)) for ti in t])  # g tau (1 - e^{-t/tau})
+    np.testing.assert_allclose(Xq[:, :, 0] * 5e-5, np.repeat(growth[:, None], 6, axis=1), rtol=1e-12)
+    slow = eff.joint_regressors(data.robot, data.theta, data, 1e7)
+    np.testing.assert_allclose(slow, EFFECTS["thermal_drift"].joint_regressors(data.robot, data.theta, data), rtol=1e-5)
+    assert eff.applies_to(default_robot("hexapod")) and not eff.applies_to(default_robot("delta"))
+
+
+
+@pytest.mark.parametrize("robot_name", list(ROBOTS))
+def test_lost_count_is_named_with_its_joint_step_and_time_on_noisy_data(robot_name):
+    robot = default_robot(robot_name)
+    probe = synthetic(robot_name, "none", [], seed=11)
+    t0 = float((probe.t_s[44] + probe.t_s[45]) / 2)
+    step = np.zeros(robot.n_chains)
+    step[1] = 0.004 if robot.joint_unit == "mm" else 4e-5
+    d = discover_effects(synthetic(robot_name, "lost_count", step, seed=11, extra=t0, noise=NOISE))
+    assert list(d.effects) == ["lost_count"] and d.explained, d.verdict
+    fit = d.chosen
+    assert fit.extra == t0
+    np.testing.assert_allclose(fit.coefficients, step, atol=5 * fit.coefficient_std.max())
+
+
+def test_thermal_warmup_is_named_with_its_rate_and_time_constant_on_noisy_data():
+    for robot_name in [r for r in ROBOTS if EFFECTS["thermal_warmup"].applies_to(default_robot(r))]:
+        d = discover_effects(synthetic(robot_name, "thermal_warmup", [3e-4], seed=12, extra=15.0, noise=NOISE))
+        assert list(d.effects) == ["thermal_warmup"] and d.explained, d.verdict
+        fit = d.chosen
+        assert fit.coefficients[0] == pytest.approx(3e-4, abs=5 * fit.coefficient_std[0])
+        assert fit.extra == pytest.approx(15.0, rel=0.25)
+
+
+def test_the_testbed_steps_one_joint_and_warms_the_legs_up():
+    from mjcf.machine import MachineEffects
+    from pipeline.testbed import Testbed
+
+    robot = default_robot("hexapod")
+    q = robot.inverse_kinematics(robot.table.nominal, np.tile(robot.home_pose, (3, 1)))
+    times = np.array([1.0, 2.0, 3.0])
+    plain = Testbed(robot, robot.table.nominal).measure(q, times_s=times).settled_joints
+    step = (0.0, 0.0, 0.01, 0.0, 0.0, 0.0)
+    lost = Testbed(robot, robot.table.nominal, effects=MachineEffects(joint_offset_step=step, joint_offset_step_time_s=1.5))
+    assert not lost.history_free
+    moved = lost.measure(q, times_s=times).settled_joints - plain
+    np.testing.assert_allclose(moved, [[0] * 6, step, step], atol=1e-6)
+    warm = Testbed(robot, robot.table.nominal, effects=MachineEffects(joint_warmup_per_s=0.01, joint_warmup_tau_s=2.0))
+    moved = warm.measure(q, times_s=times).settled_joints - plain
+    np.testing.assert_allclose(moved, np.repeat((0.01 * 2.0 * (1 - np.exp(-times / 2.0)))[:, None], 6, axis=1), atol=1e-6)

@@ -23,7 +23,7 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "Effe
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
 EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error",
-                  "instrument_drift")
+                  "instrument_drift", "lost_count", "thermal_warmup")
 
 #: name -> effect, in the order of :data:`EFFECT_MODULES`.
 EFFECTS: dict[str, Effect] = {

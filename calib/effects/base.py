@@ -276,6 +276,9 @@ class Effect:
         follows: the measurable quantity the effect's residuals follow, one of
             :data:`FOLLOWED_QUANTITIES` (what the remainder's structure tests should point at
             when the effect is left out of the candidates).
+        refine_search: whether the searched parameter is refined by golden section between the
+            best grid point's neighbours (False: the best grid point itself, for a fit that is
+            constant between grid points, e.g. a step time between two measurements).
     """
 
     name: ClassVar[str]
@@ -283,6 +286,7 @@ class Effect:
     searched: ClassVar[SearchedParameter | None] = None
     history_dependent: ClassVar[bool] = False
     follows: ClassVar[str] = ""
+    refine_search: ClassVar[bool] = True
 
     def applies_to(self, robot: Robot) -> bool:
         """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""

@@ -431,7 +431,8 @@ class _Linear:
     def search(self, eff: Effect, blocks: list) -> float:
         """The searched parameter minimising the chi-square with ``blocks`` fitted too: on the
         effect's grid of the search coordinate, refined by golden-section search between the
-        best grid point's neighbours."""
+        best grid point's neighbours (unless the effect says its fit is constant between grid
+        points: :attr:`Effect.refine_search`)."""
         Q = _orth(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         b = self.b - Q @ (Q.T @ self.b)
         robot = self.data.robot
@@ -448,6 +449,8 @@ class _Linear:
         grid = eff.search_grid(self.data)
         costs = np.array([cost(u) for u in grid])
         k = int(np.argmin(costs))
+        if not eff.refine_search:
+            return eff.searched_value(grid[k])
         a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
         g = (np.sqrt(5) - 1) / 2
         c, d = b_ - g * (b_ - a), a + g * (b_ - a)
