@@ -253,6 +253,6 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
              "machine": settings}
     for eff, _, extra in drawn:
         if eff.searched is not None:
-            truth[eff.searched.name] = extra
+            truth.update({k: v for k, (v, _) in eff.searched_values(extra).items()})
     return make_recording(robot, m.t_s, joints, m.measured, noise,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})

@@ -8,7 +8,7 @@ from calib import paper
 from calib.effects.base import unabsorbed
 from calib.effects.compliance import interior_points
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
-                           discover_effect, discover_effects, effects_for, fit_effect, fit_effects,
+                           discover_effect, discover_effects, effect_family, effects_for, fit_effect, fit_effects,
                            regressor_correlation)
 from calib.noise import SensorNoise
 from calib.robot import pose_jacobian_of_joints
@@ -82,7 +82,7 @@ CASES = [(r, e) for r in ROBOTS for e in EFFECTS if EFFECTS[e].applies_to(defaul
 def test_coefficients_match_the_regressors_and_the_machine_settings_are_plain_data(robot_name, effect):
     data = synthetic(robot_name, "none", [], n=12)
     eff = EFFECTS[effect]
-    extra = 4.0 if eff.searched else None
+    extra = eff.searched_value(eff.search_grid(data)[len(eff.search_grid(data)) // 2]) if eff.searched else None
     X = eff.regressors(data.robot, data.theta, data, extra)
     Xq = eff.joint_regressors(data.robot, data.theta, data, extra)
     p = len(eff.coefficients(data.robot))
@@ -455,18 +455,26 @@ def test_the_testbed_moves_the_measured_positions_only():
 
 
 def test_lost_count_regressor_is_a_step_of_one_joint_at_the_step_time():
-    """Independent truth: the joints read ``dq_i`` off from ``t0`` on, nothing before."""
+    """Independent truth: the one joint reads ``s`` off from ``t0`` on, nothing before, and no
+    other joint moves."""
+    from calib.effects.lost_count import JointStep
+
     data = synthetic("hexapod", "none", [], n=20)
     t0 = float((data.t_s[9] + data.t_s[10]) / 2)
-    Xq = EFFECTS["lost_count"].joint_regressors(data.robot, data.theta, data, t0)
-    step = np.array([0.0, 0.0, 0.003, 0.0, 0.0, 0.0])
+    eff = EFFECTS["lost_count"]
+    Xq = eff.joint_regressors(data.robot, data.theta, data, JointStep(2, t0))
     expected = np.zeros((20, 6))
     expected[10:, 2] = 0.003
-    np.testing.assert_array_equal(Xq @ step, expected)
-    grid = EFFECTS["lost_count"].search_grid(data)
+    np.testing.assert_array_equal(Xq @ [0.003], expected)
+    grid = eff.search_grid(data)
+    assert {g.chain for g in grid} == set(range(6))  # every joint is a candidate
     t = data.t_s
-    assert np.all([np.any((t[:-1] < g) & (g < t[1:])) for g in grid])  # never on a measurement
-    assert np.isclose(grid[:, None], (t[:-1] + t[1:]) / 2).any(axis=1).all()
+    times = np.array([g.time_s for g in grid])
+    assert np.all([np.any((t[:-1] < g) & (g < t[1:])) for g in times])  # never on a measurement
+    assert np.isclose(times[:, None], (t[:-1] + t[1:]) / 2).any(axis=1).all()
+    assert eff.searched_values(JointStep(2, t0)) == {"step_time": (t0, "s"), "joint": (3.0, "")}
+    settings = eff.machine_settings(np.array([0.003]), data.robot, CONTEXT, JointStep(2, t0))["effects"]
+    assert settings == {"joint_offset_step": (0.0, 0.0, 0.003, 0.0, 0.0, 0.0), "joint_offset_step_time_s": t0}
 
 
 def test_thermal_warmup_regressor_is_the_exponential_approach_and_becomes_the_drift():
@@ -484,16 +492,26 @@ def test_thermal_warmup_regressor_is_the_exponential_approach_and_becomes_the_dr
 
 @pytest.mark.parametrize("robot_name", list(ROBOTS))
 def test_lost_count_is_named_with_its_joint_step_and_time_on_noisy_data(robot_name):
+    from calib.effects.lost_count import JointStep
+
     robot = default_robot(robot_name)
     probe = synthetic(robot_name, "none", [], seed=11)
-    t0 = float((probe.t_s[44] + probe.t_s[45]) / 2)
-    step = np.zeros(robot.n_chains)
-    step[1] = 0.004 if robot.joint_unit == "mm" else 4e-5
-    d = discover_effects(synthetic(robot_name, "lost_count", step, seed=11, extra=t0, noise=NOISE))
+    truth = JointStep(1, float((probe.t_s[44] + probe.t_s[45]) / 2))
+    step = [0.004 if robot.joint_unit == "mm" else 4e-5]
+    d = discover_effects(synthetic(robot_name, "lost_count", step, seed=11, extra=truth, noise=NOISE))
     assert list(d.effects) == ["lost_count"] and d.explained, d.verdict
     fit = d.chosen
-    assert fit.extra == t0
+    assert fit.extra == truth
+    assert fit.parameters()["lost_count"]["joint"]["value"] == 2
     np.testing.assert_allclose(fit.coefficients, step, atol=5 * fit.coefficient_std.max())
+
+
+def test_a_trend_every_chain_shares_is_no_lost_count():
+    """A warm-up common to every leg, analysed without its family: one joint's step cannot
+    stand in for it, and the remainder says what is left follows time."""
+    data = synthetic("hexapod", "thermal_warmup", [3e-4], seed=12, extra=15.0, noise=NOISE)
+    d = discover_effects(data, candidates=[e for e in effects_for(data.robot) if e not in effect_family("thermal_warmup")])
+    assert not d.explained and d.remaining["follows"][0] == "time", d.remaining["summary"]
 
 
 def test_thermal_warmup_is_named_with_its_rate_and_time_constant_on_noisy_data():

@@ -14,8 +14,9 @@ __all__ = ["EFFECT", "ThermalWarmup", "TAU_RANGE_SPANS", "warmup_growth"]
 TAU_RANGE_SPANS = (0.02, 5.0)
 #: Grid points of the time constant's search (log-spaced).
 TAU_GRID_POINTS = 60
-#: Range of the scenario's time constant, in units of the recording's time span.
-SCENARIO_TAU_SPANS = (0.1, 0.5)
+#: Range of the scenario's time constant, in units of the recording's time span: well inside the
+#: recording, so that the levelling off (what tells a warm-up from a constant drift) is measurable.
+SCENARIO_TAU_SPANS = (0.25, 0.5)
 
 
 def warmup_growth(t_s, tau_s: float):
@@ -37,6 +38,7 @@ class ThermalWarmup(Effect):
     physics = "every leg grows with time, levelling off with a thermal time constant"
     searched = SearchedParameter("time_constant", "s")
     follows = "time"
+    generalises = (THERMAL_DRIFT.name,)
 
     def applies_to(self, robot):
         return THERMAL_DRIFT.applies_to(robot)
