@@ -6,9 +6,11 @@ import pytest
 
 from calib import paper
 from calib.effects.base import unabsorbed
+from calib.effects.discovery import MIN_NESTED_DELTA_BIC
 from calib.effects.compliance import interior_points
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
                            discover_effect, discover_effects, effect_family, effects_for, fit_effect, fit_effects,
+                           nested_in,
                            regressor_correlation)
 from calib.noise import SensorNoise
 from calib.robot import pose_jacobian_of_joints
@@ -521,6 +523,43 @@ def test_thermal_warmup_is_named_with_its_rate_and_time_constant_on_noisy_data()
         fit = d.chosen
         assert fit.coefficients[0] == pytest.approx(3e-4, abs=5 * fit.coefficient_std[0])
         assert fit.extra == pytest.approx(15.0, rel=0.25)
+
+
+def test_effect_families_are_the_nested_effects_either_way():
+    assert EFFECTS["thermal_warmup"].generalises == ("thermal_drift",)
+    assert nested_in("thermal_warmup") == ("thermal_drift",) and nested_in("thermal_drift") == ()
+    assert effect_family("thermal_drift") == effect_family("thermal_warmup") == ("thermal_drift", "thermal_warmup")
+    assert effect_family("lost_count") == ("lost_count",) and effect_family("instrument_drift") == ("instrument_drift",)
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_a_pure_drift_is_named_thermal_drift_not_the_warmup_that_contains_it(seed):
+    data = synthetic("hexapod", "thermal_drift", [8e-5], seed=seed, noise=NOISE)
+    d = discover_effects(data)
+    assert "thermal_warmup" in d.evidence  # it was a candidate
+    assert d.effects == ("thermal_drift",) and d.explained, d.verdict
+
+
+def test_a_warmup_the_data_cannot_tell_from_a_drift_is_named_drift_and_reported_as_nested():
+    """tau longer than the recording: the warm-up fits better than the drift by more than its
+    extra parameter costs (BIC alone would name it), but not by the nested margin."""
+    data = synthetic("hexapod", "thermal_warmup", [1.2e-4], seed=31, extra=100.0, noise=NOISE)
+    gain = fit_effects(data, ["thermal_drift"]).chi2 - fit_effects(data, ["thermal_warmup"]).chi2
+    log_n = np.log(data.n * data.robot.n_chains)
+    assert log_n < gain < log_n + MIN_NESTED_DELTA_BIC
+    d = discover_effects(data)
+    assert d.effects == ("thermal_drift",) and d.explained, d.verdict
+    assert [(a["named"], a["rival"], a["nested"]) for a in d.aliases] == [("thermal_drift", "thermal_warmup", True)]
+    assert 0 < d.aliases[0]["delta_bic"] < MIN_NESTED_DELTA_BIC
+
+
+def test_a_warmup_well_inside_the_recording_is_named_warmup_over_the_drift():
+    data = synthetic("hexapod", "thermal_warmup", [2e-4], seed=31, extra=25.0, noise=NOISE)  # tau about 0.3 of it
+    gain = fit_effects(data, ["thermal_drift"]).chi2 - fit_effects(data, ["thermal_warmup"]).chi2
+    assert gain > np.log(data.n * data.robot.n_chains) + MIN_NESTED_DELTA_BIC
+    d = discover_effects(data)
+    assert d.effects == ("thermal_warmup",) and d.explained and d.aliases == [], d.verdict
+    assert d.chosen.extra == pytest.approx(25.0, rel=0.3)
 
 
 def test_the_testbed_steps_one_joint_and_warms_the_legs_up():

@@ -25,8 +25,9 @@ robot's free parameters (``robot.free_default``).
    later ones make redundant is dropped; effects the data cannot tell apart are reported as
    aliases. Nested effects (one generalises the other: :attr:`Effect.generalises`) are never
    named together; the simpler is named unless the general one lowers the BIC by
-   :data:`MIN_NESTED_DELTA_BIC` more (its extra parameters must pay), and a general one ahead
-   by less is reported as an alias;
+   :data:`MIN_NESTED_DELTA_BIC` more (its extra parameters must pay), decided during the
+   selection and again on the exact joint fits; a general one ahead by less is reported as an
+   alias;
 2. fits the chosen effects and the geometry jointly (whitened Gauss-Newton) and keeps only
    effects whose coefficients are significantly non-zero (Wald test);
 3. tests the remainder (:func:`remainder_tests`): chi-square against the declared noise overall
@@ -571,10 +572,6 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
                          "cv_whitened_rms": lin.cv_rms([t["X"]], folds, seed)} for n, t in trials.items()}
         # One member per family competes: the simplest that the evidence allows.
         winners = {n: _simplest(trials, family[n], nested) for n in trials}
-        nested_rivals = [(w, g, trials[g]["delta_bic"] - trials[w]["delta_bic"])
-                         for w in set(winners.values()) for g in trials if w in nested[g]
-                         and trials[g]["delta_bic"] >= min_delta_bic
-                         and 0 < trials[g]["delta_bic"] - trials[w]["delta_bic"] < MIN_NESTED_DELTA_BIC]
         order = sorted((n for n in trials if winners[n] == n), key=lambda c: -trials[c]["delta_bic"])
         added, cv_new = None, None
         for name in order:
@@ -596,9 +593,6 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
                     and t["delta_bic"] - trials[other]["delta_bic"] < ALIAS_DELTA_BIC:
                 rivals.append((added, other, t["delta_bic"] - trials[other]["delta_bic"],
                                _canonical_correlation(t["X"], trials[other]["X"]), False))
-        for w, g, gap in nested_rivals:
-            if w == added:
-                rivals.append((added, g, gap, _canonical_correlation(t["X"], trials[g]["X"]), True))
         chosen[added] = {"extra": t["extra"], "X": t["X"], "k": t["k"]}
         chi2_cur, p_cur, cv_cur = t["chi2"], p_cur + t["k"], cv_new
         # Nested review: with the others fitted, the family's simplest member that the evidence allows.
@@ -1027,10 +1021,42 @@ class Discovery:
         return bool(self.outliers.get("model_wrong"))
 
 
+def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, sel: dict) -> None:
+    """The chosen member of each family of nested effects decided again on the exact joint fits
+    (the other chosen effects fitted too): the linearised evidence of two nested effects can
+    differ by a few units of BIC from the exact one, as much as the margin the general one needs.
+    Updates ``sel["chosen"]`` and appends nested aliases to ``sel["rivals"]``."""
+    chosen = dict(sel["chosen"])
+    log_n = np.log(lin.n)
+    for name in list(chosen):
+        fam = [f for f in effect_family(models[name]) if f in models]
+        if len(fam) < 2:
+            continue
+        nested = {f: set(nested_in(models[f])) & set(fam) for f in fam}
+        others = {n: e for n, e in chosen.items() if n != name}
+        fits = {f: fit_effects(sub, [models[n] for n in others] + [models[f]], extras=others, start=geo.theta)
+                for f in fam}
+        s2 = max(1.0, min(f.chi2 / max(f.dof, 1) for f in fits.values()))
+        trials = {f: {"delta_bic": -(fit.chi2 / s2 + fit.n_params * log_n)} for f, fit in fits.items()}
+        better = _simplest(trials, fam, nested)
+        extra = fits[better].extras[-1]
+        for g in fam:
+            gap = trials[g]["delta_bic"] - trials[better]["delta_bic"]
+            if better in nested[g] and 0 < gap < MIN_NESTED_DELTA_BIC:
+                corr = _canonical_correlation(lin.columns(models[better], extra),
+                                              lin.columns(models[g], fits[g].extras[-1]))
+                sel["rivals"].append((better, g, float(gap), corr, True))
+        if better != name:
+            chosen = {(better if n == name else n): (extra if n == name else e) for n, e in chosen.items()}
+            sel.setdefault("nested_replaced", []).append((name, better))
+    sel["chosen"] = chosen
+
+
 def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int):
     geo = fit_effects(sub, ())
     lin = _Linear(sub, geo)
     sel = _select(lin, models, max_effects, min_delta_bic, folds, seed)
+    _nested_check(sub, lin, geo, models, sel)
     names = list(sel["chosen"])
     fit = geo
     while names:
@@ -1099,12 +1125,18 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     for name, e in sel["single"].items():
         evidence[name] = {"chi2_linearised": e["chi2"], "n_params": e["n_params"],
                           "delta_bic_vs_none": e["delta_bic_vs_none"], "cv_whitened_rms": e["cv_whitened_rms"]}
+    replaced = dict(sel.get("nested_replaced", []))
     for step in sel["steps"]:
         if step["added"] in evidence:
             evidence[step["added"]]["delta_bic_when_added"] = step["trials"][step["added"]]["delta_bic"]
+        new = replaced.get(step["added"])
+        if new in evidence and new in step["trials"]:  # named in its family member's place
+            evidence[new]["delta_bic_when_added"] = step["trials"][new]["delta_bic"]
     evidence["steps"] = [{"added": s["added"], "dropped": s["dropped"],
                           "delta_bic": {k: v["delta_bic"] for k, v in s["trials"].items()}} for s in sel["steps"]]
     evidence["cv_whitened_rms_chosen"] = sel["cv_chosen"]
+    if replaced:
+        evidence["nested_replaced"] = [list(p) for p in replaced.items()]
     if sel.get("insignificant"):
         evidence["dropped_not_significant"] = sel["insignificant"]
     remaining = tests["remaining"]
