@@ -7,7 +7,8 @@ the noise) and runs :func:`pipeline.discover.discover` on each without telling i
 Kinds of recording (``--kinds``):
 
 - ``single``: one effect, or none;
-- ``pair``: two effects at once (``--pairs``; default every pair that applies);
+- ``pair``: two effects at once (``--pairs``; default every pair that applies, but two nested
+  effects: selection names one member of a family, the pair is inseparable by construction);
 - ``leave_one_out``: a single effect's recording analysed with that effect's whole family
   removed from the candidates (the unknown must be said to be unknown, and what it follows
   named). The family (:func:`calib.effects.effect_family`) is the effect and every effect nested
@@ -188,7 +189,9 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         robot: a registered robot name.
         kinds: the analyses (:data:`KINDS`); every kind but ``pair`` is done on the single-effect
             recordings (``leave_one_out`` and the stress kinds skip ``none``).
-        pairs: pairs of effects for ``pair`` (default every pair of applying effects).
+        pairs: pairs of effects for ``pair`` (default every pair of applying effects but nested
+            ones, e.g. ``thermal_drift`` and ``thermal_warmup``: a drift plus a warm-up is a
+            warm-up with a drift, and selection names one member of a family, never two).
     """
     names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
     kinds = tuple(kinds)
@@ -201,7 +204,8 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
                 cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) for s in seeds]
     if "pair" in kinds:
         real = [e for e in effects_for(default_robot(robot)) if e != "none"]
-        for p in (list(combinations(real, 2)) if pairs is None else [tuple(p) for p in pairs]):
+        default = [(a, b) for a, b in combinations(real, 2) if b not in effect_family(a)]
+        for p in (default if pairs is None else [tuple(p) for p in pairs]):
             cases += [(robot, p, int(s), ("pair",)) for s in seeds]
     workers = workers or min(len(cases), os.cpu_count() or 1)
     out = []

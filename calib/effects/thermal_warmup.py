@@ -15,8 +15,10 @@ TAU_RANGE_SPANS = (0.02, 5.0)
 #: Grid points of the time constant's search (log-spaced).
 TAU_GRID_POINTS = 60
 #: Range of the scenario's time constant, in units of the recording's time span: well inside the
-#: recording, so that the levelling off (what tells a warm-up from a constant drift) is measurable.
-SCENARIO_TAU_SPANS = (0.25, 0.5)
+#: recording, so that the levelling off (what tells a warm-up from a constant drift) is measurable
+#: at 3 times the noise: the part of the curve a straight line leaves is 12% (tau a quarter) to
+#: 10% (a third) of its largest value, against 7% at half the recording.
+SCENARIO_TAU_SPANS = (0.25, 1 / 3)
 
 
 def warmup_growth(t_s, tau_s: float):
