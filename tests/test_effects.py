@@ -215,6 +215,14 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
     if effect == "actuator_scale" and robot.joint_unit == "rad":
         X = unabsorbed(robot, theta, data, X)  # a revolute scale is nearly a crank length: sized by what is left
         assert np.abs(eff.regressors(robot, theta, data) @ sc.coefficients).max() > 10 * 0.005
+    if effect == "thermal_warmup":  # sized by the part neither the geometry nor a drift absorbs
+        D = unabsorbed(robot, theta, data, EFFECTS["thermal_drift"].regressors(robot, theta, data)).ravel()
+        X = unabsorbed(robot, theta, data, X).ravel()
+        X = (X - D * (D @ X) / (D @ D)).reshape(data.n, robot.n_chains, 1)
+        assert 0.2 * data.t_s.max() < sc.extra < 0.4 * data.t_s.max()
+        assert np.abs(eff.regressors(robot, theta, data, sc.extra) @ sc.coefficients).max() > 3 * 0.005
+        assert np.abs(X @ sc.coefficients).max() == pytest.approx(0.005, rel=1e-9)
+        return
     largest = np.abs(X @ sc.coefficients).max()
     assert largest == pytest.approx(0.005, rel=1e-9) if not eff.searched else 0.0025 < largest <= 0.005 + 1e-12
 

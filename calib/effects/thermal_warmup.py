@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Coefficient, Effect, EffectScenario, SearchedParameter, scale_to_magnitude
+from .base import Coefficient, Effect, EffectScenario, SearchedParameter, scale_to_magnitude, unabsorbed
 from .thermal_drift import EFFECT as THERMAL_DRIFT
 
 __all__ = ["EFFECT", "ThermalWarmup", "TAU_RANGE_SPANS", "warmup_growth"]
@@ -66,10 +66,16 @@ class ThermalWarmup(Effect):
                                            "joint_warmup_tau_s": float(extra)}}
 
     def scenario(self, robot, theta, data, magnitude_mm, rng, context):
+        """Sized by what tells a warm-up from the drift it contains: the part of its closure
+        contribution that the geometry and a constant drift cannot absorb has the largest value
+        ``magnitude_mm`` (its raw contribution is then several times larger); sized on the raw
+        contribution, a warm-up at 3 times the noise is a drift as far as the data can tell."""
         span = float(np.max(data.t_s))
         tau = float(span * np.exp(rng.uniform(*np.log(SCENARIO_TAU_SPANS))))
-        X = self.regressors(robot, theta, data, tau)
-        return EffectScenario(scale_to_magnitude(X, np.ones(1), magnitude_mm), tau, context)
+        X = unabsorbed(robot, theta, data, self.regressors(robot, theta, data, tau))[..., 0].ravel()
+        D = unabsorbed(robot, theta, data, THERMAL_DRIFT.regressors(robot, theta, data))[..., 0].ravel()
+        X = X - D * (D @ X) / (D @ D)
+        return EffectScenario(scale_to_magnitude(X[:, None], np.ones(1), magnitude_mm), tau, context)
 
 
 EFFECT = ThermalWarmup()
