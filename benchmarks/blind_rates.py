@@ -2,8 +2,9 @@
 
 Hexapod: every single effect and none (``--seeds`` recordings each), each also analysed with its
 effect left out of the candidates, with three gross rows, with the noise 10 and 100 times the
-declared, with 30% gross rows and with the nominal geometry 10% off; every pair of effects
-(``--pair-seeds`` recordings each). Delta and rus: the single-effect suite (``--other-seeds``).
+declared, with 30% gross rows and with the nominal geometry 10% off; every pair of effects but
+nested ones (``--pair-seeds`` recordings each). Leave-one-out removes the effect's family
+(:func:`calib.effects.effect_family`). Delta and rus: the single-effect suite (``--other-seeds``).
 Prints one Markdown table per robot and the failures; ``--json FILE`` keeps every result.
 """
 

@@ -121,6 +121,13 @@ class MachineEffects:
         instrument_drift_mm_per_s: (3,) velocity of the measuring instrument's frame, mm/s: the
             testbed adds ``v t`` to every measured position (the machine does not move); empty
             for none.
+        joint_offset_step: (C,) step in each chain's zero offset (lost encoder counts), joint
+            unit: added to the servo reference from ``joint_offset_step_time_s`` on; empty for
+            none.
+        joint_offset_step_time_s: the time of that step, s.
+        joint_warmup_per_s: initial growth rate of every actuated chain warming up, joint unit
+            per s: the servo reference gets ``g tau (1 - exp(-t / tau))``.
+        joint_warmup_tau_s: the warm-up's time constant ``tau``, s.
     """
 
     joint_drift_per_s: float = 0.0
@@ -128,9 +135,13 @@ class MachineEffects:
     screw_phase_rad: tuple = ()
     screw_pitch: float = 5.0
     instrument_drift_mm_per_s: tuple = ()
+    joint_offset_step: tuple = ()
+    joint_offset_step_time_s: float = 0.0
+    joint_warmup_per_s: float = 0.0
+    joint_warmup_tau_s: float = 60.0
 
     def __post_init__(self) -> None:
-        for name in ("screw_amplitude", "screw_phase_rad", "instrument_drift_mm_per_s"):
+        for name in ("screw_amplitude", "screw_phase_rad", "instrument_drift_mm_per_s", "joint_offset_step"):
             object.__setattr__(self, name, tuple(float(x) for x in getattr(self, name)))
         if len(self.screw_amplitude) != len(self.screw_phase_rad):
             raise ValueError("screw_amplitude and screw_phase_rad must have the same length")
@@ -139,11 +150,16 @@ class MachineEffects:
         if len(self.instrument_drift_mm_per_s) not in (0, 3):
             raise ValueError(f"instrument_drift_mm_per_s must have 3 values (x, y, z), "
                              f"got {len(self.instrument_drift_mm_per_s)}")
+        if not self.joint_warmup_tau_s > 0:
+            raise ValueError(f"joint_warmup_tau_s must be > 0, got {self.joint_warmup_tau_s!r}")
 
     def to_dict(self) -> dict:
         return {"joint_drift_per_s": self.joint_drift_per_s, "screw_amplitude": list(self.screw_amplitude),
                 "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch,
-                "instrument_drift_mm_per_s": list(self.instrument_drift_mm_per_s)}
+                "instrument_drift_mm_per_s": list(self.instrument_drift_mm_per_s),
+                "joint_offset_step": list(self.joint_offset_step),
+                "joint_offset_step_time_s": self.joint_offset_step_time_s,
+                "joint_warmup_per_s": self.joint_warmup_per_s, "joint_warmup_tau_s": self.joint_warmup_tau_s}
 
 
 class Machine:

@@ -29,7 +29,7 @@ from calib.effects import (EFFECTS, Discovery, EffectData, EffectFit, closure_no
 from calib.robot import Robot
 from calib.robots import ROBOTS
 
-from calib.effects.discovery import MIN_ROWS
+from calib.effects.discovery import MIN_NESTED_DELTA_BIC, MIN_ROWS
 
 from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from .recording import Recording, atomic_write, output_folder, read_recording
@@ -295,6 +295,11 @@ def report_lines(s: dict) -> list[str]:
                 unc = f" +- {v['std']:.2g}" if np.isfinite(v["std"]) else ""
                 lines.append(f"    {k} = {v['value']:.6g}{unc} {v['unit']}")
     for a in s["aliases"]:
+        if a.get("nested"):
+            lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']}, which contains it "
+                         f"(its extra parameters gain {a['delta_bic']:.1f} BIC, less than {MIN_NESTED_DELTA_BIC:.0f}); "
+                         f"the simpler {a['named']} fitted.")
+            continue
         lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']} (evidence within "
                      f"{a['delta_bic']:.1f} BIC, regressor correlation {a['correlation']:.2f}); {a['named']} fitted.")
     lines.append(f"Held-out residual RMS: {1e3 * s['heldout_rms_before_mm']:.3f} um -> {1e3 * s['heldout_rms_after_mm']:.3f} um "
@@ -403,7 +408,8 @@ def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
     lines += ["", "BIC drop: evidence against geometry alone (an effect needs 10 to enter); CV RMS: "
               "cross-validated whitened residual (1 = the noise)."]
     for a in s["aliases"]:
-        lines += ["", f"Cannot tell apart: {a['named']} and {a['rival']} (within {a['delta_bic']:.1f} BIC)."]
+        within = "contains it; the simpler one named" if a.get("nested") else f"within {a['delta_bic']:.1f} BIC"
+        lines += ["", f"Cannot tell apart: {a['named']} and {a['rival']} ({within})."]
     r = s.get("mujoco_resimulation")
     if r:
         lines += ["", f"MuJoCo re-simulation, position RMS: {r['before']['position_um']:.2f} -> "

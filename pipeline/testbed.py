@@ -134,7 +134,11 @@ class Testbed:
       ``frictionloss`` (which the builders write, for the viewer and the dynamics) is a soft
       constraint: it creeps to the target and leaves no dead band;
     * instrument drift: ``effects.instrument_drift_mm_per_s * t`` added to the measured
-      positions (x, y, z: the first three pose coordinates of every robot), the machine untouched.
+      positions (x, y, z: the first three pose coordinates of every robot), the machine untouched;
+    * lost count: ``effects.joint_offset_step`` added to the servo reference of a move that starts
+      at or after ``effects.joint_offset_step_time_s``;
+    * thermal warm-up: ``g tau (1 - exp(-t / tau))`` (``effects.joint_warmup_per_s``,
+      ``effects.joint_warmup_tau_s``), ``t`` as for the thermal drift.
 
     Settling. ``sequential``: each pose starts from the previous pose's settled state, one after
     another (the history the friction's hysteresis and the drift's clock need). ``rollout``: the
@@ -149,7 +153,7 @@ class Testbed:
     with the sequential ones to within what the settle velocity leaves, about 1e-8 mm and
     1e-10 rad (tests/test_testbed.py), in about 6 steps a pose instead of 350-650.
     ``auto`` uses the rollout when the physics has no history: no joint friction, no drift, no
-    instrument drift, no screw error and no ``times_s`` given; the sequential path otherwise. In the rollout, ``t_s``
+    instrument drift, no screw error, no lost count, no warm-up and no ``times_s`` given; the sequential path otherwise. In the rollout, ``t_s``
     is the time the machine spends settling the poses one after another from the warm start.
 
     Noise: pose noise ``noise.sample`` is drawn after the poses settle, then joint noise
@@ -172,6 +176,9 @@ class Testbed:
         if not (isinstance(max_steps, (int, np.integer)) and max_steps >= 1):
             raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
         c = robot.n_chains
+        if len(effects.joint_offset_step) not in (0, c):
+            raise ValueError(f"effects.joint_offset_step must have {c} values (one per {robot.chain_word}), "
+                             f"got {len(effects.joint_offset_step)}")
         if len(effects.screw_amplitude) not in (0, c):
             raise ValueError(f"effects.screw_amplitude must have {c} values (one per {robot.chain_word}), "
                              f"got {len(effects.screw_amplitude)}")
@@ -189,10 +196,11 @@ class Testbed:
         self._last_ctrl = self.data.ctrl.copy()
         self._direction = np.zeros(c)
         self.history_free = (options.joint_friction == 0 and effects.joint_drift_per_s == 0
-                             and not np.any(self._screw_amplitude) and not np.any(effects.instrument_drift_mm_per_s))
+                             and not np.any(self._screw_amplitude) and not np.any(effects.instrument_drift_mm_per_s)
+                             and not np.any(effects.joint_offset_step) and effects.joint_warmup_per_s == 0)
         if settle == "rollout" and not self.history_free:
             raise ValueError("settle='rollout' needs physics without history (no joint friction, drift, "
-                             "instrument drift or screw error): use 'sequential' or 'auto'")
+                             "instrument drift, screw error, lost count or warm-up): use 'sequential' or 'auto'")
         self.settle_mode = settle
         self.threads = int(threads) if threads is not None else available_cores()
         m = self.model
@@ -208,11 +216,16 @@ class Testbed:
 
     def servo_reference(self, joints: np.ndarray, time_s: float) -> np.ndarray:
         """(C,) the joint values the servos are sent for commanded ``joints`` at ``time_s``:
-        the command plus thermal drift and screw error (robot joint unit)."""
+        the command plus thermal drift, warm-up, screw error and lost count (robot joint unit)."""
         fx = self.effects
         screw = self._screw_amplitude * np.sin(2 * np.pi * (joints - self.home_joints) / fx.screw_pitch
                                                + self._screw_phase)
-        return joints + screw + fx.joint_drift_per_s * time_s
+        ref = joints + screw + fx.joint_drift_per_s * time_s
+        if fx.joint_warmup_per_s:
+            ref = ref + fx.joint_warmup_per_s * fx.joint_warmup_tau_s * -np.expm1(-time_s / fx.joint_warmup_tau_s)
+        if fx.joint_offset_step and time_s >= fx.joint_offset_step_time_s:
+            ref = ref + np.asarray(fx.joint_offset_step)
+        return ref
 
     def settle(self, joints: np.ndarray, at_time_s: float | None = None) -> tuple[np.ndarray, int]:
         """Command one set of joint values and step until at rest.

@@ -6,9 +6,11 @@ import pytest
 
 from calib import paper
 from calib.effects.base import unabsorbed
+from calib.effects.discovery import MIN_NESTED_DELTA_BIC
 from calib.effects.compliance import interior_points
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
-                           discover_effect, discover_effects, effects_for, fit_effect, fit_effects,
+                           discover_effect, discover_effects, effect_family, effects_for, fit_effect, fit_effects,
+                           nested_in,
                            regressor_correlation)
 from calib.noise import SensorNoise
 from calib.robot import pose_jacobian_of_joints
@@ -58,7 +60,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
 
 def test_registry_is_ordered_with_none_first_and_every_effect_declares_itself():
     assert list(EFFECTS) == ["none", "compliance", "joint_friction", "thermal_drift", "actuator_scale",
-                             "periodic_screw_error", "instrument_drift"]
+                             "periodic_screw_error", "instrument_drift", "lost_count", "thermal_warmup"]
     assert len(EFFECT_MODULES) == len(EFFECTS)
     for name, eff in EFFECTS.items():
         assert isinstance(eff, Effect) and eff.name == name and eff.physics
@@ -70,7 +72,7 @@ def test_which_effects_apply_to_which_robot():
     assert effects_for(default_robot("hexapod")) == tuple(EFFECTS)
     # Rotary motors: no leg grows, no lead screw.
     assert effects_for(default_robot("delta")) == ("none", "compliance", "joint_friction", "actuator_scale",
-                                                     "instrument_drift")
+                                                     "instrument_drift", "lost_count")
     for name in ROBOTS:
         assert effects_for(default_robot(name))[0] == "none"
 
@@ -82,7 +84,7 @@ CASES = [(r, e) for r in ROBOTS for e in EFFECTS if EFFECTS[e].applies_to(defaul
 def test_coefficients_match_the_regressors_and_the_machine_settings_are_plain_data(robot_name, effect):
     data = synthetic(robot_name, "none", [], n=12)
     eff = EFFECTS[effect]
-    extra = 4.0 if eff.searched else None
+    extra = eff.searched_value(eff.search_grid(data)[len(eff.search_grid(data)) // 2]) if eff.searched else None
     X = eff.regressors(data.robot, data.theta, data, extra)
     Xq = eff.joint_regressors(data.robot, data.theta, data, extra)
     p = len(eff.coefficients(data.robot))
@@ -213,6 +215,14 @@ def test_scenario_draws_the_requested_largest_contribution(robot_name, effect):
     if effect == "actuator_scale" and robot.joint_unit == "rad":
         X = unabsorbed(robot, theta, data, X)  # a revolute scale is nearly a crank length: sized by what is left
         assert np.abs(eff.regressors(robot, theta, data) @ sc.coefficients).max() > 10 * 0.005
+    if effect == "thermal_warmup":  # sized by the part neither the geometry nor a drift absorbs
+        D = unabsorbed(robot, theta, data, EFFECTS["thermal_drift"].regressors(robot, theta, data)).ravel()
+        X = unabsorbed(robot, theta, data, X).ravel()
+        X = (X - D * (D @ X) / (D @ D)).reshape(data.n, robot.n_chains, 1)
+        assert 0.2 * data.t_s.max() < sc.extra < 0.4 * data.t_s.max()
+        assert np.abs(eff.regressors(robot, theta, data, sc.extra) @ sc.coefficients).max() > 3 * 0.005
+        assert np.abs(X @ sc.coefficients).max() == pytest.approx(0.005, rel=1e-9)
+        return
     largest = np.abs(X @ sc.coefficients).max()
     assert largest == pytest.approx(0.005, rel=1e-9) if not eff.searched else 0.0025 < largest <= 0.005 + 1e-12
 
@@ -449,3 +459,130 @@ def test_the_testbed_moves_the_measured_positions_only():
         q, times_s=np.array([10.0, 20.0]))
     np.testing.assert_allclose(drift.settled_joints, plain.settled_joints, atol=1e-12)
     np.testing.assert_allclose(drift.measured - plain.measured, np.outer([10.0, 20.0], v), atol=1e-12)
+
+
+# -------------------------------------------------------------------------- lost count, thermal warm-up
+
+
+def test_lost_count_regressor_is_a_step_of_one_joint_at_the_step_time():
+    """Independent truth: the one joint reads ``s`` off from ``t0`` on, nothing before, and no
+    other joint moves."""
+    from calib.effects.lost_count import JointStep
+
+    data = synthetic("hexapod", "none", [], n=20)
+    t0 = float((data.t_s[9] + data.t_s[10]) / 2)
+    eff = EFFECTS["lost_count"]
+    Xq = eff.joint_regressors(data.robot, data.theta, data, JointStep(2, t0))
+    expected = np.zeros((20, 6))
+    expected[10:, 2] = 0.003
+    np.testing.assert_array_equal(Xq @ [0.003], expected)
+    grid = eff.search_grid(data)
+    assert {g.chain for g in grid} == set(range(6))  # every joint is a candidate
+    t = data.t_s
+    times = np.array([g.time_s for g in grid])
+    assert np.all([np.any((t[:-1] < g) & (g < t[1:])) for g in times])  # never on a measurement
+    assert np.isclose(times[:, None], (t[:-1] + t[1:]) / 2).any(axis=1).all()
+    assert eff.searched_values(JointStep(2, t0)) == {"step_time": (t0, "s"), "joint": (3.0, "")}
+    settings = eff.machine_settings(np.array([0.003]), data.robot, CONTEXT, JointStep(2, t0))["effects"]
+    assert settings == {"joint_offset_step": (0.0, 0.0, 0.003, 0.0, 0.0, 0.0), "joint_offset_step_time_s": t0}
+
+
+def test_thermal_warmup_regressor_is_the_exponential_approach_and_becomes_the_drift():
+    data = synthetic("hexapod", "none", [], n=20)
+    eff, tau = EFFECTS["thermal_warmup"], 7.0
+    Xq = eff.joint_regressors(data.robot, data.theta, data, tau)
+    t = data.t_s
+    growth = np.array([5e-5 * tau * (1 - np.exp(-ti / tau)) for ti in t])  # g tau (1 - e^{-t/tau})
+    np.testing.assert_allclose(Xq[:, :, 0] * 5e-5, np.repeat(growth[:, None], 6, axis=1), rtol=1e-12)
+    slow = eff.joint_regressors(data.robot, data.theta, data, 1e7)
+    np.testing.assert_allclose(slow, EFFECTS["thermal_drift"].joint_regressors(data.robot, data.theta, data), rtol=1e-5)
+    assert eff.applies_to(default_robot("hexapod")) and not eff.applies_to(default_robot("delta"))
+
+
+
+@pytest.mark.parametrize("robot_name", list(ROBOTS))
+def test_lost_count_is_named_with_its_joint_step_and_time_on_noisy_data(robot_name):
+    from calib.effects.lost_count import JointStep
+
+    robot = default_robot(robot_name)
+    probe = synthetic(robot_name, "none", [], seed=11)
+    truth = JointStep(1, float((probe.t_s[44] + probe.t_s[45]) / 2))
+    step = [0.004 if robot.joint_unit == "mm" else 4e-5]
+    d = discover_effects(synthetic(robot_name, "lost_count", step, seed=11, extra=truth, noise=NOISE))
+    assert list(d.effects) == ["lost_count"] and d.explained, d.verdict
+    fit = d.chosen
+    assert fit.extra == truth
+    assert fit.parameters()["lost_count"]["joint"]["value"] == 2
+    np.testing.assert_allclose(fit.coefficients, step, atol=5 * fit.coefficient_std.max())
+
+
+def test_a_trend_every_chain_shares_is_no_lost_count():
+    """A warm-up common to every leg, analysed without its family: one joint's step cannot
+    stand in for it, and the remainder says what is left follows time."""
+    data = synthetic("hexapod", "thermal_warmup", [3e-4], seed=12, extra=15.0, noise=NOISE)
+    d = discover_effects(data, candidates=[e for e in effects_for(data.robot) if e not in effect_family("thermal_warmup")])
+    assert not d.explained and d.remaining["follows"][0] == "time", d.remaining["summary"]
+
+
+def test_thermal_warmup_is_named_with_its_rate_and_time_constant_on_noisy_data():
+    for robot_name in [r for r in ROBOTS if EFFECTS["thermal_warmup"].applies_to(default_robot(r))]:
+        d = discover_effects(synthetic(robot_name, "thermal_warmup", [3e-4], seed=12, extra=15.0, noise=NOISE))
+        assert list(d.effects) == ["thermal_warmup"] and d.explained, d.verdict
+        fit = d.chosen
+        assert fit.coefficients[0] == pytest.approx(3e-4, abs=5 * fit.coefficient_std[0])
+        assert fit.extra == pytest.approx(15.0, rel=0.25)
+
+
+def test_effect_families_are_the_nested_effects_either_way():
+    assert EFFECTS["thermal_warmup"].generalises == ("thermal_drift",)
+    assert nested_in("thermal_warmup") == ("thermal_drift",) and nested_in("thermal_drift") == ()
+    assert effect_family("thermal_drift") == effect_family("thermal_warmup") == ("thermal_drift", "thermal_warmup")
+    assert effect_family("lost_count") == ("lost_count",) and effect_family("instrument_drift") == ("instrument_drift",)
+
+
+@pytest.mark.parametrize("seed", [3, 7])
+def test_a_pure_drift_is_named_thermal_drift_not_the_warmup_that_contains_it(seed):
+    data = synthetic("hexapod", "thermal_drift", [8e-5], seed=seed, noise=NOISE)
+    d = discover_effects(data)
+    assert "thermal_warmup" in d.evidence  # it was a candidate
+    assert d.effects == ("thermal_drift",) and d.explained, d.verdict
+
+
+def test_a_warmup_the_data_cannot_tell_from_a_drift_is_named_drift_and_reported_as_nested():
+    """tau longer than the recording: the warm-up fits better than the drift by more than its
+    extra parameter costs (BIC alone would name it), but not by the nested margin."""
+    data = synthetic("hexapod", "thermal_warmup", [1.2e-4], seed=31, extra=100.0, noise=NOISE)
+    gain = fit_effects(data, ["thermal_drift"]).chi2 - fit_effects(data, ["thermal_warmup"]).chi2
+    log_n = np.log(data.n * data.robot.n_chains)
+    assert log_n < gain < log_n + MIN_NESTED_DELTA_BIC
+    d = discover_effects(data)
+    assert d.effects == ("thermal_drift",) and d.explained, d.verdict
+    assert [(a["named"], a["rival"], a["nested"]) for a in d.aliases] == [("thermal_drift", "thermal_warmup", True)]
+    assert 0 < d.aliases[0]["delta_bic"] < MIN_NESTED_DELTA_BIC
+
+
+def test_a_warmup_well_inside_the_recording_is_named_warmup_over_the_drift():
+    data = synthetic("hexapod", "thermal_warmup", [2e-4], seed=31, extra=25.0, noise=NOISE)  # tau about 0.3 of it
+    gain = fit_effects(data, ["thermal_drift"]).chi2 - fit_effects(data, ["thermal_warmup"]).chi2
+    assert gain > np.log(data.n * data.robot.n_chains) + MIN_NESTED_DELTA_BIC
+    d = discover_effects(data)
+    assert d.effects == ("thermal_warmup",) and d.explained and d.aliases == [], d.verdict
+    assert d.chosen.extra == pytest.approx(25.0, rel=0.3)
+
+
+def test_the_testbed_steps_one_joint_and_warms_the_legs_up():
+    from mjcf.machine import MachineEffects
+    from pipeline.testbed import Testbed
+
+    robot = default_robot("hexapod")
+    q = robot.inverse_kinematics(robot.table.nominal, np.tile(robot.home_pose, (3, 1)))
+    times = np.array([1.0, 2.0, 3.0])
+    plain = Testbed(robot, robot.table.nominal).measure(q, times_s=times).settled_joints
+    step = (0.0, 0.0, 0.01, 0.0, 0.0, 0.0)
+    lost = Testbed(robot, robot.table.nominal, effects=MachineEffects(joint_offset_step=step, joint_offset_step_time_s=1.5))
+    assert not lost.history_free
+    moved = lost.measure(q, times_s=times).settled_joints - plain
+    np.testing.assert_allclose(moved, [[0] * 6, step, step], atol=1e-6)
+    warm = Testbed(robot, robot.table.nominal, effects=MachineEffects(joint_warmup_per_s=0.01, joint_warmup_tau_s=2.0))
+    moved = warm.measure(q, times_s=times).settled_joints - plain
+    np.testing.assert_allclose(moved, np.repeat((0.01 * 2.0 * (1 - np.exp(-times / 2.0)))[:, None], 6, axis=1), atol=1e-6)

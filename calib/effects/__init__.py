@@ -15,7 +15,7 @@ from ..robot import Robot
 from .base import (FOLLOWED_QUANTITIES, Coefficient, Effect, EffectData, EffectScenario, MachineContext, PhysicalParameter,
                    SearchedParameter)
 
-__all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "EffectData", "Coefficient",
+__all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "effect_family", "nested_in", "Effect", "EffectData", "Coefficient",
            "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "FOLLOWED_QUANTITIES",
            "MIN_DELTA_BIC", "MAX_EFFECTS", "EffectFit", "Discovery", "fit_effect", "fit_effects", "discover_effects",
            "discover_effect", "remainder_tests", "outlier_scan", "regressor_correlation", "locate_mismatch",
@@ -23,7 +23,7 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "Effect", "Effe
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
 EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error",
-                  "instrument_drift")
+                  "instrument_drift", "lost_count", "thermal_warmup")
 
 #: name -> effect, in the order of :data:`EFFECT_MODULES`.
 EFFECTS: dict[str, Effect] = {
@@ -47,6 +47,35 @@ def effect(name: str | Effect) -> Effect:
 def effects_for(robot: Robot) -> tuple[str, ...]:
     """Names of the effects that apply to ``robot``, registry order (``none`` first)."""
     return tuple(n for n, e in EFFECTS.items() if e.applies_to(robot))
+
+
+def nested_in(name: str | Effect) -> tuple[str, ...]:
+    """Names of the registered effects that ``name`` (a registered name or an :class:`Effect`)
+    generalises, directly or through another (:attr:`Effect.generalises`), registry order."""
+    seen: set = set()
+    todo = list(effect(name).generalises)
+    while todo:
+        n = todo.pop()
+        if n not in seen:
+            seen.add(n)
+            todo += list(effect(n).generalises)
+    return tuple(n for n in EFFECTS if n in seen)
+
+
+def effect_family(name: str | Effect) -> tuple[str, ...]:
+    """``name`` and every registered effect nested with it, either way (those it generalises
+    and those that generalise it, transitively), registry order with ``name`` first if it is not
+    registered: the effects a recording of ``name`` is also correctly explained by, and that
+    leave-one-out removes together."""
+    first = effect(name)
+    family = {first.name} | set(nested_in(first)) | {g for g in EFFECTS if first.name in nested_in(g)}
+    todo = [n for n in family if n in EFFECTS and n != first.name]
+    while todo:
+        n = todo.pop()
+        linked = set(nested_in(n)) | {g for g in EFFECTS if n in nested_in(g)}
+        todo += [m for m in linked - family]
+        family |= linked
+    return tuple(([] if first.name in EFFECTS else [first.name]) + [n for n in EFFECTS if n in family])
 
 
 from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, closure_noise_std,  # noqa: E402

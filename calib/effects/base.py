@@ -276,6 +276,14 @@ class Effect:
         follows: the measurable quantity the effect's residuals follow, one of
             :data:`FOLLOWED_QUANTITIES` (what the remainder's structure tests should point at
             when the effect is left out of the candidates).
+        refine_search: whether the searched parameter is refined by golden section between the
+            best grid point's neighbours (False: the best grid point itself, for a fit that is
+            constant between grid points, e.g. a step time between two measurements).
+        generalises: names of the registered effects this one contains as a limiting case (nested
+            models: ``thermal_warmup`` with a time constant much longer than the recording is
+            ``thermal_drift``). Selection names the simpler one unless the general one earns a
+            clear margin of evidence over it, never both; a recording analysed with an effect
+            left out has its whole family left out (:func:`calib.effects.effect_family`).
     """
 
     name: ClassVar[str]
@@ -283,6 +291,8 @@ class Effect:
     searched: ClassVar[SearchedParameter | None] = None
     history_dependent: ClassVar[bool] = False
     follows: ClassVar[str] = ""
+    refine_search: ClassVar[bool] = True
+    generalises: ClassVar[tuple[str, ...]] = ()
 
     def applies_to(self, robot: Robot) -> bool:
         """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""
@@ -314,12 +324,18 @@ class Effect:
         return closure_regressors(robot.closure_jacobians(theta, data.joints, data.measured).joints, Xq)
 
     def search_grid(self, data: EffectData) -> np.ndarray:
-        """(K,) grid of the search coordinate (effects with :attr:`searched`)."""
+        """(K,) grid of the search coordinate (effects with :attr:`searched`; a sequence of
+        values for a search that is not refined, :attr:`refine_search`)."""
         raise NotImplementedError
 
     def searched_value(self, u: float) -> float:
         """The searched parameter at search coordinate ``u``."""
         raise NotImplementedError
+
+    def searched_values(self, extra) -> dict:
+        """``{name: (value, unit)}``: the searched parameter ``extra`` as reported (one entry,
+        :attr:`searched`, unless the effect's searched parameter holds several numbers)."""
+        return {self.searched.name: (float(extra), self.searched.unit)}
 
     def machine_settings(self, coefficients: np.ndarray, robot: Robot, context: MachineContext,
                          extra: float | None = None) -> dict:

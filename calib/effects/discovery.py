@@ -23,7 +23,11 @@ robot's free parameters (``robot.free_default``).
    an underestimated noise does not turn chance into evidence) and lower the cross-validated
    residual (closed form: deleted residuals of each fold through the hat matrix); an effect the
    later ones make redundant is dropped; effects the data cannot tell apart are reported as
-   aliases;
+   aliases. Nested effects (one generalises the other: :attr:`Effect.generalises`) are never
+   named together; the simpler is named unless the general one lowers the BIC by
+   :data:`MIN_NESTED_DELTA_BIC` more (its extra parameters must pay), decided during the
+   selection and again on the exact joint fits; a general one ahead by less is reported as an
+   alias;
 2. fits the chosen effects and the geometry jointly (whitened Gauss-Newton) and keeps only
    effects whose coefficients are significantly non-zero (Wald test);
 3. tests the remainder (:func:`remainder_tests`): chi-square against the declared noise overall
@@ -44,10 +48,11 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist, norm
 
 from ..robot import KinematicsError, Robot
-from . import EFFECTS, effect as registered, effects_for
+from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors
 
-__all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC", "VERDICT_ALPHA",
+__all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
+           "MIN_NESTED_DELTA_BIC", "VERDICT_ALPHA",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
            "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation"]
@@ -60,6 +65,10 @@ MIN_DELTA_BIC = 10.0
 MIN_ROWS = 12
 #: Most effects named together.
 MAX_EFFECTS = 3
+#: Evidence a general effect needs over one it contains (:attr:`Effect.generalises`) to be named
+#: in its place: BIC lower by at least this, on top of the BIC's own charge for the extra
+#: parameters (as much as an effect needs to enter at all: :data:`MIN_DELTA_BIC`).
+MIN_NESTED_DELTA_BIC = MIN_DELTA_BIC
 #: Largest canonical correlation of two effects' whitened regressors (geometry projected out)
 #: above which this recording cannot tell them apart.
 ALIAS_CORRELATION = 0.95
@@ -275,7 +284,7 @@ class EffectFit:
             d = {c.name: {"value": float(v), "std": float(sd), "unit": c.unit}
                  for c, v, sd in zip(m.coefficients(self.robot), self.coefficients[s], self.coefficient_std[s])}
             if extra is not None:
-                d[m.searched.name] = {"value": float(extra), "std": float("nan"), "unit": m.searched.unit}
+                d.update({k: {"value": v, "std": float("nan"), "unit": u} for k, (v, u) in m.searched_values(extra).items()})
             d["significance"] = self.significance(m.name)
             out[m.name] = d
         return out
@@ -431,7 +440,8 @@ class _Linear:
     def search(self, eff: Effect, blocks: list) -> float:
         """The searched parameter minimising the chi-square with ``blocks`` fitted too: on the
         effect's grid of the search coordinate, refined by golden-section search between the
-        best grid point's neighbours."""
+        best grid point's neighbours (unless the effect says its fit is constant between grid
+        points: :attr:`Effect.refine_search`)."""
         Q = _orth(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         b = self.b - Q @ (Q.T @ self.b)
         robot = self.data.robot
@@ -448,6 +458,8 @@ class _Linear:
         grid = eff.search_grid(self.data)
         costs = np.array([cost(u) for u in grid])
         k = int(np.argmin(costs))
+        if not eff.refine_search:
+            return eff.searched_value(grid[k])
         a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
         g = (np.sqrt(5) - 1) / 2
         c, d = b_ - g * (b_ - a), a + g * (b_ - a)
@@ -505,9 +517,43 @@ def regressor_correlation(data: EffectData, candidates=None, extras=None) -> dic
     return {(a, b): _canonical_correlation(cols[a], cols[b]) for i, a in enumerate(names) for b in names[i + 1:]}
 
 
+def _simplest(trials: dict, names, nested: dict) -> str:
+    """Among ``names`` (one family of nested effects, each with its ``delta_bic`` in ``trials``;
+    ``nested[name]``: the effects it generalises), the one selection names: the best by BIC,
+    then, as long as an effect it generalises is within :data:`MIN_NESTED_DELTA_BIC` of it, that
+    simpler one (the extra parameters must pay)."""
+    names = [n for n in names if n in trials]
+    best = max(names, key=lambda n: trials[n]["delta_bic"])
+    while True:
+        simpler = [n for n in nested[best] if n in names
+                   and trials[best]["delta_bic"] - trials[n]["delta_bic"] < MIN_NESTED_DELTA_BIC]
+        if not simpler:
+            return best
+        best = max(simpler, key=lambda n: trials[n]["delta_bic"])
+
+
+def _trial(lin: _Linear, eff: Effect, blocks: list, chi2_ref: float, p_ref: int, log_n: float) -> dict:
+    """``eff`` fitted with ``blocks``: its columns, chi-square and BIC evidence against
+    ``blocks`` alone (chi-square ``chi2_ref``, ``p_ref`` parameters)."""
+    extra = lin.search(eff, blocks) if eff.searched is not None else None
+    X = lin.columns(eff, extra)
+    chi2_new = lin.chi2(blocks + [X])
+    k = X.shape[1] + (eff.searched is not None)
+    s2 = max(1.0, chi2_new / max(lin.dof0 - p_ref - k, 1))
+    return {"extra": extra, "X": X, "k": k, "chi2": chi2_new, "scale": s2,
+            "delta_bic": (chi2_ref - chi2_new) / s2 - k * log_n}
+
+
 def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int) -> dict:
-    """Stepwise selection (forward, with a backward check after each addition)."""
+    """Stepwise selection (forward, with a backward check after each addition).
+
+    Nested effects (:attr:`Effect.generalises`) are one family: at most one of a family is in
+    the model, the simplest unless a more general one gains :data:`MIN_NESTED_DELTA_BIC` over it
+    (:func:`_simplest`), and after each step the family's member in the model is reviewed with
+    the other effects fitted (a warm-up's curvature can show only once another effect is in)."""
     log_n = np.log(lin.n)
+    family = {n: set(effect_family(m)) & set(models) for n, m in models.items()}
+    nested = {n: set(nested_in(m)) & set(models) for n, m in models.items()}
     chosen: dict = {}  # name -> {"extra", "X", "k"}
     excluded: set = set()
     chi2_cur, p_cur = lin.chi2([]), 0
@@ -517,20 +563,16 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
         blocks = [c["X"] for c in chosen.values()]
         trials = {}
         for name, eff in models.items():
-            if name in chosen or name in excluded:
+            if name in chosen or name in excluded or (family[name] - {name}) & set(chosen):
                 continue
-            extra = lin.search(eff, blocks) if eff.searched is not None else None
-            X = lin.columns(eff, extra)
-            chi2_new = lin.chi2(blocks + [X])
-            k = X.shape[1] + (eff.searched is not None)
-            s2 = max(1.0, chi2_new / max(lin.dof0 - p_cur - k, 1))
-            trials[name] = {"extra": extra, "X": X, "k": k, "chi2": chi2_new, "scale": s2,
-                            "delta_bic": (chi2_cur - chi2_new) / s2 - k * log_n}
+            trials[name] = _trial(lin, eff, blocks, chi2_cur, p_cur, log_n)
         if first is None:
             first = {n: {"chi2": t["chi2"], "delta_bic_vs_none": t["delta_bic"], "n_params": t["k"],
                          "extra": t["extra"],
                          "cv_whitened_rms": lin.cv_rms([t["X"]], folds, seed)} for n, t in trials.items()}
-        order = sorted(trials, key=lambda c: -trials[c]["delta_bic"])
+        # One member per family competes: the simplest that the evidence allows.
+        winners = {n: _simplest(trials, family[n], nested) for n in trials}
+        order = sorted((n for n in trials if winners[n] == n), key=lambda c: -trials[c]["delta_bic"])
         added, cv_new = None, None
         for name in order:
             t = trials[name]
@@ -550,9 +592,24 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
             if other != added and trials[other]["delta_bic"] >= min_delta_bic \
                     and t["delta_bic"] - trials[other]["delta_bic"] < ALIAS_DELTA_BIC:
                 rivals.append((added, other, t["delta_bic"] - trials[other]["delta_bic"],
-                               _canonical_correlation(t["X"], trials[other]["X"])))
+                               _canonical_correlation(t["X"], trials[other]["X"]), False))
         chosen[added] = {"extra": t["extra"], "X": t["X"], "k": t["k"]}
         chi2_cur, p_cur, cv_cur = t["chi2"], p_cur + t["k"], cv_new
+        # Nested review: with the others fitted, the family's simplest member that the evidence allows.
+        for name in [n for n in chosen if n != added and len(family[n]) > 1]:
+            rest = {n: c for n, c in chosen.items() if n != name}
+            blocks_rest = [c["X"] for c in rest.values()]
+            chi2_rest, p_rest = lin.chi2(blocks_rest), p_cur - chosen[name]["k"]
+            review = {f: _trial(lin, models[f], blocks_rest, chi2_rest, p_rest, log_n)
+                      for f in family[name] if f not in excluded}
+            better = _simplest(review, review, nested)
+            if better != name:
+                r = review[better]
+                chosen = {(better if n == name else n): ({"extra": r["extra"], "X": r["X"], "k": r["k"]} if n == name
+                                                         else c) for n, c in chosen.items()}
+                chi2_cur, p_cur = r["chi2"], p_rest + r["k"]
+                cv_cur = lin.cv_rms([c["X"] for c in chosen.values()], folds, seed)
+                step.setdefault("replaced", []).append((name, better))
         # Backward: an earlier effect the later ones make redundant leaves the model.
         for name in [n for n in chosen if n != added]:
             rest = [c["X"] for n, c in chosen.items() if n != name]
@@ -640,7 +697,10 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
       the geometry absorbs is not counted); F test (the noise's scale estimated, so it speaks
       also when the noise is larger than declared), per-chain t of the coefficients;
     - smooth in it (ordered quantities): the standardised residuals' serial correlation when the
-      rows are sorted by the quantity (any smooth function shows, a periodic one included).
+      rows are sorted by the quantity (any smooth function shows, a periodic one included);
+    - common and smooth in it (ordered quantities): every chain's joint displaced by one cubic
+      function of the quantity (three coefficients, Legendre polynomials of the quantity scaled
+      to [-1, 1]), mapped and projected like the proportional test; F test.
 
     Bonferroni over every statistic, at ``alpha``.
 
@@ -669,39 +729,54 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     w = fit.whitened.ravel()
     R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if n > 2 else np.eye(C)
     feats = _features(data)
-    m_tests = len(feats) * (2 * C + 2)  # per quantity: F, combined serial, per chain t and serial
+    n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
+    # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth
+    m_tests = len(feats) * (2 * C + 2) + n_ordered
+
+    def f_test(X):
+        """F test of the whitened remainder on columns ``X`` (the model's columns projected out):
+        ``(p, beta, cov, keep)``."""
+        X = X - Q @ (Q.T @ X)
+        keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
+        X = X[:, keep]
+        k = int(np.linalg.matrix_rank(X)) if X.size else 0
+        if k == 0 or fit.dof - k <= 0:
+            return 1.0, None, None, keep
+        beta = _solve(X, w)
+        d2 = float(np.sum((X @ beta) ** 2))
+        s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
+        return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(X.T @ X, hermitian=True) * s2, keep
+
     structure = {}
     for name, kind, values in feats:
         v = values - values.mean(axis=0)
         Xq = np.zeros((n, C, C))
         Xq[:, np.arange(C), np.arange(C)] = v
-        X = _whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, C)
-        X = X - Q @ (Q.T @ X)
-        keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
-        X = X[:, keep]
-        k = int(np.linalg.matrix_rank(X)) if X.size else 0
+        p_f, beta, cov, keep = f_test(_whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, C))
         t_chain = np.zeros(C)
-        p_f = 1.0
-        if k > 0 and fit.dof - k > 0:
-            beta = _solve(X, w)
-            d2 = float(np.sum((X @ beta) ** 2))
-            rest = max(fit.chi2 - d2, 1e-300)
-            s2 = rest / (fit.dof - k)
-            F = (d2 / k) / s2
-            p_f = float(f_dist.sf(F, k, fit.dof - k))
-            cov = np.linalg.pinv(X.T @ X, hermitian=True) * s2
+        if beta is not None:
             t_chain[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
         p_t = 2 * norm.sf(np.abs(t_chain))
+        p_smooth = 1.0
         if kind == "ordered":
             lag = np.array([_lag1(z[:, c], values[:, c]) for c in range(C)])
             comb = float(np.sum(lag) / np.sqrt(max(np.sum(R ** 2), 1e-12)))
             p_lag = norm.sf(lag)
             p_comb = float(norm.sf(comb))
+            # Common and smooth: every joint displaced by one cubic function of its own value
+            # of the quantity (a warm-up, a drift that levels off: shared by every chain, so a
+            # test per chain is six times weaker against it).
+            span = float(np.ptp(values))
+            if span > 0:
+                u = 2 * (values - values.min()) / span - 1
+                Xq = np.stack([u, 1.5 * u ** 2 - 0.5, 2.5 * u ** 3 - 1.5 * u], axis=-1)
+                p_smooth = f_test(_whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, 3))[0]
         else:
             lag, comb, p_lag, p_comb = np.zeros(C), 0.0, np.ones(C), 1.0
         p_per = np.minimum(p_t, p_lag)
-        p_min = min(p_f, p_comb, float(p_per.min()))
-        structure[name] = {"p_value_proportional": p_f, "t_per_chain": t_chain.tolist(),
+        p_min = min(p_f, p_comb, p_smooth, float(p_per.min()))
+        structure[name] = {"p_value_proportional": p_f, "p_value_common_smooth": p_smooth,
+                           "t_per_chain": t_chain.tolist(),
                            "serial_correlation_per_chain": lag.tolist(), "serial_correlation_combined": comb,
                            "p_value": min(1.0, p_min * m_tests),
                            "chains": [int(c) for c in np.flatnonzero(p_per * m_tests < alpha)],
@@ -908,7 +983,9 @@ class Discovery:
             selection's steps; the geometry-only chi-square test.
         tests: the remainder's tests (:func:`remainder_tests`).
         aliases: pairs the data could not tell apart: ``{"named", "rival", "delta_bic",
-            "correlation"}``.
+            "correlation", "nested"}``; ``nested``: the rival generalises the effect named, which
+            is named because the rival's extra parameters did not gain :data:`MIN_NESTED_DELTA_BIC`
+            (``delta_bic`` is then the rival's gain, positive).
         outliers: the outlier scan (:func:`outlier_scan`) of the last round.
         flagged: indices of rows removed as outliers (gross and isolated).
         kept: indices of the rows used.
@@ -944,10 +1021,42 @@ class Discovery:
         return bool(self.outliers.get("model_wrong"))
 
 
+def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, sel: dict) -> None:
+    """The chosen member of each family of nested effects decided again on the exact joint fits
+    (the other chosen effects fitted too): the linearised evidence of two nested effects can
+    differ by a few units of BIC from the exact one, as much as the margin the general one needs.
+    Updates ``sel["chosen"]`` and appends nested aliases to ``sel["rivals"]``."""
+    chosen = dict(sel["chosen"])
+    log_n = np.log(lin.n)
+    for name in list(chosen):
+        fam = [f for f in effect_family(models[name]) if f in models]
+        if len(fam) < 2:
+            continue
+        nested = {f: set(nested_in(models[f])) & set(fam) for f in fam}
+        others = {n: e for n, e in chosen.items() if n != name}
+        fits = {f: fit_effects(sub, [models[n] for n in others] + [models[f]], extras=others, start=geo.theta)
+                for f in fam}
+        s2 = max(1.0, min(f.chi2 / max(f.dof, 1) for f in fits.values()))
+        trials = {f: {"delta_bic": -(fit.chi2 / s2 + fit.n_params * log_n)} for f, fit in fits.items()}
+        better = _simplest(trials, fam, nested)
+        extra = fits[better].extras[-1]
+        for g in fam:
+            gap = trials[g]["delta_bic"] - trials[better]["delta_bic"]
+            if better in nested[g] and 0 < gap < MIN_NESTED_DELTA_BIC:
+                corr = _canonical_correlation(lin.columns(models[better], extra),
+                                              lin.columns(models[g], fits[g].extras[-1]))
+                sel["rivals"].append((better, g, float(gap), corr, True))
+        if better != name:
+            chosen = {(better if n == name else n): (extra if n == name else e) for n, e in chosen.items()}
+            sel.setdefault("nested_replaced", []).append((name, better))
+    sel["chosen"] = chosen
+
+
 def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int):
     geo = fit_effects(sub, ())
     lin = _Linear(sub, geo)
     sel = _select(lin, models, max_effects, min_delta_bic, folds, seed)
+    _nested_check(sub, lin, geo, models, sel)
     names = list(sel["chosen"])
     fit = geo
     while names:
@@ -1008,20 +1117,26 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
     tests = remainder_tests(sub, fit, alpha=alpha)
     explained = tests["explained"]
-    aliases = [{"named": a, "rival": b, "delta_bic": gap, "correlation": corr}
-               for a, b, gap, corr in sel["rivals"] if a in fit.effects and b not in fit.effects]
+    aliases = [{"named": a, "rival": b, "delta_bic": gap, "correlation": corr, "nested": nested}
+               for a, b, gap, corr, nested in sel["rivals"] if a in fit.effects and b not in fit.effects]
     evidence = {"geometry_chi2_test": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "alpha": alpha},
                 "none": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "n_params": geo.n_params,
                          "bic": geo.bic(), "delta_bic_vs_none": 0.0, "cv_whitened_rms": sel["cv_geometry"]}}
     for name, e in sel["single"].items():
         evidence[name] = {"chi2_linearised": e["chi2"], "n_params": e["n_params"],
                           "delta_bic_vs_none": e["delta_bic_vs_none"], "cv_whitened_rms": e["cv_whitened_rms"]}
+    replaced = dict(sel.get("nested_replaced", []))
     for step in sel["steps"]:
         if step["added"] in evidence:
             evidence[step["added"]]["delta_bic_when_added"] = step["trials"][step["added"]]["delta_bic"]
+        new = replaced.get(step["added"])
+        if new in evidence and new in step["trials"]:  # named in its family member's place
+            evidence[new]["delta_bic_when_added"] = step["trials"][new]["delta_bic"]
     evidence["steps"] = [{"added": s["added"], "dropped": s["dropped"],
                           "delta_bic": {k: v["delta_bic"] for k, v in s["trials"].items()}} for s in sel["steps"]]
     evidence["cv_whitened_rms_chosen"] = sel["cv_chosen"]
+    if replaced:
+        evidence["nested_replaced"] = [list(p) for p in replaced.items()]
     if sel.get("insignificant"):
         evidence["dropped_not_significant"] = sel["insignificant"]
     remaining = tests["remaining"]

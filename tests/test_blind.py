@@ -1,0 +1,60 @@
+"""The blind suite's bookkeeping without simulating (the recordings are stood in for): which
+candidates each kind of analysis gets."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import pipeline.blind as blind
+import pipeline.scenarios as scenarios
+from calib.effects import effect_family, effects_for
+from calib.noise import SensorNoise
+from calib.robots import default_robot
+
+
+@pytest.fixture
+def seen(monkeypatch):
+    """The candidates of every analysis blind_case asks for (the recording is a stand-in)."""
+    calls = []
+
+    def fake_recording(effects, seed, robot=None):
+        names = () if effects == "none" else tuple(effects)
+        return SimpleNamespace(noise=SensorNoise(0.001, 1e-6, "normal"), measured=np.zeros((60, 6)),
+                               meta={"simulation": {"contributions_mm": {e: 0.005 for e in names}}})
+
+    def fake_analyse(rec, candidates, seed):
+        calls.append(tuple(candidates))
+        return {"named": [], "explained": False, "follows": ["time"], "flagged": [], "rows": 60,
+                "model_wrong": False, "heldout_before_mm": 0.002, "heldout_after_mm": 0.001,
+                "noise_floor_mm": 0.001, "verdict": "", "consistent": True, "insignificant": []}
+
+    monkeypatch.setattr(scenarios, "effect_recording", fake_recording)
+    monkeypatch.setattr(blind, "_analyse", fake_analyse)
+    return calls
+
+
+@pytest.mark.parametrize("left_out", ["thermal_drift", "thermal_warmup"])
+def test_leave_one_out_removes_the_whole_family_of_nested_effects(seen, left_out):
+    everything = effects_for(default_robot("hexapod"))
+    (r,) = blind.blind_case(("hexapod", (left_out,), 0, ("leave_one_out",)))
+    (candidates,) = seen
+    assert "thermal_drift" not in candidates and "thermal_warmup" not in candidates
+    assert set(candidates) == set(everything) - {"thermal_drift", "thermal_warmup"}
+    assert r["left_out"] == left_out and r["left_out_family"] == ["thermal_drift", "thermal_warmup"]
+    assert r["expected"] == "time" and r["criteria"]["unknown"] and r["criteria"]["points"]
+
+
+def test_leave_one_out_of_an_effect_without_family_removes_it_alone(seen):
+    assert effect_family("lost_count") == ("lost_count",)
+    blind.blind_case(("hexapod", ("lost_count",), 0, ("leave_one_out",)))
+    (candidates,) = seen
+    assert set(candidates) == set(effects_for(default_robot("hexapod"))) - {"lost_count"}
+
+
+def test_a_pair_recording_leaving_each_out_removes_each_family(seen):
+    blind.blind_case(("hexapod", ("thermal_warmup", "joint_friction"), 0, ("leave_one_out", "single")))
+    no_warmup, no_friction, everything = seen
+    assert {"thermal_drift", "thermal_warmup"} & set(no_warmup) == set() and "joint_friction" in no_warmup
+    assert "joint_friction" not in no_friction and {"thermal_drift", "thermal_warmup"} <= set(no_friction)
+    assert everything == effects_for(default_robot("hexapod"))
