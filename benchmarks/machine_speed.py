@@ -15,7 +15,7 @@
    tree and (with ``--baseline-ref``) the baseline's, alternated in one run; beside them the
    import-only time: a process that imports what the default run imports (:data:`RUN_IMPORTS`)
    and runs nothing; the run's own split (simulate, identify, log: importing Rerun and writing
-   the .rrd) from its summary; and the floor: the libraries alone (numpy, scipy.optimize,
+   the .rrd) from its summary; and the floor: the libraries alone (numpy, scipy.special,
    mujoco, rerun).
    ``--command-only`` skips part 1. Python compiles this package's modules in every process when
    bytecode caching is off (``PYTHONDONTWRITEBYTECODE`` set, as on the machine these figures were
@@ -221,10 +221,10 @@ def main(argv: list[str] | None = None) -> int:
             # What the default run cannot go below: the libraries it needs, nothing else.
             w = c = np.inf
             for _ in range(a.repeats):
-                wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.optimize, mujoco, rerun"],
+                wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.special, mujoco, rerun"],
                                       {"MUJOCO_GL": "disable"})
                 w, c = min(w, wi), min(c, ci)
-            print(f"  {'floor':<12} import numpy, scipy.optimize, mujoco (no OpenGL), rerun: "
+            print(f"  {'floor':<12} import numpy, scipy.special, mujoco (no OpenGL), rerun: "
                   f"{w:.2f} s wall ({c:.2f} s CPU)")
     print(f"\n{load()}")
     return 0
