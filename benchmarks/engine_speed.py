@@ -1,6 +1,7 @@
 """Speed of the calibration engine (run by hand).
 
-``python benchmarks/engine_speed.py [--poses 100] [--repeat 7] [--kinematics-poses 10000] [--no-delta]``
+``python benchmarks/engine_speed.py [--poses 100] [--repeat 7] [--kinematics-poses 10000] [--no-delta]
+[--baseline-ref REV [--rounds 3]]``
 
 Hexapod (the paper's machine, Table 3 errors): ``N`` reachable workspace poses of the actual
 machine, its leg lengths, measured poses = poses + the paper's sensor noise (+-1 um, uniform;
@@ -21,12 +22,22 @@ machine, its leg lengths, measured poses = poses + the paper's sensor noise (+-1
 
 Delta (``--no-delta`` skips it), 1 um and 0.01 deg noise: the weighted chain-wise LM (the Delta
 paper's IKM) and the forward fit (FKM).
+
+``--baseline-ref REV``: the same timings of the engine at git revision ``REV`` (a clean export,
+``git archive``), this tree's and the baseline's run in child processes one after the other,
+``--rounds`` times, each figure the best over the rounds; prints both and their ratio (the
+speed-up of this tree, measured in one run on the same machine).
 """
 
 from __future__ import annotations
 
 import argparse
+import re
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -121,6 +132,34 @@ def delta_rows(n: int, seed: int, repeat: int) -> list[str]:
             row(f"Delta forward LM (FKM), {n} poses", best_of(fkm, repeat), fkm())]
 
 
+def compare_with(ref: str, args, rounds: int) -> None:
+    """This tree's table and the baseline's, alternated ``rounds`` times; best of each row and the ratio."""
+    from machine_speed import ROOT, child_env, export_revision, load
+
+    here = Path(__file__).resolve()
+    own = ["--poses", str(args.poses), "--repeat", str(args.repeat), "--kinematics-poses",
+           str(args.kinematics_poses), "--seed", str(args.seed)] + (["--no-delta"] if args.no_delta else [])
+    best: dict[str, dict[str, float]] = {"baseline": {}, "this tree": {}}
+    print(f"engine_speed: this tree and {ref}, alternated, {rounds} rounds of best of {args.repeat}; {load()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        base = export_revision(ref, Path(tmp))
+        for _ in range(rounds):
+            for label, tree in (("baseline", base), ("this tree", ROOT)):
+                out = subprocess.run([sys.executable, str(here)] + own, cwd=tree, env=child_env(tree),
+                                     capture_output=True, text=True, check=True).stdout
+                for line in out.splitlines():
+                    m = re.match(r"\| (.+?) \| ([0-9.]+) ms \|", line)
+                    if m:
+                        task = m.group(1)
+                        best[label][task] = min(best[label].get(task, float("inf")), float(m.group(2)))
+    print(f"| task | {ref} | this tree | speed-up |\n|---|---|---|---|")
+    for task, t in best["this tree"].items():
+        b = best["baseline"].get(task)
+        print(f"| {task} | {'-' if b is None else f'{b:.2f} ms'} | {t:.2f} ms | "
+              f"{'-' if b is None else f'{b / t:.2f}x'} |")
+    print(load())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--poses", type=int, default=100, help="measured poses (default 100)")
@@ -129,7 +168,12 @@ def main() -> None:
                     help="poses of the hexapod IK/FK timing (default 10000)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-delta", action="store_true", help="skip the Delta rows")
+    ap.add_argument("--baseline-ref", default=None, help="also time the engine of this git revision")
+    ap.add_argument("--rounds", type=int, default=3, help="alternations with --baseline-ref (default 3)")
     a = ap.parse_args()
+    if a.baseline_ref:
+        compare_with(a.baseline_ref, a, a.rounds)
+        return
     print(f"best of {a.repeat}")
     print("| task | time | result |")
     print("|---|---|---|")
