@@ -386,7 +386,21 @@ def test_an_effect_left_out_of_the_candidates_is_said_to_be_unknown_and_what_it_
     assert d.remaining["follows"][0] == "time"
     assert "thermal_drift" not in d.effects and d.partial == d.effects
     assert "following time" in d.remaining["summary"]
+    assert d.remaining["pose_drift"] == []  # growing legs, not a drifting pose: said in joint space
     assert d.flagged == ()  # the rows that carry the drift are evidence, not outliers
+
+
+def test_a_frame_drift_left_out_is_not_explained_by_growing_legs_and_is_said_to_drift_in_pose_space():
+    # The measurement frame moving up at 0.1 um/s: growing legs (thermal_drift, the only
+    # candidate) raise the platform too, and take most of it; what they leave follows time in
+    # pose space (the same displacement at every pose), which no per-leg statistic sees.
+    d = discover_effects(synthetic("hexapod", "instrument_drift", [0, 0, 1e-4], seed=0, noise=NOISE),
+                         candidates=("thermal_drift",))
+    assert d.effects == ("thermal_drift",) and not d.explained
+    assert d.remaining["follows"][0] == "time" and d.remaining["pose_drift"] == ["z"]
+    time = d.tests["structure"]["time"]
+    assert time["p_value_pose_drift"] < time["p_value_proportional"]
+    assert "the measured pose drifts with time, alike at every pose: z" in d.remaining["summary"]
 
 
 def test_noise_larger_than_declared_is_not_explained_and_names_nothing_insignificant():

@@ -32,7 +32,8 @@ robot's free parameters (``robot.free_default``).
    effects whose coefficients are significantly non-zero (Wald test);
 3. tests the remainder (:func:`remainder_tests`): chi-square against the declared noise overall
    and per chain, and structure against time, the direction and size of each joint's last
-   move, its stroke, the load it carries and the position in the workspace. ``explained`` is
+   move, its stroke, the load it carries and the position in the workspace, and the measured
+   pose drifting with time (the same at every pose: a moving measurement frame). ``explained`` is
    true only when every test passes;
 4. flags outliers (:func:`outlier_scan`): rows whose studentized deleted residual (closed-form
    leave-one-out) is gross and not shared by their neighbours in time, in the workspace or in
@@ -52,7 +53,7 @@ from . import EFFECTS, effect as registered, effect_family, effects_for, nested_
 from .base import Effect, EffectData, closure_regressors
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
-           "MIN_NESTED_DELTA_BIC", "VERDICT_ALPHA",
+           "MIN_NESTED_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
            "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation"]
@@ -78,6 +79,9 @@ ALIAS_DELTA_BIC = 6.0
 #: Significance of the remainder's structure tests (Bonferroni-corrected over chains, quantities
 #: and statistics).
 VERDICT_ALPHA = 0.01
+#: A pose coordinate is said to drift with time (in the remainder's words) when its drift rate
+#: is this many standard errors from zero.
+POSE_DRIFT_Z = 3.0
 #: Significance of the remainder's chi-square tests against the declared noise (overall; per
 #: chain Bonferroni-corrected). Stricter than the structure tests: the omnibus test also reacts to
 #: a declared noise a few percent off, which is no physics left out.
@@ -700,7 +704,15 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
       rows are sorted by the quantity (any smooth function shows, a periodic one included);
     - common and smooth in it (ordered quantities): every chain's joint displaced by one cubic
       function of the quantity (three coefficients, Legendre polynomials of the quantity scaled
-      to [-1, 1]), mapped and projected like the proportional test; F test.
+      to [-1, 1]), mapped and projected like the proportional test; F test;
+    - in pose space (time): every measured pose coordinate off in proportion to time, the same
+      at every pose (a measurement frame moving, nothing the joints do), mapped to the closure
+      through its pose Jacobian and projected like the proportional test; one F test over the
+      pose coordinates, counted with time's statistics. Growing legs raise the platform too and
+      take most of a frame's drift; what they leave is one displacement in pose space, which no
+      statistic per chain sees as well. ``remaining['pose_drift']`` names the coordinates that
+      drift (drift rate more than :data:`POSE_DRIFT_Z` standard errors from zero) when time is
+      followed and this test is time's strongest.
 
     Bonferroni over every statistic, at ``alpha``.
 
@@ -730,8 +742,9 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if n > 2 else np.eye(C)
     feats = _features(data)
     n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
-    # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth
-    m_tests = len(feats) * (2 * C + 2) + n_ordered
+    # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth;
+    # the measured pose drifting with time
+    m_tests = len(feats) * (2 * C + 2) + n_ordered + 1
 
     def f_test(X):
         """F test of the whitened remainder on columns ``X`` (the model's columns projected out):
@@ -747,6 +760,16 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
         s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
         return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(X.T @ X, hermitian=True) * s2, keep
 
+    # The measured pose drifting with time: every pose coordinate off in proportion to time, the
+    # same at every pose (the measurement frame moving; nothing the joints do), through the
+    # closure's pose Jacobian; one F test over the pose coordinates.
+    tc = data.t_s - data.t_s.mean()
+    p_pose, t_pose = 1.0, np.zeros(robot.pose_dim)
+    if np.ptp(tc) > 0:
+        p_pose, beta, cov, keep = f_test(_whiten(winv, jac.pose * tc[:, None, None]).reshape(-1, robot.pose_dim))
+        if beta is not None:
+            t_pose[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    pose_best = False
     structure = {}
     for name, kind, values in feats:
         v = values - values.mean(axis=0)
@@ -775,7 +798,13 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
             lag, comb, p_lag, p_comb = np.zeros(C), 0.0, np.ones(C), 1.0
         p_per = np.minimum(p_t, p_lag)
         p_min = min(p_f, p_comb, p_smooth, float(p_per.min()))
-        structure[name] = {"p_value_proportional": p_f, "p_value_common_smooth": p_smooth,
+        extra = {}
+        if name == "time":
+            # Said in the words when the pose-space description beats every joint-space one.
+            pose_best = p_pose < p_min
+            p_min = min(p_min, p_pose)
+            extra = {"p_value_pose_drift": p_pose, "t_pose_drift": dict(zip(robot.pose_names, t_pose.tolist()))}
+        structure[name] = {"p_value_proportional": p_f, "p_value_common_smooth": p_smooth, **extra,
                            "t_per_chain": t_chain.tolist(),
                            "serial_correlation_per_chain": lag.tolist(), "serial_correlation_combined": comb,
                            "p_value": min(1.0, p_min * m_tests),
@@ -800,6 +829,10 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
         "follows": follows,
         "does_not_follow": [k for k in ("time", "direction of the last move", "size of the last move", "stroke", "load")
                             if k in structure and k not in follows],
+        # The measured pose drifting with time (alike at every pose; it follows time in pose space
+        # better than in any chain's joint): the coordinates that drift.
+        "pose_drift": [k for k, t in zip(robot.pose_names, t_pose) if abs(t) > POSE_DRIFT_Z]
+        if "time" in follows and pose_best else [],
     }
     remaining["summary"] = _remaining_words(remaining, chain, explained)
     return {"explained": explained,
@@ -827,6 +860,9 @@ def _remaining_words(rem: dict, chain: str, explained: bool) -> str:
     where = _chain_list(chain, rem["chains"]) or f"every {chain} alike"
     if rem["follows"]:
         what = "following " + ", ".join(rem["follows"][:3])
+        if rem.get("pose_drift"):
+            what += (f" (the measured pose drifts with time, alike at every pose: "
+                     f"{', '.join(rem['pose_drift'])})")
         if rem["does_not_follow"]:
             what += "; not " + ", ".join(rem["does_not_follow"])
     else:
