@@ -399,14 +399,6 @@ def _eye(points: np.ndarray) -> rrb.EyeControls3D:
                              look_target=c, eye_up=(0.0, 0.0, 1.0))
 
 
-def _key_positions(points: np.ndarray, n: int) -> np.ndarray:
-    """Where the 3D key's labels go: a column beside the machine, top to bottom."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    x = hi[0] + 0.35 * (hi[0] - lo[0])
-    zs = np.linspace(hi[2], lo[2] + 0.25 * (hi[2] - lo[2]), n)
-    return np.c_[np.full(n, x), np.full(n, (lo[1] + hi[1]) / 2), zs]
-
-
 def _scene(robot: Robot, nominal, targets) -> np.ndarray:
     joints = robot.inverse_kinematics(nominal, targets)
     return robot.chain_points(nominal, joints, targets)

@@ -665,26 +665,6 @@ def _lag1(z: np.ndarray, values: np.ndarray) -> float:
     return float(zz[:-1] @ zz[1:] / den * np.sqrt(zz.size))
 
 
-def _linear(z: np.ndarray, values: np.ndarray) -> float:
-    """t statistic of the slope of ``z`` on ``values`` (N(0, 1)-like when ``z`` is white)."""
-    v = values - values.mean()
-    zz = z - z.mean()
-    den = np.sqrt(float(v @ v) * float(zz @ zz))
-    if den <= 0:
-        return 0.0
-    r = float(v @ zz) / den
-    return float(r * np.sqrt(max(z.size - 2, 1)) / np.sqrt(max(1 - r * r, 1e-12)))
-
-
-def _two_groups(z: np.ndarray, groups: np.ndarray) -> float:
-    """Welch t of the mean of ``z`` where ``groups > 0`` minus where ``groups < 0``."""
-    a, b = z[groups > 0], z[groups < 0]
-    if a.size < 2 or b.size < 2:
-        return 0.0
-    se = np.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size)
-    return float((a.mean() - b.mean()) / se) if se > 0 else 0.0
-
-
 def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_ALPHA,
                     noise_alpha: float = NOISE_ALPHA) -> dict:
     """Test what the fitted model leaves against the declared noise and for structure.
