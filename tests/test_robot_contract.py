@@ -65,6 +65,21 @@ def test_pose_only_closure_jacobian_equals_the_pose_block_exactly(name):
 
 
 @pytest.mark.parametrize("name", NAMES)
+def test_one_call_closure_methods_equal_the_separate_calls_exactly(name):
+    """closure_and_pose_jacobian and closure_with_jacobians (which a robot may compute in one
+    pass) give bit for bit what closure and closure_jacobians give."""
+    robot, theta = _machine(name)
+    poses = reachable_poses(robot, 7, 4, theta=theta)
+    joints = robot.inverse_kinematics(theta, poses) + 1e-3  # off the closure on purpose
+    r, jac = robot.closure(theta, joints, poses), robot.closure_jacobians(theta, joints, poses)
+    r1, jpose = robot.closure_and_pose_jacobian(theta, joints, poses)
+    r2, jac2 = robot.closure_with_jacobians(theta, joints, poses)
+    for a, b in ((r1, r), (jpose, jac.pose), (r2, r), (jac2.pose, jac.pose), (jac2.joints, jac.joints),
+                 (jac2.parameters, jac.parameters)):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_forward_parameter_jacobian_matches_finite_differences_of_fk(name):
     robot, theta = _machine(name)
     poses = reachable_poses(robot, 4, 3, theta=theta)
