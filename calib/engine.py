@@ -28,6 +28,8 @@ from scipy.special import gammaincinv
 from .validation import as_array
 from .noise import SensorNoise
 from .robot import (
+    FORWARD_KINEMATICS_TOL_MM,
+    SINGULAR_CONDITION,
     KinematicsError,
     Robot,
     pose_jacobian_of_joints,
@@ -185,32 +187,46 @@ def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
 GRAM_CONDITION_FLOOR = 1e-10
 
 
-def _covariance_and_conditions(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _covariance_and_conditions(A: np.ndarray, gram: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(pinv(A^T A), cond(A scaled))`` of each matrix of a stack ``A`` (M, N, K): (M, K, K) and (M,).
 
-    One symmetric eigendecomposition of each column-scaled Gram matrix ``Gs = D^-1 A^T A D^-1``
-    (``D`` the column norms) gives both: ``pinv(A^T A) = D^-1 pinv(Gs) D^-1`` (eigenvalues below
-    ``1e-15`` of the largest dropped, as ``numpy.linalg.pinv(hermitian=True)`` does) and the
-    column-scaled condition number ``sqrt(lambda_max / lambda_min)``; the SVD of ``A D^-1`` only
-    where that ratio is beyond :data:`GRAM_CONDITION_FLOOR`. A zero column: condition number inf,
-    variance 0 for its parameter."""
+    The column-scaled Gram matrix ``Gs = D^-1 A^T A D^-1`` (``D`` the column norms; ``gram``
+    (M, K, K) is ``A^T A`` when the caller has it) gives both: its eigenvalues the column-scaled
+    condition number ``sqrt(lambda_max / lambda_min)``, and ``pinv(A^T A) = D^-1 pinv(Gs) D^-1``
+    with eigenvalues below ``1e-15`` of the largest dropped, as ``numpy.linalg.pinv(hermitian=True)``
+    does (the plain inverse where none is: the same matrix, without the eigenvectors). The SVD
+    of ``A D^-1`` only where the eigenvalue ratio is beyond :data:`GRAM_CONDITION_FLOOR`. A zero
+    column: condition number inf, variance 0 for its parameter."""
     m, n, k = A.shape
     if n == 0 or k == 0:
         return np.zeros((m, k, k)), np.full(m, np.inf)
-    norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A))
+    norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A) if gram is None else np.diagonal(gram, axis1=1, axis2=2))
     zero = np.any(norms == 0, axis=1)
     s = np.where(norms == 0, 1.0, norms)
-    As = A / s[:, None, :]
-    lam, V = np.linalg.eigh(np.swapaxes(As, 1, 2) @ As)  # ascending eigenvalues
-    top = lam[:, -1:]
-    keep = lam > 1e-15 * top
-    inverse = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-    cov = (V * inverse[:, None, :]) @ np.swapaxes(V, 1, 2) / (s[:, :, None] * s[:, None, :])
+    if gram is None:
+        As = A / s[:, None, :]
+        Gs = np.swapaxes(As, 1, 2) @ As
+    else:
+        Gs = gram / (s[:, :, None] * s[:, None, :])
+    lam = np.linalg.eigvalsh(Gs)  # ascending
+    top = lam[:, -1]
+    full = lam[:, 0] > 1e-15 * top
+    cov = np.empty_like(Gs)
+    if np.all(full):
+        cov[:] = np.linalg.inv(Gs)
+    else:
+        if np.any(full):
+            cov[full] = np.linalg.inv(Gs[full])
+        lam_d, V = np.linalg.eigh(Gs[~full])
+        keep = lam_d > 1e-15 * lam_d[:, -1:]
+        inverse = np.where(keep, 1.0 / np.where(keep, lam_d, 1.0), 0.0)
+        cov[~full] = (V * inverse[:, None, :]) @ np.swapaxes(V, 1, 2)
+    cov /= s[:, :, None] * s[:, None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
-        cond = np.sqrt(top[:, 0] / lam[:, 0])
-    exact = ~(lam[:, 0] > GRAM_CONDITION_FLOOR * top[:, 0]) & ~zero
+        cond = np.sqrt(top / lam[:, 0])
+    exact = ~(lam[:, 0] > GRAM_CONDITION_FLOOR * top) & ~zero
     if np.any(exact):
-        cond[exact] = np.linalg.cond(As[exact])
+        cond[exact] = np.linalg.cond(A[exact] / s[exact][:, None, :])
     return cov, np.where(zero, np.inf, cond)
 
 
@@ -407,6 +423,82 @@ def _predicted(robot, theta, joints, measured) -> np.ndarray:
 # --------------------------------------------------------------------------- forward
 
 
+def _start_poses(robot, theta0, joints, measured) -> np.ndarray:
+    """(N, D) the start model's forward kinematics from the measured poses; ValueError naming
+    the row it cannot reach."""
+    try:
+        return robot.forward_kinematics(theta0, joints, initial=measured)
+    except KinematicsError as exc:
+        raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
+
+
+#: Steps of :func:`_simultaneous_newton` before it gives the fit over to Levenberg-Marquardt.
+SIMULTANEOUS_NEWTON_STEPS = 12
+
+
+def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac, poses0):
+    """Gauss-Newton on the parameters with the forward kinematics solved along, one Newton step of
+    the poses per iteration (the fast path of :func:`identify_forward`).
+
+    At ``(theta, p)`` one call gives the closure ``F`` and its Jacobians; with ``M = (dF/dpose)^-1``
+    the poses the model reaches are, to first order in the closure and the parameter step,
+    ``p - M F - M (dF/dtheta) dtheta``: the Gauss-Newton step of the forward residual takes that
+    linearisation, and the next poses are that prediction. Both converge quadratically, so the
+    fit costs one closure-and-Jacobians call an iteration instead of a forward kinematics and a
+    Jacobian. Stopped when the scaled step is at most ``1e-9`` of the scaled parameters and,
+    at the point it leads to, every closure residual is at most :data:`FORWARD_KINEMATICS_TOL_MM`
+    (the poses are then the forward kinematics to its own tolerance) and the pose Jacobian is
+    well conditioned (Frobenius bound below :data:`SINGULAR_CONDITION`).
+
+    Returns ``(theta (P,), poses (N, D), J (N D, K) whitened residual Jacobian at them, J^T J,
+    iterations, costs (0.5 |whitened residual of the Newton-corrected poses|^2 per iteration),
+    message)``, or None where it cannot vouch for the answer (a step that raised the cost, a
+    singular or non-finite evaluation, no convergence in :data:`SIMULTANEOUS_NEWTON_STEPS`):
+    the caller then runs Levenberg-Marquardt through the forward kinematics.
+    """
+    whole = idx.size == theta0.size and np.array_equal(idx, np.arange(theta0.size))
+    theta, p = theta0.copy(), np.array(poses0, dtype=float)
+    column_scale = 1.0 / robot.pose_scale()
+    history: list[float] = []
+    converged, relative = False, np.inf
+    with np.errstate(all="ignore"):
+        for it in range(SIMULTANEOUS_NEWTON_STEPS + 1):
+            try:
+                r, jac = robot.closure_with_jacobians(theta, joints, p)
+                M = np.linalg.inv(jac.pose)
+            except (KinematicsError, np.linalg.LinAlgError):
+                return None
+            H = M @ (jac.parameters if whole else jac.parameters[:, :, idx])  # -d poses / d theta_free
+            newton = p - np.einsum("nij,nj->ni", M, r)  # the poses after one Newton step
+            e = white(measured - newton).ravel()
+            J = white_jac(H)
+            cost = 0.5 * float(e @ e)
+            if not np.isfinite(cost) or (history and cost > history[-1] * (1.0 + 1e-8)):
+                return None
+            history.append(cost)
+            gram = J.T @ J
+            if converged and np.max(np.abs(r)) <= FORWARD_KINEMATICS_TOL_MM:
+                size = np.sqrt(np.einsum("nij,nij->n", jac.pose * column_scale, jac.pose * column_scale)
+                               * np.einsum("nij,nij->n", M / column_scale[:, None], M / column_scale[:, None]))
+                if not np.all(size < SINGULAR_CONDITION):
+                    return None
+                return theta, p, J, gram, it, history, f"converged: the last step was {relative:.1e} relative"
+            if it == SIMULTANEOUS_NEWTON_STEPS:
+                return None
+            scale = np.sqrt(np.diag(gram))
+            scale[scale == 0] = 1.0
+            try:
+                dx = -np.linalg.solve(gram / scale / scale[:, None], (J.T @ e) / scale) / scale
+            except np.linalg.LinAlgError:
+                return None
+            theta[idx] += dx
+            p = newton - H @ dx
+            relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * theta[idx]))
+            converged = relative <= _CONVERGED_STEP
+    return None
+
+
+
 def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free=None, start=None,
                      solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
                      ftol: float = 1e-15) -> IdentificationResult:
@@ -432,11 +524,9 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     if n * d < idx.size:
         raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
                          f"{idx.size} parameters, got {n}")
-    try:
-        start_poses = robot.forward_kinematics(theta0, joints, initial=measured)
-    except KinematicsError as exc:
-        raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
-    winv = pose_whitening(robot, theta0, joints, start_poses, noise)
+    # The whitening needs the start model's poses only to propagate joint noise.
+    start_poses = _start_poses(robot, theta0, joints, measured) if noise.joint_std > 0 else None
+    winv = pose_whitening(robot, theta0, joints, measured if start_poses is None else start_poses, noise)
     # Without joint noise the whitening is the same diagonal for every pose: a product.
     diag = np.diagonal(winv, axis1=1, axis2=2)
     diagonal = bool(np.all(diag == diag[0]) and np.count_nonzero(winv) == np.count_nonzero(diag))
@@ -448,6 +538,16 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     def white_jac(jp):  # (N, D, K) -> whitened, flattened to (N D, K)
         jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv, jp)
         return jw.reshape(n * d, jp.shape[2])
+
+    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
+                                        measured if start_poses is None else start_poses) \
+        if solver == "lm" else None
+    if simultaneous is not None:
+        theta, predicted, J, gram, iters, history, msg = simultaneous
+        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
+                               iters, history, True, msg)
+    if start_poses is None:
+        start_poses = _start_poses(robot, theta0, joints, measured)
 
     # The last forward kinematics: each evaluation starts from it (a small perturbation),
     # moved to first order by the last Jacobian (Newton then has one step less to go), and the
@@ -497,23 +597,33 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         predicted = state["poses"]  # the forward kinematics at the solution, already done
     else:
         predicted = _predicted(robot, theta, joints, measured)
+    J = white_jac(residual_jac(theta, predicted)) if np.all(np.isfinite(predicted)) else None
+    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
+                           history, ok, msg)
+
+
+def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram, iterations,
+                    history, success, message) -> IdentificationResult:
+    """The forward identification's result at ``theta``: ``predicted`` (N, D) its forward
+    kinematics (NaN where it failed), ``J`` (N D, K) the whitened residual Jacobian there (None
+    if it failed) and ``gram`` its ``J^T J`` when already formed (else None)."""
+    n, d = measured.shape
     res = measured - predicted
     cov = np.zeros((robot.n_parameters,) * 2)
-    if np.all(np.isfinite(res)):
-        J = white_jac(residual_jac(theta, predicted))
+    if J is not None and np.all(np.isfinite(res)):
         r = white(res).ravel()
-        block, cond = _covariance_and_conditions(J[None])
+        block, cond = _covariance_and_conditions(J[None], None if gram is None else gram[None])
         chi2 = float(r @ r)
         cov[np.ix_(idx, idx)] = block[0]
     else:
         chi2, cond = float("nan"), np.array([np.nan])
         cov[np.ix_(idx, idx)] = np.nan
     if n * d > idx.size and np.isfinite(chi2):  # converged or not, say where the residual stands
-        msg = f"{msg}; {noise_verdict(chi2, n * d - idx.size)}"
+        message = f"{message}; {noise_verdict(chi2, n * d - idx.size)}"
     return IdentificationResult(
         method="forward", robot=robot, theta=theta, start=theta0, free_names=free, residuals=res,
-        pose_residuals=res, covariance=cov, chi2=chi2, dof=n * d - idx.size, iterations=iters,
-        history=tuple(history), success=ok, message=msg, condition_numbers=cond)
+        pose_residuals=res, covariance=cov, chi2=chi2, dof=n * d - idx.size, iterations=iterations,
+        history=tuple(history), success=success, message=message, condition_numbers=cond)
 
 
 # --------------------------------------------------------------------------- chain-wise

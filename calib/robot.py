@@ -30,7 +30,8 @@ from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
-           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM"]
+           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
+           "FORWARD_KINEMATICS_TOL_MM"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -311,8 +312,12 @@ class Robot(ABC):
         return f"<{type(self).__name__} {self.name!r}: {self.n_parameters} parameters, {self.n_chains} chains>"
 
 
+#: Largest closure residual (mm) of a pose the forward kinematics returns: converged.
+FORWARD_KINEMATICS_TOL_MM = 1e-11
+
+
 def newton_forward_kinematics(robot: Robot, theta: np.ndarray, joints: np.ndarray, *,
-                              initial: np.ndarray | None = None, tol: float = 1e-11,
+                              initial: np.ndarray | None = None, tol: float = FORWARD_KINEMATICS_TOL_MM,
                               max_iter: int = 50) -> np.ndarray:
     """Forward kinematics by Newton's method on the closure, vectorised over rows.
 
