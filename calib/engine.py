@@ -5,8 +5,9 @@ Two methods, written once over :class:`calib.robot.Robot`:
 * :func:`identify_forward`: all free parameters at once, minimising the pose residuals
   ``QM_j - FK(theta, q_j)`` through the forward kinematics, whitened by the declared noise (pose
   sensor noise plus joint noise propagated through the manipulator Jacobian), with the analytic
-  Jacobian of the implicit function theorem. Levenberg-Marquardt (scipy's MINPACK) or
-  Gauss-Newton. The Delta paper's FKM; applied to the hexapod, the "forward method".
+  Jacobian of the implicit function theorem. Gauss-Newton with the poses Newton-stepped along
+  (Levenberg-Marquardt through the forward kinematics as the fallback), or Gauss-Newton through
+  the forward kinematics. The Delta paper's FKM; applied to the hexapod, the "forward method".
 * :func:`identify_chainwise`: each chain on its own, from the closure residuals
   ``F_i(theta_i, q_ij, QM_j)`` at the measured poses (joint space). With Gauss-Newton steps and
   the forward kinematics of the corrected model after each, stopped by the integrated pose error
@@ -71,7 +72,8 @@ class IdentificationResult:
         history: max dQint after each iteration (chain-wise GN; from the corrected poses to
             second order, one Newton step of the forward kinematics from the measured ones, and
             exact, from the forward kinematics, where a stopping rule is judged), or cost per
-            evaluation.
+            evaluation (forward Gauss-Newton with the poses solved along: per iteration, at the
+            poses one Newton step of the forward kinematics corrects).
         success: whether a stopping criterion was met.
         message: which criterion stopped it, in words.
         condition_numbers: column-scaled condition numbers of the identification Jacobian at
@@ -452,8 +454,8 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
 
     Returns ``(theta (P,), poses (N, D), J (N D, K) whitened residual Jacobian at them, J^T J,
     iterations, costs (0.5 |whitened residual of the Newton-corrected poses|^2 per iteration),
-    message)``, or None where it cannot vouch for the answer (a step that raised the cost, a
-    singular or non-finite evaluation, no convergence in :data:`SIMULTANEOUS_NEWTON_STEPS`):
+    message)``, or, where it cannot vouch for the answer (a step that raised the cost, a singular
+    or non-finite evaluation, no convergence in :data:`SIMULTANEOUS_NEWTON_STEPS`), why, in words:
     the caller then runs Levenberg-Marquardt through the forward kinematics.
     """
     whole = idx.size == theta0.size and np.array_equal(idx, np.arange(theta0.size))
@@ -466,36 +468,38 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
             try:
                 r, jac = robot.closure_with_jacobians(theta, joints, p)
                 M = np.linalg.inv(jac.pose)
-            except (KinematicsError, np.linalg.LinAlgError):
-                return None
+            except (KinematicsError, np.linalg.LinAlgError) as exc:
+                return f"a singular or impossible configuration at iteration {it}: {exc}"
             H = M @ (jac.parameters if whole else jac.parameters[:, :, idx])  # -d poses / d theta_free
             newton = p - np.einsum("nij,nj->ni", M, r)  # the poses after one Newton step
             e = white(measured - newton).ravel()
             J = white_jac(H)
             cost = 0.5 * float(e @ e)
-            if not np.isfinite(cost) or (history and cost > history[-1] * (1.0 + 1e-8)):
-                return None
+            if not np.isfinite(cost):
+                return f"a non-finite residual at iteration {it}"
+            if history and cost > history[-1] * (1.0 + 1e-8):
+                return f"the step of iteration {it} raised the cost"
             history.append(cost)
             gram = J.T @ J
             if converged and np.max(np.abs(r)) <= FORWARD_KINEMATICS_TOL_MM:
                 size = np.sqrt(np.einsum("nij,nij->n", jac.pose * column_scale, jac.pose * column_scale)
                                * np.einsum("nij,nij->n", M / column_scale[:, None], M / column_scale[:, None]))
                 if not np.all(size < SINGULAR_CONDITION):
-                    return None
+                    return "a near-singular configuration at the solution"
                 return theta, p, J, gram, it, history, f"converged: the last step was {relative:.1e} relative"
             if it == SIMULTANEOUS_NEWTON_STEPS:
-                return None
+                return f"no convergence in {it} iterations"
             scale = np.sqrt(np.diag(gram))
             scale[scale == 0] = 1.0
             try:
                 dx = -np.linalg.solve(gram / scale / scale[:, None], (J.T @ e) / scale) / scale
             except np.linalg.LinAlgError:
-                return None
+                return "singular normal equations"
             theta[idx] += dx
             p = newton - H @ dx
             relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * theta[idx]))
             converged = relative <= _CONVERGED_STEP
-    return None
+    return "no convergence"
 
 
 
@@ -516,21 +520,27 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         noise: declared noise (weights; a declared zero is floored, see :class:`SensorNoise`).
         free: names to identify; default ``robot.free_default``.
         start: (P,) start vector; default the nominal one. Fixed parameters keep its values.
-        solver: ``"lm"`` (Levenberg-Marquardt, MINPACK) or ``"gn"`` (Gauss-Newton).
-        max_iter, xtol, ftol: stopping controls.
+        solver: ``"lm"``: Gauss-Newton with the forward kinematics solved along
+            (:func:`_simultaneous_newton`: one closure-and-Jacobians call an iteration), and
+            where it cannot vouch for its answer (a step that raises the cost, a singular
+            configuration, no convergence; ``message`` says so) Levenberg-Marquardt through the
+            forward kinematics (Marquardt's scaling, MINPACK's rules); ``"gn"``: Gauss-Newton
+            through the forward kinematics. All reach the same minimum.
+        max_iter, xtol, ftol: stopping controls (of the solvers through the forward kinematics).
     """
     joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
     n, d = measured.shape
     if n * d < idx.size:
         raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
                          f"{idx.size} parameters, got {n}")
-    # The whitening needs the start model's poses only to propagate joint noise.
-    start_poses = _start_poses(robot, theta0, joints, measured) if noise.joint_std > 0 else None
-    winv = pose_whitening(robot, theta0, joints, measured if start_poses is None else start_poses, noise)
-    # Without joint noise the whitening is the same diagonal for every pose: a product.
-    diag = np.diagonal(winv, axis1=1, axis2=2)
-    diagonal = bool(np.all(diag == diag[0]) and np.count_nonzero(winv) == np.count_nonzero(diag))
-    w = diag[0].copy()
+    # Without joint noise the whitening is the same diagonal for every pose (a product) and needs
+    # no poses; joint noise is propagated through the manipulator Jacobian at the start model's.
+    start_poses = None
+    if noise.joint_std > 0:
+        start_poses = _start_poses(robot, theta0, joints, measured)
+        winv = pose_whitening(robot, theta0, joints, start_poses, noise)
+    diagonal = not noise.joint_std > 0
+    w = 1.0 / noise.pose_std(robot.pose_units)
 
     def white(v):  # (N, D) -> whitened
         return v * w if diagonal else np.einsum("nij,nj->ni", winv, v)
@@ -541,8 +551,8 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
 
     simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
                                         measured if start_poses is None else start_poses) \
-        if solver == "lm" else None
-    if simultaneous is not None:
+        if solver == "lm" else "not asked for"
+    if not isinstance(simultaneous, str):
         theta, predicted, J, gram, iters, history, msg = simultaneous
         return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
                                iters, history, True, msg)
@@ -590,6 +600,7 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
             x, iters, ok, msg = _levenberg_marquardt(fun, jac, theta0[idx], max_iter, xtol, ftol)
         except (KinematicsError, np.linalg.LinAlgError) as exc:
             x, iters, ok, msg = theta0[idx], 0, False, f"the fit left the workspace: {exc}"
+        msg = f"Levenberg-Marquardt through the forward kinematics (Gauss-Newton met {simultaneous}): {msg}"
     else:
         x, iters, ok, msg = _least_squares(fun, jac, theta0[idx], solver, max_iter, xtol, ftol, [])
     theta = full(x)

@@ -234,3 +234,46 @@ def test_identification_covariance_and_conditions_are_those_of_the_fisher_inform
         np.testing.assert_allclose(chain.covariance[np.ix_(ix, ix)], np.linalg.pinv(A.T @ A) * s2, rtol=1e-6,
                                    atol=1e-9 * np.abs(chain.covariance[np.ix_(ix, ix)]).max())
         assert chain.condition_numbers[c] == pytest.approx(np.linalg.cond(A / np.linalg.norm(A, axis=0)), rel=1e-6)
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("joint_noise", [0.0, 1e-3])
+def test_forward_fit_with_poses_solved_along_is_the_forward_kinematics_fit(name, joint_noise):
+    """A second method: the default forward fit (Gauss-Newton with the forward kinematics solved
+    along, one Newton step of the poses an iteration) reaches the minimum the Gauss-Newton fit
+    through the exact forward kinematics reaches; its predicted poses are the forward kinematics
+    of its answer and its covariance is that of the residual Jacobian recomputed there."""
+    from calib.observability import identification_jacobian
+
+    robot, theta = _machine(name)
+    poses = reachable_poses(robot, 50, np.random.default_rng(3), theta=theta)
+    noise = SensorNoise(1e-3, 1e-6, joint=joint_noise)
+    joints = robot.inverse_kinematics(theta, poses) + noise.sample_joints(len(poses), robot.n_chains, 4)
+    measured = poses + noise.sample(len(poses), 5, robot.pose_units)
+    fast = identify_forward(robot, joints, measured, noise)
+    exact = identify_forward(robot, joints, measured, noise, solver="gn")
+    assert fast.success and exact.success
+    scale = np.maximum(exact.std, 1e-12)
+    assert np.max(np.abs(fast.theta - exact.theta) / scale) < 1e-4  # 1e-4 of a standard uncertainty
+    fk = robot.forward_kinematics(fast.theta, joints, initial=measured)
+    assert np.max(np.abs(measured - fast.pose_residuals - fk)) < 1e-9
+    assert fast.chi2 == pytest.approx(exact.chi2, rel=1e-9)
+    idx = robot.table.indices(fast.free_names)
+    np.testing.assert_allclose(fast.covariance[np.ix_(idx, idx)], exact.covariance[np.ix_(idx, idx)],
+                               rtol=1e-6, atol=1e-9 * np.abs(exact.covariance).max())
+    assert fast.iterations < exact.iterations + 3 and len(fast.history) == fast.iterations + 1
+
+
+def test_forward_fit_falls_back_to_levenberg_marquardt_where_newton_cannot_vouch():
+    """A start far from the answer (every length 30 mm off, angles 3 degrees): a Gauss-Newton
+    step raises the cost, Levenberg-Marquardt through the forward kinematics takes over (the
+    message says so) and reaches the machine's parameters."""
+    robot, theta = _machine("hexapod")
+    poses = reachable_poses(robot, 60, np.random.default_rng(0), theta=theta)
+    joints = robot.inverse_kinematics(theta, poses)
+    start = robot.table.nominal + uniform_errors(robot, 5, 30.0, np.deg2rad(3.0))
+    fit = identify_forward(robot, joints, poses, SensorNoise(1e-3, 1e-6), start=start)
+    assert fit.message.startswith("Levenberg-Marquardt through the forward kinematics (Gauss-Newton met ")
+    assert fit.success and np.max(np.abs(fit.theta - theta)) < 1e-6
+    near = identify_forward(robot, joints, poses, SensorNoise(1e-3, 1e-6))
+    assert near.success and near.message.startswith("converged")

@@ -167,40 +167,41 @@ class Hexapod(Robot):
         """
         B, dl, P = self.legs(theta)
         p = np.ascontiguousarray(np.asarray(poses, dtype=float).T)  # (6, N)
+        n = p.shape[1]
         c, s = np.cos(p[3:6]), np.sin(p[3:6])
         ca, cb, cg = c
         sa, sb, sg = s
         sbsa, sbca = sb * sa, sb * ca
-        R = ((cg * cb, cg * sbsa - sg * ca, cg * sbca + sg * sa),
-             (sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa),
-             (-sb, cb * sa, cb * ca))
-        Pc = [P[:, k, None] for k in range(3)]  # (6, 1) columns, broadcast over the poses
-        w = [R[i][0] * Pc[0] + R[i][1] * Pc[1] + R[i][2] * Pc[2] for i in range(3)]  # R P_i, (6, N)
-        L = [w[i] + (p[i] - B[:, i, None]) for i in range(3)]
-        norm = np.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2])
+        R = np.empty((3, 3, n))  # R[i, k] (N,): the rotation's entries
+        R[0, 0], R[0, 1], R[0, 2] = cg * cb, cg * sbsa - sg * ca, cg * sbca + sg * sa
+        R[1, 0], R[1, 1], R[1, 2] = sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa
+        R[2, 0], R[2, 1], R[2, 2] = -sb, cb * sa, cb * ca
+        w = np.einsum("ikn,lk->iln", R, P)  # (3, 6, N): R P_l
+        L = w + (p[0:3, None, :] - B.T[:, :, None])  # (3, 6, N) leg vectors
+        norm = np.sqrt(np.einsum("iln,iln->ln", L, L))
         F = norm - dl[:, None]
         if joints is not None:
             F -= np.asarray(joints, dtype=float).T
         if not (jacobian or parameters):
             return F, None, None
-        inv = 1.0 / norm
-        u = [L[i] * inv for i in range(3)]
+        u = L / norm  # (3, 6, N) unit leg vectors
+        u0, u1, u2 = u
         Jt = Jleg = None
         if jacobian:
-            Jt = np.empty((6, 6, p.shape[1]))
-            for i in range(3):
-                Jt[:, i] = u[i]
-            mx = w[1] * u[2] - w[2] * u[1]
-            my = w[2] * u[0] - w[0] * u[2]
-            mz = w[0] * u[1] - w[1] * u[0]
-            Jt[:, 3] = R[0][0] * mx + R[1][0] * my + R[2][0] * mz
+            Jt = np.empty((6, 6, n))
+            Jt[:, 0:3] = u.transpose(1, 0, 2)
+            w0, w1, w2 = w
+            mx = w1 * u2 - w2 * u1
+            my = w2 * u0 - w0 * u2
+            mz = w0 * u1 - w1 * u0
+            Jt[:, 3] = R[0, 0] * mx + R[1, 0] * my + R[2, 0] * mz
             Jt[:, 4] = cg * my - sg * mx
             Jt[:, 5] = mz
         if parameters:
-            Jleg = np.empty((6, 7, p.shape[1]))
+            Jleg = np.empty((6, 7, n))
+            np.negative(u.transpose(1, 0, 2), out=Jleg[:, 0:3])
             for i in range(3):
-                np.negative(u[i], out=Jleg[:, i])
-                Jleg[:, 4 + i] = R[0][i] * u[0] + R[1][i] * u[1] + R[2][i] * u[2]  # (R^T u)_i
+                Jleg[:, 4 + i] = R[0, i] * u0 + R[1, i] * u1 + R[2, i] * u2  # (R^T u)_i
             Jleg[:, 3] = -1.0
         return F, Jt, Jleg
 
