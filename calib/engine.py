@@ -266,11 +266,11 @@ def _chain_steps(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     stack with a chain whose (Cholesky-estimated) column-scaled condition number exceeds
     :data:`NORMAL_EQUATIONS_CONDITION` (or is rank deficient) is solved chain by chain by
     ``numpy.linalg.lstsq`` instead (the normal equations square the condition number)."""
-    norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A))
+    G = np.swapaxes(A, 1, 2) @ A
+    norms = np.sqrt(np.diagonal(G, axis1=1, axis2=2))
     if np.all(norms > 0):
-        As = A / norms[:, None, :]
-        G = np.swapaxes(As, 1, 2) @ As
-        g = np.einsum("mnk,mn->mk", As, b)
+        G = G / (norms[:, :, None] * norms[:, None, :])
+        g = np.einsum("mnk,mn->mk", A, b) / norms
         try:
             d = np.diagonal(np.linalg.cholesky(G), axis1=1, axis2=2)
             if np.all(d.max(axis=1) <= NORMAL_EQUATIONS_CONDITION * d.min(axis=1)):
