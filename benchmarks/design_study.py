@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/design_study.py [--robot hexapod] [--trials 1000] [--seed 0] [--workers 2]
-        [--out FILE.json] [--overwrite]
+        [--scheduler ADDRESS] [--out FILE.json] [--overwrite]
 
 Noise: Gaussian, standard deviation 0.001 mm on each position coordinate and 1e-6 rad on each
 angle (declared = simulated). Machine: the robot's default machine with its reference errors
@@ -20,11 +20,17 @@ MuJoCo).
 3. Number of poses for a held-out position error RMS of 1 um (and 0.5 um): designed vs random
    feasible poses in the same workspace (linearised prediction from the CRB, checked by Monte
    Carlo at the reported N).
+
+The designs, the points of the curves of 3. (a design, or five random draws, per number of poses
+and workspace) and the Monte Carlo trials run as tasks of :mod:`pipeline.executor`, on one local
+Dask cluster of ``--workers`` processes (default the cores; ``--workers 1``: here) or on
+``--scheduler ADDRESS``; the figures are the same whatever runs them.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -34,10 +40,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calib.design import design_poses, minimum_poses, robot_workspace, sample_feasible_poses, select_poses  # noqa: E402
+from calib.design import minimum_poses, robot_workspace, sample_feasible_poses, select_poses  # noqa: E402
 from calib.noise import SensorNoise  # noqa: E402
 from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
+from pipeline.design import design_start  # noqa: E402
+from pipeline.executor import add_executor_arguments, dask_client, run_tasks, runs_here  # noqa: E402
 from pipeline.recording import atomic_write  # noqa: E402
 from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
 
@@ -77,14 +85,39 @@ class Bench:
         pu = pose_uncertainty(self.robot, self.nominal, heldout, a.parameter_covariance())
         return float(np.sqrt(np.mean(pu.position_rms_mm ** 2)) * 1e3)
 
-    def run_mc(self, poses, trials, seed, workers, methods):
+    def run_mc(self, poses, trials, seed, workers, methods, client=None):
         commanded = self.robot.inverse_kinematics(self.nominal, poses)
         reached = self.robot.forward_kinematics(self.theta, commanded, initial=poses)
         crb = analyze_observability(self.robot, self.theta, reached, NOISE, joints=commanded)
         t0 = time.perf_counter()
         r = monte_carlo(self.robot, self.theta, commanded, NOISE, trials, seed, methods=methods, workers=workers,
-                        initial=poses)
+                        initial=poses, client=client)
         return r, crb, time.perf_counter() - t0
+
+
+def curve_point(job: dict) -> tuple:
+    """A point of the curves of 3. (a task): ``(designed, random)`` predicted held-out position
+    error RMS (um) of ``n`` poses in a workspace: the D-optimal design of ``n`` of the candidates
+    (None above 100 poses) and the median of 5 seeded random feasible draws."""
+    bench = Bench(job["robot"], job["seed"])
+    robot, nominal, held, n = bench.robot, bench.nominal, job["held"], job["n"]
+    designed = None
+    if n <= 100:
+        d = select_poses(robot, nominal, job["candidates"], n, NOISE, criterion="d").poses
+        designed = bench.predicted_heldout_rms_um(d, held)
+    vals = [bench.predicted_heldout_rms_um(sample_feasible_poses(robot, nominal, job["workspace"], n,
+                                                                 [job["seed"], 5, k]), held) for k in range(5)]
+    return designed, float(np.median(vals))
+
+
+@contextlib.contextmanager
+def executor(workers, scheduler):
+    """One Dask client for every job of the study (None: tasks run here)."""
+    if runs_here(workers, scheduler):
+        yield None
+    else:
+        with dask_client(workers, scheduler) as client:
+            yield client
 
 
 def main(argv=None) -> int:
@@ -92,13 +125,19 @@ def main(argv=None) -> int:
     p.add_argument("--robot", default="hexapod")
     p.add_argument("--trials", type=int, default=1000)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=None)
+    add_executor_arguments(p)
     p.add_argument("--out", default=None)
     p.add_argument("--overwrite", action="store_true")
     args = p.parse_args(argv)
     if args.out and Path(args.out).exists() and not args.overwrite:
         raise SystemExit(f"{args.out} exists; pass --overwrite to replace it")
+    with executor(args.workers, args.scheduler) as client:
+        return study(args, client)
+
+
+def study(args, client) -> int:
     bench = Bench(args.robot, args.seed)
+    tasks = {"workers": args.workers, "client": client}
     robot, nominal = bench.robot, bench.nominal
     full, small = robot_workspace(robot, "full"), robot_workspace(robot, "default")
     held = {"full": sample_feasible_poses(robot, nominal, full, 100, [args.seed, 1]),
@@ -109,19 +148,23 @@ def main(argv=None) -> int:
     # ---- designs with 10 poses -------------------------------------------------------------
     reference = reference_poses(robot)
     sets = {} if reference is None else {"reference poses": reference}
-    for wsn, ws in (("full", full), ("default", small)):
-        for c in ("d", "e"):
-            t0 = time.perf_counter()
-            sets[f"{c.upper()}-optimal, {wsn} workspace"] = design_poses(robot, nominal, 10, ws, NOISE, criterion=c,
-                                                                           seed=args.seed).poses
-            log(f"design {c} {wsn}: {time.perf_counter() - t0:.1f} s")
+    designs = [(c, wsn, ws) for wsn, ws in (("full", full), ("default", small)) for c in ("d", "e")]
+    base = {"robot": robot.name, "description": robot.description(), "theta": nominal, "n": 10,
+            "noise": NOISE.to_dict(), "free": None, "seed": args.seed, "start": 0, "n_candidates": 3000}
+    t0 = time.perf_counter()
+    # Each design_poses(robot, nominal, 10, ws, NOISE, criterion=c, seed=args.seed), as a task.
+    done = dict(run_tasks(design_start, [{**base, "workspace": ws.to_dict(), "criterion": c} for c, _, ws in designs],
+                          **tasks))
+    for k, (c, wsn, _) in enumerate(designs):
+        sets[f"{c.upper()}-optimal, {wsn} workspace"] = done[k].poses
+    log(f"designs ({', '.join(f'{c} {wsn}' for c, wsn, _ in designs)}): {time.perf_counter() - t0:.1f} s")
     sets["random, full workspace"] = sample_feasible_poses(robot, nominal, full, 10, [args.seed, 2])
 
     rows, eff = [], {}
     ref_rms = None
     for name, poses in sets.items():
         methods = ("forward", "chainwise") if name in ("reference poses", "D-optimal, full workspace") else ("forward",)
-        r, crb, dt = bench.run_mc(poses, args.trials, args.seed, args.workers, methods)
+        r, crb, dt = bench.run_mc(poses, args.trials, args.seed, args.workers, methods, client)
         log(f"{name}: {args.trials} trials x {len(methods)} methods in {dt:.1f} s")
         for m in methods:
             e = r[m]["errors"]
@@ -171,19 +214,25 @@ def main(argv=None) -> int:
     grid = list(range(minimum_poses(robot), 31)) + [35, 40, 50, 60, 80, 100, 130, 160, 200, 260, 330, 420, 540, 700]
     need = {}
     curves = {}
+    points = []
     for wsn, ws in (("full", full), ("default", small)):
         cands = sample_feasible_poses(robot, nominal, ws, 3000, [args.seed, 3])
         curves[wsn] = {"designed": {}, "random": {}}
-        for n in grid:
-            if n <= 100:
-                d = select_poses(robot, nominal, cands, n, NOISE, criterion="d").poses
-                curves[wsn]["designed"][n] = bench.predicted_heldout_rms_um(d, held[wsn])
-            # random: a seeded feasible draw, median of 5 draws
-            vals = [bench.predicted_heldout_rms_um(sample_feasible_poses(robot, nominal, ws, n, [args.seed, 5, k]),
-                                                   held[wsn]) for k in range(5)]
-            curves[wsn]["random"][n] = float(np.median(vals))
-            log(f"{wsn} N={n}: designed {curves[wsn]['designed'].get(n, float('nan')):.3g} um, "
-                f"random {curves[wsn]['random'][n]:.3g} um")
+        points += [{"robot": robot.name, "seed": args.seed, "wsn": wsn, "workspace": ws, "candidates": cands,
+                    "held": held[wsn], "n": n} for n in grid]
+    values = {}
+    order = sorted(range(len(points)), key=lambda k: -points[k]["n"])  # the longest first: no long tail
+    for i, (designed, random) in run_tasks(curve_point, [points[k] for k in order], **tasks):
+        k = order[i]
+        values[k] = designed, random
+        log(f"{points[k]['wsn']} N={points[k]['n']}: designed {designed if designed is not None else float('nan'):.3g}"
+            f" um, random {random:.3g} um")
+    for k, point in enumerate(points):
+        designed, random = values[k]
+        if designed is not None:
+            curves[point["wsn"]]["designed"][point["n"]] = designed
+        curves[point["wsn"]]["random"][point["n"]] = random
+    for wsn in ("full", "default"):
         for target in (1.0, 0.5):
             for kind in ("designed", "random"):
                 ns = [n for n, v in sorted(curves[wsn][kind].items()) if v <= target]
@@ -207,7 +256,7 @@ def main(argv=None) -> int:
                         for k in range(5)]
                 poses = sorted(vals, key=lambda v: v[0])[2][2]  # the median draw
             trials = min(args.trials, 200)
-            r, _, _ = bench.run_mc(poses, trials, args.seed + 1, args.workers, ("forward",))
+            r, _, _ = bench.run_mc(poses, trials, args.seed + 1, args.workers, ("forward",), client)
             checks[f"{wsn}/{kind}"] = {"n": n, "trials": trials,
                                        **bench.heldout_errors(r["forward"]["errors"], held[wsn]),
                                        "predicted_rms_um": bench.predicted_heldout_rms_um(poses, held[wsn])}

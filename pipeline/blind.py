@@ -23,7 +23,9 @@ Kinds of recording (``--kinds``):
 
 The derived kinds reuse the single-effect recordings (no further simulation). Each result says
 whether its acceptance criterion holds (:func:`criteria`); :func:`rates_table` sums them up.
-Recordings run in parallel on the Dask executor (:mod:`pipeline.executor`).
+Recordings run in parallel on the Dask executor (:mod:`pipeline.executor`: a local cluster of
+``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``); the rates go to
+stdout, progress to stderr (on a cluster, the recordings done as Dask's scheduler reports them).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
-from .executor import task_pool
+from .executor import ProgressDisplay, run_tasks, runs_here
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
@@ -179,7 +181,8 @@ def criteria(r: dict) -> dict:
 
 
 def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
-                    workers: int | None = None, progress=None) -> list[dict]:
+                    workers: int | None = None, scheduler: str | None = None, progress=None,
+                    display=None) -> list[dict]:
     """Run :func:`blind_case` for every recording asked (in parallel; deterministic per case).
 
     Args:
@@ -192,6 +195,11 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         pairs: pairs of effects for ``pair`` (default every pair of applying effects but nested
             ones, e.g. ``thermal_drift`` and ``thermal_warmup``: a drift plus a warm-up is a
             warm-up with a drift, and selection names one member of a family, never two).
+        workers: processes of the local Dask cluster (:func:`pipeline.executor.run_tasks`);
+            default the cores, at most one a recording; 1 runs here.
+        scheduler: address of an existing Dask cluster to run on instead.
+        progress: ``progress(done, total)`` after each recording.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done on a cluster.
     """
     names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
     kinds = tuple(kinds)
@@ -208,19 +216,12 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         for p in (default if pairs is None else [tuple(p) for p in pairs]):
             cases += [(robot, p, int(s), ("pair",)) for s in seeds]
     workers = workers or min(len(cases), os.cpu_count() or 1)
-    out = []
-    if workers == 1:
-        for k, c in enumerate(cases):
-            out += blind_case(c)
-            if progress:
-                progress(k + 1, len(cases))
-        return out
-    with task_pool(workers) as pool:
-        for k, r in enumerate(pool.map(blind_case, cases)):
-            out += r
-            if progress:
-                progress(k + 1, len(cases))
-    return out
+    from pipeline.blind import blind_case as entry  # by name in the workers (also when run as __main__)
+
+    done = [None] * len(cases)
+    for k, r in run_tasks(entry, cases, workers=workers, scheduler=scheduler, progress=progress, display=display):
+        done[k] = r
+    return [r for rs in done for r in rs]
 
 
 def _group(r: dict) -> str:
@@ -267,17 +268,22 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--pairs", nargs="+", default=None, metavar="A,B", help="pairs for --kinds pair (default all)")
     ap.add_argument("--seeds", type=positive_int, default=20, help="recordings per effect (or pair)")
     ap.add_argument("--first-seed", type=nonnegative_int, default=0)
-    ap.add_argument("--workers", type=positive_int, default=None)
+    ap.add_argument("--workers", type=positive_int, default=None,
+                    help="processes of the local Dask cluster (default: all cores; 1: run here, no cluster)")
+    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
     a = ap.parse_args(argv)
 
-    def progress(done, total):
+    def progress(done, total):  # recordings run here; on a cluster, Dask's progress (display)
         if done == total or done % max(1, total // 10) == 0:
             print(f"  {done}/{total} recordings", file=sys.stderr, flush=True)
 
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:
         res = run_blind_suite(a.effects, range(a.first_seed, a.first_seed + a.seeds), robot=a.robot, kinds=a.kinds,
-                              pairs=pairs, workers=a.workers, progress=progress)
+                              pairs=pairs, workers=a.workers, scheduler=a.scheduler,
+                              progress=progress if runs_here(a.workers, a.scheduler) else None,
+                              display=ProgressDisplay("blind suite", unit="recordings"))
     except NotImplementedError as exc:
         raise ValueError(str(exc)) from None
     print(f"robot: {a.robot}")

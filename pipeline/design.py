@@ -4,8 +4,8 @@ Usage::
 
     python -m pipeline.design --poses 10 [--robot hexapod|delta|...] [--criterion d|e]
         [--workspace full|default] [--seed 0] [--out designed_poses.csv] [--noise-mm 0.001]
-        [--noise-rad 1e-6] [--noise-joint 0] [--candidates 3000] [--geometry ROBOT.json]
-        [--summary-json FILE] [--rrd FILE] [--overwrite]
+        [--noise-rad 1e-6] [--noise-joint 0] [--candidates 3000] [--starts 1] [--workers N]
+        [--scheduler ADDRESS] [--geometry ROBOT.json] [--summary-json FILE] [--rrd FILE] [--overwrite]
 
 The command file is a CSV whose header comes from the robot: its pose coordinates with their
 units, then its joints with theirs, e.g. ``x_mm,y_mm,z_mm,alpha_rad,beta_rad,gamma_rad,l1_mm,...,
@@ -15,10 +15,22 @@ runs). A JSON sidecar (same name, ``.json``) records the robot, its description,
 the workspace, the declared noise, the seed and the observability figures of the design. Files
 are written atomically and never overwrite an existing file unless ``--overwrite`` is given.
 
+The search (:func:`calib.design.design_poses`: a seeded draw of feasible candidates, then greedy
+selection and exchange passes) finds a local optimum of its candidates. ``--starts K`` runs ``K``
+independent searches, each on its own candidate draw, and keeps the best design by the criterion
+(D: ``log det F``; E: ``lambda_min(F)``; a tie goes to the lower start). Start 0 draws with
+``--seed`` (the single search's draw: ``--starts 1``, the default, writes what it always did),
+start ``k > 0`` with ``SeedSequence(seed, spawn_key=(k,))``: a start's numbers depend on the seed
+and ``k`` only, so the design is the same whatever runs it. The starts run as tasks of
+:mod:`pipeline.executor` (a local Dask cluster of ``--workers`` processes, default the cores but
+at most ``K``; ``--workers 1`` here; ``--scheduler ADDRESS`` an existing cluster). With ``K > 1``
+the sidecar and the summary record the starts and each start's criterion value (``starts``).
+
 Python use (e.g. for ``pipeline.run --design optimal``)::
 
     from pipeline.design import optimal_poses, read_command_file
     poses = optimal_poses(robot, 10, criterion="d", workspace="full", seed=0)  # (10, D)
+    poses = optimal_poses(robot, 10, starts=4, workers=2)  # best of 4 searches, on 2 workers
     poses, joints = read_command_file("designed_poses.csv")  # robot found from the header
 """
 
@@ -30,17 +42,19 @@ import io
 import json
 import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from calib.design import (CRITERIA, WORKSPACES, Workspace, design_poses, minimum_poses, robot_workspace,
-                          sample_feasible_poses)
+from calib.design import (CRITERIA, WORKSPACES, DesignResult, Workspace, design_poses, minimum_poses,
+                          robot_workspace, sample_feasible_poses)
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
-from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
+from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int, positive_int
+from pipeline.executor import ProgressDisplay, add_executor_arguments, default_workers, run_tasks
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -50,6 +64,11 @@ __all__ = [
     "command_columns",
     "command_csv",
     "optimal_poses",
+    "DesignSearch",
+    "criterion_value",
+    "design_search",
+    "design_start",
+    "start_seed",
     "write_command_file",
     "read_command_file",
     "load_robot",
@@ -78,9 +97,110 @@ def _workspace(robot: Robot, workspace: str | Workspace) -> Workspace:
     return workspace if isinstance(workspace, Workspace) else robot_workspace(robot, workspace)
 
 
+def start_seed(seed: int, start: int) -> int | np.random.Generator:
+    """The candidate draw of start ``start`` of a search seeded ``seed``: ``seed`` itself for start
+    0 (a single search's draw), ``SeedSequence(seed, spawn_key=(start,))`` for the others."""
+    if start == 0:
+        return seed
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(int(start),)))
+
+
+def design_start(job: dict) -> DesignResult:
+    """One start of a design search (a task of :mod:`pipeline.executor`; plain data in).
+
+    Args:
+        job: ``robot`` (registered name), ``description`` (its ``Robot.description()``), ``theta``
+            (P,), ``n``, ``workspace`` (:meth:`Workspace.to_dict`), ``noise``
+            (:meth:`SensorNoise.to_dict`), ``free`` (names or None), ``criterion``, ``seed``,
+            ``start``, ``n_candidates``.
+
+    Returns:
+        :func:`calib.design.design_poses` on the start's candidate draw (:func:`start_seed`).
+    """
+    robot = robot_from_description(job["robot"], job["description"])
+    return design_poses(robot, np.asarray(job["theta"], dtype=float), job["n"], Workspace.from_dict(job["workspace"]),
+                        SensorNoise(**job["noise"]), free=job["free"], criterion=job["criterion"],
+                        seed=start_seed(job["seed"], job["start"]), n_candidates=job["n_candidates"])
+
+
+@dataclass(frozen=True, eq=False)
+class DesignSearch:
+    """The starts of a design search and the best of them.
+
+    Attributes:
+        results: one :class:`calib.design.DesignResult` per start, in start order.
+        best: the start whose design is kept (highest criterion value, the lower start on a tie).
+    """
+
+    results: tuple
+    best: int
+
+    @property
+    def design(self) -> DesignResult:
+        """The design kept."""
+        return self.results[self.best]
+
+    @property
+    def values(self) -> list[float]:
+        """Each start's criterion value: ``log det F`` (D) or ``lambda_min(F)`` (E), 1/mm^2."""
+        return [criterion_value(r) for r in self.results]
+
+    def to_dict(self, seed: int) -> dict:
+        """JSON-ready record of the starts (for the sidecar and the summary)."""
+        key = "log_det_fisher" if self.design.criterion == "d" else "lambda_min_fisher"
+        return {"count": len(self.results), "best": self.best,
+                "seeds": f"start 0: seed {seed}; start k > 0: SeedSequence({seed}, spawn_key=(k,))",
+                "criterion": key, "values": self.values}
+
+
+def criterion_value(result: DesignResult) -> float:
+    """The value a design maximises: ``log det F`` (D-optimal) or ``lambda_min(F)`` (E-optimal)."""
+    return result.log_det if result.criterion == "d" else result.lambda_min
+
+
+def design_search(robot: Robot, theta, n: int, workspace: Workspace, noise: SensorNoise, *, free=None,
+                  criterion: str = "d", seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES, starts: int = 1,
+                  workers: int | None = None, scheduler: str | None = None, client=None,
+                  display: ProgressDisplay | None = None) -> DesignSearch:
+    """``starts`` independent design searches (:func:`design_start`), the best kept.
+
+    Args:
+        robot, theta, n, workspace, noise, free, criterion, n_candidates: as
+            :func:`calib.design.design_poses`.
+        seed: the search's seed; start ``k`` draws its candidates from :func:`start_seed`.
+        starts: independent searches (1: the single search of ``design_poses`` with ``seed``).
+        workers: processes of the local Dask cluster (default the cores, at most ``starts``;
+            1 runs here). ``scheduler``, ``client``: as :func:`pipeline.executor.run_tasks`.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the starts done on a cluster.
+
+    Returns:
+        The :class:`DesignSearch`; the same whatever runs it.
+    """
+    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 1:
+        raise ValueError(f"starts must be an integer >= 1, got {starts!r}")
+    if workers is not None and int(workers) < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if scheduler is None and client is None:
+        workers = min(int(starts), int(workers or default_workers()))
+    base = {"robot": robot.name, "description": robot.description(), "theta": np.asarray(theta, dtype=float),
+            "n": n, "workspace": workspace.to_dict(), "noise": noise.to_dict(),
+            "free": None if free is None else list(free), "criterion": criterion, "seed": seed,
+            "n_candidates": n_candidates}
+    from pipeline.design import design_start as entry  # by name in the workers (also when run as __main__)
+
+    results = [None] * int(starts)
+    for k, r in run_tasks(entry, [{**base, "start": k} for k in range(int(starts))], workers=workers,
+                          scheduler=scheduler, client=client, display=display):
+        results[k] = r
+    values = [criterion_value(r) for r in results]
+    best = max(range(len(results)), key=lambda k: (values[k], -k))
+    return DesignSearch(results=tuple(results), best=best)
+
+
 def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | Workspace = "full",
                   seed: int = 0, *, theta=None, noise: SensorNoise = DEFAULT_NOISE, free=None,
-                  n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+                  n_candidates: int = DEFAULT_CANDIDATES, starts: int = 1, workers: int | None = None,
+                  scheduler: str | None = None, client=None) -> np.ndarray:
     """``n`` optimal calibration poses for a machine of the robot's nominal geometry.
 
     Args:
@@ -94,7 +214,9 @@ def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | W
             unknown before calibration).
         noise: declared noise weighting the pose coordinates.
         free: parameters to determine; default ``robot.free_default``.
-        n_candidates: feasible candidates drawn.
+        n_candidates: feasible candidates drawn (each start).
+        starts: independent searches, the best kept (:func:`design_search`; 1: one search).
+        workers, scheduler, client: where the starts run (:func:`design_search`).
 
     Returns:
         (n, D) target poses, the robot's pose units, base frame; all inside ``workspace``.
@@ -102,8 +224,12 @@ def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | W
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
     theta = robot.table.nominal if theta is None else theta
-    return design_poses(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
-                        seed=seed, n_candidates=n_candidates).poses
+    if starts == 1:
+        return design_poses(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
+                            seed=seed, n_candidates=n_candidates).poses
+    return design_search(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
+                         seed=seed, n_candidates=n_candidates, starts=starts, workers=workers,
+                         scheduler=scheduler, client=client).design.poses
 
 
 def _check_rows(robot: Robot, poses, joints) -> tuple[np.ndarray, np.ndarray]:
@@ -260,7 +386,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the candidate draw")
     p.add_argument("--out", default="designed_poses.csv", help="command file (CSV); sidecar .json beside it")
     add_noise_arguments(p)
-    p.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES, help="feasible candidate poses drawn")
+    p.add_argument("--candidates", type=int, default=DEFAULT_CANDIDATES,
+                   help="feasible candidate poses drawn (each start)")
+    p.add_argument("--starts", type=positive_int, default=1,
+                   help="independent searches, each on its own candidate draw; the best design is kept")
+    add_executor_arguments(p)
     p.add_argument("--geometry", default=None, help="robot description JSON (Robot.description()); "
                                                     "default the registered robot's default machine")
     p.add_argument("--summary-json", default=None)
@@ -283,6 +413,8 @@ def _main(argv: list[str] | None = None) -> int:
                          f"{robot.pose_dim} equations per pose), got {args.poses}")
     if args.candidates < args.poses:
         raise SystemExit(f"--candidates must be >= --poses ({args.poses}), got {args.candidates}")
+    if args.workers is not None and args.workers < 1:
+        raise SystemExit(f"--workers must be >= 1, got {args.workers}")
     outs = [Path(args.out), sidecar_path(args.out)] + [Path(p) for p in (args.summary_json, args.rrd) if p]
     for p in outs:
         if p.exists() and not args.overwrite:
@@ -292,10 +424,22 @@ def _main(argv: list[str] | None = None) -> int:
     noise = noise_from_arguments(args)
     theta = robot.table.nominal
     ws = robot_workspace(robot, args.workspace)
+    each = f" in each of {args.starts} starts" if args.starts > 1 else ""
     print(f"designing {args.poses} {args.criterion.upper()}-optimal poses for the {robot.name} in its "
-          f"{ws.name} workspace from {args.candidates} candidates (seed {args.seed})...", file=sys.stderr)
-    res = design_poses(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
-                       n_candidates=args.candidates)
+          f"{ws.name} workspace from {args.candidates} candidates{each} (seed {args.seed})...", file=sys.stderr)
+    if args.starts == 1:
+        search = None
+        res = design_poses(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
+                           n_candidates=args.candidates)
+    else:
+        search = design_search(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
+                               n_candidates=args.candidates, starts=args.starts, workers=args.workers,
+                               scheduler=args.scheduler, display=ProgressDisplay("design search", unit="starts"))
+        res = search.design
+        values = search.values
+        name = "log det F" if args.criterion == "d" else "lambda_min(F)"
+        print(f"best of {args.starts} starts: start {search.best}, {name} {values[search.best]:.6g} "
+              f"(starts from {min(values):.6g} to {max(values):.6g})", file=sys.stderr)
     joints = robot.inverse_kinematics(theta, res.poses)
     check_joint_limits(robot, joints, "designed pose")
     analysis = analyze_observability(robot, theta, res.poses, noise, joints=joints)
@@ -326,6 +470,8 @@ def _main(argv: list[str] | None = None) -> int:
         "lambda_min_fisher": res.lambda_min,
         "observability": analysis.summary(),
     }
+    if search is not None:
+        meta["starts"] = search.to_dict(args.seed)
     summary = {
         "command": "pipeline.design",
         "robot": robot.name,
@@ -338,6 +484,8 @@ def _main(argv: list[str] | None = None) -> int:
         "observability": analysis.summary(),
         "predicted_pose_uncertainty": uncertainty,
     }
+    if search is not None:
+        summary["starts"] = search.to_dict(args.seed)
     if reference is not None:
         summary["reference_poses_observability"] = reference.summary()
         summary["crb_rms_gain_vs_reference_poses"] = reference.crb_rms / analysis.crb_rms

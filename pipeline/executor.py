@@ -19,17 +19,30 @@ the blind suite's recordings) runs on a Dask cluster:
 The tasks are plain functions of plain data, seeded by the task (never by the worker or the order
 they finish in), so every way of running a job gives the same numbers. Results come back as each
 task finishes (:func:`run_tasks`), which is what lets a fleet write each machine's row as it lands.
+
+A long job on a cluster shows its progress on stderr (:class:`ProgressDisplay`), driven by Dask's
+own progress reporting: the scheduler-side ``Progress`` plugin that
+``distributed.diagnostics.progressbar.ProgressBar`` listens to, here on the client's event loop
+while this process consumes the results (``distributed.progress`` would block until the job ends
+and write to stdout, where the commands print their results).
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
+import math
 import os
+import sys
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "task_pool", "add_executor_arguments",
-           "default_workers"]
+           "default_workers", "runs_here", "ProgressDisplay"]
+
+logger = logging.getLogger(__name__)
 
 #: One BLAS thread.
 BLAS_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -83,8 +96,14 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         os.environ.update(saved)
 
 
+def runs_here(workers: int | None = None, scheduler: str | None = None, client=None) -> bool:
+    """Whether :func:`run_tasks` with these arguments runs the tasks in this process (no cluster)."""
+    return client is None and not scheduler and int(workers or default_workers()) == 1
+
+
 def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, scheduler: str | None = None,
-              client=None, progress: Callable[[int, int], None] | None = None) -> Iterator[tuple[int, object]]:
+              client=None, progress: Callable[[int, int], None] | None = None,
+              display: "ProgressDisplay | None" = None) -> Iterator[tuple[int, object]]:
     """Run ``fn(job)`` for every job; yield ``(index, result)`` as each task finishes.
 
     Args:
@@ -94,7 +113,11 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
             tasks here, in order. Default: the cores of this machine.
         scheduler: address of an existing Dask cluster.
         client: an open ``distributed.Client`` to use (its cluster stays up afterwards).
-        progress: ``progress(done, total)`` after each finished task.
+        progress: ``progress(done, total)`` after each finished task (every way of running).
+        display: where the tasks run on a cluster, the job's progress as Dask's scheduler reports
+            it is drawn there (on stderr) while the results are consumed, and ended (the final
+            count, or where the job stopped) before this generator returns or raises. Not drawn
+            for tasks run here (:func:`runs_here`): report those through ``progress``.
 
     A task that raises stops the job with its exception (the tasks not yet run are cancelled);
     a job that must go on past a bad input catches the error in ``fn`` and returns it as data.
@@ -103,7 +126,7 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
     total = len(jobs)
     if workers is not None and int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    if client is None and not scheduler and (workers or default_workers()) == 1:
+    if runs_here(workers, scheduler, client):
         for i, job in enumerate(jobs):
             result = fn(job)
             if progress:
@@ -113,16 +136,17 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
     with contextlib.ExitStack() as stack:
         if client is None:
             client = stack.enter_context(dask_client(workers, scheduler))
-        yield from _as_completed(client, fn, jobs, progress)
+        yield from _as_completed(client, fn, jobs, progress, display)
 
 
-def _as_completed(client, fn, jobs, progress):
+def _as_completed(client, fn, jobs, progress, display):
     from distributed import as_completed
 
     # pure=False: two equal jobs are two tasks (a job's result is never shared by key).
     futures = client.map(fn, jobs, pure=False)
     index = {f.key: i for i, f in enumerate(futures)}
-    done = 0
+    watch = _SchedulerProgress.start(client, futures, display) if display is not None and futures else None
+    done, held = 0, []
     try:
         for future in as_completed(futures):
             result = future.result()
@@ -130,9 +154,199 @@ def _as_completed(client, fn, jobs, progress):
             if progress:
                 progress(done, len(jobs))
             yield index[future.key], result
-            future.release()
+            # A result is released once consumed; while the scheduler-side progress is being set up
+            # it must still find every key (it waits for them), so releases wait until it is.
+            held.append(future)
+            if watch is None or watch.ready:
+                for f in held:
+                    f.release()
+                held.clear()
     finally:
+        if watch is not None:
+            watch.wait_ready()
         client.cancel([f for f in futures if not f.done()])
+        if watch is not None:
+            watch.stop()
+
+
+class ProgressDisplay:
+    """A job's progress on stderr: ``LABEL: [####      ] 12/40 tasks (5 s)``.
+
+    On a terminal one line is redrawn in place (at most once a second unless the count changes);
+    otherwise (a log) one plain line when a tenth more of the job is done or ``log_interval``
+    seconds have passed since the last line, whichever comes first; a last line when the job ends,
+    with its wall time, or where it stopped. Lines of results printed while the job runs go
+    through :meth:`echo`, above the bar. Thread-safe: Dask's reports arrive on the client's event
+    loop, results on the thread consuming them. Never writes to stdout.
+
+    Args:
+        label: what runs (``study``, ``fleet``, ...).
+        unit: what is counted (Dask counts tasks).
+        stream: where to draw; default ``sys.stderr`` at the time of drawing.
+        log_interval: seconds between two plain lines at most (not on a terminal).
+    """
+
+    #: Seconds between two plain progress lines in a log, at most.
+    LOG_INTERVAL = 60.0
+    #: Characters of the bar on a terminal.
+    WIDTH = 30
+
+    def __init__(self, label: str, *, unit: str = "tasks", stream=None, log_interval: float = LOG_INTERVAL):
+        self.label = label
+        self.unit = unit
+        self.log_interval = float(log_interval)
+        self._stream = stream
+        self._lock = threading.Lock()
+        self._t0 = None
+        self._shown = ""         # the bar's text on the terminal line ("" if none is shown)
+        self._logged = None      # (done, time) of the last plain line
+        self.last = None         # (done, total) last reported
+
+    @property
+    def stream(self):
+        return sys.stderr if self._stream is None else self._stream
+
+    def _terminal(self) -> bool:
+        try:
+            return bool(self.stream.isatty())
+        except (AttributeError, ValueError):
+            return False
+
+    def _elapsed(self) -> float:
+        now = time.monotonic()
+        if self._t0 is None:
+            self._t0 = now
+        return now - self._t0
+
+    def _text(self, done: int, total: int, elapsed: float, terminal: bool) -> str:
+        if not terminal:
+            return f"{self.label}: {done}/{total} {self.unit} ({elapsed:.1f} s)"
+        filled = int(self.WIDTH * done / total) if total else self.WIDTH
+        bar = "#" * filled + " " * (self.WIDTH - filled)
+        return f"{self.label}: [{bar}] {done}/{total} {self.unit} ({elapsed:.0f} s)"
+
+    def _write(self, text: str) -> None:
+        with contextlib.suppress(ValueError, OSError):  # a closed stream ends the display, not the job
+            self.stream.write(text)
+            self.stream.flush()
+
+    def update(self, done: int, total: int) -> None:
+        """The job has ``done`` of ``total`` tasks finished."""
+        with self._lock:
+            elapsed = self._elapsed()
+            self.last = (int(done), int(total))
+            if self._terminal():
+                text = self._text(done, total, elapsed, True)
+                if text != self._shown:
+                    self._write("\r\x1b[2K" + text)
+                    self._shown = text
+                return
+            if done >= total:
+                return  # the last line is :meth:`finish`'s
+            if self._logged is not None:
+                before, when = self._logged
+                tenth = total and math.floor(10 * done / total) > math.floor(10 * before / total)
+                if done == before or not (tenth or elapsed - when >= self.log_interval):
+                    return
+            self._write(self._text(done, total, elapsed, False) + "\n")
+            self._logged = (int(done), elapsed)
+
+    def finish(self, done: int, total: int, stopped: str | None = None) -> None:
+        """The job ended: all done, or ``stopped`` (why) at ``done`` of ``total``."""
+        with self._lock:
+            elapsed = self._elapsed()
+            self.last = (int(done), int(total))
+            terminal = self._terminal()
+            text = self._text(done, total, elapsed, terminal)
+            text += f": stopped, {stopped}" if stopped else ", done"
+            self._write(("\r\x1b[2K" if terminal else "") + text + "\n")
+            self._shown, self._logged, self._t0 = "", None, None
+
+    def echo(self, line: str) -> None:
+        """Print a line (e.g. a result) on the display's stream, above the bar if one is drawn."""
+        with self._lock:
+            if self._shown:
+                self._write("\r\x1b[2K" + line + "\n" + self._shown)
+            else:
+                self._write(line + "\n")
+
+
+class _SchedulerProgress:
+    """Dask's ``ProgressBar`` listening on the client's event loop, drawing on a :class:`ProgressDisplay`.
+
+    ``ProgressBar.listen`` connects to the scheduler, which runs the ``Progress`` plugin on the
+    job's keys and sends ``{all, remaining, status}`` every ``interval``; it returns when the
+    status is ``finished`` or ``error`` (a task erred, or a task not yet done was cancelled).
+    """
+
+    #: Seconds between two of the scheduler's reports.
+    INTERVAL = 0.1
+    #: Seconds to wait for the scheduler's set-up, or its last report, before giving up on it.
+    PATIENCE = 10.0
+
+    def __init__(self, client, futures, display: ProgressDisplay):
+        from distributed.diagnostics.progressbar import ProgressBar
+
+        owner = self
+
+        class Bar(ProgressBar):
+            def _draw_bar(self, remaining, all, status=None, **kwargs):
+                owner.ready_event.set()
+                if status not in ("finished", "error"):
+                    display.update(all - remaining, all)
+
+            def _draw_stop(self, remaining, all, status=None, exception=None, **kwargs):
+                why = None
+                if status == "error":
+                    why = "a task failed" if exception is not None else "cancelled"
+                display.finish(all - remaining, all, why)
+                owner.drawn_stop = True
+
+        self.display = display
+        self.total = len(futures)
+        self.bar = Bar(futures, scheduler=client.scheduler.address, interval=self.INTERVAL, complete=True)
+        self.ready_event = threading.Event()
+        self.ended = threading.Event()
+        self.drawn_stop = False
+        self.loop = client.loop.asyncio_loop
+        self.future = None
+
+    @classmethod
+    def start(cls, client, futures, display: ProgressDisplay) -> "_SchedulerProgress":
+        watch = cls(client, futures, display)
+        display.update(0, watch.total)
+        watch.future = asyncio.run_coroutine_threadsafe(watch._listen(), watch.loop)
+        return watch
+
+    async def _listen(self):
+        try:
+            await self.bar.listen()
+        except Exception as exc:  # no progress display is no reason to fail the job
+            logger.debug("progress display: %s", exc)
+        finally:
+            comm = getattr(self.bar, "comm", None)
+            if comm is not None and not comm.closed():
+                comm.abort()
+            self.ended.set()
+
+    @property
+    def ready(self) -> bool:
+        """The scheduler has set the job's progress up (or listening failed)."""
+        return self.ready_event.is_set() or self.ended.is_set()
+
+    def wait_ready(self) -> None:
+        deadline = time.monotonic() + self.PATIENCE
+        while not self.ready and time.monotonic() < deadline:
+            self.ready_event.wait(0.02)
+
+    def stop(self) -> None:
+        """Wait for the scheduler's last report (the job ended), then stop listening."""
+        if not self.ended.wait(self.PATIENCE):
+            self.future.cancel()  # cancels the listening task on the event loop
+            self.ended.wait(self.PATIENCE)
+        if not self.drawn_stop:
+            done, total = self.display.last or (0, self.total)
+            self.display.finish(done, total, "no report from the scheduler")
 
 
 @contextlib.contextmanager

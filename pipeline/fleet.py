@@ -31,6 +31,10 @@ time; always at the end, an interruption included), so an interrupted fleet keep
 machine that had finished, and a rerun does the rest. One fleet
 at a time writes to an output folder (a lock file holds it). Exit status 0 when every row is
 calibrated, 1 when some row is an error, 2 for a refused input or output.
+
+On stderr: one line per machine as it lands (``--quiet``: none) and, on a cluster, the fleet's
+progress as Dask's scheduler reports it (:class:`pipeline.executor.ProgressDisplay`, the lines of
+the machines printed above it); stdout gets the summary at the end.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from pathlib import Path
 from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
-from .executor import add_executor_arguments, run_tasks
+from .executor import ProgressDisplay, add_executor_arguments, run_tasks
 from .recording import OutputError, atomic_write, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
@@ -258,7 +262,8 @@ def _alive(pid: int) -> bool:
 
 
 def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | None = None,
-              scheduler: str | None = None, client=None, redo: bool = False, progress=None) -> FleetReport:
+              scheduler: str | None = None, client=None, redo: bool = False, progress=None,
+              display=None) -> FleetReport:
     """Calibrate every recording of ``folder`` (see the module docstring).
 
     Args:
@@ -268,6 +273,7 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
         workers, scheduler, client: the executor (:func:`pipeline.executor.run_tasks`).
         redo: calibrate every machine, even those whose row stands.
         progress: ``progress(row, done, total)`` after each machine finished here.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the machines done on a cluster.
 
     Raises:
         ValueError: ``folder`` is not a folder, ``method`` unknown, or ``out`` cannot be written
@@ -297,7 +303,8 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
         dirty, last, cost = True, time.monotonic(), 0.0
         from pipeline.fleet import calibrate_machine as entry  # by name in the workers
 
-        for k, (_, row) in enumerate(run_tasks(entry, jobs, workers=workers, scheduler=scheduler, client=client)):
+        for k, (_, row) in enumerate(run_tasks(entry, jobs, workers=workers, scheduler=scheduler, client=client,
+                                               display=display)):
             atomic_write(_row_path(out, row["machine"]), json.dumps(row, indent=1) + "\n", overwrite=True)
             rows[row["machine"]] = row
             ran.append(row["machine"])
@@ -344,14 +351,18 @@ def _main(argv) -> int:
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
 
+    # Each machine's line as it lands (a result, here or on a cluster), printed above the progress
+    # of the job that Dask's scheduler reports on a cluster.
+    display = ProgressDisplay("fleet", unit="machines")
+
     def progress(row, done, total):
         if not args.quiet:
-            print(_report_line(row, done, total), file=sys.stderr, flush=True)
+            display.echo(_report_line(row, done, total))
 
     t0 = time.perf_counter()
     try:
         rep = run_fleet(args.folder, args.out, method=args.method, workers=args.workers, scheduler=args.scheduler,
-                        redo=args.redo, progress=progress)
+                        redo=args.redo, progress=progress, display=display)
     except KeyboardInterrupt:
         out = args.out or args.folder / "calibrated"
         print(f"interrupted: the machines that had finished are in {out / TABLE_NAMES['md']}; "

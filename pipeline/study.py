@@ -32,7 +32,9 @@ Trial ``k`` draws its pose noise from ``SeedSequence(seed, spawn_key=(k,))`` (jo
 Trials run in chunks on a Dask cluster (:mod:`pipeline.executor`: a local cluster of
 ``--workers`` processes, default the number of cores, one BLAS thread each; ``--workers 1`` runs
 here; ``--scheduler ADDRESS`` runs on an existing cluster); the simulation of a chunk is
-vectorised (one forward-kinematics solve for all its trials), progress goes to stderr.
+vectorised (one forward-kinematics solve for all its trials). Progress goes to stderr: on a
+cluster the chunks done as Dask's scheduler reports them (:class:`pipeline.executor.ProgressDisplay`),
+here the trials done.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ from calib.observability import analyze_observability, free_indices, parameter_s
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
-from pipeline.executor import add_executor_arguments, run_tasks
+from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, runs_here
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write
 
@@ -185,7 +187,7 @@ def _merge(parts: list[dict], methods) -> dict:
 
 def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials: int, seed: int, *,
                 methods=("forward",), heldout=None, workers: int | None = None, progress=None,
-                initial=None, scheduler: str | None = None, client=None) -> dict:
+                initial=None, scheduler: str | None = None, client=None, display=None) -> dict:
     """Run ``trials`` Monte Carlo trials, in parallel, deterministically for a given seed.
 
     Args:
@@ -203,6 +205,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
         initial: (N, D) start of the forward kinematics (e.g. the target poses); default home.
         scheduler: address of an existing Dask cluster to run on instead (``--scheduler``).
         client: an open ``distributed.Client`` to run on (left open).
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the chunks done on a cluster.
 
     The trials run in chunks (:func:`run_trials`, eight a worker) on the executor of
     :mod:`pipeline.executor`; trial ``k``'s noise depends on ``seed`` and ``k`` only, so the
@@ -239,7 +242,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
     parts, done = [], 0
 
     for _, part in run_tasks(entry, [{**base, "trials": c} for c in chunks], workers=workers,
-                             scheduler=scheduler, client=client):
+                             scheduler=scheduler, client=client, display=display):
         parts.append(part)
         done += len(part["trials"])
         if progress:
@@ -383,10 +386,13 @@ def _main(argv: list[str] | None = None) -> int:
         print(f"\rstudy: {done}/{total} trials ({time.perf_counter() - t0:.1f} s)", end="",
               file=sys.stderr, flush=True)
 
+    # Here, the trials done (one line redrawn); on a cluster, Dask's progress of the chunks.
+    here = runs_here(args.workers, args.scheduler)
     results = monte_carlo(robot, theta_true, commanded, noise, args.trials, args.seed, methods=methods,
-                          heldout=heldout, workers=args.workers, progress=progress, initial=targets,
-                          scheduler=args.scheduler)
-    print(file=sys.stderr)
+                          heldout=heldout, workers=args.workers, progress=progress if here else None,
+                          initial=targets, scheduler=args.scheduler, display=ProgressDisplay("study"))
+    if here:
+        print(file=sys.stderr)
     figures = summarize(results, names, parameter_scale(robot)[analysis.indices], crb_var, args.trials)
     summary = {
         "command": "pipeline.study",

@@ -1,11 +1,16 @@
 """The Dask executor (pipeline.executor): results as tasks finish, errors, the concurrent.futures pool."""
 
+import asyncio
+import io
 import math
 import os
+import re
+import threading
+import time
 
 import pytest
 
-from pipeline.executor import THREADS_VAR, WORKER_ENV, run_tasks, task_pool
+from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, run_tasks, runs_here, task_pool
 
 
 def worker_threads(_):
@@ -18,6 +23,11 @@ def fails_on_three(x):
     if x == 3:
         raise ValueError("three")
     return x
+
+
+def slow_square(x):
+    time.sleep(0.02)
+    return x * x
 
 
 def test_run_tasks_here_and_on_a_cluster(dask_two_workers):
@@ -60,3 +70,110 @@ def test_task_pool_is_a_concurrent_futures_executor():
     with task_pool(1) as pool:
         assert list(pool.map(math.sqrt, [9, 1, 4])) == [3.0, 1.0, 2.0]
         assert pool.submit(math.factorial, 5).result() == 120
+
+
+def _listening(client) -> list:
+    """Progress listeners still running on the client's event loop."""
+    async def tasks():
+        return [t for t in asyncio.all_tasks() if t.get_coro().__qualname__.endswith("Progress._listen")]
+    return client.sync(tasks)
+
+
+def _progress_plugins(client) -> list:
+    return client.run_on_scheduler(lambda dask_scheduler: [n for n in dask_scheduler.plugins if "progress" in n])
+
+
+def _counts(err: str, label: str) -> list[tuple[int, int]]:
+    lines = err.splitlines()
+    assert lines and all(line.startswith(f"{label}: ") for line in lines), err
+    return [tuple(map(int, re.match(rf"{label}: (\d+)/(\d+) tasks", line).groups())) for line in lines]
+
+
+@pytest.fixture
+def quiet_cluster(dask_two_workers):
+    """The two-worker client, warm (Dask's own lazily started threads exist), and the threads then."""
+    list(run_tasks(math.sqrt, [1, 4], client=dask_two_workers))
+    return dask_two_workers, set(threading.enumerate())
+
+
+def test_progress_of_a_cluster_job_is_dask_s_on_stderr(quiet_cluster, capsys):
+    client, threads = quiet_cluster
+    capsys.readouterr()
+    seen = []
+    got = sorted(run_tasks(slow_square, range(12), client=client, display=ProgressDisplay("job"),
+                           progress=lambda d, t: seen.append(d)))
+    assert got == [(k, k * k) for k in range(12)] and seen == list(range(1, 13))
+    out, err = capsys.readouterr()
+    assert out == ""  # commands print their results on stdout: progress never goes there
+    counts = _counts(err, "job")
+    assert counts[0] == (0, 12) and counts[-1] == (12, 12) and err.rstrip().endswith(", done")
+    assert [d for d, _ in counts] == sorted(d for d, _ in counts)
+    assert len(counts) <= 12  # a line a tenth of the job at most (a log is not flooded)
+    # Nothing left running: no listener on the client's loop, no plugin on the scheduler, no thread.
+    assert _listening(client) == [] and _progress_plugins(client) == []
+    assert set(threading.enumerate()) == threads
+
+
+def test_a_failing_task_stops_the_progress_and_raises(quiet_cluster, capsys):
+    client, threads = quiet_cluster
+    capsys.readouterr()
+    with pytest.raises(ValueError, match="three"):
+        list(run_tasks(fails_on_three, range(6), client=client, display=ProgressDisplay("job")))
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines()[-1].endswith(": stopped, a task failed")
+    assert _listening(client) == [] and _progress_plugins(client) == []
+    assert set(threading.enumerate()) == threads
+
+
+def test_a_job_left_early_stops_the_progress(quiet_cluster, capsys):
+    client, threads = quiet_cluster
+    capsys.readouterr()
+    job = run_tasks(slow_square, range(40), client=client, display=ProgressDisplay("job"))
+    next(job)
+    assert len(_listening(client)) == 1  # Dask's progress is listened to while the job runs
+    job.close()  # the consumer stops (e.g. Ctrl-C): the tasks not done are cancelled
+    out, err = capsys.readouterr()
+    done, total = _counts(err, "job")[-1]
+    assert out == "" and total == 40 and done < 40 and err.rstrip().endswith(": stopped, cancelled")
+    assert _listening(client) == [] and _progress_plugins(client) == []
+    assert set(threading.enumerate()) == threads
+
+
+def test_progress_here_goes_through_the_callback_only(capsys):
+    seen = []
+    assert runs_here(1) and not runs_here(2) and not runs_here(1, "tcp://host:8786")
+    list(run_tasks(math.sqrt, [1, 4], workers=1, display=ProgressDisplay("job"),
+                   progress=lambda d, t: seen.append((d, t))))
+    assert seen == [(1, 2), (2, 2)] and capsys.readouterr() == ("", "")
+
+
+class Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_display_on_a_terminal_and_in_a_log():
+    tty = Terminal()
+    d = ProgressDisplay("fleet", unit="machines", stream=tty)
+    d.update(0, 4)
+    d.update(1, 4)
+    d.update(1, 4)  # unchanged: not redrawn
+    d.echo("  [1/4] m1: calibrated")  # a result above the bar, the bar redrawn under it
+    d.finish(4, 4)
+    bar = "fleet: [{}] {}/4 machines (0 s)"
+    assert tty.getvalue() == ("\r\x1b[2K" + bar.format(" " * 30, 0) + "\r\x1b[2K" + bar.format("#" * 7 + " " * 23, 1)
+                              + "\r\x1b[2K  [1/4] m1: calibrated\n" + bar.format("#" * 7 + " " * 23, 1)
+                              + "\r\x1b[2K" + bar.format("#" * 30, 4) + ", done\n")
+    log = io.StringIO()
+    d = ProgressDisplay("study", stream=log)
+    for k in range(1001):
+        d.update(k, 1000)
+    d.finish(1000, 1000)
+    lines = log.getvalue().splitlines()
+    assert [int(re.match(r"study: (\d+)/1000", s).group(1)) for s in lines] == list(range(0, 1001, 100))
+    assert lines[-1].endswith(", done")
+    d = ProgressDisplay("study", stream=log, log_interval=0.0)  # a line at each change when asked
+    log.truncate(0), log.seek(0)
+    for k in (0, 1, 1, 2):
+        d.update(k, 1000)
+    assert len(log.getvalue().splitlines()) == 3

@@ -2,6 +2,8 @@
 
 import dataclasses
 import json
+import re
+import shutil
 
 import numpy as np
 import pytest
@@ -85,6 +87,21 @@ def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_fo
         side.unlink()
     assert rep.ran == ["orphan"] and len(rep.skipped) == 19
     assert {r["machine"]: r["status"] for r in rep.rows}["orphan"] == "calibrated"
+
+
+def test_fleet_on_a_cluster_prints_rows_and_dask_s_progress_on_stderr(fleet_folder, tmp_path, dask_two_workers,
+                                                                     capsys):
+    folder = tmp_path / "three"
+    folder.mkdir()
+    for name in ("hexapod_00", "delta_00", "rus_00"):
+        for p in (fleet_folder / f"{name}.csv", sidecar_path(fleet_folder / f"{name}.csv")):
+            shutil.copy(p, folder / p.name)
+    assert main([str(folder), "--scheduler", dask_two_workers.scheduler.address]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith(f"fleet {folder}: 3 machines, 3 calibrated") and "fleet: " not in out
+    lines = err.splitlines()
+    assert lines[0].startswith("fleet: 0/3 machines") and re.fullmatch(r"fleet: 3/3 machines \(.*\), done", lines[-1])
+    assert sorted(line.split()[0] for line in lines if line.startswith("  [")) == ["[1/3]", "[2/3]", "[3/3]"]
 
 
 def test_interrupted_fleet_keeps_what_finished(fleet_folder, tmp_path):

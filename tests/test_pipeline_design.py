@@ -6,15 +6,19 @@ import pytest
 
 import calib.robots
 from calib import paper
-from calib.design import feasibility, minimum_poses, robot_workspace
+from calib.design import design_poses, feasibility, minimum_poses, robot_workspace
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability
 from calib.robots import default_robot, reference_poses, robot_from_description
 from pipeline.design import (
+    DEFAULT_NOISE,
     command_columns,
+    command_csv,
+    design_search,
     main,
     optimal_poses,
     read_command_file,
+    start_seed,
     write_command_file,
 )
 
@@ -114,6 +118,8 @@ def test_cli_refuses_to_overwrite(tmp_path, capsys):
     (["--poses", "6", "--robot", "delta"], r"--poses must be >= 7 \(21 parameters, 3 equations per pose\)"),
     (["--poses", "8", "--robot", "moon"], "--robot: unknown robot 'moon'; registered robots are"),
     (["--poses", "8", "--candidates", "7"], "--candidates must be >= --poses"),
+    (["--poses", "8", "--starts", "0"], "--starts: expected an integer >= 1, got 0"),
+    (["--poses", "8", "--starts", "2", "--workers", "0"], "--workers must be >= 1, got 0"),
     (["--poses", "8", "--geometry", "missing.json"], "--geometry missing.json: cannot read a hexapod description"),
 ])
 def test_cli_rejects_bad_arguments(tmp_path, argv, match, capsys):
@@ -196,6 +202,68 @@ def test_round_trip_full_precision(tmp_path, name):
     np.testing.assert_array_equal(p, poses)
     np.testing.assert_array_equal(q, joints)
     assert json.loads((tmp_path / "c.json").read_text()) == {"robot": name, "k": 1}
+
+
+#: The sidecar of a single search, as it always was (no record of starts).
+SINGLE_SEARCH_KEYS = {"robot", "kind", "columns", "units", "robot_description", "criterion", "workspace", "noise",
+                      "seed", "n_candidates", "log_det_fisher", "lambda_min_fisher", "observability"}
+
+
+def test_one_start_writes_what_the_single_search_always_did(tmp_path):
+    nominal = HEXAPOD.table.nominal
+    argv = ["--poses", "8", "--seed", "3", "--candidates", "300"]
+    assert main(argv + ["--out", str(tmp_path / "a.csv")]) == 0
+    assert main(argv + ["--starts", "1", "--workers", "2", "--out", str(tmp_path / "b.csv")]) == 0
+    single = design_poses(HEXAPOD, nominal, 8, robot_workspace(HEXAPOD, "full"), DEFAULT_NOISE, seed=3,
+                          n_candidates=300)
+    expected = command_csv(HEXAPOD, single.poses, HEXAPOD.inverse_kinematics(nominal, single.poses))
+    for name in ("a", "b"):  # --starts 1 (the default) is the single search, never a cluster
+        assert (tmp_path / f"{name}.csv").read_text() == expected
+    side = json.loads((tmp_path / "a.json").read_text())
+    assert set(side) == SINGLE_SEARCH_KEYS and side["log_det_fisher"] == single.log_det
+    assert (tmp_path / "b.json").read_text() == (tmp_path / "a.json").read_text()
+
+
+def test_starts_give_the_same_files_on_one_and_two_workers(tmp_path, dask_two_workers, capsys):
+    argv = ["--poses", "8", "--seed", "3", "--candidates", "300", "--starts", "4"]
+    a, b = tmp_path / "one.csv", tmp_path / "two.csv"
+    assert main(argv + ["--workers", "1", "--out", str(a), "--summary-json", str(tmp_path / "one.summary")]) == 0
+    # Two workers: the tests' local cluster, by its address (as --scheduler gives it).
+    assert main(argv + ["--scheduler", dask_two_workers.scheduler.address, "--out", str(b),
+                        "--summary-json", str(tmp_path / "two.summary")]) == 0
+    out, err = capsys.readouterr()
+    assert out == "" and "design search: 4/4 starts" in err  # Dask's progress of the starts, on stderr
+    assert a.read_bytes() == b.read_bytes()
+    assert a.with_suffix(".json").read_bytes() == b.with_suffix(".json").read_bytes()
+    one, two = (json.loads((tmp_path / f"{k}.summary").read_text()) for k in ("one", "two"))
+    assert one.pop("out") == str(a) and two.pop("out") == str(b) and one == two
+    # Each start is the single search on its own draw; the best of them is kept.
+    ws = robot_workspace(HEXAPOD, "full")
+    each = [design_poses(HEXAPOD, HEXAPOD.table.nominal, 8, ws, DEFAULT_NOISE, seed=start_seed(3, k),
+                         n_candidates=300) for k in range(4)]
+    starts = json.loads(a.with_suffix(".json").read_text())["starts"]
+    assert starts["count"] == 4 and starts["criterion"] == "log_det_fisher"
+    assert starts["values"] == [r.log_det for r in each]
+    assert len(set(starts["values"])) == 4  # independent draws
+    best = max(range(4), key=lambda k: (each[k].log_det, -k))
+    assert starts["best"] == best and all(each[best].log_det >= r.log_det for r in each)
+    np.testing.assert_array_equal(read_command_file(a)[0], each[best].poses)
+    assert json.loads(a.with_suffix(".json").read_text())["log_det_fisher"] == each[best].log_det
+    assert json.loads((tmp_path / "one.summary").read_text())["starts"] == starts
+
+
+def test_e_optimal_best_of_starts():
+    ws = robot_workspace(DELTA, "full")
+    search = design_search(DELTA, DELTA.table.nominal, 7, ws, DEFAULT_NOISE, criterion="e", seed=5,
+                           n_candidates=200, starts=3, workers=1)
+    assert search.values == [r.lambda_min for r in search.results]
+    assert all(search.design.lambda_min >= v for v in search.values)
+    np.testing.assert_array_equal(search.results[0].poses, design_poses(
+        DELTA, DELTA.table.nominal, 7, ws, DEFAULT_NOISE, criterion="e", seed=5, n_candidates=200).poses)
+    np.testing.assert_array_equal(optimal_poses(DELTA, 7, "e", seed=5, n_candidates=200, starts=3, workers=1),
+                                  search.design.poses)
+    with pytest.raises(ValueError, match="starts must be an integer >= 1"):
+        design_search(DELTA, DELTA.table.nominal, 7, ws, DEFAULT_NOISE, starts=0)
 
 
 def test_optimal_poses_validation():
