@@ -482,9 +482,10 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
             history.append(cost)
             gram = J.T @ J
             if converged and np.max(np.abs(r)) <= FORWARD_KINEMATICS_TOL_MM:
-                size = np.sqrt(np.einsum("nij,nij->n", jac.pose * column_scale, jac.pose * column_scale)
-                               * np.einsum("nij,nij->n", M / column_scale[:, None], M / column_scale[:, None]))
-                if not np.all(size < SINGULAR_CONDITION):
+                scaled, inverse = jac.pose * column_scale, M / column_scale[:, None]
+                condition_bound = np.sqrt(np.einsum("nij,nij->n", scaled, scaled)
+                                          * np.einsum("nij,nij->n", inverse, inverse))  # >= cond_2
+                if not np.all(condition_bound < SINGULAR_CONDITION):
                     return "a near-singular configuration at the solution"
                 return theta, p, J, gram, it, history, f"converged: the last step was {relative:.1e} relative"
             if it == SIMULTANEOUS_NEWTON_STEPS:
@@ -500,7 +501,6 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
             relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * theta[idx]))
             converged = relative <= _CONVERGED_STEP
     return "no convergence"
-
 
 
 def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free=None, start=None,
