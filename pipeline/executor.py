@@ -296,18 +296,19 @@ class _SchedulerProgress:
                     display.update(all - remaining, all)
 
             def _draw_stop(self, remaining, all, status=None, exception=None, **kwargs):
+                # Kept for :meth:`stop`, which draws it on the consuming thread once the job's
+                # last result has been handled (a result line printed then stays above it).
                 why = None
                 if status == "error":
                     why = "a task failed" if exception is not None else "cancelled"
-                display.finish(all - remaining, all, why)
-                owner.drawn_stop = True
+                owner.last_report = (all - remaining, all, why)
 
         self.display = display
         self.total = len(futures)
         self.bar = Bar(futures, scheduler=client.scheduler.address, interval=self.INTERVAL, complete=True)
         self.ready_event = threading.Event()
         self.ended = threading.Event()
-        self.drawn_stop = False
+        self.last_report = None  # (done, total, why stopped or None): the scheduler's last report
         self.loop = client.loop.asyncio_loop
         self.future = None
 
@@ -344,7 +345,9 @@ class _SchedulerProgress:
         if not self.ended.wait(self.PATIENCE):
             self.future.cancel()  # cancels the listening task on the event loop
             self.ended.wait(self.PATIENCE)
-        if not self.drawn_stop:
+        if self.last_report is not None:
+            self.display.finish(*self.last_report)
+        else:
             done, total = self.display.last or (0, self.total)
             self.display.finish(done, total, "no report from the scheduler")
 
