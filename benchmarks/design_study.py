@@ -44,7 +44,7 @@ from calib.design import minimum_poses, robot_workspace, sample_feasible_poses, 
 from calib.noise import SensorNoise  # noqa: E402
 from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
-from pipeline.design import design_start  # noqa: E402
+from pipeline.design import DEFAULT_CANDIDATES, design_start  # noqa: E402
 from pipeline.executor import add_executor_arguments, dask_client, run_tasks, runs_here  # noqa: E402
 from pipeline.recording import atomic_write  # noqa: E402
 from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
@@ -150,7 +150,7 @@ def study(args, client) -> int:
     sets = {} if reference is None else {"reference poses": reference}
     designs = [(c, wsn, ws) for wsn, ws in (("full", full), ("default", small)) for c in ("d", "e")]
     base = {"robot": robot.name, "description": robot.description(), "theta": nominal, "n": 10,
-            "noise": NOISE.to_dict(), "free": None, "seed": args.seed, "start": 0, "n_candidates": 3000}
+            "noise": NOISE.to_dict(), "free": None, "seed": args.seed, "start": 0, "n_candidates": DEFAULT_CANDIDATES}
     t0 = time.perf_counter()
     # Each design_poses(robot, nominal, 10, ws, NOISE, criterion=c, seed=args.seed), as a task.
     done = dict(run_tasks(design_start, [{**base, "workspace": ws.to_dict(), "criterion": c} for c, _, ws in designs],

@@ -224,9 +224,6 @@ def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | W
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
     theta = robot.table.nominal if theta is None else theta
-    if starts == 1:
-        return design_poses(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
-                            seed=seed, n_candidates=n_candidates).poses
     return design_search(robot, theta, n, _workspace(robot, workspace), noise, free=free, criterion=criterion,
                          seed=seed, n_candidates=n_candidates, starts=starts, workers=workers,
                          scheduler=scheduler, client=client).design.poses
@@ -427,15 +424,11 @@ def _main(argv: list[str] | None = None) -> int:
     each = f" in each of {args.starts} starts" if args.starts > 1 else ""
     print(f"designing {args.poses} {args.criterion.upper()}-optimal poses for the {robot.name} in its "
           f"{ws.name} workspace from {args.candidates} candidates{each} (seed {args.seed})...", file=sys.stderr)
-    if args.starts == 1:
-        search = None
-        res = design_poses(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
-                           n_candidates=args.candidates)
-    else:
-        search = design_search(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
-                               n_candidates=args.candidates, starts=args.starts, workers=args.workers,
-                               scheduler=args.scheduler, display=ProgressDisplay("design search", unit="starts"))
-        res = search.design
+    search = design_search(robot, theta, args.poses, ws, noise, criterion=args.criterion, seed=args.seed,
+                           n_candidates=args.candidates, starts=args.starts, workers=args.workers,
+                           scheduler=args.scheduler, display=ProgressDisplay("design search", unit="starts"))
+    res = search.design
+    if args.starts > 1:
         values = search.values
         name = "log det F" if args.criterion == "d" else "lambda_min(F)"
         print(f"best of {args.starts} starts: start {search.best}, {name} {values[search.best]:.6g} "
@@ -470,7 +463,7 @@ def _main(argv: list[str] | None = None) -> int:
         "lambda_min_fisher": res.lambda_min,
         "observability": analysis.summary(),
     }
-    if search is not None:
+    if args.starts > 1:
         meta["starts"] = search.to_dict(args.seed)
     summary = {
         "command": "pipeline.design",
@@ -484,8 +477,8 @@ def _main(argv: list[str] | None = None) -> int:
         "observability": analysis.summary(),
         "predicted_pose_uncertainty": uncertainty,
     }
-    if search is not None:
-        summary["starts"] = search.to_dict(args.seed)
+    if args.starts > 1:
+        summary["starts"] = meta["starts"]
     if reference is not None:
         summary["reference_poses_observability"] = reference.summary()
         summary["crb_rms_gain_vs_reference_poses"] = reference.crb_rms / analysis.crb_rms
