@@ -26,6 +26,7 @@ from typing import ClassVar, Iterator, Sequence
 
 import numpy as np
 
+from .batched_lu import BatchedLU
 from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
@@ -375,19 +376,20 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
     """Newton's iteration on rows ``offset ...`` of :func:`newton_forward_kinematics`.
 
     Full Newton steps while the steps are large; once every remaining row's last step is below
-    :data:`CHORD_STEP_MM`, chord steps (the last pose Jacobian kept, the closure alone
-    re-evaluated). A converged row's singularity is judged on the last Jacobian evaluated for it
+    :data:`CHORD_STEP_MM`, chord steps (the last pose Jacobian and its LU factors kept, the
+    closure alone re-evaluated). A converged row's singularity is judged on the last Jacobian evaluated for it
     (at most :data:`CHORD_STEP_MM` away)."""
     n, d = poses.shape
     active = None  # rows still iterating (None: all of them, no gathering)
     p, q = poses, joints
-    J = None
+    J = factors = None  # the pose Jacobian and its LU factors (computed when first solved with)
     chord = False
     for _ in range(max_iter):
         if chord:
             r = robot.closure(theta, q, p)
         else:
             r, J = robot.closure_and_pose_jacobian(theta, q, p)
+            factors = None
         done = np.max(np.abs(r), axis=1) <= tol
         n_done = int(np.count_nonzero(done))
         if n_done:
@@ -401,8 +403,11 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
             if active is not None:
                 poses[active - offset] = p
             active, p, q, r, J = rows[keep], p[keep], q[keep], r[keep], J[keep]
+            factors = None
         try:
-            step = np.linalg.solve(J, r[..., None])[..., 0]
+            if factors is None:
+                factors = BatchedLU(J)
+            step = factors.solve(r)
         except np.linalg.LinAlgError:
             rows = np.arange(n) + offset if active is None else active
             bad = np.linalg.matrix_rank(J * scale) < d
