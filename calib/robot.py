@@ -428,39 +428,51 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
         f"(joints {np.array2string(joints[k - offset], precision=4)}): no assembly near the start pose", k)
 
 
+#: Reference rows :func:`_raise_if_singular` tries before it takes the SVD of the rows left.
+SINGULAR_BOUND_REFERENCES = 4
+
+
 def _raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> None:
     """Raise :class:`KinematicsError` for the first of the (M, C, D) pose Jacobians ``J`` (rows
     ``rows``) whose column-scaled condition number reaches :data:`SINGULAR_CONDITION`.
 
     An exact condition number is an SVD per matrix; most rows are cleared by a cheap rigorous
-    bound instead: with ``A`` the scaled Jacobian of the first row, ``H = A^-1`` and ``E = I - H
-    Js``, ``Js = A (I - E)`` gives ``cond(Js) <= cond(A) (1 + e) / (1 - e)`` for ``e =
-    |E|_F < 1`` (one matrix product for all rows), with ``cond(A) <= |A|_F |H|_F``. Rows the
-    bound does not clear get the SVD."""
+    bound instead: with ``A`` the scaled Jacobian of a reference row, ``H = A^-1`` and ``E = I -
+    H Js``, ``Js = A (I - E)`` gives ``cond(Js) <= cond(A) (1 + e) / (1 - e)`` for ``e = |E|_F
+    < 1`` (one matrix product for all rows), with ``cond(A) <= |A|_F |H|_F``. The reference is
+    the first row, then the first row not yet cleared (up to :data:`SINGULAR_BOUND_REFERENCES`
+    of them: a machine whose Jacobian varies much over the workspace, like the Delta's, needs a
+    few); rows no bound clears get the SVD."""
     m, c, dd = J.shape
-    # (M, D, C) transposed and scaled, contiguous (free for a robot that returns a transposed view)
-    JsT = np.ascontiguousarray(np.swapaxes(J, 1, 2)) * scale[:, None]
+    # Structure-of-arrays (C, D, M), columns scaled: a contiguous result whatever J's strides
+    # (for a robot that returns a transposed view, a plain product), so that the M products
+    # below are one matrix product and the reductions run over the M rows.
+    Js = J.transpose(1, 2, 0) * scale[None, :, None]
     unsure = np.ones(m, dtype=bool)
     if c == dd:
-        A = JsT[0].T
-        try:  # cond(A) <= |A|_F |A^-1|_F: no SVD for the reference row either
-            H = np.linalg.inv(A)
-            cond_a = float(np.linalg.norm(A) * np.linalg.norm(H))
-        except np.linalg.LinAlgError:
-            H = None
-        if H is not None and not cond_a < SINGULAR_CONDITION:
-            H = None
-        if H is not None:
-            ET = (JsT.reshape(-1, c) @ H.T).reshape(m, dd, dd)  # (H Js)^T
-            ET -= np.eye(dd)
-            e = np.sqrt(np.einsum("nij,nij->n", ET, ET))
+        for _ in range(SINGULAR_BOUND_REFERENCES):
+            todo = np.flatnonzero(unsure)
+            if not todo.size:
+                return
+            rest = Js if todo.size == m else Js[:, :, todo]
+            A = rest[:, :, 0]
+            try:  # cond(A) <= |A|_F |A^-1|_F: no SVD for the reference row either
+                H = np.linalg.inv(A)
+                cond_a = float(np.linalg.norm(A) * np.linalg.norm(H))
+            except np.linalg.LinAlgError:
+                break
+            if not cond_a < SINGULAR_CONDITION:
+                break
+            E = (H @ rest.reshape(c, -1)).reshape(dd, dd, todo.size)  # H Js, row by row
+            E[np.arange(dd), np.arange(dd)] -= 1.0
+            e = np.sqrt(np.einsum("ijm,ijm->m", E, E))
             with np.errstate(divide="ignore"):
                 bound = cond_a * (1.0 + e) / (1.0 - e)
-            unsure = ~((e < 1.0) & (bound < SINGULAR_CONDITION))
+            unsure[todo] = ~((e < 1.0) & (bound < SINGULAR_CONDITION))
     if not unsure.any():
         return
     cond = np.full(m, 0.0)
-    cond[unsure] = np.linalg.cond(np.swapaxes(JsT[unsure], 1, 2))
+    cond[unsure] = np.linalg.cond(Js[:, :, unsure].transpose(2, 0, 1))
     singular = ~(cond < SINGULAR_CONDITION)
     if np.any(singular):
         i = int(np.argmax(singular))
