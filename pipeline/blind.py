@@ -25,14 +25,13 @@ The derived kinds reuse the single-effect recordings (no further simulation). Ea
 whether its acceptance criterion holds (:func:`criteria`); :func:`rates_table` sums them up.
 Recordings run in parallel on the Dask executor (:mod:`pipeline.executor`: a local cluster of
 ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``); the rates go to
-stdout, progress to stderr (on a cluster, the recordings done as Dask's scheduler reports them).
+stdout, progress to stderr (the recordings done, however they run: :class:`pipeline.executor.ProgressDisplay`).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import sys
 from dataclasses import replace
 from itertools import combinations
 
@@ -43,7 +42,7 @@ from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
-from .executor import ProgressDisplay, run_tasks, runs_here
+from .executor import ProgressDisplay, run_tasks
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
@@ -199,7 +198,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
             default the cores, at most one a recording; 1 runs here.
         scheduler: address of an existing Dask cluster to run on instead.
         progress: ``progress(done, total)`` after each recording.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done on a cluster.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
     """
     names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
     kinds = tuple(kinds)
@@ -273,16 +272,10 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
                     help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
     a = ap.parse_args(argv)
-
-    def progress(done, total):  # recordings run here; on a cluster, Dask's progress (display)
-        if done == total or done % max(1, total // 10) == 0:
-            print(f"  {done}/{total} recordings", file=sys.stderr, flush=True)
-
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:
         res = run_blind_suite(a.effects, range(a.first_seed, a.first_seed + a.seeds), robot=a.robot, kinds=a.kinds,
                               pairs=pairs, workers=a.workers, scheduler=a.scheduler,
-                              progress=progress if runs_here(a.workers, a.scheduler) else None,
                               display=ProgressDisplay("blind suite", unit="recordings"))
     except NotImplementedError as exc:
         raise ValueError(str(exc)) from None

@@ -171,7 +171,7 @@ def design_search(robot: Robot, theta, n: int, workspace: Workspace, noise: Sens
         starts: independent searches (1: the single search of ``design_poses`` with ``seed``).
         workers: processes of the local Dask cluster (default the cores, at most ``starts``;
             1 runs here). ``scheduler``, ``client``: as :func:`pipeline.executor.run_tasks`.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the starts done on a cluster.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the starts done, however they run.
 
     Returns:
         The :class:`DesignSearch`; the same whatever runs it.

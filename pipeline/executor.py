@@ -20,8 +20,10 @@ The tasks are plain functions of plain data, seeded by the task (never by the wo
 they finish in), so every way of running a job gives the same numbers. Results come back as each
 task finishes (:func:`run_tasks`), which is what lets a fleet write each machine's row as it lands.
 
-A long job on a cluster shows its progress on stderr (:class:`ProgressDisplay`), driven by Dask's
-own progress reporting: the scheduler-side ``Progress`` plugin that
+A job shows its progress on stderr (:class:`ProgressDisplay`) however it runs, and only
+:func:`run_tasks` knows how that is (:func:`runs_here`), so a command hands it the display and
+never decides itself: tasks run here are counted as each finishes; on a cluster the count is
+Dask's own progress reporting, the scheduler-side ``Progress`` plugin that
 ``distributed.diagnostics.progressbar.ProgressBar`` listens to, here on the client's event loop
 while this process consumes the results (``distributed.progress`` would block until the job ends
 and write to stdout, where the commands print their results).
@@ -114,10 +116,11 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
         scheduler: address of an existing Dask cluster.
         client: an open ``distributed.Client`` to use (its cluster stays up afterwards).
         progress: ``progress(done, total)`` after each finished task (every way of running).
-        display: where the tasks run on a cluster, the job's progress as Dask's scheduler reports
-            it is drawn there (on stderr) while the results are consumed, and ended (the final
-            count, or where the job stopped) before this generator returns or raises. Not drawn
-            for tasks run here (:func:`runs_here`): report those through ``progress``.
+        display: the job's progress, drawn (on stderr) however the tasks run, while the results
+            are consumed, and ended (the final count, or where the job stopped) before this
+            generator returns or raises: for tasks run here (:func:`runs_here`), the tasks done as
+            each finishes; on a cluster, the tasks done as Dask's scheduler reports them. Not
+            drawn for a job of no tasks.
 
     A task that raises stops the job with its exception (the tasks not yet run are cancelled);
     a job that must go on past a bad input catches the error in ``fn`` and returns it as data.
@@ -127,16 +130,36 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
     if workers is not None and int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     if runs_here(workers, scheduler, client):
-        for i, job in enumerate(jobs):
-            result = fn(job)
-            if progress:
-                progress(i + 1, total)
-            yield i, result
+        yield from _in_order(fn, jobs, progress, display if total else None)
         return
     with contextlib.ExitStack() as stack:
         if client is None:
             client = stack.enter_context(dask_client(workers, scheduler))
         yield from _as_completed(client, fn, jobs, progress, display)
+
+
+def _in_order(fn, jobs, progress, display):
+    """The tasks run here, one after another; ``display`` (or None) counts them as each finishes."""
+    total, done, stopped = len(jobs), 0, "cancelled"  # left early (e.g. Ctrl-C), as on a cluster
+    if display is not None:
+        display.update(0, total)
+    try:
+        for i, job in enumerate(jobs):
+            try:
+                result = fn(job)
+            except Exception:
+                stopped = "a task failed"
+                raise
+            done = i + 1
+            if display is not None:
+                display.update(done, total)
+            if progress:
+                progress(done, total)
+            yield i, result
+        stopped = None
+    finally:
+        if display is not None:
+            display.finish(done, total, stopped)
 
 
 def _as_completed(client, fn, jobs, progress, display):

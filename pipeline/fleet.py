@@ -32,9 +32,9 @@ machine that had finished, and a rerun does the rest. One fleet
 at a time writes to an output folder (a lock file holds it). Exit status 0 when every row is
 calibrated, 1 when some row is an error, 2 for a refused input or output.
 
-On stderr: one line per machine as it lands (``--quiet``: none) and, on a cluster, the fleet's
-progress as Dask's scheduler reports it (:class:`pipeline.executor.ProgressDisplay`, the lines of
-the machines printed above it); stdout gets the summary at the end.
+On stderr: one line per machine as it lands (``--quiet``: none) and the fleet's progress, however
+it runs (:class:`pipeline.executor.ProgressDisplay`, the lines of the machines printed above it);
+stdout gets the summary at the end.
 """
 
 from __future__ import annotations
@@ -273,7 +273,7 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
         workers, scheduler, client: the executor (:func:`pipeline.executor.run_tasks`).
         redo: calibrate every machine, even those whose row stands.
         progress: ``progress(row, done, total)`` after each machine finished here.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the machines done on a cluster.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the machines done, however they run.
 
     Raises:
         ValueError: ``folder`` is not a folder, ``method`` unknown, or ``out`` cannot be written
@@ -351,8 +351,7 @@ def _main(argv) -> int:
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
 
-    # Each machine's line as it lands (a result, here or on a cluster), printed above the progress
-    # of the job that Dask's scheduler reports on a cluster.
+    # Each machine's line as it lands (a result, here or on a cluster), printed above the job's progress.
     display = ProgressDisplay("fleet", unit="machines")
 
     def progress(row, done, total):

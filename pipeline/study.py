@@ -32,9 +32,8 @@ Trial ``k`` draws its pose noise from ``SeedSequence(seed, spawn_key=(k,))`` (jo
 Trials run in chunks on a Dask cluster (:mod:`pipeline.executor`: a local cluster of
 ``--workers`` processes, default the number of cores, one BLAS thread each; ``--workers 1`` runs
 here; ``--scheduler ADDRESS`` runs on an existing cluster); the simulation of a chunk is
-vectorised (one forward-kinematics solve for all its trials). Progress goes to stderr: on a
-cluster the chunks done as Dask's scheduler reports them (:class:`pipeline.executor.ProgressDisplay`),
-here the trials done.
+vectorised (one forward-kinematics solve for all its trials). Progress goes to stderr: the chunks
+done, however they run (:class:`pipeline.executor.ProgressDisplay`).
 """
 
 from __future__ import annotations
@@ -55,7 +54,7 @@ from calib.observability import analyze_observability, free_indices, parameter_s
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
-from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, runs_here
+from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write
 
@@ -205,7 +204,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
         initial: (N, D) start of the forward kinematics (e.g. the target poses); default home.
         scheduler: address of an existing Dask cluster to run on instead (``--scheduler``).
         client: an open ``distributed.Client`` to run on (left open).
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the chunks done on a cluster.
+        display: a :class:`pipeline.executor.ProgressDisplay` showing the chunks done, however they run.
 
     The trials run in chunks (:func:`run_trials`, eight a worker) on the executor of
     :mod:`pipeline.executor`; trial ``k``'s noise depends on ``seed`` and ``k`` only, so the
@@ -381,18 +380,9 @@ def _main(argv: list[str] | None = None) -> int:
         predicted = float(np.sqrt(np.mean(pu.position_rms_mm ** 2)))
     methods = METHODS if args.method == "both" else (args.method,)
     t0 = time.perf_counter()
-
-    def progress(done, total):
-        print(f"\rstudy: {done}/{total} trials ({time.perf_counter() - t0:.1f} s)", end="",
-              file=sys.stderr, flush=True)
-
-    # Here, the trials done (one line redrawn); on a cluster, Dask's progress of the chunks.
-    here = runs_here(args.workers, args.scheduler)
     results = monte_carlo(robot, theta_true, commanded, noise, args.trials, args.seed, methods=methods,
-                          heldout=heldout, workers=args.workers, progress=progress if here else None,
-                          initial=targets, scheduler=args.scheduler, display=ProgressDisplay("study"))
-    if here:
-        print(file=sys.stderr)
+                          heldout=heldout, workers=args.workers, initial=targets, scheduler=args.scheduler,
+                          display=ProgressDisplay("study"))
     figures = summarize(results, names, parameter_scale(robot)[analysis.indices], crb_var, args.trials)
     summary = {
         "command": "pipeline.study",

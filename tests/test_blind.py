@@ -1,12 +1,14 @@
 """The blind suite's bookkeeping without simulating (the recordings are stood in for): which
 candidates each kind of analysis gets."""
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 import pipeline.blind as blind
+import pipeline.executor as executor
 import pipeline.scenarios as scenarios
 from calib.effects import effect_family, effects_for
 from calib.noise import SensorNoise
@@ -58,3 +60,18 @@ def test_a_pair_recording_leaving_each_out_removes_each_family(seen):
     assert {"thermal_drift", "thermal_warmup"} & set(no_warmup) == set() and "joint_friction" in no_warmup
     assert "joint_friction" not in no_friction and {"thermal_drift", "thermal_warmup"} <= set(no_friction)
     assert everything == effects_for(default_robot("hexapod"))
+
+
+def test_one_recording_with_no_workers_reports_progress_on_stderr(monkeypatch, capsys):
+    """With no --workers and no --scheduler, one recording runs here (the local cluster is at most a
+    worker a recording): the command still shows its progress, on stderr, and stdout is the rates only.
+    Several cores are claimed, so that a command deciding on its own that the job runs on a cluster
+    (and leaving the count to it) would show nothing, whatever this machine has."""
+    monkeypatch.setattr(executor, "default_workers", lambda: 4)
+    res = blind.run(["--effects", "none", "--seeds", "1"])
+    out, err = capsys.readouterr()
+    assert len(res) == 1 and res[0]["kind"] == "single" and res[0]["effects"] == []
+    assert out == "\n".join(["robot: hexapod", blind.rates_table(res), *blind.failure_lines(res)]) + "\n"
+    lines = err.splitlines()
+    assert lines[0].startswith("blind suite: 0/1 recordings") and len(lines) == 2
+    assert re.fullmatch(r"blind suite: 1/1 recordings \(\d+\.\d s\), done", lines[-1])

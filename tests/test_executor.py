@@ -139,12 +139,30 @@ def test_a_job_left_early_stops_the_progress(quiet_cluster, capsys):
     assert set(threading.enumerate()) == threads
 
 
-def test_progress_here_goes_through_the_callback_only(capsys):
+def test_progress_here_is_drawn_as_each_task_finishes(capsys):
+    """Tasks run here draw the same display as on a cluster: the caller never asks where they run."""
     seen = []
     assert runs_here(1) and not runs_here(2) and not runs_here(1, "tcp://host:8786")
-    list(run_tasks(math.sqrt, [1, 4], workers=1, display=ProgressDisplay("job"),
-                   progress=lambda d, t: seen.append((d, t))))
-    assert seen == [(1, 2), (2, 2)] and capsys.readouterr() == ("", "")
+    job = run_tasks(math.sqrt, [1, 4, 9], workers=1, display=ProgressDisplay("job"),
+                    progress=lambda d, t: seen.append((d, t)))
+    assert next(job) == (0, 1.0)
+    assert _counts(capsys.readouterr().err, "job") == [(0, 3), (1, 3)]  # drawn as the task finished
+    assert list(job) == [(1, 2.0), (2, 3.0)] and seen == [(1, 3), (2, 3), (3, 3)]
+    out, err = capsys.readouterr()
+    assert out == "" and _counts(err, "job") == [(2, 3), (3, 3)] and err.rstrip().endswith(", done")
+    # A task that raises, a job left early, a job of no tasks.
+    with pytest.raises(ValueError, match="three"):
+        list(run_tasks(fails_on_three, range(6), workers=1, display=ProgressDisplay("job")))
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines()[-1].startswith("job: 3/6 tasks") \
+        and err.splitlines()[-1].endswith(": stopped, a task failed")
+    job = run_tasks(math.sqrt, range(5), workers=1, display=ProgressDisplay("job"))
+    next(job)
+    job.close()
+    out, err = capsys.readouterr()
+    assert out == "" and _counts(err, "job")[-1] == (1, 5) and err.rstrip().endswith(": stopped, cancelled")
+    assert list(run_tasks(math.sqrt, [], workers=1, display=ProgressDisplay("job"))) == []
+    assert capsys.readouterr() == ("", "")
 
 
 class Terminal(io.StringIO):

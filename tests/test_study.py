@@ -1,4 +1,5 @@
 import json
+import re
 
 import numpy as np
 import pytest
@@ -160,7 +161,8 @@ def test_cli_writes_summary_and_rrd(tmp_path, capsys, name, poses):
     if poses == "designed":
         argv += ["--n-poses", "8"]
     assert main(argv) == 0
-    assert "study: 4/4 trials" in capsys.readouterr().err
+    out, err = capsys.readouterr()  # --workers 1: the four chunks (one trial each) counted here, on stderr
+    assert out == "" and err.startswith("study: 0/4 tasks") and re.search(r"^study: 4/4 tasks \(.* s\), done$", err, re.M)
     s = json.loads(summary.read_text())
     assert s["robot"] == name and s["trials"] == 4 and set(s["methods"]) == {"forward", "chainwise"}
     assert s["n_poses"] == (10 if poses == "reference" else 8)
