@@ -30,6 +30,7 @@ from .validation import as_array
 from .noise import SensorNoise
 from .robot import (
     FORWARD_KINEMATICS_TOL_MM,
+    ClosureJacobians,
     SINGULAR_CONDITION,
     KinematicsError,
     Robot,
@@ -653,8 +654,10 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     we evaluate it exactly: the same to first order, fewer iterations), corrects the parameters,
     computes the corrected poses ``QC`` by forward kinematics and stops when
     ``max_j dQint_j <= epsilon``. With noisy data ``dQint`` never falls below the noise and the
-    iteration stops when the largest update falls below ``step_tol``; ``message`` says which rule
-    stopped it and whether the residual is at the declared noise.
+    iteration stops when the next update's largest entry is below ``step_tol`` (that update is
+    not taken: the closure and its Jacobians stay those of the returned vector, one evaluation
+    fewer); ``message`` says which rule stopped it and whether the residual is at the declared
+    noise.
 
     ``solver="lm"`` (the Delta paper's IKM): each chain fitted to convergence by
     Levenberg-Marquardt.
@@ -667,7 +670,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         weighted: whiten each closure residual by its declared standard deviation (pose and joint
             noise propagated); the paper's hexapod method is unweighted.
         epsilon: the paper's tolerance on max dQint (mm + rad, Eq. 17).
-        step_tol: tolerance on the largest parameter update (GN).
+        step_tol: tolerance on the largest parameter update (GN): a smaller one is not taken.
         max_iter: outer iterations (GN) or iterations per chain (LM).
     """
     noise_given = noise is not None
@@ -697,30 +700,32 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         # once per vector, they serve its Gauss-Newton step, the integrated error of the
         # corrected model and, for the final vector, the result.
         r, jac = robot.closure_with_jacobians(theta, joints, measured)
+        dQ = None  # the corrected poses' offset from the measured ones, to second order
         corrected = None
-        for iterations in range(1, max_iter + 1):
+        for it in range(1, max_iter + 1):
             J = jac.parameters
             step = np.zeros_like(theta)
             for chains, params in groups:
                 A, b = _chain_systems(J, r, w, chains, params)
                 step[params] = _chain_steps(A, b)
-            try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
-                r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
-            except KinematicsError as exc:
-                message = f"the Gauss-Newton step left the workspace at iteration {iterations}: {exc}"
-                break
-            theta, r, jac = theta + step, r_new, jac_new
-            # The corrected poses QC to second order: one Newton step of the forward kinematics
-            # from the measured ones, dQ = (dF/dpose)^-1 F (exact to |dQ|^2 / machine size).
-            try:
-                dQ = np.linalg.solve(jac.pose, r[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                dQ = np.full(measured.shape, np.inf)
-            history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
-            small_step = np.max(np.abs(step)) <= step_tol
-            if not (history[-1] <= epsilon or small_step):
-                continue
-            # A stopping rule holds to second order: decide on the exact forward kinematics.
+            update = float(np.max(np.abs(step)))
+            small_step = update <= step_tol
+            if not small_step:
+                try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
+                    r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
+                except KinematicsError as exc:
+                    message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
+                    break
+                theta, r, jac = theta + step, r_new, jac_new
+                iterations = it
+                dQ = _newton_offset(jac, r)
+                history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
+                if not history[-1] <= epsilon:
+                    continue
+            # A stopping rule holds (the paper's to second order, or the next update is negligible
+            # and not taken): decide on the exact forward kinematics.
+            if dQ is None:  # the start is the answer
+                dQ = _newton_offset(jac, r)
             try:
                 corrected = robot.forward_kinematics(
                     theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
@@ -728,16 +733,20 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                 corrected = None
                 message = f"forward kinematics of the corrected model failed: {exc}"
                 break
-            history[-1] = float(integrated_error(robot, measured - corrected)[2].max())
-            if history[-1] <= epsilon:
+            exact = float(integrated_error(robot, measured - corrected)[2].max())
+            if history:
+                history[-1] = exact
+            else:
+                history.append(exact)
+            if exact <= epsilon:
                 success = True
-                message = f"paper's criterion met: max dQint = {history[-1]:.3g} <= epsilon = {epsilon:g}"
+                message = f"paper's criterion met: max dQint = {exact:.3g} <= epsilon = {epsilon:g}"
                 break
             if small_step:
                 success = True
-                message = (f"parameter update {np.max(np.abs(step)):.3g} <= step_tol = {step_tol:g}; the "
-                           f"paper's criterion is not reachable: max dQint stays at {history[-1]:.3g} "
-                           f"(> epsilon = {epsilon:g})")
+                message = (f"the next parameter update, {update:.3g}, is below step_tol = {step_tol:g} "
+                           f"and not taken; the paper's criterion is not reachable: max dQint stays at "
+                           f"{exact:.3g} (> epsilon = {epsilon:g})")
                 break
             corrected = None
         if corrected is None:
@@ -793,6 +802,16 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         pose_residuals=measured - corrected, covariance=cov, chi2=chi2, dof=dof_total,
         iterations=iterations, history=tuple(history), success=success, message=message,
         condition_numbers=cond)
+
+
+def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
+    """(N, D) one Newton step of the forward kinematics from the measured poses, ``(dF/dpose)^-1
+    F``: the measured poses minus the corrected ones, exact to ``|dQ|^2 / machine size``
+    (``inf`` where the pose Jacobian is singular)."""
+    try:
+        return np.linalg.solve(jac.pose, r[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return np.full(r.shape[:1] + jac.pose.shape[2:], np.inf)
 
 
 def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:

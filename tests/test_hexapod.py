@@ -124,6 +124,25 @@ def test_chainwise_corrected_poses_are_the_forward_kinematics_from_the_measured_
     np.testing.assert_allclose(fit.residuals, ROBOT.closure(fit.theta, commanded, noisy), rtol=0, atol=0)
 
 
+def test_chainwise_noisy_stop_leaves_the_negligible_update_untaken():
+    """With noisy data the loop stops when the next update is below step_tol, without taking it:
+    restarted from its answer, the fit takes no step and returns the same vector and residuals."""
+    commanded, measured = _paper_data()
+    noise = SensorNoise(paper.PAPER_NOISE_MM)
+    noisy = measured + noise.sample(10, 0)
+    fit = identify_chainwise(ROBOT, commanded, noisy, noise)
+    assert fit.success and "not taken" in fit.message
+    again = identify_chainwise(ROBOT, commanded, noisy, noise, start=fit.theta)
+    assert again.success and again.iterations == 0 and "not taken" in again.message
+    np.testing.assert_array_equal(again.theta, fit.theta)
+    np.testing.assert_array_equal(again.residuals, fit.residuals)
+    assert again.history == (fit.history[-1],)
+    # one more iteration with a tighter step_tol moves the answer by less than step_tol
+    tighter = identify_chainwise(ROBOT, commanded, noisy, noise, start=fit.theta, step_tol=0.0, max_iter=1)
+    assert tighter.iterations == 1
+    assert 0 < np.abs(tighter.theta - fit.theta).max() <= 1e-10
+
+
 def test_chainwise_history_is_the_integrated_error_and_its_last_entry_exact():
     """Each iteration's max dQint comes from one Newton step of the forward kinematics (second
     order); the entry on which the loop stops is the corrected model's forward kinematics."""
