@@ -30,8 +30,8 @@ from .validation import as_array
 from .noise import SensorNoise
 from .robot import (
     FORWARD_KINEMATICS_TOL_MM,
-    ClosureJacobians,
     SINGULAR_CONDITION,
+    ClosureJacobians,
     KinematicsError,
     Robot,
     pose_jacobian_of_joints,

@@ -32,7 +32,7 @@ from .validation import as_array, frozen_array
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
            "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
-           "FORWARD_KINEMATICS_TOL_MM"]
+           "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -376,9 +376,10 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
     """Newton's iteration on rows ``offset ...`` of :func:`newton_forward_kinematics`.
 
     Full Newton steps while the steps are large; once every remaining row's last step is below
-    :data:`CHORD_STEP_MM`, chord steps (the last pose Jacobian and its LU factors kept, the
-    closure alone re-evaluated). A converged row's singularity is judged on the last Jacobian evaluated for it
-    (at most :data:`CHORD_STEP_MM` away)."""
+    :data:`CHORD_STEP_MM`, chord steps (the last pose Jacobian and its LU factors
+    (:class:`calib.batched_lu.BatchedLU`) kept, the closure alone re-evaluated). A converged
+    row's singularity is judged on the last Jacobian evaluated for it (at most
+    :data:`CHORD_STEP_MM` away)."""
     n, d = poses.shape
     active = None  # rows still iterating (None: all of them, no gathering)
     p, q = poses, joints
