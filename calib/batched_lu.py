@@ -58,7 +58,8 @@ class BatchedLU:
             return
         order = _pivot_order(A[0])
         self._order = order
-        lu = np.asarray(A.transpose(1, 2, 0), dtype=float)[order]  # (n, n, M), a copy: lu[i, j] entries
+        # (n, n, M), a C-ordered copy (indexing a strided view would keep its strides): lu[i, j] entries
+        lu = np.ascontiguousarray(A.transpose(1, 2, 0), dtype=float)[order]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             for k in range(n - 1):
                 f = lu[k + 1:, k] / lu[k, k]  # (n-k-1, M) multipliers of column k
