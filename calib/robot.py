@@ -134,6 +134,9 @@ class ClosureJacobians:
         pose: (N, C, D) ``dF_i / d pose_k``; mm/mm for positions, mm/rad for angles.
         joints: (N, C, C) ``dF_i / d q_k`` (diagonal for these mechanisms), mm per joint unit.
         parameters: (N, C, P) ``dF_i / d theta_k``, mm per parameter unit.
+
+    The arrays may be read-only views (the hexapod's ``joints`` is ``-I`` broadcast): copy
+    before writing.
     """
 
     pose: np.ndarray
