@@ -32,7 +32,7 @@ from .validation import as_array, frozen_array
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
            "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
-           "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES"]
+           "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES", "raise_if_singular"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -398,7 +398,7 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
         n_done = int(np.count_nonzero(done))
         if n_done:
             rows = np.arange(n) + offset if active is None else active
-            _raise_if_singular(J[done] if n_done < done.size else J, scale, rows[done])
+            raise_if_singular(J[done] if n_done < done.size else J, scale, rows[done])
             if n_done == done.size:
                 if active is not None:
                     poses[active - offset] = p
@@ -432,13 +432,15 @@ def _newton_block(robot, theta, joints, poses, tol, max_iter, scale, offset) -> 
         f"(joints {np.array2string(joints[k - offset], precision=4)}): no assembly near the start pose", k)
 
 
-#: Reference rows :func:`_raise_if_singular` tries before it takes the SVD of the rows left.
+#: Reference rows :func:`raise_if_singular` tries before it takes the SVD of the rows left.
 SINGULAR_BOUND_REFERENCES = 4
 
 
-def _raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> None:
-    """Raise :class:`KinematicsError` for the first of the (M, C, D) pose Jacobians ``J`` (rows
-    ``rows``) whose column-scaled condition number reaches :data:`SINGULAR_CONDITION`.
+def raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> None:
+    """Raise :class:`KinematicsError` for the first of the (M, C, D) pose Jacobians ``J`` whose
+    column-scaled condition number reaches :data:`SINGULAR_CONDITION`; ``scale`` (D,) multiplies
+    the columns (the forward kinematics passes ``1 / Robot.pose_scale()``), ``rows`` (M,) are the
+    row numbers the error names (its ``index``).
 
     An exact condition number is an SVD per matrix; most rows are cleared by a cheap rigorous
     bound instead: with ``A`` the scaled Jacobian of a reference row, ``H = A^-1`` and ``E = I -

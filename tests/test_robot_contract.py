@@ -7,7 +7,8 @@ import pytest
 
 from calib.engine import gauge_representative, identify_chainwise, identify_forward
 from calib.noise import SensorNoise
-from calib.robot import KinematicsError, check_joint_limits, pose_jacobian_of_parameters
+from calib.robot import (SINGULAR_CONDITION, KinematicsError, check_joint_limits, pose_jacobian_of_parameters,
+                         raise_if_singular)
 from calib.robots import ROBOTS, default_robot, robot_from_description, uniform_errors
 from calib.workspace import reachable_poses
 
@@ -277,3 +278,29 @@ def test_forward_fit_falls_back_to_levenberg_marquardt_where_newton_cannot_vouch
     assert fit.success and np.max(np.abs(fit.theta - theta)) < 1e-6
     near = identify_forward(robot, joints, poses, SensorNoise(1e-3, 1e-6))
     assert near.success and near.message.startswith("converged")
+
+
+@pytest.mark.parametrize("size", [3, 6])
+def test_singularity_check_names_the_first_row_the_svd_calls_singular(size):
+    """The cheap bounds (reference rows) clear rows, the SVD decides the rest: the verdict is the
+    SVD's on every row, wherever a near-singular one sits and however much the rows vary."""
+    rng = np.random.default_rng(size)
+    for trial in range(60):
+        m = int(rng.integers(1, 400))
+        J = rng.normal(size=(size, size)) + 3.0 * np.eye(size) + \
+            rng.normal(size=(m, size, size)) * rng.choice([0.05, 0.5, 2.0])
+        scale = rng.uniform(0.01, 1.0, size)
+        if trial % 2:
+            k = int(rng.integers(0, m))
+            U, s, Vt = np.linalg.svd(J[k] * scale)
+            s[-1] = s[0] * 10.0 ** rng.uniform(-7, -4)
+            J[k] = (U * s) @ Vt / scale
+        cond = np.linalg.cond(J * scale)
+        singular = np.flatnonzero(~(cond < SINGULAR_CONDITION))
+        rows = np.arange(m) + 1000
+        if singular.size:
+            with pytest.raises(KinematicsError) as err:
+                raise_if_singular(J, scale, rows)
+            assert err.value.index == 1000 + singular[0]
+        else:
+            raise_if_singular(J, scale, rows)
