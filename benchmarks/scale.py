@@ -82,14 +82,6 @@ def blind_task(job):
     return out, time.process_time() - c0, time.perf_counter() - t0
 
 
-def blind_cases(robot: str, seeds: int) -> list:
-    """The cases of the single-effect blind suite of ``robot`` (as ``run_blind_suite`` makes them)."""
-    from calib.effects import effects_for
-
-    return [(robot, () if e == "none" else (e,), s, ("single",))
-            for e in effects_for(default_robot(robot)) for s in range(seeds)]
-
-
 def blind_on(client, cases, threads=None) -> dict:
     """The blind suite on ``client``: wall, per-task compute (Dask's task stream) and overhead."""
     from distributed import get_task_stream
@@ -111,7 +103,9 @@ def blind_on(client, cases, threads=None) -> dict:
 
 
 def blind_scale(robot: str, seeds: int, compare_threads: bool) -> dict:
-    cases = blind_cases(robot, seeds)
+    from pipeline.blind import blind_cases
+
+    cases = blind_cases(seeds=range(seeds), robot=robot, kinds=("single",))
     fig = {"cases": len(cases), "seeds": seeds}
     for n in (1, 2):
         log(f"blind suite, {len(cases)} cases, local cluster of {n} worker(s)...")

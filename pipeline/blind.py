@@ -44,7 +44,7 @@ from calib.robots import ROBOTS, default_robot
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
 from .executor import ProgressDisplay, run_tasks
 
-__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
+__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
 
 #: The kinds of recording (see the module docstring).
@@ -179,6 +179,26 @@ def criteria(r: dict) -> dict:
     return c
 
 
+def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None) -> list[tuple]:
+    """The recordings :func:`run_blind_suite` runs, each the argument of one :func:`blind_case`:
+    ``(robot, effects, seed, kinds)`` (arguments as :func:`run_blind_suite`'s)."""
+    names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
+    kinds = tuple(kinds)
+    cases = []
+    single_kinds = [k for k in kinds if k != "pair"]
+    if single_kinds:
+        for e in names:
+            ks = [k for k in single_kinds if e != "none" or k in ("single",) + STRESS_KINDS]
+            if ks:
+                cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) for s in seeds]
+    if "pair" in kinds:
+        real = [e for e in effects_for(default_robot(robot)) if e != "none"]
+        default = [(a, b) for a, b in combinations(real, 2) if b not in effect_family(a)]
+        for p in (default if pairs is None else [tuple(p) for p in pairs]):
+            cases += [(robot, p, int(s), ("pair",)) for s in seeds]
+    return cases
+
+
 def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
                     workers: int | None = None, scheduler: str | None = None, progress=None,
                     display=None) -> list[dict]:
@@ -200,20 +220,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         progress: ``progress(done, total)`` after each recording.
         display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
     """
-    names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
-    kinds = tuple(kinds)
-    cases = []
-    single_kinds = [k for k in kinds if k != "pair"]
-    if single_kinds:
-        for e in names:
-            ks = [k for k in single_kinds if e != "none" or k in ("single",) + STRESS_KINDS]
-            if ks:
-                cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) for s in seeds]
-    if "pair" in kinds:
-        real = [e for e in effects_for(default_robot(robot)) if e != "none"]
-        default = [(a, b) for a, b in combinations(real, 2) if b not in effect_family(a)]
-        for p in (default if pairs is None else [tuple(p) for p in pairs]):
-            cases += [(robot, p, int(s), ("pair",)) for s in seeds]
+    cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
     workers = workers or min(len(cases), os.cpu_count() or 1)
     from pipeline.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 

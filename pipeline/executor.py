@@ -41,7 +41,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 
-__all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "task_pool", "add_executor_arguments",
+__all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "add_executor_arguments",
            "default_workers", "runs_here", "ProgressDisplay"]
 
 logger = logging.getLogger(__name__)
@@ -373,20 +373,6 @@ class _SchedulerProgress:
         else:
             done, total = self.display.last or (0, self.total)
             self.display.finish(done, total, "no report from the scheduler")
-
-
-@contextlib.contextmanager
-def task_pool(workers: int | None = None, scheduler: str | None = None):
-    """A ``concurrent.futures.Executor`` (``submit``, ``map`` in order) backed by a Dask client.
-
-    For code written against a process pool: ``with task_pool(2) as pool: pool.map(f, xs)``.
-    """
-    with dask_client(workers, scheduler) as client:
-        executor = client.get_executor(pure=False)
-        try:
-            yield executor
-        finally:
-            executor.shutdown(wait=True)
 
 
 def add_executor_arguments(parser) -> None:

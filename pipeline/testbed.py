@@ -222,7 +222,9 @@ class Testbed:
                                                + self._screw_phase)
         ref = joints + screw + fx.joint_drift_per_s * time_s
         if fx.joint_warmup_per_s:
-            ref = ref + fx.joint_warmup_per_s * fx.joint_warmup_tau_s * -np.expm1(-time_s / fx.joint_warmup_tau_s)
+            from calib.effects.thermal_warmup import warmup_growth  # imported where a warm-up is simulated
+
+            ref = ref + fx.joint_warmup_per_s * warmup_growth(time_s, fx.joint_warmup_tau_s)
         if fx.joint_offset_step and time_s >= fx.joint_offset_step_time_s:
             ref = ref + np.asarray(fx.joint_offset_step)
         return ref

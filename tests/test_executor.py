@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, run_tasks, runs_here, task_pool
+from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, run_tasks, runs_here
 
 
 def worker_threads(_):
@@ -63,13 +63,6 @@ def test_a_failing_task_stops_the_job(dask_two_workers):
         list(run_tasks(fails_on_three, range(6), client=dask_two_workers))
     with pytest.raises(ValueError, match="workers must be >= 1"):
         list(run_tasks(math.sqrt, [1], workers=0))
-
-
-def test_task_pool_is_a_concurrent_futures_executor():
-    """What the modules written against a process pool (pipeline.blind) get."""
-    with task_pool(1) as pool:
-        assert list(pool.map(math.sqrt, [9, 1, 4])) == [3.0, 1.0, 2.0]
-        assert pool.submit(math.factorial, 5).result() == 120
 
 
 def _listening(client) -> list:

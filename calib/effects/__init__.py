@@ -68,13 +68,12 @@ def effect_family(name: str | Effect) -> tuple[str, ...]:
     registered: the effects a recording of ``name`` is also correctly explained by, and that
     leave-one-out removes together."""
     first = effect(name)
-    family = {first.name} | set(nested_in(first)) | {g for g in EFFECTS if first.name in nested_in(g)}
-    todo = [n for n in family if n in EFFECTS and n != first.name]
-    while todo:
-        n = todo.pop()
-        linked = set(nested_in(n)) | {g for g in EFFECTS if n in nested_in(g)}
-        todo += [m for m in linked - family]
-        family |= linked
+    family, todo = {first.name}, [first]
+    while todo:  # the effects nested with one already found, either way, until none is new
+        e = effect(todo.pop())
+        found = set(nested_in(e)) | {g for g in EFFECTS if e.name in nested_in(g)}
+        todo += list(found - family)
+        family |= found
     return tuple(([] if first.name in EFFECTS else [first.name]) + [n for n in EFFECTS if n in family])
 
 
