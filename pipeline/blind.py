@@ -42,7 +42,7 @@ from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
-from .executor import ProgressDisplay, run_tasks
+from .executor import ProgressDisplay, add_executor_arguments, run_tasks
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
@@ -221,7 +221,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
     """
     cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
-    workers = workers or min(len(cases), os.cpu_count() or 1)
+    workers = min(len(cases), os.cpu_count() or 1) if workers is None else workers
     from pipeline.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 
     done = [None] * len(cases)
@@ -274,10 +274,7 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--pairs", nargs="+", default=None, metavar="A,B", help="pairs for --kinds pair (default all)")
     ap.add_argument("--seeds", type=positive_int, default=20, help="recordings per effect (or pair)")
     ap.add_argument("--first-seed", type=nonnegative_int, default=0)
-    ap.add_argument("--workers", type=positive_int, default=None,
-                    help="processes of the local Dask cluster (default: all cores; 1: run here, no cluster)")
-    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                    help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+    add_executor_arguments(ap)
     a = ap.parse_args(argv)
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:

@@ -410,8 +410,6 @@ def _main(argv: list[str] | None = None) -> int:
                          f"{robot.pose_dim} equations per pose), got {args.poses}")
     if args.candidates < args.poses:
         raise SystemExit(f"--candidates must be >= --poses ({args.poses}), got {args.candidates}")
-    if args.workers is not None and args.workers < 1:
-        raise SystemExit(f"--workers must be >= 1, got {args.workers}")
     outs = [Path(args.out), sidecar_path(args.out)] + [Path(p) for p in (args.summary_json, args.rrd) if p]
     for p in outs:
         if p.exists() and not args.overwrite:

@@ -41,6 +41,8 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 
+from .cli import positive_int
+
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "add_executor_arguments",
            "default_workers", "runs_here", "ProgressDisplay"]
 
@@ -377,7 +379,7 @@ class _SchedulerProgress:
 
 def add_executor_arguments(parser) -> None:
     """``--workers N`` and ``--scheduler ADDRESS`` (the executor of a many-task command)."""
-    parser.add_argument("--workers", type=int, default=None,
+    parser.add_argument("--workers", type=positive_int, default=None,
                         help="processes of the local Dask cluster (default: all cores; 1: run here, "
                              "no cluster)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -348,8 +348,6 @@ def _report_line(row, done, total) -> str:
 
 def _main(argv) -> int:
     args = _parser().parse_args(argv)
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
 
     # Each machine's line as it lands (a result, here or on a cluster), printed above the job's progress.
     display = ProgressDisplay("fleet", unit="machines")

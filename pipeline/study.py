@@ -222,7 +222,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:
         raise ValueError(f"methods must be a non-empty subset of {METHODS}, got {methods!r}")
-    workers = int(workers or os.cpu_count() or 1)
+    workers = int(os.cpu_count() or 1) if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     if client is not None:

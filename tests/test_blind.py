@@ -75,3 +75,10 @@ def test_one_recording_with_no_workers_reports_progress_on_stderr(monkeypatch, c
     lines = err.splitlines()
     assert lines[0].startswith("blind suite: 0/1 recordings") and len(lines) == 2
     assert re.fullmatch(r"blind suite: 1/1 recordings \(\d+\.\d s\), done", lines[-1])
+
+
+@pytest.mark.parametrize("workers", [0, -2])
+def test_no_worker_is_refused_not_taken_for_the_default(workers):
+    """``workers=0`` is no worker at all: refused like any count below one, not read as "the default"."""
+    with pytest.raises(ValueError, match=f"workers must be >= 1, got {workers}"):
+        blind.run_blind_suite(["none"], range(1), workers=workers)

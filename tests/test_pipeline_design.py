@@ -119,7 +119,7 @@ def test_cli_refuses_to_overwrite(tmp_path, capsys):
     (["--poses", "8", "--robot", "moon"], "--robot: unknown robot 'moon'; registered robots are"),
     (["--poses", "8", "--candidates", "7"], "--candidates must be >= --poses"),
     (["--poses", "8", "--starts", "0"], "--starts: expected an integer >= 1, got 0"),
-    (["--poses", "8", "--starts", "2", "--workers", "0"], "--workers must be >= 1, got 0"),
+    (["--poses", "8", "--starts", "2", "--workers", "0"], "--workers: expected an integer >= 1, got 0"),
     (["--poses", "8", "--geometry", "missing.json"], "--geometry missing.json: cannot read a hexapod description"),
 ])
 def test_cli_rejects_bad_arguments(tmp_path, argv, match, capsys):

@@ -140,8 +140,9 @@ def test_monte_carlo_validation():
         monte_carlo(robot, theta, commanded, NOISE, 0, 0)
     with pytest.raises(ValueError, match="methods must be a non-empty subset"):
         monte_carlo(robot, theta, commanded, NOISE, 2, 0, methods=("paper",))
-    with pytest.raises(ValueError, match="workers must be >= 1, got -1"):
-        monte_carlo(robot, theta, commanded, NOISE, 2, 0, workers=-1)
+    for workers in (-1, 0):  # 0 is no worker, not the default
+        with pytest.raises(ValueError, match=f"workers must be >= 1, got {workers}"):
+            monte_carlo(robot, theta, commanded, NOISE, 2, 0, workers=workers)
     with pytest.raises(TypeError, match="robot must be a registered calib.robot.Robot"):
         monte_carlo("hexapod", theta, commanded, NOISE, 2, 0)
 
