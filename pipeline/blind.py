@@ -31,7 +31,6 @@ stdout, progress to stderr (the recordings done, however they run: :class:`pipel
 from __future__ import annotations
 
 import argparse
-import os
 from dataclasses import replace
 from itertools import combinations
 
@@ -42,7 +41,7 @@ from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
-from .executor import ProgressDisplay, add_executor_arguments, run_tasks
+from .executor import ProgressDisplay, add_executor_arguments, default_workers, run_tasks
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
            "main"]
@@ -221,7 +220,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
     """
     cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
-    workers = min(len(cases), os.cpu_count() or 1) if workers is None else workers
+    workers = min(len(cases), default_workers()) if workers is None else workers
     from pipeline.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 
     done = [None] * len(cases)

@@ -54,7 +54,7 @@ from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int, positive_int
-from pipeline.executor import ProgressDisplay, add_executor_arguments, default_workers, run_tasks
+from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, worker_count
 from pipeline.recording import atomic_write, sidecar_path
 
 __all__ = [
@@ -178,10 +178,9 @@ def design_search(robot: Robot, theta, n: int, workspace: Workspace, noise: Sens
     """
     if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1, got {starts!r}")
-    if workers is not None and int(workers) < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    workers = worker_count(workers)
     if scheduler is None and client is None:
-        workers = min(int(starts), int(workers or default_workers()))
+        workers = min(int(starts), workers)
     base = {"robot": robot.name, "description": robot.description(), "theta": np.asarray(theta, dtype=float),
             "n": n, "workspace": workspace.to_dict(), "noise": noise.to_dict(),
             "free": None if free is None else list(free), "criterion": criterion, "seed": seed,

@@ -44,7 +44,7 @@ from collections.abc import Callable, Iterable, Iterator
 from .cli import positive_int
 
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "add_executor_arguments",
-           "default_workers", "runs_here", "ProgressDisplay"]
+           "default_workers", "worker_count", "runs_here", "ProgressDisplay"]
 
 logger = logging.getLogger(__name__)
 
@@ -60,6 +60,15 @@ WORKER_ENV = {**BLAS_ENV, THREADS_VAR: "1"}
 def default_workers() -> int:
     """The local cluster's default size: the cores of this machine."""
     return os.cpu_count() or 1
+
+
+def worker_count(workers: int | None = None) -> int:
+    """``workers`` checked (an integer >= 1; ``ValueError`` otherwise, 0 included), or
+    :func:`default_workers` for None."""
+    count = default_workers() if workers is None else int(workers)
+    if count < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    return count
 
 
 @contextlib.contextmanager
@@ -83,9 +92,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         with Client(scheduler) as client:
             yield client
         return
-    workers = int(workers or default_workers())
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    workers = worker_count(workers)
     saved = dict(os.environ)
     try:
         environ = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()}
@@ -102,7 +109,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
 
 def runs_here(workers: int | None = None, scheduler: str | None = None, client=None) -> bool:
     """Whether :func:`run_tasks` with these arguments runs the tasks in this process (no cluster)."""
-    return client is None and not scheduler and int(workers or default_workers()) == 1
+    return client is None and not scheduler and worker_count(workers) == 1
 
 
 def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, scheduler: str | None = None,
@@ -129,8 +136,7 @@ def run_tasks(fn: Callable, jobs: Iterable, *, workers: int | None = None, sched
     """
     jobs = list(jobs)
     total = len(jobs)
-    if workers is not None and int(workers) < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    worker_count(workers)  # checked before any task runs
     if runs_here(workers, scheduler, client):
         yield from _in_order(fn, jobs, progress, display if total else None)
         return

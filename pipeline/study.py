@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -54,7 +53,7 @@ from calib.observability import analyze_observability, free_indices, parameter_s
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
-from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks
+from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, worker_count
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
 from pipeline.recording import atomic_write
 
@@ -198,7 +197,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
         seed: master seed.
         methods: subset of :data:`METHODS`.
         heldout: (H, D) held-out target poses, or None.
-        workers: processes of the local Dask cluster (default ``os.cpu_count()``, one BLAS
+        workers: processes of the local Dask cluster (default the cores, one BLAS
             thread each); 1 runs in this process (set ``OPENBLAS_NUM_THREADS=1`` for speed).
         progress: callable ``(done, total)`` or None.
         initial: (N, D) start of the forward kinematics (e.g. the target poses); default home.
@@ -222,9 +221,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:
         raise ValueError(f"methods must be a non-empty subset of {METHODS}, got {methods!r}")
-    workers = int(os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    workers = worker_count(workers)
     if client is not None:
         workers = max(1, sum(client.nthreads().values()))
     theta_true = np.asarray(theta_true, dtype=float)

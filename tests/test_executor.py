@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, run_tasks, runs_here
+from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, default_workers, run_tasks, runs_here, worker_count
 
 
 def worker_threads(_):
@@ -56,6 +56,15 @@ def test_available_cores_honours_the_thread_limit(monkeypatch):
         monkeypatch.setenv(THREADS_VAR, bad)
         with pytest.raises(ValueError, match=THREADS_VAR):
             available_cores()
+
+
+def test_worker_count_checks_the_count_and_defaults_to_the_cores():
+    assert worker_count() == default_workers() and worker_count(3) == 3
+    for bad in (0, -1):  # 0 is no worker, not "the default"
+        with pytest.raises(ValueError, match=f"workers must be >= 1, got {bad}"):
+            worker_count(bad)
+    with pytest.raises(ValueError, match="workers must be >= 1, got 0"):
+        runs_here(0)
 
 
 def test_a_failing_task_stops_the_job(dask_two_workers):

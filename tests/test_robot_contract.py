@@ -244,8 +244,6 @@ def test_forward_fit_with_poses_solved_along_is_the_forward_kinematics_fit(name,
     along, one Newton step of the poses an iteration) reaches the minimum the Gauss-Newton fit
     through the exact forward kinematics reaches; its predicted poses are the forward kinematics
     of its answer and its covariance is that of the residual Jacobian recomputed there."""
-    from calib.observability import identification_jacobian
-
     robot, theta = _machine(name)
     poses = reachable_poses(robot, 50, np.random.default_rng(3), theta=theta)
     noise = SensorNoise(1e-3, 1e-6, joint=joint_noise)
