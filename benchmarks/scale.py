@@ -23,7 +23,13 @@ Measured in one run:
    (all its threads) beside its wall time, and a check that both give the same results. With
    ``--blind-threads-compare``, the 2-worker cluster again with each task's testbed allowed every
    core (``THREADS_VAR`` raised in the task: the executor's setting before it limited it).
-4. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
+4. **What the hardware gives two processes** (:func:`parallel_capacity`): the same CPU-bound
+   loop (Python arithmetic and small numpy solves, no Dask, no files) run alone and as two
+   processes at once, alternated over several rounds: ``2 x alone / slower of the pair`` is the
+   best speed-up any executor can reach from 1 to 2 processes on this machine at that time (2.0
+   with two free cores; less when the cores share a physical core or the host's other guests
+   take a share of them). The executor's own efficiency is its speed-up over this figure.
+5. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
    over ``--machines`` recordings (one simulated per robot in MuJoCo, then copies).
 
 The numbers depend on what else runs on the machine: print ``os.getloadavg()`` with them.
@@ -35,6 +41,7 @@ import argparse
 import dataclasses
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -65,6 +72,44 @@ def log(msg):
 
 def noop(x):
     return x
+
+
+#: The loop :func:`parallel_capacity` times: waits for a start time (argv[1], ``time.time()``)
+#: so that the two processes of a pair compute together, then prints its compute seconds.
+CAPACITY_LOOP = """
+import sys, time
+import numpy as np
+A = np.random.default_rng(0).random((64, 6, 6)) + 6.0 * np.eye(6)
+b = np.ones((64, 6, 1))
+time.sleep(max(0.0, float(sys.argv[1]) - time.time()))
+t = time.perf_counter()
+x = 0
+for i in range(3_000_000):
+    x += i * i % 7
+    if i % 200 == 0:
+        np.linalg.solve(A, b)
+print(time.perf_counter() - t)
+"""
+
+
+def parallel_capacity(rounds: int = 5) -> dict:
+    """Speed-up the hardware gives two CPU-bound processes over one, now (see the module's item 4):
+    ``rounds`` alternations of one process alone and two at once; per round ``2 x alone / slower
+    of the pair``; the median round is the figure."""
+    def timed(k: int) -> list[float]:
+        start = f"{time.time() + 1.0:.6f}"  # after the interpreters and numpy have loaded
+        procs = [subprocess.Popen([sys.executable, "-c", CAPACITY_LOOP, start], stdout=subprocess.PIPE, text=True)
+                 for _ in range(k)]
+        return [float(p.communicate()[0]) for p in procs]
+
+    alone, pairs, ratios = [], [], []
+    for _ in range(rounds):
+        a, pair = timed(1)[0], timed(2)
+        alone.append(a)
+        pairs.append(pair)
+        ratios.append(2.0 * a / max(pair))
+    return {"rounds": rounds, "alone_s": alone, "pair_s": pairs, "speedup_per_round": ratios,
+            "speedup": float(np.median(ratios))}
 
 
 def blind_task(job):
@@ -219,6 +264,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="write the figures as JSON here")
     args = p.parse_args(argv)
     fig = {"cpu_count": os.cpu_count(), "load_before": os.getloadavg(), "robot": args.robot, "trials": args.trials}
+    log("what the hardware gives two processes...")
+    fig["capacity_before"] = parallel_capacity()
     if args.trials:
         study_scale(args, fig)
     if args.blind_seeds:
@@ -226,6 +273,8 @@ def main(argv=None) -> int:
     if args.machines:
         log("fleet machines in this process...")
         fig["fleet"] = fleet_cost(args.machines)
+    log("what the hardware gives two processes, again...")
+    fig["capacity_after"] = parallel_capacity()
     fig["load_after"] = os.getloadavg()
     print(json.dumps(fig, indent=1))
     if args.trials:
@@ -253,6 +302,12 @@ def main(argv=None) -> int:
               + f"\nspeed-up 1 -> 2 workers {b['speedup_1_to_2']:.2f}x"
               + (f" ({b['w1']['wall_s'] / b['w2_every_core']['wall_s']:.2f}x with every core a task)"
                  if "w2_every_core" in b else "") + f"; same results on 1 and 2 workers: {b['same_results']}")
+        slower = b["w2"]["per_task_s"] / b["w1"]["per_task_s"]
+        print(f"a task's compute on 2 workers / on 1: {slower:.2f} (the hardware's share of the loss); "
+              f"the speed-up at the 1-worker task cost: {b['speedup_1_to_2'] * slower:.2f}x (the executor's share)")
+    before, after = fig["capacity_before"]["speedup"], fig["capacity_after"]["speedup"]
+    print(f"\nwhat the hardware gives two CPU-bound processes over one (no executor): {before:.2f}x before, "
+          f"{after:.2f}x after (medians of {fig['capacity_before']['rounds']} alternated rounds)")
     print(f"load {fig['load_before']} -> {fig['load_after']}")
     if args.out:
         atomic_write(args.out, json.dumps(fig, indent=1) + "\n", overwrite=True)
