@@ -5,8 +5,8 @@ Usage::
     python -m pipeline.fleet FOLDER [--out DIR] [--method chainwise|forward] [--workers N]
         [--scheduler ADDRESS] [--redo]
 
-Every ``*.csv`` in ``FOLDER`` (not its sub-folders) is one machine's recording (CSV + JSON
-sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is calibrated by
+Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machine's recording
+(CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is calibrated by
 :func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the analysis of
 ``python -m pipeline.run --real FILE``), as one task of :mod:`pipeline.executor` (a local Dask
 cluster of ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``: a task
@@ -86,12 +86,26 @@ class FleetReport:
 
 
 def fleet_inputs(folder) -> list[Path]:
-    """The recordings of a fleet: every ``*.csv`` in ``folder`` (not its sub-folders), by name."""
+    """The recordings of a fleet: every file of ``folder`` (not its sub-folders) whose name ends in
+    ``.csv``, in any case (``.CSV`` as written by some instruments' software), by name.
+
+    Raises:
+        ValueError: ``folder`` is not a folder, or two recordings would be one machine (their
+            stems equal but for case: their outputs would be the same files on a file system
+            that ignores case).
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"{folder}: " + ("is a file, not a folder of recordings" if folder.exists()
                                           else "folder not found"))
-    return sorted(p for p in folder.glob("*.csv") if p.is_file())
+    inputs = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
+    seen: dict[str, Path] = {}
+    for p in inputs:
+        other = seen.setdefault(p.stem.casefold(), p)
+        if other is not p:
+            raise ValueError(f"{other} and {p}: two recordings of one machine name {p.stem!r} "
+                             "(names that differ only in case give the same outputs); rename one")
+    return inputs
 
 
 def input_hash(csv_path) -> str:

@@ -137,3 +137,28 @@ def test_fleet_refusals(tmp_path, capsys):
     (tmp_path / "f").write_text("x")
     assert main([str(tmp_path), "--out", str(tmp_path / "f")]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err
+
+
+def test_recordings_named_in_upper_case_are_machines_too(fleet_folder, tmp_path, capsys):
+    """An instrument's software that writes ``.CSV``: still a recording (its sidecar found by stem);
+    two names equal but for case are refused before any work, naming both (their outputs would be
+    the same files on a file system that ignores case)."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for name, source in (("LAB_A.CSV", "hexapod_01"), ("lab_b.csv", "rus_01")):
+        shutil.copy(fleet_folder / f"{source}.csv", folder / name)
+        shutil.copy(sidecar_path(fleet_folder / f"{source}.csv"), sidecar_path(folder / name))
+    (folder / "notes.csv.txt").write_text("not a recording")
+    (folder / "sub.csv").mkdir()  # a folder, not a recording
+    rep = run_fleet(folder, tmp_path / "out", workers=1)
+    assert [(r["machine"], r["robot"], r["status"]) for r in rep.rows] == [
+        ("LAB_A", "hexapod", "calibrated"), ("lab_b", "rus", "calibrated")]
+    shutil.copy(folder / "lab_b.csv", folder / "LAB_B.csv")
+    shutil.copy(sidecar_path(folder / "lab_b.csv"), folder / "LAB_B.json")
+    before = sorted(p.name for p in (tmp_path / "out").iterdir())
+    capsys.readouterr()
+    assert main([str(folder), "--out", str(tmp_path / "out"), "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{folder / 'LAB_B.csv'} and {folder / 'lab_b.csv'}: two recordings of one machine" \
+        in err[0], err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == before
