@@ -220,7 +220,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
     """
     cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
-    workers = min(len(cases), default_workers()) if workers is None else workers
+    workers = max(1, min(len(cases), default_workers())) if workers is None else workers
     from pipeline.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 
     done = [None] * len(cases)

@@ -82,3 +82,8 @@ def test_no_worker_is_refused_not_taken_for_the_default(workers):
     """``workers=0`` is no worker at all: refused like any count below one, not read as "the default"."""
     with pytest.raises(ValueError, match=f"workers must be >= 1, got {workers}"):
         blind.run_blind_suite(["none"], range(1), workers=workers)
+
+
+def test_a_suite_of_no_recordings_is_empty_not_an_error():
+    """No case (an empty list of effects): the default worker count stays at least one."""
+    assert blind.blind_cases([], range(3)) == [] and blind.run_blind_suite([], range(3)) == []
