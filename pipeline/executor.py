@@ -31,6 +31,7 @@ and write to stdout, where the commands print their results).
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 import contextlib
 import logging
@@ -44,7 +45,7 @@ from collections.abc import Callable, Iterable, Iterator
 from .cli import positive_int
 
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "add_executor_arguments",
-           "default_workers", "worker_count", "runs_here", "ProgressDisplay"]
+           "default_workers", "worker_count", "scheduler_address", "runs_here", "ProgressDisplay"]
 
 logger = logging.getLogger(__name__)
 
@@ -80,6 +81,10 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
             cores of this machine. Ignored with ``scheduler``.
         scheduler: address of a running Dask scheduler (``tcp://host:8786``), or None.
 
+    Raises:
+        ValueError: ``scheduler`` is not an address, or no scheduler answers there (within
+            Dask's connect timeout, ``distributed.comm.timeouts.connect``); names the flag.
+
     The local cluster's logs are quiet; its dashboard (with ``bokeh`` installed) listens on a free
     port of this machine only (``client.dashboard_link``). It is closed, and this process's
     environment restored (Dask's nanny sets the worker variables in the parent before it
@@ -89,7 +94,11 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     from distributed import Client, LocalCluster
 
     if scheduler:
-        with Client(scheduler) as client:
+        try:
+            client = Client(scheduler)
+        except (OSError, ValueError) as exc:  # unreachable (a timeout is an OSError), or not an address
+            raise ValueError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler: {exc}") from None
+        with client:
             yield client
         return
     workers = worker_count(workers)
@@ -383,10 +392,22 @@ class _SchedulerProgress:
             self.display.finish(done, total, "no report from the scheduler")
 
 
+def scheduler_address(text: str) -> str:
+    """argparse type: the address of a Dask scheduler (``tcp://host:8786``, ``host:8786``, ``tls://...``),
+    checked for its form only (whether a scheduler answers there is found on connecting)."""
+    from distributed.comm import get_address_host_port  # only when the flag is given
+
+    try:
+        get_address_host_port(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not a Dask scheduler address: {exc}") from None
+    return text
+
+
 def add_executor_arguments(parser) -> None:
     """``--workers N`` and ``--scheduler ADDRESS`` (the executor of a many-task command)."""
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="processes of the local Dask cluster (default: all cores; 1: run here, "
                              "no cluster)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+    parser.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
                         help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")

@@ -52,7 +52,7 @@ from pathlib import Path
 from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
-from .executor import ProgressDisplay, add_executor_arguments, run_tasks
+from .executor import ProgressDisplay, add_executor_arguments, dask_client, run_tasks
 from .recording import OutputError, atomic_write, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
@@ -298,6 +298,10 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
     folder = Path(folder)
     inputs = fleet_inputs(folder)
     out = Path(out) if out is not None else folder / "calibrated"
+    if client is None and scheduler:  # an unreachable cluster is refused before any output is written
+        with dask_client(scheduler=scheduler) as client:
+            return run_fleet(folder, out, method=method, client=client, redo=redo, progress=progress,
+                             display=display)
     output_folder(out)
     lock = _FleetLock(out)
     rows, ran, skipped, dirty = {}, [], [], False

@@ -162,3 +162,22 @@ def test_recordings_named_in_upper_case_are_machines_too(fleet_folder, tmp_path,
     assert len(err) == 1 and f"{folder / 'LAB_B.csv'} and {folder / 'lab_b.csv'}: two recordings of one machine" \
         in err[0], err
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == before
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:1", "127.0.0.1:1"])  # nothing listens on port 1
+def test_unreachable_scheduler_is_refused_before_any_output(fleet_folder, tmp_path, capsys, address):
+    """``--scheduler`` where no scheduler answers: exit 2, one line naming the flag, and no output
+    folder (the fleet writes its table as machines land, so it connects first)."""
+    import dask
+
+    folder = tmp_path / "one"
+    folder.mkdir()
+    for p in (fleet_folder / "hexapod_00.csv", sidecar_path(fleet_folder / "hexapod_00.csv")):
+        shutil.copy(p, folder / p.name)
+    capsys.readouterr()
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        assert main([str(folder), "--scheduler", address]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--scheduler {address}: cannot connect to a Dask scheduler" in err[0], err
+    assert "Timed out trying to connect" in err[0], err
+    assert sorted(p.name for p in folder.iterdir()) == ["hexapod_00.csv", "hexapod_00.json"]
