@@ -43,8 +43,8 @@ from calib.robots import ROBOTS, default_robot
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
 from .executor import ProgressDisplay, add_executor_arguments, default_workers, run_tasks
 
-__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria", "failure_lines", "rates_table", "run",
-           "main"]
+__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria",
+           "failure_lines", "rates_table", "run", "main"]
 
 #: The kinds of recording (see the module docstring).
 KINDS = ("single", "pair", "leave_one_out", "gross3", "noise10", "noise100", "gross30", "geometry_off")

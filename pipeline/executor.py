@@ -10,9 +10,10 @@ the blind suite's recordings) runs on a Dask cluster:
   (:func:`pipeline.testbed.available_cores`): a worker using every core would leave none to the
   others, and several multi-threaded workers on a few cores thrash);
 * or an **existing cluster** (``scheduler="tcp://host:8786"``, the ``--scheduler`` flag), started
-  with ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1`` on machines where this package is installed (Dask's
-  worker sets the BLAS variables to 1; set :data:`THREADS_VAR` = 1 in the workers' environment too,
-  e.g. ``PARALLEL_CALIB_THREADS=1 dask worker ...``, when a node runs one worker per core);
+  with ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1`` on machines where this package
+  is installed (Dask's worker sets the BLAS variables to 1; set :data:`THREADS_VAR` = 1 in the
+  workers' environment too, e.g. ``PARALLEL_CALIB_THREADS=1 dask worker ...``, when a node runs
+  one worker per core);
 * or, with one worker and no scheduler, **this process**, one task after another (no cluster to
   start: the cheapest for small jobs and the one debuggers and profilers see).
 

@@ -7,8 +7,8 @@ Usage::
 
 Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machine's recording
 (CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is
-calibrated by :func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the analysis of
-``python -m pipeline.run --real FILE``), as one task of :mod:`pipeline.executor` (a local Dask
+calibrated by :func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the
+analysis of ``python -m pipeline.run --real FILE``), as one task of :mod:`pipeline.executor` (a local Dask
 cluster of ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``: a task
 reads its recording and writes its outputs by path, so the workers of a remote cluster must see
 ``FOLDER`` and ``--out`` at the same paths, e.g. on a shared file system).
