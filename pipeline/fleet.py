@@ -29,7 +29,8 @@ others go on. The three table files are rewritten (each atomically) after each m
 (less often when the table is so long that rewriting it would take more than a tenth of the
 time; always at the end, an interruption included), so an interrupted fleet keeps every
 machine that had finished, and a rerun does the rest. One fleet
-at a time writes to an output folder (a lock file holds it). Exit status 0 when every row is
+at a time writes to an output folder (it holds a system lock on ``.fleet.lock``, which goes
+with the process however it ends). Exit status 0 when every row is
 calibrated, 1 when some row is an error, 2 for a refused input or output.
 
 On stderr: one line per machine as it lands (``--quiet``: none) and the fleet's progress, however
@@ -238,41 +239,50 @@ def _done(row: dict | None, sha: str, method: str) -> bool:
 
 
 class _FleetLock:
-    """``out/.fleet.lock`` holding this process's id; a lock whose process is gone is taken over."""
+    """An exclusive lock on ``out/.fleet.lock`` (POSIX ``flock``), the file holding the owner's
+    process id for the message of a refused fleet.
+
+    The system drops the lock when its holder ends, however it ends, so a lock file left by a
+    killed fleet blocks nothing, and of two fleets started together exactly one takes it (before,
+    a second fleet could read the first's lock file before the id was in it, judge it stale and
+    take it over too). The file is removed on release, while still locked; a fleet that opened it
+    just before and then locks the removed file sees that the path no longer names it, and tries
+    again.
+    """
 
     def __init__(self, out: Path):
+        import fcntl
+
         self.path = out / LOCK_NAME
-        for _ in range(2):
+        while True:
             try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                try:
-                    pid = int(self.path.read_text().strip() or "0")
-                except (OSError, ValueError):
-                    pid = 0
-                if pid and pid != os.getpid() and _alive(pid):
-                    raise OutputError(f"--out {out}: another fleet (process {pid}) is writing this folder now") from None
-                self.path.unlink(missing_ok=True)
-                continue
+                fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
             except OSError as exc:
                 raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
-            with os.fdopen(fd, "w") as f:
-                f.write(str(os.getpid()))
-            return
-        raise OutputError(f"--out {out}: cannot take the lock {self.path}")
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.read(fd, 32).decode(errors="replace").strip()
+                os.close(fd)
+                who = f" (process {holder})" if holder.isdigit() else ""
+                raise OutputError(f"--out {out}: another fleet{who} is writing this folder now") from None
+            except OSError as exc:  # a file system without locks
+                os.close(fd)
+                raise OutputError(f"--out {out}: cannot lock {self.path}: {exc.strerror or exc}") from None
+            try:
+                current = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                current = False
+            if current:
+                break
+            os.close(fd)  # locked a file its holder has just removed: take the one the path names now
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self.fd = fd
 
     def release(self) -> None:
         self.path.unlink(missing_ok=True)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+        os.close(self.fd)
 
 
 def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | None = None,

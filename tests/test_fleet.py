@@ -4,6 +4,8 @@ import dataclasses
 import json
 import re
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -181,3 +183,62 @@ def test_unreachable_scheduler_is_refused_before_any_output(fleet_folder, tmp_pa
     assert len(err) == 1 and f"--scheduler {address}: cannot connect to a Dask scheduler" in err[0], err
     assert "Timed out trying to connect" in err[0], err
     assert sorted(p.name for p in folder.iterdir()) == ["hexapod_00.csv", "hexapod_00.json"]
+
+
+#: Another process holding an output folder's fleet lock as a fleet does (``flock`` on
+#: ``.fleet.lock``), with its process id written or, as a fleet that has just taken it, not yet.
+HOLD_LOCK = """
+import fcntl, os, sys
+fd = os.open(sys.argv[1], os.O_CREAT | os.O_RDWR, 0o644)
+fcntl.flock(fd, fcntl.LOCK_EX)
+if sys.argv[2] == "pid":
+    os.write(fd, str(os.getpid()).encode())
+print("held", flush=True)
+sys.stdin.read()
+"""
+
+
+@pytest.mark.parametrize("written", ["pid", "nothing yet"])
+def test_a_second_fleet_on_one_output_folder_is_refused(fleet_folder, tmp_path, capsys, written):
+    """While another process holds the folder's lock: exit 2, one line (naming the holder when its id
+    is in the file), nothing written. Before the lock was a kernel lock, a lock file still empty was
+    read as stale and taken over: two fleets wrote one folder."""
+    folder = tmp_path / "one"
+    folder.mkdir()
+    for p in (fleet_folder / "rus_00.csv", sidecar_path(fleet_folder / "rus_00.csv")):
+        shutil.copy(p, folder / p.name)
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(out / ".fleet.lock"), written],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        capsys.readouterr()
+        assert main([str(folder), "--out", str(out), "--workers", "1"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        who = f" (process {holder.pid})" if written == "pid" else ""
+        assert err == [f"error: --out {out}: another fleet{who} is writing this folder now"], err
+        assert [p.name for p in out.iterdir()] == [".fleet.lock"]
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)
+    rep = run_fleet(folder, out, workers=1)  # the holder has ended: its lock went with it
+    assert [r["status"] for r in rep.rows] == ["calibrated"] and not (out / ".fleet.lock").exists()
+
+
+def test_a_lock_file_left_by_a_killed_fleet_blocks_nothing(fleet_folder, tmp_path):
+    """A fleet killed outright leaves its lock file (with its process id) but not its lock."""
+    folder = tmp_path / "one"
+    folder.mkdir()
+    for p in (fleet_folder / "hexapod_00.csv", sidecar_path(fleet_folder / "hexapod_00.csv")):
+        shutil.copy(p, folder / p.name)
+    out = tmp_path / "out"
+    out.mkdir()
+    killed = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(out / ".fleet.lock"), "pid"],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert killed.stdout.readline().strip() == "held"
+    killed.kill()
+    killed.wait(timeout=30)
+    assert (out / ".fleet.lock").read_text() == str(killed.pid)
+    rep = run_fleet(folder, out, workers=1)
+    assert [r["status"] for r in rep.rows] == ["calibrated"] and not (out / ".fleet.lock").exists()
