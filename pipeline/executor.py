@@ -205,7 +205,14 @@ def _as_completed(client, fn, jobs, progress, display):
     finally:
         if watch is not None:
             watch.wait_ready()
-        client.cancel([f for f in futures if not f.done()])
+        # Only tasks still pending: the scheduler reports every cancel request, empty or not, to
+        # every client it has, and a report that reaches a client still connecting arrives in one
+        # batch with the scheduler's greeting, which distributed's Client takes for a broken
+        # handshake (AssertionError in Client._ensure_connected; a --scheduler run connecting then
+        # failed).
+        pending = [f for f in futures if not f.done()]
+        if pending:
+            client.cancel(pending)
         if watch is not None:
             watch.stop()
 

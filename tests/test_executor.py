@@ -43,6 +43,18 @@ def test_run_tasks_here_and_on_a_cluster(dask_two_workers):
         assert env == WORKER_ENV and cores == 1
 
 
+def test_a_finished_job_sends_the_scheduler_no_cancel_request(dask_two_workers):
+    """The scheduler tells every client of every cancel request, empty ones too, and a client
+    connecting at that moment fails its handshake (distributed 2026.8: an AssertionError in
+    ``Client._ensure_connected``): a job whose tasks all finished must not send one."""
+    client = dask_two_workers
+    before = len(client.get_events(client.id))
+    assert sorted(run_tasks(math.sqrt, [1, 4], client=client)) == [(0, 1.0), (1, 2.0)]
+    # A task submitted after it travels the same stream to the scheduler, behind any cancel request.
+    assert client.submit(math.sqrt, 9.0, pure=False).result() == 3.0
+    assert [e for _, e in client.get_events(client.id)[before:] if e.get("action") == "cancel"] == []
+
+
 def test_available_cores_honours_the_thread_limit(monkeypatch):
     from pipeline.testbed import available_cores
 
