@@ -172,10 +172,7 @@ def test_unreachable_scheduler_is_refused_before_any_output(fleet_folder, tmp_pa
     folder (the fleet writes its table as machines land, so it connects first)."""
     import dask
 
-    folder = tmp_path / "one"
-    folder.mkdir()
-    for p in (fleet_folder / "hexapod_00.csv", sidecar_path(fleet_folder / "hexapod_00.csv")):
-        shutil.copy(p, folder / p.name)
+    folder = one_machine(fleet_folder, tmp_path / "one", "hexapod_00")
     capsys.readouterr()
     with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
         assert main([str(folder), "--scheduler", address]) == 2
@@ -198,21 +195,32 @@ sys.stdin.read()
 """
 
 
+def one_machine(fleet_folder, folder, stem):
+    """``folder`` (created) holding one recording of the fleet, ``stem``, and its sidecar."""
+    folder.mkdir()
+    for p in (fleet_folder / f"{stem}.csv", sidecar_path(fleet_folder / f"{stem}.csv")):
+        shutil.copy(p, folder / p.name)
+    return folder
+
+
+def hold_lock(out, written):
+    """A process holding ``out``'s fleet lock (see :data:`HOLD_LOCK`), once it holds it."""
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(out / ".fleet.lock"), written],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    return holder
+
+
 @pytest.mark.parametrize("written", ["pid", "nothing yet"])
 def test_a_second_fleet_on_one_output_folder_is_refused(fleet_folder, tmp_path, capsys, written):
     """While another process holds the folder's lock: exit 2, one line (naming the holder when its id
     is in the file), nothing written. Before the lock was a kernel lock, a lock file still empty was
     read as stale and taken over: two fleets wrote one folder."""
-    folder = tmp_path / "one"
-    folder.mkdir()
-    for p in (fleet_folder / "rus_00.csv", sidecar_path(fleet_folder / "rus_00.csv")):
-        shutil.copy(p, folder / p.name)
+    folder = one_machine(fleet_folder, tmp_path / "one", "rus_00")
     out = tmp_path / "out"
     out.mkdir()
-    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(out / ".fleet.lock"), written],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    holder = hold_lock(out, written)
     try:
-        assert holder.stdout.readline().strip() == "held"
         capsys.readouterr()
         assert main([str(folder), "--out", str(out), "--workers", "1"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -228,15 +236,10 @@ def test_a_second_fleet_on_one_output_folder_is_refused(fleet_folder, tmp_path, 
 
 def test_a_lock_file_left_by_a_killed_fleet_blocks_nothing(fleet_folder, tmp_path):
     """A fleet killed outright leaves its lock file (with its process id) but not its lock."""
-    folder = tmp_path / "one"
-    folder.mkdir()
-    for p in (fleet_folder / "hexapod_00.csv", sidecar_path(fleet_folder / "hexapod_00.csv")):
-        shutil.copy(p, folder / p.name)
+    folder = one_machine(fleet_folder, tmp_path / "one", "hexapod_00")
     out = tmp_path / "out"
     out.mkdir()
-    killed = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, str(out / ".fleet.lock"), "pid"],
-                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    assert killed.stdout.readline().strip() == "held"
+    killed = hold_lock(out, "pid")
     killed.kill()
     killed.wait(timeout=30)
     assert (out / ".fleet.lock").read_text() == str(killed.pid)
