@@ -270,7 +270,8 @@ class _FleetLock:
                 os.close(fd)
                 raise OutputError(f"--out {out}: cannot lock {self.path}: {exc.strerror or exc}") from None
             try:
-                current = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+                named, held = os.stat(self.path), os.fstat(fd)
+                current = (named.st_dev, named.st_ino) == (held.st_dev, held.st_ino)
             except FileNotFoundError:
                 current = False
             if current:
