@@ -29,8 +29,9 @@ Measured in one run:
    best speed-up any executor can reach from 1 to 2 processes on this machine at that time (2.0
    with two free cores; less when the cores share a physical core or the host's other guests
    take a share of them). The executor's own efficiency is its speed-up over this figure.
-5. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process)
-   over ``--machines`` recordings (one simulated per robot in MuJoCo, then copies).
+5. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process,
+   with the fleet's default effect discovery and without) over ``--machines`` recordings (one
+   simulated per robot in MuJoCo, then copies).
 
 The numbers depend on what else runs on the machine: print ``os.getloadavg()`` with them.
 """
@@ -208,17 +209,19 @@ def fleet_cost(n_machines: int) -> dict:
                 m = rec.measured.copy()
                 m[:, :3] += np.random.default_rng([k, 1]).uniform(-3e-4, 3e-4, (len(m), 3))
                 files.append(write_recording(tmp / "fleet" / f"{robot}_{k}.csv", dataclasses.replace(rec, measured=m))[0])
-        walls = {}
-        for f in files:
-            row = calibrate_machine({"machine": f.stem, "file": str(f), "out": str(tmp / "out"), "method": "chainwise",
-                                     "sha256": input_hash(f)})
-            assert row["status"] == "calibrated", row["error"]
-            walls.setdefault(row["robot"], []).append(row["wall_s"])
+        walls = {True: {}, False: {}}  # with the fleet's default effect discovery, and without
+        for discover in (True, False):
+            for f in files:
+                row = calibrate_machine({"machine": f.stem, "file": str(f), "out": str(tmp / "out"),
+                                         "method": "chainwise", "sha256": input_hash(f), "discover": discover})
+                assert row["status"] == "calibrated", row["error"]
+                walls[discover].setdefault(row["robot"], []).append(row["wall_s"])
     # The first machine of a process pays the imports (rerun, the observability...): reported apart.
-    first = [w[0] for w in walls.values()]
-    rest = [x for w in walls.values() for x in w[1:]]
-    return {"machines": len(files), "per_robot_mean_s": {k: float(np.mean(v[1:] or v)) for k, v in walls.items()},
-            "mean_s": float(np.mean(rest or first)), "first_in_process_s": float(first[0])}
+    first = [w[0] for w in walls[True].values()]
+    rest = {d: [x for w in walls[d].values() for x in w[1:]] for d in walls}
+    return {"machines": len(files), "per_robot_mean_s": {k: float(np.mean(v[1:] or v)) for k, v in walls[True].items()},
+            "mean_s": float(np.mean(rest[True] or first)), "mean_without_discovery_s": float(np.mean(rest[False])),
+            "first_in_process_s": float(first[0])}
 
 
 def study_scale(args, fig: dict) -> None:

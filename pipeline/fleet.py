@@ -2,27 +2,35 @@
 
 Usage::
 
-    python -m pipeline.fleet FOLDER [--out DIR] [--method chainwise|forward] [--workers N]
-        [--scheduler ADDRESS] [--redo]
+    python -m pipeline.fleet FOLDER [--out DIR] [--method chainwise|forward] [--no-discover]
+        [--workers N] [--scheduler ADDRESS] [--redo]
 
 Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machine's recording
 (CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is
 calibrated by :func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the
-analysis of ``python -m pipeline.run --real FILE``), as one task of :mod:`pipeline.executor` (a local Dask
+analysis of ``python -m pipeline.run --real FILE``), then its residuals searched for the physics the
+geometric model left out (:func:`pipeline.discover.discover`, without its MuJoCo re-simulation;
+``--no-discover``: not searched), as one task of :mod:`pipeline.executor` (a local Dask
 cluster of ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``: a task
 reads its recording and writes its outputs by path, so the workers of a remote cluster must see
 ``FOLDER`` and ``--out`` at the same paths, e.g. on a shared file system).
 
 Written to ``--out`` (default ``FOLDER/calibrated``):
 
-* ``<machine>.rrd`` and ``<machine>.summary.json`` per machine (the machine is the CSV's stem);
+* ``<machine>.rrd``, ``<machine>.summary.json`` and ``<machine>.discovery.json`` (the discovery's
+  summary, as ``python -m pipeline.discover --summary-json``) per machine (the machine is the CSV's
+  stem);
 * ``fleet.csv`` and ``fleet.md``: one row per machine (machine, robot, calibration poses used,
   held-out position error before/after in um, flagged rows, ``explained``, wall time, status);
-  ``explained`` is ``n/a`` (effect discovery, :mod:`pipeline.discover`, is not run here);
+  ``explained`` is whether the model the discovery chose explains the recording to its declared
+  noise, and the model: ``yes: geometry alone``, ``yes: geometry + thermal_drift``, ``no:
+  geometry + compliance`` (that effect named, structure left beyond it), ``no: geometry alone``
+  (nothing in the library accounts for it); ``n/a`` with ``--no-discover``, ``n/a: REASON`` when
+  the discovery refuses the recording (fewer than 12 measurements);
 * ``fleet.json``: the same rows with each input's SHA-256 and the outputs' paths;
 * ``.rows/<machine>.json``: each machine's row, written as soon as it finishes: a rerun skips a
   machine whose row is there with the same SHA-256 of its recording (CSV and sidecar) and method,
-  and whose outputs are still there (``--redo``: run all).
+  and whose outputs are still there, searched or not as this run asks (``--redo``: run all).
 
 A file that cannot be calibrated is reported on its row (``error``: the reason, one line) and the
 others go on. The three table files are rewritten (each atomically) after each machine finishes
@@ -54,7 +62,7 @@ from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
 from .executor import ProgressDisplay, add_executor_arguments, dask_client, run_tasks
-from .recording import OutputError, atomic_write, output_folder, sidecar_path
+from .recording import OutputError, atomic_write, output_folder, read_recording, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
            "run_fleet", "main"]
@@ -64,7 +72,7 @@ FLEET_FORMAT = "parallel-calib fleet"
 #: Columns of ``fleet.csv`` (``fleet.json`` adds ``file``, ``sha256``, ``method`` and the outputs).
 TABLE_COLUMNS = ("machine", "robot", "status", "poses", "poses_used", "heldout_before_um", "heldout_after_um",
                  "flagged_rows", "explained", "wall_s", "error")
-#: What the ``explained`` column holds when discovery is not run.
+#: What the ``explained`` column holds when discovery is not run (``NOT_RUN: reason`` when it refused).
 NOT_RUN = "n/a"
 TABLE_NAMES = {"json": "fleet.json", "csv": "fleet.csv", "md": "fleet.md"}
 LOCK_NAME = ".fleet.lock"
@@ -134,21 +142,24 @@ def calibrate_machine(job: dict) -> dict:
     """Calibrate one recording (a task of the fleet; plain data in and out).
 
     Args:
-        job: ``machine``, ``file`` (the CSV), ``out`` (output folder), ``method``, ``sha256``.
+        job: ``machine``, ``file`` (the CSV), ``out`` (output folder), ``method``, ``sha256``,
+            ``discover`` (search the residuals for left-out physics; default False).
 
     Returns:
-        The machine's row (:data:`TABLE_COLUMNS` plus ``file``, ``sha256``, ``method``, ``rrd``,
-        ``summary``); a file that cannot be calibrated gives ``status="error"`` and ``error``, the
-        reason in one line.
+        The machine's row (:data:`TABLE_COLUMNS` plus ``file``, ``sha256``, ``method``,
+        ``discover``, ``rrd``, ``summary``, ``discovery``: the discovery's summary file, None when
+        not searched); a file that cannot be calibrated gives ``status="error"`` and ``error``,
+        the reason in one line.
     """
     from pipeline.calibration import RunSettings, run_calibration
 
     t0 = time.perf_counter()
     machine, out = job["machine"], Path(job["out"])
+    searched = bool(job.get("discover", False))
     row = {"machine": machine, "file": job["file"], "sha256": job["sha256"], "method": job["method"],
-           "robot": None, "status": "error", "poses": None, "poses_used": None, "heldout_before_um": None,
-           "heldout_after_um": None, "flagged_rows": [], "explained": NOT_RUN, "wall_s": None, "error": None,
-           "rrd": None, "summary": None}
+           "discover": searched, "robot": None, "status": "error", "poses": None, "poses_used": None,
+           "heldout_before_um": None, "heldout_after_um": None, "flagged_rows": [], "explained": NOT_RUN,
+           "wall_s": None, "error": None, "rrd": None, "summary": None, "discovery": None}
     summary_path = out / f"{machine}.summary.json"
     try:
         result = run_calibration(RunSettings(real=Path(job["file"]), out=out, name=machine, overwrite=True,
@@ -165,8 +176,24 @@ def calibrate_machine(job: dict) -> dict:
                    heldout_before_um=None if not held else 1e3 * held["before"],
                    heldout_after_um=None if not held else 1e3 * held["after"],
                    rrd=s.get("rrd"), summary=str(summary_path))
+        if searched:
+            row.update(_discovered(Path(job["file"]), out / f"{machine}.discovery.json"))
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def _discovered(csv_path: Path, summary_path: Path) -> dict:
+    """``explained`` and ``discovery`` (the summary's path) of a calibrated recording's discovery."""
+    from pipeline.discover import discover, model_words
+
+    try:
+        report = discover(read_recording(csv_path), resim=False)
+    except ValueError as exc:  # refused (too few measurements): the calibration stands
+        return {"explained": f"{NOT_RUN}: {one_line(exc)}", "discovery": None}
+    s = report.summary
+    atomic_write(summary_path, json.dumps(s, indent=1) + "\n", overwrite=True)
+    return {"explained": f"{'yes' if s['explained'] else 'no'}: {model_words(s['effects'])}",
+            "discovery": str(summary_path)}
 
 
 def _cell(v, digits=4) -> str:
@@ -193,7 +220,9 @@ def _md_text(rows, folder) -> str:
     lines = [f"# Fleet calibration of {folder}", "",
              f"{len(rows)} machines: {ok} calibrated, {len(rows) - ok} not. Held-out: position error of the "
              "recording's validation rows, before (nominal model) and after calibration. Flagged rows: "
-             "1-based data rows of the recording. explained: n/a (effect discovery not run).", "",
+             "1-based data rows of the recording. explained: whether the model effect discovery chose (geometry "
+             "alone, or with the effects named) explains the recording to its declared noise (its verdict in "
+             "<machine>.discovery.json; n/a: not searched).", "",
              "| machine | robot | poses (used) | held-out before (um) | after (um) | flagged rows | explained "
              "| wall (s) | status |",
              "|---|---|---|---|---|---|---|---|---|"]
@@ -229,12 +258,14 @@ def _previous_row(out: Path, machine: str) -> dict | None:
     return row if isinstance(row, dict) and row.get("machine") == machine else None
 
 
-def _done(row: dict | None, sha: str, method: str) -> bool:
-    """A previous row stands: same input and method, and its outputs are still there."""
-    if row is None or row.get("sha256") != sha or row.get("method") != method:
+def _done(row: dict | None, sha: str, method: str, discover: bool) -> bool:
+    """A previous row stands: same input, method and search, and its outputs are still there."""
+    if row is None or row.get("sha256") != sha or row.get("method") != method or \
+            bool(row.get("discover", False)) != discover:
         return False
     if row.get("status") == "calibrated":
-        return all(row.get(k) and Path(row[k]).is_file() for k in ("rrd", "summary"))
+        outputs = ("rrd", "summary") + (("discovery",) if row.get("discovery") else ())
+        return all(row.get(k) and Path(row[k]).is_file() for k in outputs)
     return row.get("status") == "error"
 
 
@@ -286,7 +317,7 @@ class _FleetLock:
         os.close(self.fd)
 
 
-def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | None = None,
+def run_fleet(folder, out=None, *, method: str = "chainwise", discover: bool = True, workers: int | None = None,
               scheduler: str | None = None, client=None, redo: bool = False, progress=None,
               display=None) -> FleetReport:
     """Calibrate every recording of ``folder`` (see the module docstring).
@@ -295,6 +326,7 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
         folder: the folder of recordings.
         out: output folder (default ``folder/calibrated``).
         method: identification method (:data:`calib.engine.METHODS`).
+        discover: search each calibrated machine's residuals for left-out physics (``explained``).
         workers, scheduler, client: the executor (:func:`pipeline.executor.run_tasks`).
         redo: calibrate every machine, even those whose row stands.
         progress: ``progress(row, done, total)`` after each machine finished here.
@@ -311,8 +343,8 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
     out = Path(out) if out is not None else folder / "calibrated"
     if client is None and scheduler:  # an unreachable cluster is refused before any output is written
         with dask_client(scheduler=scheduler) as client:
-            return run_fleet(folder, out, method=method, client=client, redo=redo, progress=progress,
-                             display=display)
+            return run_fleet(folder, out, method=method, discover=discover, client=client, redo=redo,
+                             progress=progress, display=display)
     output_folder(out)
     lock = _FleetLock(out)
     rows, ran, skipped, dirty = {}, [], [], False
@@ -322,13 +354,14 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", workers: int | Non
         for p in inputs:
             machine, sha = p.stem, input_hash(p)
             previous = None if redo else _previous_row(out, machine)
-            if _done(previous, sha, method):
+            if _done(previous, sha, method, discover):
                 rows[machine] = previous
                 skipped.append(machine)
                 continue
             # A lock left by an interrupted run (this fleet holds the folder: no other run writes it).
             (out / f".{machine}.lock").unlink(missing_ok=True)
-            jobs.append({"machine": machine, "file": str(p), "out": str(out), "method": method, "sha256": sha})
+            jobs.append({"machine": machine, "file": str(p), "out": str(out), "method": method, "sha256": sha,
+                         "discover": discover})
         dirty, last, cost = True, time.monotonic(), 0.0
         from pipeline.fleet import calibrate_machine as entry  # by name in the workers
 
@@ -359,6 +392,8 @@ def _parser():
     p.add_argument("--out", type=Path, default=None, help="output folder (default FOLDER/calibrated)")
     p.add_argument("--method", choices=list(METHODS), default="chainwise",
                    help="identification method (as python -m pipeline.run --method)")
+    p.add_argument("--no-discover", action="store_true",
+                   help="do not search the residuals for left-out physics (the explained column: n/a)")
     add_executor_arguments(p)
     p.add_argument("--redo", action="store_true", help="calibrate every machine, even those already done")
     p.add_argument("--quiet", action="store_true", help="no line per machine")
@@ -369,7 +404,8 @@ def _report_line(row, done, total) -> str:
     if row["status"] == "calibrated":
         held = "" if row["heldout_after_um"] is None else \
             f", held-out {row['heldout_before_um']:.4g} -> {row['heldout_after_um']:.4g} um"
-        what = f"calibrated ({row['robot']}, {row['poses']} poses{held})"
+        found = "" if row["explained"] == NOT_RUN else f"; explained {row['explained']}"
+        what = f"calibrated ({row['robot']}, {row['poses']} poses{held}{found})"
     else:
         what = f"error: {row['error']}"
     return f"  [{done}/{total}] {row['machine']}: {what} ({row['wall_s']:.2f} s)"
@@ -387,7 +423,8 @@ def _main(argv) -> int:
 
     t0 = time.perf_counter()
     try:
-        rep = run_fleet(args.folder, args.out, method=args.method, workers=args.workers, scheduler=args.scheduler,
+        rep = run_fleet(args.folder, args.out, method=args.method, discover=not args.no_discover,
+                        workers=args.workers, scheduler=args.scheduler,
                         redo=args.redo, progress=progress, display=display)
     except KeyboardInterrupt:
         out = args.out or args.folder / "calibrated"

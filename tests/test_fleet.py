@@ -6,6 +6,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -62,7 +63,9 @@ def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_fo
     assert bad["garbled"]["robot"] == "delta" and bad["orphan"]["robot"] is None
     assert {r["robot"] for r in ok} == set(POSES)
     for r in ok:
-        assert r["poses"] == POSES[r["robot"]] and r["explained"] == "n/a"
+        # Simulated with the geometric errors and sensor noise only: geometry explains each one.
+        assert r["poses"] == POSES[r["robot"]] and r["explained"] == "yes: geometry alone", r
+        assert json.loads(Path(r["discovery"]).read_text())["explained"] is True
         assert 0 < r["heldout_after_um"] < r["heldout_before_um"]  # calibration helped on held-out rows
         assert (out / f"{r['machine']}.rrd").is_file()
         assert json.loads((out / f"{r['machine']}.summary.json").read_text())["robot"] == r["robot"]
@@ -245,3 +248,43 @@ def test_a_lock_file_left_by_a_killed_fleet_blocks_nothing(fleet_folder, tmp_pat
     assert (out / ".fleet.lock").read_text() == str(killed.pid)
     rep = run_fleet(folder, out, workers=1)
     assert [r["status"] for r in rep.rows] == ["calibrated"] and not (out / ".fleet.lock").exists()
+
+
+def test_fleet_says_which_machines_the_model_explains(tmp_path, capsys):
+    """``explained``: effect discovery on each calibrated machine, against what was injected: an
+    effect of the library (named), none (geometry alone), a distortion outside the library (not
+    explained), too few measurements (refused, the calibration stands). Rerun without the search:
+    every machine redone, ``n/a``; with it again: redone once, then skipped."""
+    from pipeline.scenarios import effect_recording
+
+    folder = tmp_path / "in"
+    machines = {"scaled": ("actuator_scale", "hexapod", 1, 40), "plain": ("none", "delta", 1, 40),
+                "drifting": ("instrument_drift", "rus", 1, 40), "bent": ("none", "hexapod", 2, 40),
+                "short": ("none", "delta", 3, 9)}
+    for machine, (effect, robot, seed, n) in machines.items():
+        rec = effect_recording(effect, seed, robot=robot, n_poses=n)
+        if machine == "bent":  # a smooth distortion of the measured heights: no effect of the library
+            m = rec.measured.copy()
+            m[:, 2] += 0.01 * np.sin(m[:, 0] / 7.0) * np.cos(m[:, 1] / 9.0)
+            rec = dataclasses.replace(rec, measured=m)
+        write_recording(folder / f"{machine}.csv", rec)
+    out = tmp_path / "out"
+    rep = run_fleet(folder, out, workers=1)
+    assert {r["machine"]: r["explained"] for r in rep.rows} == {
+        "scaled": "yes: geometry + actuator_scale", "plain": "yes: geometry alone",
+        "drifting": "yes: geometry + instrument_drift", "bent": "no: geometry alone",
+        "short": "n/a: effect discovery needs at least 12 measurements, got 9"}
+    assert all(r["status"] == "calibrated" for r in rep.rows)
+    for r in rep.rows:
+        if r["machine"] != "short":
+            verdict = json.loads(Path(r["discovery"]).read_text())
+            assert verdict["explained"] == r["explained"].startswith("yes") and verdict["robot"] == r["robot"]
+    md = (out / "fleet.md").read_text()
+    assert "| yes: geometry + actuator_scale |" in md and "| no: geometry alone |" in md
+
+    assert main([str(folder), "--out", str(out), "--workers", "1", "--no-discover", "--quiet"]) == 0
+    rows = json.loads((out / "fleet.json").read_text())["rows"]
+    assert {r["explained"] for r in rows} == {"n/a"} and {r["discovery"] for r in rows} == {None}
+    assert "ran 5, skipped 0" in capsys.readouterr().out
+    assert len(run_fleet(folder, out, workers=1).ran) == 5
+    assert len(run_fleet(folder, out, workers=1).skipped) == 5
