@@ -184,12 +184,16 @@ def calibrate_machine(job: dict) -> dict:
 
 def _discovered(csv_path: Path, summary_path: Path) -> dict:
     """``explained`` and ``discovery`` (the summary's path) of a calibrated recording's discovery."""
+    from numpy.linalg import LinAlgError
+
     from pipeline.discover import discover, model_words
 
     try:
         report = discover(read_recording(csv_path), resim=False)
-    except ValueError as exc:  # refused (too few measurements): the calibration stands
-        return {"explained": f"{NOT_RUN}: {one_line(exc)}", "discovery": None}
+    except Exception as exc:  # noqa: BLE001 - refused (too few measurements) or failed: the calibration stands
+        refused = isinstance(exc, ValueError) and not isinstance(exc, LinAlgError)  # LinAlgError is a ValueError
+        why = one_line(exc) if refused else f"discovery failed: {type(exc).__name__}: {one_line(exc)}"
+        return {"explained": f"{NOT_RUN}: {why}", "discovery": None}
     s = report.summary
     atomic_write(summary_path, json.dumps(s, indent=1) + "\n", overwrite=True)
     return {"explained": f"{'yes' if s['explained'] else 'no'}: {model_words(s['effects'])}",
