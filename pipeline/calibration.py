@@ -26,7 +26,7 @@ from calib.outliers import find_outliers
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.recording import OutputError, output_folder
+from pipeline.recording import OutputError, Recording, output_folder
 
 __all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "NameReservation", "default_name", "OUTPUT_EXTENSIONS"]
@@ -75,6 +75,8 @@ class RunResult:
     summary: dict
     result: IdentificationResult
     paths: dict = field(default_factory=dict)
+    #: The recording read from ``RunSettings.real`` (None for a simulated run).
+    recording: Recording | None = None
 
 
 def default_name(settings: RunSettings) -> str:
@@ -311,13 +313,11 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, paths=paths)
+    return RunResult(summary=summary, result=result, paths=paths, recording=rec)
 
 
 def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs):
     """The analysis of :func:`run_calibration`; writes the ``.rrd`` to its temporary file."""
-    from pipeline.recording import Recording
-
     sim = None
     if rec is not None:
         robot, noise = rec.robot, rec.noise

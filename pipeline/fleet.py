@@ -62,7 +62,7 @@ from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
 from .executor import ProgressDisplay, add_executor_arguments, dask_client, run_tasks
-from .recording import OutputError, atomic_write, output_folder, read_recording, sidecar_path
+from .recording import OutputError, atomic_write, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
            "run_fleet", "main"]
@@ -177,19 +177,20 @@ def calibrate_machine(job: dict) -> dict:
                    heldout_after_um=None if not held else 1e3 * held["after"],
                    rrd=s.get("rrd"), summary=str(summary_path))
         if searched:
-            row.update(_discovered(Path(job["file"]), out / f"{machine}.discovery.json"))
+            row.update(_discovered(result.recording, out / f"{machine}.discovery.json"))
     row["wall_s"] = time.perf_counter() - t0
     return row
 
 
-def _discovered(csv_path: Path, summary_path: Path) -> dict:
-    """``explained`` and ``discovery`` (the summary's path) of a calibrated recording's discovery."""
+def _discovered(rec, summary_path: Path) -> dict:
+    """``explained`` and ``discovery`` (the summary's path) of a calibrated recording's discovery
+    (``rec``: the :class:`pipeline.recording.Recording` the calibration read)."""
     from numpy.linalg import LinAlgError
 
     from pipeline.discover import discover, model_words
 
     try:
-        report = discover(read_recording(csv_path), resim=False)
+        report = discover(rec, resim=False)
     except Exception as exc:  # noqa: BLE001 - refused (too few measurements) or failed: the calibration stands
         refused = isinstance(exc, ValueError) and not isinstance(exc, LinAlgError)  # LinAlgError is a ValueError
         why = one_line(exc) if refused else f"discovery failed: {type(exc).__name__}: {one_line(exc)}"
