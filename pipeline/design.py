@@ -429,7 +429,7 @@ def _main(argv: list[str] | None = None) -> int:
         values = search.values
         name = "log det F" if args.criterion == "d" else "lambda_min(F)"
         print(f"best of {args.starts} starts: start {search.best}, {name} {values[search.best]:.6g} "
-              f"(starts from {min(values):.6g} to {max(values):.6g})", file=sys.stderr)
+              f"(starts from {min(values):.6g} to {max(values):.6g})")
     joints = robot.inverse_kinematics(theta, res.poses)
     check_joint_limits(robot, joints, "designed pose")
     analysis = analyze_observability(robot, theta, res.poses, noise, joints=joints)
@@ -491,8 +491,7 @@ def _main(argv: list[str] | None = None) -> int:
             f"{len(published)} reference poses)" if reference is not None else "")
     print(f"wrote {csv_path} and {side}: condition number {analysis.scaled_condition_number:.4g} "
           f"(column-scaled), CRB parameter RMS {analysis.crb_rms:.4g} mm{gain}; predicted position error "
-          f"after calibration {uncertainty['position_rms_um']['mean']:.3g} um RMS (mean over the workspace)",
-          file=sys.stderr)
+          f"after calibration {uncertainty['position_rms_um']['mean']:.3g} um RMS (mean over the workspace)")
     return 0
 
 

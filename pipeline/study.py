@@ -409,8 +409,7 @@ def _main(argv: list[str] | None = None) -> int:
               f"(mean {f['mse_over_crb_mean']:.3f})"
               + (f"; held-out position error mean {held['mean'] * 1e3:.4g} um, RMS {held['rms'] * 1e3:.4g} um"
                  + (f" (predicted at the CRB {predicted * 1e3:.4g} um)" if predicted is not None else "")
-                 if held else ""),
-              file=sys.stderr)
+                 if held else ""))
     return 0
 
 

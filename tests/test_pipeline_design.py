@@ -232,7 +232,11 @@ def test_starts_give_the_same_files_on_one_and_two_workers(tmp_path, dask_two_wo
     assert main(argv + ["--scheduler", dask_two_workers.scheduler.address, "--out", str(b),
                         "--summary-json", str(tmp_path / "two.summary")]) == 0
     out, err = capsys.readouterr()
-    assert out == "" and "design search: 4/4 starts" in err  # Dask's progress of the starts, on stderr
+    assert "design search: 4/4 starts" in err  # Dask's progress of the starts, on stderr
+    # The results on stdout, one search's after the other's: the best start, then what was written.
+    lines = out.splitlines()
+    assert [line.split(":")[0] for line in lines] == ["best of 4 starts", f"wrote {a} and {a.with_suffix('.json')}"] + \
+        ["best of 4 starts", f"wrote {b} and {b.with_suffix('.json')}"] and "best of" not in err
     assert a.read_bytes() == b.read_bytes()
     assert a.with_suffix(".json").read_bytes() == b.with_suffix(".json").read_bytes()
     one, two = (json.loads((tmp_path / f"{k}.summary").read_text()) for k in ("one", "two"))

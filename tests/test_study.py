@@ -163,7 +163,10 @@ def test_cli_writes_summary_and_rrd(tmp_path, capsys, name, poses):
         argv += ["--n-poses", "8"]
     assert main(argv) == 0
     out, err = capsys.readouterr()  # --workers 1: the four chunks (one trial each) counted here, on stderr
-    assert out == "" and err.startswith("study: 0/4 tasks") and re.search(r"^study: 4/4 tasks \(.* s\), done$", err, re.M)
+    assert err.startswith("study: 0/4 tasks") and re.search(r"^study: 4/4 tasks \(.* s\), done$", err, re.M)
+    assert "parameter error RMS" not in err  # the result is on stdout, a line a method
+    assert [line.split(":")[0] for line in out.splitlines()] == ["forward", "chainwise"]
+    assert all("parameter error RMS" in line and "MSE/CRB per parameter" in line for line in out.splitlines())
     s = json.loads(summary.read_text())
     assert s["robot"] == name and s["trials"] == 4 and set(s["methods"]) == {"forward", "chainwise"}
     assert s["n_poses"] == (10 if poses == "reference" else 8)
