@@ -200,8 +200,7 @@ class Hexapod(Robot):
         if parameters:
             Jleg = np.empty((6, 7, n))
             np.negative(u.transpose(1, 0, 2), out=Jleg[:, 0:3])
-            for i in range(3):
-                Jleg[:, 4 + i] = R[0, i] * u0 + R[1, i] * u1 + R[2, i] * u2  # (R^T u)_i
+            np.einsum("ikn,iln->lkn", R, u, out=Jleg[:, 4:7])  # R^T u_l, one call for the three rows
             Jleg[:, 3] = -1.0
         return F, Jt, Jleg
 
