@@ -261,24 +261,26 @@ def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: n
 NORMAL_EQUATIONS_CONDITION = 1e6
 
 
-def _chain_steps(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _chain_steps(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(M, K) least-squares steps ``argmin |A_m x + b_m|`` of a stack of chain systems (``A``
-    (M, N, K), ``b`` (M, N)), in one batched solve of the column-scaled normal equations; a
+    (M, N, K), ``b`` (M, N)), and the Gram matrices ``A^T A`` (M, K, K) they were solved with
+    (the covariance of a fit that stops at these systems reuses them), in one batched solve of
+    the column-scaled normal equations; a
     stack with a chain whose (Cholesky-estimated) column-scaled condition number exceeds
     :data:`NORMAL_EQUATIONS_CONDITION` (or is rank deficient) is solved chain by chain by
     ``numpy.linalg.lstsq`` instead (the normal equations square the condition number)."""
-    G = np.swapaxes(A, 1, 2) @ A
-    norms = np.sqrt(np.diagonal(G, axis1=1, axis2=2))
+    gram = np.swapaxes(A, 1, 2) @ A
+    norms = np.sqrt(np.diagonal(gram, axis1=1, axis2=2))
     if np.all(norms > 0):
-        G = G / (norms[:, :, None] * norms[:, None, :])
+        G = gram / (norms[:, :, None] * norms[:, None, :])
         g = np.einsum("mnk,mn->mk", A, b) / norms
         try:
             d = np.diagonal(np.linalg.cholesky(G), axis1=1, axis2=2)
             if np.all(d.max(axis=1) <= NORMAL_EQUATIONS_CONDITION * d.min(axis=1)):
-                return -np.linalg.solve(G, g[..., None])[..., 0] / norms
+                return -np.linalg.solve(G, g[..., None])[..., 0] / norms, gram
         except np.linalg.LinAlgError:
             pass
-    return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])])
+    return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])]), gram
 
 
 def _gauss_newton(fun, jac, x0, max_iter, xtol):
@@ -695,6 +697,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     cond = np.full(robot.n_chains, np.nan)
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
+    systems = systems_jac = None  # the Gauss-Newton step's last systems and the Jacobians they are from
     if solver == "gn":
         # The closure and its Jacobians at the measured poses, for the current vector: computed
         # once per vector, they serve its Gauss-Newton step, the integrated error of the
@@ -705,9 +708,11 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         for it in range(1, max_iter + 1):
             J = jac.parameters
             step = np.zeros_like(theta)
+            systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
             for chains, params in groups:
                 A, b = _chain_systems(J, r, w, chains, params)
-                step[params] = _chain_steps(A, b)
+                step[params], gram = _chain_steps(A, b)
+                systems.append((A, gram))
             update = float(np.max(np.abs(step)))
             small_step = update <= step_tol
             if not small_step:
@@ -777,12 +782,11 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         success, message = all(oks), "; ".join(messages)
         corrected = _predicted(robot, theta, joints, measured)
         r, jac = robot.closure_with_jacobians(theta, joints, measured)
-    jac_final = jac
-    J = jac_final.parameters
     cov = np.zeros((robot.n_parameters,) * 2)
-    for chains, params in groups:
-        A, _ = _chain_systems(J, r, w, chains, params)
-        block, cond[chains] = _covariance_and_conditions(A)  # (M, K, K) and (M,), per chain
+    for k, (chains, params) in enumerate(groups):
+        # The systems of the step not taken (the noisy stop) are those of the returned vector.
+        A, gram = systems[k] if systems_jac is jac else (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
+        block, cond[chains] = _covariance_and_conditions(A, gram)  # (M, K, K) and (M,), per chain
         dof = n - params.shape[1]
         if not weighted:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
             rc = r[:, chains]
@@ -790,7 +794,7 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
                 np.full_like(block, np.nan)
         cov[params[:, :, None], params[:, None, :]] = block
     if noise_given:
-        white = r / np.maximum(_closure_std(robot, jac_final, noise), 1e-12)
+        white = r / np.maximum(_closure_std(robot, jac, noise), 1e-12)
         chi2 = float(np.sum(white ** 2))
     else:
         chi2 = float("nan")

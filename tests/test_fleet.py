@@ -96,11 +96,7 @@ def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_fo
 
 def test_fleet_on_a_cluster_prints_rows_and_dask_s_progress_on_stderr(fleet_folder, tmp_path, dask_two_workers,
                                                                      capsys):
-    folder = tmp_path / "three"
-    folder.mkdir()
-    for name in ("hexapod_00", "delta_00", "rus_00"):
-        for p in (fleet_folder / f"{name}.csv", sidecar_path(fleet_folder / f"{name}.csv")):
-            shutil.copy(p, folder / p.name)
+    folder = some_machines(fleet_folder, tmp_path / "three", "hexapod_00", "delta_00", "rus_00")
     assert main([str(folder), "--scheduler", dask_two_workers.scheduler.address]) == 0
     out, err = capsys.readouterr()
     assert out.startswith(f"fleet {folder}: 3 machines, 3 calibrated") and "fleet: " not in out
@@ -175,7 +171,7 @@ def test_unreachable_scheduler_is_refused_before_any_output(fleet_folder, tmp_pa
     folder (the fleet writes its table as machines land, so it connects first)."""
     import dask
 
-    folder = one_machine(fleet_folder, tmp_path / "one", "hexapod_00")
+    folder = some_machines(fleet_folder, tmp_path / "one", "hexapod_00")
     capsys.readouterr()
     with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
         assert main([str(folder), "--scheduler", address]) == 2
@@ -198,11 +194,12 @@ sys.stdin.read()
 """
 
 
-def one_machine(fleet_folder, folder, stem):
-    """``folder`` (created) holding one recording of the fleet, ``stem``, and its sidecar."""
+def some_machines(fleet_folder, folder, *stems):
+    """``folder`` (created) holding the recordings ``stems`` of the fleet, with their sidecars."""
     folder.mkdir()
-    for p in (fleet_folder / f"{stem}.csv", sidecar_path(fleet_folder / f"{stem}.csv")):
-        shutil.copy(p, folder / p.name)
+    for stem in stems:
+        for p in (fleet_folder / f"{stem}.csv", sidecar_path(fleet_folder / f"{stem}.csv")):
+            shutil.copy(p, folder / p.name)
     return folder
 
 
@@ -219,7 +216,7 @@ def test_a_second_fleet_on_one_output_folder_is_refused(fleet_folder, tmp_path, 
     """While another process holds the folder's lock: exit 2, one line (naming the holder when its id
     is in the file), nothing written. Before the lock was a kernel lock, a lock file still empty was
     read as stale and taken over: two fleets wrote one folder."""
-    folder = one_machine(fleet_folder, tmp_path / "one", "rus_00")
+    folder = some_machines(fleet_folder, tmp_path / "one", "rus_00")
     out = tmp_path / "out"
     out.mkdir()
     holder = hold_lock(out, written)
@@ -239,7 +236,7 @@ def test_a_second_fleet_on_one_output_folder_is_refused(fleet_folder, tmp_path, 
 
 def test_a_lock_file_left_by_a_killed_fleet_blocks_nothing(fleet_folder, tmp_path):
     """A fleet killed outright leaves its lock file (with its process id) but not its lock."""
-    folder = one_machine(fleet_folder, tmp_path / "one", "hexapod_00")
+    folder = some_machines(fleet_folder, tmp_path / "one", "hexapod_00")
     out = tmp_path / "out"
     out.mkdir()
     killed = hold_lock(out, "pid")
@@ -298,6 +295,6 @@ def test_a_failed_discovery_leaves_the_calibration_standing(fleet_folder, tmp_pa
         raise np.linalg.LinAlgError("Singular matrix")
 
     monkeypatch.setattr(pipeline.discover, "discover", broken)
-    rep = run_fleet(one_machine(fleet_folder, tmp_path / "one", "delta_01"), tmp_path / "out", workers=1)
+    rep = run_fleet(some_machines(fleet_folder, tmp_path / "one", "delta_01"), tmp_path / "out", workers=1)
     assert [(r["status"], r["explained"]) for r in rep.rows] == [
         ("calibrated", "n/a: discovery failed: LinAlgError: Singular matrix")]
