@@ -3,7 +3,7 @@
 Usage::
 
     python -m pipeline.fleet FOLDER [--out DIR] [--method chainwise|forward] [--no-discover]
-        [--workers N] [--scheduler ADDRESS] [--redo]
+        [--workers N] [--scheduler ADDRESS] [--redo] [--quiet]
 
 Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machine's recording
 (CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is
