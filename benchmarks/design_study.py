@@ -45,8 +45,9 @@ from calib.noise import SensorNoise  # noqa: E402
 from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
 from pipeline.design import DEFAULT_CANDIDATES, design_start  # noqa: E402
-from pipeline.executor import add_executor_arguments, dask_client, run_tasks, runs_here  # noqa: E402
-from pipeline.recording import atomic_write  # noqa: E402
+from pipeline.cli import add_executor_arguments
+from pipeline.execution import dask_client, run_tasks, runs_here  # noqa: E402
+from pipeline.formats import atomic_write  # noqa: E402
 from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
 
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")

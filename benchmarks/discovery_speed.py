@@ -18,7 +18,7 @@ import numpy as np
 
 from calib.effects import EffectData, discover_effects
 from pipeline.discover import discover
-from pipeline.scenarios import effect_recording
+from pipeline.simulation import effect_recording
 
 CASES = (("hexapod", ()), ("hexapod", ("joint_friction",)), ("hexapod", ("joint_friction", "thermal_drift")),
          ("hexapod", ("compliance", "joint_friction", "periodic_screw_error")), ("delta", ("joint_friction",)))

@@ -51,7 +51,7 @@ import numpy as np
 from calib.robots import default_robot, reference_errors
 from calib.workspace import reachable_poses
 from mjcf.machine import MachineOptions
-from pipeline.testbed import Testbed
+from pipeline.simulation import Testbed
 name, n, variant, gravity, out = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4] == "1", sys.argv[5]
 robot = default_robot(name)
 theta = robot.table.nominal + reference_errors(robot, 0)

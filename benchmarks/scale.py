@@ -60,8 +60,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calib.design import design_poses, robot_workspace, sample_feasible_poses  # noqa: E402
 from calib.noise import SensorNoise  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
-from pipeline.executor import THREADS_VAR, dask_client, run_tasks  # noqa: E402
-from pipeline.recording import atomic_write  # noqa: E402
+from pipeline.execution import THREADS_VAR, dask_client, run_tasks  # noqa: E402
+from pipeline.formats import atomic_write  # noqa: E402
 from pipeline.study import monte_carlo, true_errors  # noqa: E402
 
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
@@ -194,9 +194,9 @@ def study_on(client, inputs, trials):
 
 
 def fleet_cost(n_machines: int) -> dict:
-    from pipeline.calibration import RunSettings, run_calibration
+    from pipeline.workflows.calibration import RunSettings, run_calibration
     from pipeline.fleet import calibrate_machine, input_hash
-    from pipeline.recording import read_recording, write_recording
+    from pipeline.formats import read_recording, write_recording
 
     poses = {"hexapod": 12, "delta": 12, "rus": 20}
     with tempfile.TemporaryDirectory() as tmp:

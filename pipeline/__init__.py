@@ -1,31 +1,23 @@
-"""Orchestration and I/O: the simulated testbed, recordings, Rerun logging, command lines.
+"""The edges of the workbench: files, simulation, views, command lines, execution on Dask.
 
-The names below are imported from their modules when first used, so that a command imports only
-what it needs (``python -m pipeline.run --help`` loads neither MuJoCo nor Rerun).
+Rooms, each a subpackage whose ``__init__`` exports what the others may use (imports run one way,
+from the commands down; see docs/architecture.md):
+
+* ``python -m pipeline.<tool>``: the commands (``run``, ``discover``, ``design``, ``study``,
+  ``blind``, ``fleet``, ``snapshot``), each a thin front end: parse, call one library function,
+  print its result; :mod:`pipeline.cli` holds what they share;
+* :mod:`pipeline.workflows`: the tools' library functions (settings in, result out);
+* :mod:`pipeline.views`: Rerun files and their layouts, reading them back, headless snapshots;
+* :mod:`pipeline.formats`: the recording format, its checks, safe writing of outputs;
+* :mod:`pipeline.simulation`: the simulated lab (testbed, scenarios) over :mod:`mjcf`;
+* :mod:`pipeline.execution`: many-task jobs on Dask.
+
+The names below are imported from their rooms when first used.
 """
 
-from __future__ import annotations
+from .lazy import lazy_exports
 
-import importlib
-
-__all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "Testbed", "Measurements", "SettleError"]
-
-#: submodule -> the names this package re-exports from it (imported on first use).
-_EXPORTS = {
-    "recording": ("Recording", "RecordingError", "read_recording", "write_recording"),
-    "testbed": ("Testbed", "Measurements", "SettleError"),
-}
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-
-def __getattr__(name: str):
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module 'pipeline' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_MODULE_OF))
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "formats": ("Recording", "RecordingError", "read_recording", "write_recording"),
+    "simulation": ("Testbed", "Measurements", "SettleError"),
+})

@@ -1,7 +1,7 @@
 """The blind suite: does discovery name what it is not told, and say what it cannot explain?
 
 ``python -m pipeline.blind --robot NAME --seeds 20`` simulates seeded recordings of the robot's
-MuJoCo machine (:func:`pipeline.scenarios.effect_recording`: 60-120 poses in random order, the
+MuJoCo machine (:func:`pipeline.simulation.effect_recording`: 60-120 poses in random order, the
 scenario machine's geometric errors, 1 um noise, each effect's largest contribution 3-10 times
 the noise) and runs :func:`pipeline.discover.discover` on each without telling it the truth.
 Kinds of recording (``--kinds``):
@@ -25,7 +25,7 @@ The derived kinds reuse the single-effect recordings (no further simulation). Ea
 whether its acceptance criterion holds (:func:`criteria`); :func:`rates_table` sums them up.
 Recordings run in parallel on the Dask executor (:mod:`pipeline.executor`: a local cluster of
 ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``); the rates go to
-stdout, progress to stderr (the recordings done, however they run: :class:`pipeline.executor.ProgressDisplay`).
+stdout, progress to stderr (the recordings done, however they run: :class:`pipeline.execution.ProgressDisplay`).
 """
 
 from __future__ import annotations
@@ -41,7 +41,8 @@ from calib.effects.discovery import SIGNIFICANCE_ALPHA
 from calib.robots import ROBOTS, default_robot
 
 from .cli import ArgumentParser, cli_main, nonnegative_int, positive_int
-from .executor import ProgressDisplay, add_executor_arguments, default_workers, run_tasks
+from pipeline.execution import ProgressDisplay, default_workers, run_tasks
+from pipeline.cli import add_executor_arguments
 
 __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria",
            "failure_lines", "rates_table", "run", "main"]
@@ -112,7 +113,7 @@ def blind_case(args: tuple) -> list[dict]:
         One dict per analysis: the truth, what discovery said, and :func:`criteria`.
     """
     robot_name, effects, seed, kinds = args
-    from pipeline.scenarios import effect_recording
+    from pipeline.simulation import effect_recording
 
     robot = default_robot(robot_name)
     rec = effect_recording(tuple(effects) or "none", seed, robot=robot)
@@ -213,11 +214,11 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         pairs: pairs of effects for ``pair`` (default every pair of applying effects but nested
             ones, e.g. ``thermal_drift`` and ``thermal_warmup``: a drift plus a warm-up is a
             warm-up with a drift, and selection names one member of a family, never two).
-        workers: processes of the local Dask cluster (:func:`pipeline.executor.run_tasks`);
+        workers: processes of the local Dask cluster (:func:`pipeline.execution.run_tasks`);
             default the cores, at most one a recording; 1 runs here.
         scheduler: address of an existing Dask cluster to run on instead.
         progress: ``progress(done, total)`` after each recording.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the recordings done, however they run.
+        display: a :class:`pipeline.execution.ProgressDisplay` showing the recordings done, however they run.
     """
     cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
     workers = max(1, min(len(cases), default_workers())) if workers is None else workers

@@ -11,7 +11,7 @@ import argparse
 import sys
 
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int", "check_outputs",
-           "EXIT_USAGE", "EXIT_INTERRUPTED"]
+           "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
 EXIT_USAGE = 2
@@ -82,8 +82,29 @@ def positive_int(text: str) -> int:
 def check_outputs(paths: dict, *, overwrite: bool) -> None:
     """Check output paths before any work (see :class:`pipeline.recording.ResultSet`); ``paths``
     maps each flag to its path (``None``: not asked for)."""
-    from pipeline.recording import ResultSet
+    from pipeline.formats import ResultSet
 
     given = {flag: path for flag, path in paths.items() if path}
     with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
         pass
+
+
+def scheduler_address(text: str) -> str:
+    """argparse type: the address of a Dask scheduler (``tcp://host:8786``, ``host:8786``, ``tls://...``),
+    checked for its form only (whether a scheduler answers there is found on connecting)."""
+    from distributed.comm import get_address_host_port  # only when the flag is given
+
+    try:
+        get_address_host_port(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not a Dask scheduler address: {exc}") from None
+    return text
+
+
+def add_executor_arguments(parser) -> None:
+    """``--workers N`` and ``--scheduler ADDRESS`` (the executor of a many-task command)."""
+    parser.add_argument("--workers", type=positive_int, default=None,
+                        help="processes of the local Dask cluster (default: all cores; 1: run here, "
+                             "no cluster)")
+    parser.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
+                        help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")

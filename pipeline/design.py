@@ -54,8 +54,9 @@ from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int, positive_int
-from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, worker_count
-from pipeline.recording import atomic_write, sidecar_path
+from pipeline.execution import ProgressDisplay, run_tasks, worker_count
+from pipeline.cli import add_executor_arguments
+from pipeline.formats import atomic_write, sidecar_path
 
 __all__ = [
     "DEFAULT_NOISE",
@@ -170,8 +171,8 @@ def design_search(robot: Robot, theta, n: int, workspace: Workspace, noise: Sens
         seed: the search's seed; start ``k`` draws its candidates from :func:`start_seed`.
         starts: independent searches (1: the single search of ``design_poses`` with ``seed``).
         workers: processes of the local Dask cluster (default the cores, at most ``starts``;
-            1 runs here). ``scheduler``, ``client``: as :func:`pipeline.executor.run_tasks`.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the starts done, however they run.
+            1 runs here). ``scheduler``, ``client``: as :func:`pipeline.execution.run_tasks`.
+        display: a :class:`pipeline.execution.ProgressDisplay` showing the starts done, however they run.
 
     Returns:
         The :class:`DesignSearch`; the same whatever runs it.
@@ -504,8 +505,8 @@ def _write_rrd(path: str, robot: Robot, analysis, reference, poses: np.ndarray, 
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from pipeline.obs_log import log_observability, observability_views
-    from pipeline.rerun_log import APP_IDS, save_recording
+    from pipeline.views import log_observability, observability_views
+    from pipeline.views import application_id, save_recording
 
     views = [observability_views("design/observability", "Designed poses", per_parameter=True)]
     if reference is not None:
@@ -529,7 +530,7 @@ def _write_rrd(path: str, robot: Robot, analysis, reference, poses: np.ndarray, 
                               title=f"Reference poses ({robot.name})")
 
     try:
-        save_recording(path, log, application_id=APP_IDS["design"], overwrite=overwrite, bp=bp)
+        save_recording(path, log, application_id=application_id("design", robot.name), overwrite=overwrite, bp=bp)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
 

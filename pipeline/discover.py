@@ -7,7 +7,7 @@ remains is consistent with the declared noise and, if not, what it is, where and
 shows the held-out fit improve, and re-simulates the MuJoCo machine with the effects added (their
 own :meth:`~calib.effects.Effect.machine_settings`), re-fitting a physical parameter there with
 ``mujoco.sysid``. ``--robot NAME --scenario EFFECT[,EFFECT]`` runs it on a seeded simulated
-recording instead (:func:`pipeline.scenarios.effect_recording`).
+recording instead (:func:`pipeline.simulation.effect_recording`).
 
 Callable from Python as :func:`discover`. Nothing here depends on the robot or the effect.
 """
@@ -32,8 +32,8 @@ from calib.robots import ROBOTS
 from calib.effects.discovery import MIN_NESTED_DELTA_BIC, MIN_ROWS
 
 from .cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
-from .recording import Recording, atomic_write, output_folder, read_recording
-from .scenarios import effect_recording, effects_settings, machine_context, merged_settings, simulate
+from pipeline.formats import Recording, atomic_write, output_folder, read_recording
+from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 
 __all__ = ["discover", "DiscoveryReport", "resimulate", "run", "main", "RESIMULATION_SETTLE_VELOCITY",
            "PLOTTED_QUANTITIES", "quantity_values", "verdict_quantity", "discovery_markdown", "verdict_words",
@@ -82,7 +82,7 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
 
     Before: the machine with the geometry identified alone. After: the machine with the
     geometry identified jointly with the named effects, and their physics added (their
-    ``machine_settings``, together: :func:`pipeline.scenarios.effects_settings`); the first
+    ``machine_settings``, together: :func:`pipeline.simulation.effects_settings`); the first
     named effect that names a physical parameter (``physical_parameter``: servo stiffness,
     friction force, drift rate) has it re-fitted in MuJoCo with ``mujoco.sysid`` (confidence
     interval from its Jacobian). The transmission
@@ -425,8 +425,8 @@ def write_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport,
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from .rerun_log import (APP_IDS, FLAG_COLOR, MACHINE_COLORS, chain_colors, chart_view, log_named_bars,
-                            log_residual_scatter, save_recording)
+    from pipeline.views import (application_id, FLAG_COLOR, MACHINE_COLORS, chain_colors, chart_view,
+                                log_named_bars, log_residual_scatter, save_recording)
 
     disc, s = report.discovery, report.summary
     rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
@@ -506,7 +506,7 @@ def write_rrd(path: Path, robot: Robot, rec: Recording, report: DiscoveryReport,
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         collapse_panels=True)
-    return save_recording(path, log, application_id=APP_IDS["discover"], overwrite=overwrite, bp=bp)
+    return save_recording(path, log, application_id=application_id("discover", robot.name), overwrite=overwrite, bp=bp)
 
 
 def _names(text: str) -> tuple[str, ...]:

@@ -7,7 +7,7 @@ Usage::
 
 Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machine's recording
 (CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is
-calibrated by :func:`pipeline.calibration.run_calibration` (``RunSettings(real=FILE)``: the
+calibrated by :func:`pipeline.workflows.calibration.run_calibration` (``RunSettings(real=FILE)``: the
 analysis of ``python -m pipeline.run --real FILE``), then its residuals searched for the physics the
 geometric model left out (:func:`pipeline.discover.discover`, without its MuJoCo re-simulation;
 ``--no-discover``: not searched), as one task of :mod:`pipeline.executor` (a local Dask
@@ -42,7 +42,7 @@ with the process however it ends). Exit status 0 when every row is
 calibrated, 1 when some row is an error, 2 for a refused input or output.
 
 On stderr: one line per machine as it lands (``--quiet``: none) and the fleet's progress, however
-it runs (:class:`pipeline.executor.ProgressDisplay`, the lines of the machines printed above it);
+it runs (:class:`pipeline.execution.ProgressDisplay`, the lines of the machines printed above it);
 stdout gets the summary at the end.
 """
 
@@ -61,8 +61,9 @@ from pathlib import Path
 from calib.engine import METHODS
 
 from .cli import EXIT_INTERRUPTED, ArgumentParser, cli_main, one_line
-from .executor import ProgressDisplay, add_executor_arguments, dask_client, run_tasks
-from .recording import OutputError, atomic_write, output_folder, sidecar_path
+from pipeline.execution import ProgressDisplay, dask_client, run_tasks
+from pipeline.cli import add_executor_arguments
+from pipeline.formats import OutputError, atomic_write, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
            "run_fleet", "main"]
@@ -151,7 +152,7 @@ def calibrate_machine(job: dict) -> dict:
         not searched); a file that cannot be calibrated gives ``status="error"`` and ``error``,
         the reason in one line.
     """
-    from pipeline.calibration import RunSettings, run_calibration
+    from pipeline.workflows.calibration import RunSettings, run_calibration
 
     t0 = time.perf_counter()
     machine, out = job["machine"], Path(job["out"])
@@ -332,10 +333,10 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", discover: bool = T
         out: output folder (default ``folder/calibrated``).
         method: identification method (:data:`calib.engine.METHODS`).
         discover: search each calibrated machine's residuals for left-out physics (``explained``).
-        workers, scheduler, client: the executor (:func:`pipeline.executor.run_tasks`).
+        workers, scheduler, client: the executor (:func:`pipeline.execution.run_tasks`).
         redo: calibrate every machine, even those whose row stands.
         progress: ``progress(row, done, total)`` after each machine finished here.
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the machines done, however they run.
+        display: a :class:`pipeline.execution.ProgressDisplay` showing the machines done, however they run.
 
     Raises:
         ValueError: ``folder`` is not a folder, ``method`` unknown, or ``out`` cannot be written

@@ -1,6 +1,6 @@
 """``python -m pipeline.run``: calibrate any registered robot, simulated or from a recording.
 
-Thin: parses the flags, calls :func:`pipeline.calibration.run_calibration`, prints the summary.
+Thin: parses the flags, calls :func:`pipeline.workflows.calibration.run_calibration`, prints the summary.
 The calibration (and with it MuJoCo and Rerun) is imported when a run starts, not for ``--help``.
 """
 
@@ -20,7 +20,7 @@ from calib.robots import ROBOTS
 from .cli import ArgumentParser, cli_main
 
 if TYPE_CHECKING:
-    from .calibration import RunResult, RunSettings
+    from pipeline.workflows.calibration import RunResult, RunSettings
 
 __all__ = ["main", "build_parser", "settings_from_args", "run", "print_summary"]
 
@@ -102,7 +102,7 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
     if args.real is not None and not args.real.is_file():
         raise ValueError(f"--real {args.real}: " + ("is a folder, not a recording" if args.real.is_dir()
                                                      else "file not found"))
-    from .calibration import RunSettings
+    from pipeline.workflows.calibration import RunSettings
 
     fields = {k: v for k, v in vars(args).items() if k != "quiet"}
     return RunSettings(**fields)
@@ -166,7 +166,7 @@ def print_summary(s: dict) -> None:
 def run(argv: list[str] | None = None) -> RunResult:
     """Parse ``argv`` and run (for Python callers and tests); raises on bad input."""
     args = build_parser().parse_args(argv)
-    from .calibration import run_calibration
+    from pipeline.workflows.calibration import run_calibration
 
     result = run_calibration(settings_from_args(args), progress=_progress(not args.quiet))
     if args.summary_json is not None:

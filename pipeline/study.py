@@ -33,7 +33,7 @@ Trials run in chunks on a Dask cluster (:mod:`pipeline.executor`: a local cluste
 ``--workers`` processes, default the number of cores, one BLAS thread each; ``--workers 1`` runs
 here; ``--scheduler ADDRESS`` runs on an existing cluster); the simulation of a chunk is
 vectorised (one forward-kinematics solve for all its trials). Progress goes to stderr: the chunks
-done, however they run (:class:`pipeline.executor.ProgressDisplay`).
+done, however they run (:class:`pipeline.execution.ProgressDisplay`).
 """
 
 from __future__ import annotations
@@ -53,9 +53,10 @@ from calib.observability import analyze_observability, free_indices, parameter_s
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
-from pipeline.executor import ProgressDisplay, add_executor_arguments, run_tasks, worker_count
+from pipeline.execution import ProgressDisplay, run_tasks, worker_count
+from pipeline.cli import add_executor_arguments
 from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
-from pipeline.recording import atomic_write
+from pipeline.formats import atomic_write
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
            "compensation_errors", "run_trials", "monte_carlo", "summarize", "main"]
@@ -203,7 +204,7 @@ def monte_carlo(robot: Robot, theta_true, commanded, noise: SensorNoise, trials:
         initial: (N, D) start of the forward kinematics (e.g. the target poses); default home.
         scheduler: address of an existing Dask cluster to run on instead (``--scheduler``).
         client: an open ``distributed.Client`` to run on (left open).
-        display: a :class:`pipeline.executor.ProgressDisplay` showing the chunks done, however they run.
+        display: a :class:`pipeline.execution.ProgressDisplay` showing the chunks done, however they run.
 
     The trials run in chunks (:func:`run_trials`, eight a worker) on the executor of
     :mod:`pipeline.executor`; trial ``k``'s noise depends on ``seed`` and ``k`` only, so the
@@ -440,8 +441,8 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from pipeline.obs_log import log_bars, log_observability, observability_views
-    from pipeline.rerun_log import APP_IDS, chart_view, save_recording
+    from pipeline.views import log_bars, log_observability, observability_views
+    from pipeline.views import application_id, chart_view, save_recording
 
     names = list(analysis.names)
     views = [observability_views("study/observability", "Calibration poses", per_parameter=True)]
@@ -473,7 +474,7 @@ def _write_rrd(path, analysis, results, figures, summary, overwrite) -> None:
                                  columns=rr.Scalars.columns(scalars=hp * 1e3))
 
     try:
-        save_recording(path, log, application_id=APP_IDS["study"], overwrite=overwrite, bp=bp)
+        save_recording(path, log, application_id=application_id("study", summary["robot"]), overwrite=overwrite, bp=bp)
     except FileExistsError as exc:
         raise SystemExit(str(exc)) from None
 

@@ -28,7 +28,7 @@ def rng():
 def dask_two_workers():
     """A Dask client on a local cluster of two worker processes (one thread, one BLAS thread
     each), started once for the tests that need it (starting one costs seconds)."""
-    from pipeline.executor import dask_client
+    from pipeline.execution import dask_client
 
     with dask_client(2) as client:
         yield client

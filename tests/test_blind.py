@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import pipeline.blind as blind
-import pipeline.executor as executor
-import pipeline.scenarios as scenarios
+import pipeline.execution as executor
+import pipeline.simulation as scenarios
 from calib.effects import effect_family, effects_for
 from calib.noise import SensorNoise
 from calib.robots import default_robot

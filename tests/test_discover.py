@@ -11,9 +11,9 @@ from calib.robots.hexapod import Hexapod, paper_hexapod
 from calib.rotation import rotation_matrix
 from pipeline.blind import run_blind_suite
 from pipeline.discover import discover, main
-from pipeline.recording import read_recording, write_recording
-from pipeline.rerun_log import rrd_entities
-from pipeline.scenarios import effect_recording
+from pipeline.formats import read_recording, write_recording
+from pipeline.views import rrd_entities
+from pipeline.simulation import effect_recording
 
 #: Robots whose blind suite runs in the tests (the Delta's and the third robot's single-effect
 #: rates are measured by benchmarks/blind_rates.py: their MuJoCo recordings take several times

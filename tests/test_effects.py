@@ -463,7 +463,7 @@ def test_instrument_drift_is_a_moving_frame_not_moving_joints(robot_name):
 
 def test_the_testbed_moves_the_measured_positions_only():
     from mjcf.machine import MachineEffects
-    from pipeline.testbed import Testbed
+    from pipeline.simulation import Testbed
 
     robot = default_robot("delta")
     q = robot.inverse_kinematics(robot.table.nominal, robot.workspace_bounds().mean(axis=1)[None] + [[0, 0, 0], [20, 0, 0]])
@@ -586,7 +586,7 @@ def test_a_warmup_well_inside_the_recording_is_named_warmup_over_the_drift():
 
 def test_the_testbed_steps_one_joint_and_warms_the_legs_up():
     from mjcf.machine import MachineEffects
-    from pipeline.testbed import Testbed
+    from pipeline.simulation import Testbed
 
     robot = default_robot("hexapod")
     q = robot.inverse_kinematics(robot.table.nominal, np.tile(robot.home_pose, (3, 1)))

@@ -10,11 +10,12 @@ import time
 
 import pytest
 
-from pipeline.executor import THREADS_VAR, WORKER_ENV, ProgressDisplay, default_workers, run_tasks, runs_here, worker_count
+from pipeline.execution import (THREADS_VAR, WORKER_ENV, ProgressDisplay, default_workers, run_tasks,
+                                runs_here, worker_count)
 
 
 def worker_threads(_):
-    from pipeline.testbed import available_cores
+    from pipeline.execution import available_cores
 
     return {k: os.environ.get(k) for k in WORKER_ENV}, available_cores()
 
@@ -56,7 +57,7 @@ def test_a_finished_job_sends_the_scheduler_no_cancel_request(dask_two_workers):
 
 
 def test_available_cores_honours_the_thread_limit(monkeypatch):
-    from pipeline.testbed import available_cores
+    from pipeline.execution import available_cores
 
     monkeypatch.delenv(THREADS_VAR, raising=False)
     every = available_cores()

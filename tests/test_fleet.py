@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.calibration import RunSettings, run_calibration
+from pipeline.workflows.calibration import RunSettings, run_calibration
 from pipeline.fleet import TABLE_COLUMNS, input_hash, main, run_fleet
-from pipeline.recording import read_recording, sidecar_path, write_recording
+from pipeline.formats import read_recording, sidecar_path, write_recording
 
 #: Calibration poses simulated per robot (the rus has 66 parameters: 20 poses, twice its fewest).
 POSES = {"hexapod": 12, "delta": 12, "rus": 20}
@@ -252,7 +252,7 @@ def test_fleet_says_which_machines_the_model_explains(tmp_path, capsys):
     effect of the library (named), none (geometry alone), a distortion outside the library (not
     explained), too few measurements (refused, the calibration stands). Rerun without the search:
     every machine redone, ``n/a``; with it again: redone once, then skipped."""
-    from pipeline.scenarios import effect_recording
+    from pipeline.simulation import effect_recording
 
     folder = tmp_path / "in"
     machines = {"scaled": ("actuator_scale", "hexapod", 1, 40), "plain": ("none", "delta", 1, 40),

@@ -21,7 +21,7 @@ from calib.noise import SensorNoise
 from calib.robots import paper_hexapod
 from calib.rotation import euler_from_matrix, rotation_matrix
 from calib.workspace import reachable_poses
-from pipeline.recording import Recording, read_recording, write_recording
+from pipeline.formats import Recording, read_recording, write_recording
 from pipeline.run import main, run
 
 ROBOT = paper_hexapod()
@@ -349,7 +349,7 @@ def test_an_explicit_name_taken_is_refused_before_any_work(work, capsys):
 
 
 def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, monkeypatch):
-    import pipeline.calibration as calibration
+    import pipeline.workflows.calibration as calibration
 
     csv_path, out = work
 
@@ -363,7 +363,7 @@ def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, mon
 
 
 def test_concurrent_runs_into_one_folder_get_their_own_names(work):
-    from pipeline.calibration import NameReservation, RunSettings
+    from pipeline.workflows.calibration import NameReservation, RunSettings
 
     csv_path, out = work
     settings = RunSettings(real=csv_path, out=out)

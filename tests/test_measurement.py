@@ -213,7 +213,7 @@ def hexapod_recording(tmp_path_factory):
 
 def test_real_recording_in_a_far_frame_reports_the_frame(hexapod_recording):
     from dataclasses import replace
-    from pipeline.recording import read_recording, write_recording
+    from pipeline.formats import read_recording, write_recording
     from pipeline.run import run
     out, base = hexapod_recording
     rec = read_recording(out / "base.csv")
@@ -240,7 +240,7 @@ def test_real_recording_in_a_far_frame_reports_the_frame(hexapod_recording):
 
 def test_real_position_only_recording_round_trips_and_calibrates(hexapod_recording):
     from dataclasses import replace
-    from pipeline.recording import read_recording, write_recording
+    from pipeline.formats import read_recording, write_recording
     from pipeline.run import run
     out, base = hexapod_recording
     rec = read_recording(out / "base.csv")

@@ -11,7 +11,7 @@ from mjcf import build_machine
 from mjcf.delta import ARM_JOINTS, DEFAULT_STIFFNESS_NM_PER_RAD, build_spec
 from mjcf.machine import GRAVITY_M_S2, PLATFORM_SITE, SENSOR_POS, MachineOptions
 from mjcf.units import m_to_mm
-from pipeline.testbed import SettleError, Testbed
+from pipeline.simulation import SettleError, Testbed
 
 ROBOT = Delta()
 NOMINAL = ROBOT.table.nominal

@@ -293,7 +293,7 @@ def test_cli_e_optimal_default_workspace(tmp_path, name):
 def test_observability_markdown_and_type_check():
     import rerun as rr
 
-    from pipeline.obs_log import log_observability, observability_markdown
+    from pipeline.views import log_observability, observability_markdown
 
     a = analyze_observability(HEXAPOD, HEXAPOD.table.nominal, paper.TABLE4_NOMINAL_POSES,
                               SensorNoise(1e-3, 1e-6, "normal"))
@@ -305,7 +305,7 @@ def test_observability_markdown_and_type_check():
 
 
 def test_observability_markdown_names_the_delta_null_directions():
-    from pipeline.obs_log import observability_markdown
+    from pipeline.views import observability_markdown
 
     poses = optimal_poses(DELTA, 10, n_candidates=100)
     a = analyze_observability(DELTA, DELTA.table.nominal, poses, SensorNoise(1e-3, 0.0, "normal"),

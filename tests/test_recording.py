@@ -5,7 +5,7 @@ import pytest
 
 from calib.noise import SensorNoise
 from calib.robots import paper_hexapod
-from pipeline.recording import Recording, RecordingError, read_recording, write_recording
+from pipeline.formats import Recording, RecordingError, read_recording, write_recording
 
 
 def make_recording(n=8, seed=0):

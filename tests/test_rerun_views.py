@@ -9,8 +9,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from calib.robots import ROBOTS, default_robot
-from pipeline.rerun_log import (APP_IDS, chart_view, empty_views, log_named_bars, log_residual_scatter,
-                                rrd_application_ids, rrd_blueprint, rrd_entities, rrd_labels, save_recording)
+from pipeline.views import (TOOLS, application_id, chart_view, empty_views, log_named_bars,
+                            log_residual_scatter, rrd_application_ids, rrd_blueprint, rrd_entities,
+                            rrd_labels, save_recording)
 from pipeline.run import run
 
 
@@ -62,7 +63,7 @@ def test_machine_is_drawn_at_every_calibration_pose(robot_run):
 
 def test_bar_values_are_the_array_rerun_builds():
     """The bar chart's tensor assembled in Arrow (no pyarrow.compute) is Rerun's own."""
-    from pipeline.obs_log import bar_values
+    from pipeline.views import bar_values
 
     v = np.array([3.0, -1.5, 0.0, 2e-9])
     assert rr.BarChart(bar_values(v)).values.pa_array.equals(rr.BarChart(v).values.pa_array)
@@ -98,7 +99,7 @@ def test_a_view_without_data_on_the_active_timeline_is_reported(tmp_path):
         rec.set_time("other", sequence=0)
         rec.log("a", rr.Scalars(1.0))
 
-    save_recording(tmp_path / "x.rrd", log, bp=bp)
+    save_recording(tmp_path / "x.rrd", log, application_id=application_id("run", "hexapod"), bp=bp)
     assert empty_views(tmp_path / "x.rrd") == ["elsewhere"]
 
 
@@ -115,16 +116,17 @@ def _discovery_like(path):
         log_named_bars(rec, "evidence", ["gravity", "backlash", "thermal"], [("delta BIC", [-40.0, 3.0, 1.0],
                                                                            (235, 205, 60))], unit="1")
 
-    return save_recording(path, log, application_id=APP_IDS["discover"], bp=bp)
+    return save_recording(path, log, application_id=application_id("discover", "hexapod"), bp=bp)
 
 
 def test_run_and_discovery_files_keep_their_own_layouts(robot_run, tmp_path):
-    _, rrd, _ = robot_run
+    name, rrd, _ = robot_run
     disc = _discovery_like(tmp_path / "d.rrd")
-    assert len(set(APP_IDS.values())) == len(APP_IDS) == 4
+    ids = {application_id(tool, robot) for tool in TOOLS for robot in ROBOTS}
+    assert len(ids) == len(TOOLS) * len(ROBOTS)
     # The viewer keeps one blueprint per application id: distinct ids, each file's blueprint under its own.
-    assert rrd_application_ids(rrd) == {APP_IDS["run"]}
-    assert rrd_application_ids(disc) == {APP_IDS["discover"]}
+    assert rrd_application_ids(rrd) == {f"parallel-calib-run-{name}"}
+    assert rrd_application_ids(disc) == {"parallel-calib-discover-hexapod"}
     assert empty_views(disc) == []
     assert rrd_labels(disc, "/evidence/bars/delta_BIC") == ["gravity", "backlash", "thermal"]
     assert rrd_labels(disc, "/stroke/before/marks") == ["flagged row 4"]
@@ -135,7 +137,7 @@ def test_discover_writes_under_its_own_application_id():
 
     import pipeline.discover
 
-    assert 'APP_IDS["discover"]' in inspect.getsource(pipeline.discover)
+    assert 'application_id("discover", robot.name)' in inspect.getsource(pipeline.discover)
 
 
 def _text(rrd, entity):
@@ -158,7 +160,7 @@ def test_discovery_file_read_back(tmp_path):
                           "--summary-json", str(summary)]) == 0
     s = json.loads(summary.read_text())
     rrd = tmp_path / "d.rrd"
-    assert rrd_application_ids(rrd) == {APP_IDS["discover"]}
+    assert rrd_application_ids(rrd) == {"parallel-calib-discover-hexapod"}
     bp = rrd_blueprint(rrd)
     assert bp["timeline"] == "measurement"
     assert empty_views(rrd) == []
@@ -183,7 +185,7 @@ def test_discovery_file_marks_flagged_rows(tmp_path):
     from dataclasses import replace
 
     from pipeline.discover import discover, write_rrd
-    from pipeline.scenarios import effect_recording
+    from pipeline.simulation import effect_recording
 
     rec = effect_recording("joint_friction", 3, n_poses=60)
     m = rec.measured.copy()

@@ -142,7 +142,7 @@ def test_parameter_table_addresses_by_name(name):
 def measured_on_mujoco():
     """name -> (robot, theta, Measurements): each robot's machine, 0.5 mm / 0.5 deg off nominal,
     simulated in MuJoCo (no gravity, no noise) at 40 poses commanded by the nominal IK."""
-    from pipeline.testbed import Testbed
+    from pipeline.simulation import Testbed
 
     out = {}
     for name in NAMES:
@@ -171,7 +171,7 @@ def test_noise_free_identification_through_the_mujoco_testbed(measured_on_mujoco
 
 @pytest.mark.parametrize("name", NAMES)
 def test_recording_round_trip_is_exact(measured_on_mujoco, name, tmp_path):
-    from pipeline.recording import Recording, read_recording, write_recording
+    from pipeline.formats import Recording, read_recording, write_recording
 
     robot, theta, m = measured_on_mujoco[name]
     n = len(m.t_s)

@@ -9,8 +9,8 @@ import pytest
 
 from calib import paper
 from calib.robots import ROBOTS
-from pipeline.recording import read_recording, write_recording
-from pipeline.rerun_log import rrd_entities
+from pipeline.formats import read_recording, write_recording
+from pipeline.views import rrd_entities
 from pipeline.run import main, run
 
 EXPECTED_ENTITIES = {
@@ -130,7 +130,7 @@ def table4_recording(path, heldout=50, seed=1):
     from calib.noise import SensorNoise
     from calib.robots import paper_hexapod
     from calib.workspace import reachable_poses
-    from pipeline.recording import Recording
+    from pipeline.formats import Recording
 
     robot = paper_hexapod()
     nominal = robot.table.nominal

@@ -10,7 +10,7 @@ from calib.robots.hexapod import paper_hexapod
 from calib.workspace import reachable_poses
 from mjcf.machine import MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
-from pipeline.testbed import SettleError, Testbed
+from pipeline.simulation import SettleError, Testbed
 
 ROBOT = paper_hexapod()
 NOMINAL = ROBOT.table.nominal

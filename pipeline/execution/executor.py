@@ -7,7 +7,7 @@ the blind suite's recordings) runs on a Dask cluster:
   thread each, each computing on one core (:data:`WORKER_ENV`, set before the worker starts:
   ``OPENBLAS_NUM_THREADS`` / ``OMP_NUM_THREADS`` / ``MKL_NUM_THREADS`` = 1 for BLAS, and
   :data:`THREADS_VAR` = 1 for this package's own threads, the MuJoCo testbed's ``mujoco.rollout``
-  (:func:`pipeline.testbed.available_cores`): a worker using every core would leave none to the
+  (:func:`available_cores`): a worker using every core would leave none to the
   others, and several multi-threaded workers on a few cores thrash);
 * or an **existing cluster** (``scheduler="tcp://host:8786"``, the ``--scheduler`` flag), started
   with ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1`` on machines where this package
@@ -32,7 +32,6 @@ and write to stdout, where the commands print their results).
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import logging
@@ -43,17 +42,15 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 
-from .cli import positive_int
-
-__all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "add_executor_arguments",
-           "default_workers", "worker_count", "scheduler_address", "runs_here", "ProgressDisplay"]
+__all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "default_workers", "worker_count",
+           "runs_here", "ProgressDisplay", "available_cores"]
 
 logger = logging.getLogger(__name__)
 
 #: One BLAS thread.
 BLAS_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: The threads this package's own multi-threaded code may run in this process (the testbed's
-#: rollout; :func:`pipeline.testbed.available_cores`); unset: every core the process may use.
+#: rollout; :func:`available_cores`); unset: every core the process may use.
 THREADS_VAR = "PARALLEL_CALIB_THREADS"
 #: Set in every local worker before it starts: each worker computes on one core.
 WORKER_ENV = {**BLAS_ENV, THREADS_VAR: "1"}
@@ -400,22 +397,21 @@ class _SchedulerProgress:
             self.display.finish(done, total, "no report from the scheduler")
 
 
-def scheduler_address(text: str) -> str:
-    """argparse type: the address of a Dask scheduler (``tcp://host:8786``, ``host:8786``, ``tls://...``),
-    checked for its form only (whether a scheduler answers there is found on connecting)."""
-    from distributed.comm import get_address_host_port  # only when the flag is given
 
+
+def available_cores() -> int:
+    """CPU cores this process may run on, at most :data:`THREADS_VAR` when set
+    (a Dask worker of the local cluster: 1, so that each worker computes on its own core)."""
     try:
-        get_address_host_port(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"not a Dask scheduler address: {exc}") from None
-    return text
-
-
-def add_executor_arguments(parser) -> None:
-    """``--workers N`` and ``--scheduler ADDRESS`` (the executor of a many-task command)."""
-    parser.add_argument("--workers", type=positive_int, default=None,
-                        help="processes of the local Dask cluster (default: all cores; 1: run here, "
-                             "no cluster)")
-    parser.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
-                        help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    limit = os.environ.get(THREADS_VAR, "").strip()
+    if limit:
+        try:
+            cores = min(cores, int(limit))
+        except ValueError:
+            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}") from None
+        if cores < 1:
+            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}")
+    return cores

@@ -26,7 +26,7 @@ from calib.outliers import find_outliers
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.recording import OutputError, Recording, output_folder
+from pipeline.formats import OutputError, Recording, output_folder
 
 __all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "NameReservation", "default_name", "OUTPUT_EXTENSIONS"]
@@ -151,7 +151,7 @@ def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str
 
 def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress):
     from mjcf.machine import MachineOptions
-    from pipeline.testbed import Testbed
+    from pipeline.simulation import Testbed
 
     seeds = np.random.SeedSequence(settings.seed).spawn(4)
     nominal = robot.table.nominal
@@ -273,7 +273,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.recording import ResultSet, plausibility, read_recording, recording_texts
+    from pipeline.formats import ResultSet, plausibility, read_recording, recording_texts
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}
@@ -510,8 +510,8 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
 
     t3 = time.perf_counter()
     from calib.observability import analyze_observability
-    from pipeline.rerun_log import (APP_IDS, blueprint, log_calibration_run, run_eye, run_magnification,
-                                    save_recording, summary_markdown)
+    from pipeline.views import (application_id, blueprint, log_calibration_run, run_eye, run_magnification,
+                                save_recording, summary_markdown)
 
     analysis = analyze_observability(robot, result.start, measured[used], noise)
     summary["observability"] = {"condition_number": float(analysis.condition_number),
@@ -534,7 +534,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
                    has_heldout=heldout_before is not None, history_label=history_label)
-    save_recording(outputs.temp("rrd"), log, application_id=APP_IDS["run"], overwrite=True, bp=bp)
+    save_recording(outputs.temp("rrd"), log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
     split["log"] = time.perf_counter() - t3
     return summary, result
 
@@ -548,6 +548,6 @@ def _predicted_or(robot: Robot, theta, joints, measured) -> np.ndarray:
 
 
 def sidecar_name(csv_path) -> str:
-    from pipeline.recording import sidecar_path
+    from pipeline.formats import sidecar_path
 
     return str(sidecar_path(csv_path))

@@ -13,7 +13,7 @@ Reusable by every pipeline command: :func:`log_observability` writes, under ``pr
   combination (``0.71 B1.z - 0.70 dl1``), length its standard deviation (um); the combinations
   that are not identifiable at all are named in the report;
 * every bar chart logged with names (:func:`log_bars`) is also drawn as a named chart in 2D
-  (``{path}/bars``, ``{path}/names``...; see :func:`pipeline.rerun_log.log_named_bars`);
+  (``{path}/bars``, ``{path}/names``...; see :func:`pipeline.views.charts.log_named_bars`);
 * ``{prefix}/report``: a markdown document with the indices, the condition numbers, the weakest
   and the not identifiable parameter combinations and the per-parameter table.
 
@@ -27,6 +27,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from calib.observability import ObservabilityAnalysis
+
+from .charts import chart_view, log_named_bars
 
 __all__ = ["log_observability", "log_bars", "bar_values", "log_combinations", "observability_markdown",
            "observability_views"]
@@ -102,7 +104,7 @@ def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None,
              title: str = "", groups=None, group_names=None) -> None:
     """A static bar chart of finite values (non-finite entries logged as 0); ``names`` (one per
     bar) are logged beside it as a ``parameter_names`` component, and the bars are drawn again,
-    named, under ``path`` for a :func:`pipeline.rerun_log.chart_view`."""
+    named, under ``path`` for a :func:`pipeline.views.charts.chart_view`."""
     v = np.asarray(values, dtype=float)
     extra = []
     if names is not None:
@@ -112,8 +114,6 @@ def log_bars(rec: rr.RecordingStream, path: str, values: np.ndarray, names=None,
         extra.append(rr.AnyValues(parameter_names=names))
     rec.log(path, rr.BarChart(bar_values(np.where(np.isfinite(v), v, 0.0))), *extra, static=True)
     if names is not None:
-        from .rerun_log import log_named_bars
-
         log_named_bars(rec, path, names, [("value", v, (50, 150, 235))], unit=unit, title=title,
                        groups=groups, group_names=group_names)
 
@@ -144,7 +144,6 @@ def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, 
 
 def log_combinations(rec: rr.RecordingStream, path: str, analysis: ObservabilityAnalysis, k: int = 6) -> None:
     """The ``k`` worst-determined combinations as bars named by the combination (std in um)."""
-    from .rerun_log import log_named_bars
 
     combos = analysis.weakest_combinations(min(k, analysis.n_free), n_terms=3)[::-1]  # best of them first
     names = [c["combination"] + ("" if c["determined"] else " (not identifiable)") for c in combos]
@@ -157,7 +156,6 @@ def observability_views(prefix: str = "observability", name: str = "Observabilit
                         per_parameter: bool = False) -> rrb.Container:
     """Blueprint views of what :func:`log_observability` writes: the named weakest combinations
     (and with ``per_parameter`` the named CRB bars) above the report."""
-    from .rerun_log import chart_view
 
     views = [chart_view(f"{prefix}/combinations", f"{name}: worst-determined parameter combinations")]
     if per_parameter:

@@ -10,7 +10,6 @@ the others one after another (see :class:`Testbed`, "Settling").
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import mujoco
@@ -23,9 +22,9 @@ from mjcf import build_machine
 from mjcf.machine import PLATFORM_SITE, MachineEffects, MachineOptions
 from mjcf.units import mm_to_m
 
-from .executor import THREADS_VAR
+from pipeline.execution import available_cores
 
-__all__ = ["SettleError", "Measurements", "Testbed", "SETTLE_MODES", "available_cores"]
+__all__ = ["SettleError", "Measurements", "Testbed", "SETTLE_MODES"]
 
 #: How :meth:`Testbed.measure` settles the poses: ``auto`` (rollout when the physics has no
 #: history, sequential otherwise), ``rollout`` or ``sequential``.
@@ -48,24 +47,6 @@ ASSEMBLY_POSE_TOLERANCE = 1e-9
 REST_MAX_ITERATIONS = 12
 REST_FD_STEP = 1e-7
 REST_RCOND = 1e-6
-
-
-def available_cores() -> int:
-    """CPU cores this process may run on, at most :data:`pipeline.executor.THREADS_VAR` when set
-    (a Dask worker of the local cluster: 1, so that each worker computes on its own core)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    limit = os.environ.get(THREADS_VAR, "").strip()
-    if limit:
-        try:
-            cores = min(cores, int(limit))
-        except ValueError:
-            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}") from None
-        if cores < 1:
-            raise ValueError(f"{THREADS_VAR} must be a positive integer, got {limit!r}")
-    return cores
 
 
 class SettleError(RuntimeError):

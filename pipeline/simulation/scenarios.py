@@ -28,7 +28,7 @@ from calib.robots import default_robot
 from mjcf.machine import GRAVITY_M_S2, MachineEffects, MachineOptions
 from mjcf.units import M_PER_MM
 
-from .recording import Recording
+from pipeline.formats import Recording
 
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "make_recording",

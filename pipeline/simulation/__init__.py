@@ -1,0 +1,13 @@
+"""The simulated lab: a perturbed machine measured like a metrology lab (:class:`Testbed`), and
+the seeded scenarios of the discovery studies (effects drawn, poses drawn, recordings made).
+MuJoCo itself (building, commanding, settling and reading the machine) lives in :mod:`mjcf`;
+this package is imported on first use."""
+
+from pipeline.lazy import lazy_exports
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "testbed": ("Testbed", "Measurements", "SettleError", "SETTLE_MODES"),
+    "scenarios": ("DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine", "machine_context",
+                  "merged_settings", "simulate", "make_recording", "effects_settings", "effect_recording",
+                  ),
+})

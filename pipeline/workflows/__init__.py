@@ -1,0 +1,9 @@
+"""The tools' library functions, one module each: settings in, a result object out, usable from
+Python with the commands' defaults (:func:`run_calibration`, ...). The commands
+(``python -m pipeline.<tool>``) parse their flags, call one of these and print its result."""
+
+from pipeline.lazy import lazy_exports
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "calibration": ("RunSettings", "RunResult", "run_calibration"),
+})
