@@ -4,7 +4,7 @@ effects, no re-simulation, one core:
 
 The recordings are simulated first (not timed); then :func:`calib.effects.discover_effects`
 (selection, joint fit, remainder tests, outlier rounds) and the whole
-:func:`pipeline.discover.discover` without re-simulation (adds the held-out fits and the
+:func:`pipeline.workflows.discovery.discover` without re-simulation (adds the held-out fits and the
 summary) are timed, best of ``--repeat``.
 """
 
@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from calib.effects import EffectData, discover_effects
-from pipeline.discover import discover
+from pipeline.workflows.discovery import discover
 from pipeline.simulation import effect_recording
 
 CASES = (("hexapod", ()), ("hexapod", ("joint_friction",)), ("hexapod", ("joint_friction", "thermal_drift")),

@@ -3,7 +3,7 @@
 ``python -m pipeline.blind --robot NAME --seeds 20`` simulates seeded recordings of the robot's
 MuJoCo machine (:func:`pipeline.simulation.effect_recording`: 60-120 poses in random order, the
 scenario machine's geometric errors, 1 um noise, each effect's largest contribution 3-10 times
-the noise) and runs :func:`pipeline.discover.discover` on each without telling it the truth.
+the noise) and runs :func:`pipeline.workflows.discovery.discover` on each without telling it the truth.
 Kinds of recording (``--kinds``):
 
 - ``single``: one effect, or none;
@@ -60,7 +60,8 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.discover import discover, report_lines
+    from pipeline.views import report_lines
+    from pipeline.workflows.discovery import discover
 
     rep = discover(rec, seed=seed, resim=False, candidates=candidates)
     s = rep.summary

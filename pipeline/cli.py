@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int", "check_outputs",
+__all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
            "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
@@ -77,16 +77,6 @@ def nonnegative_int(text: str) -> int:
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1 (counts that cannot be zero: seeds, workers, poses)."""
     return _int_at_least(1, text)
-
-
-def check_outputs(paths: dict, *, overwrite: bool) -> None:
-    """Check output paths before any work (see :class:`pipeline.recording.ResultSet`); ``paths``
-    maps each flag to its path (``None``: not asked for)."""
-    from pipeline.formats import ResultSet
-
-    given = {flag: path for flag, path in paths.items() if path}
-    with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
-        pass
 
 
 def scheduler_address(text: str) -> str:

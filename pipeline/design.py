@@ -53,10 +53,10 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
-from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int, positive_int
+from pipeline.cli import ArgumentParser, cli_main, nonnegative_int, positive_int
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
 from pipeline.cli import add_executor_arguments
-from pipeline.formats import atomic_write, sidecar_path
+from pipeline.formats import check_outputs, atomic_write, sidecar_path
 
 __all__ = [
     "DEFAULT_NOISE",

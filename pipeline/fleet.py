@@ -9,7 +9,7 @@ Every ``*.csv`` (``.CSV`` too) in ``FOLDER`` (not its sub-folders) is one machin
 (CSV + JSON sidecar, :mod:`pipeline.recording`; any registered robot, robots mixed). Each is
 calibrated by :func:`pipeline.workflows.calibration.run_calibration` (``RunSettings(real=FILE)``: the
 analysis of ``python -m pipeline.run --real FILE``), then its residuals searched for the physics the
-geometric model left out (:func:`pipeline.discover.discover`, without its MuJoCo re-simulation;
+geometric model left out (:func:`pipeline.workflows.discovery.discover`, without its MuJoCo re-simulation;
 ``--no-discover``: not searched), as one task of :mod:`pipeline.executor` (a local Dask
 cluster of ``--workers`` processes, ``--workers 1`` here, or ``--scheduler ADDRESS``: a task
 reads its recording and writes its outputs by path, so the workers of a remote cluster must see
@@ -188,7 +188,8 @@ def _discovered(rec, summary_path: Path) -> dict:
     (``rec``: the :class:`pipeline.recording.Recording` the calibration read)."""
     from numpy.linalg import LinAlgError
 
-    from pipeline.discover import discover, model_words
+    from pipeline.views import model_words
+    from pipeline.workflows.discovery import discover
 
     try:
         report = discover(rec, resim=False)

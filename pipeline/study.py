@@ -55,8 +55,8 @@ from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_d
 from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
 from pipeline.cli import add_executor_arguments
-from pipeline.cli import ArgumentParser, check_outputs, cli_main, nonnegative_int
-from pipeline.formats import atomic_write
+from pipeline.cli import ArgumentParser, cli_main, nonnegative_int
+from pipeline.formats import check_outputs, atomic_write
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
            "compensation_errors", "run_trials", "monte_carlo", "summarize", "main"]

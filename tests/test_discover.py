@@ -10,7 +10,8 @@ from calib.robots import default_robot
 from calib.robots.hexapod import Hexapod, paper_hexapod
 from calib.rotation import rotation_matrix
 from pipeline.blind import run_blind_suite
-from pipeline.discover import discover, main
+from pipeline.discover import main
+from pipeline.workflows.discovery import discover
 from pipeline.formats import read_recording, write_recording
 from pipeline.views import rrd_entities
 from pipeline.simulation import effect_recording
@@ -200,11 +201,11 @@ def test_cli_refuses_an_unknown_candidate(tmp_path, capsys):
 
 
 def test_cli_never_replaces_a_summary_and_checks_outputs_before_the_analysis(tmp_path, capsys, monkeypatch):
-    import pipeline.discover
+    import pipeline.workflows.discovery
 
     summary = tmp_path / "s.json"
     summary.write_text("{}")
-    monkeypatch.setattr(pipeline.discover, "effect_recording", lambda *a, **k: pytest.fail("analysis started"))
+    monkeypatch.setattr(pipeline.workflows.discovery, "effect_recording", lambda *a, **k: pytest.fail("analysis started"))
     assert main(["--scenario", "none", "--no-resim", "--out", str(tmp_path), "--summary-json", str(summary)]) == 2
     assert "--summary-json" in capsys.readouterr().err and summary.read_text() == "{}"
 

@@ -289,12 +289,12 @@ def test_fleet_says_which_machines_the_model_explains(tmp_path, capsys):
 
 def test_a_failed_discovery_leaves_the_calibration_standing(fleet_folder, tmp_path, monkeypatch):
     """The search failing on a machine (here made to) is said on its row; the calibration stands."""
-    import pipeline.discover
+    import pipeline.workflows.discovery
 
     def broken(rec, **options):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(pipeline.discover, "discover", broken)
+    monkeypatch.setattr(pipeline.workflows.discovery, "discover", broken)
     rep = run_fleet(some_machines(fleet_folder, tmp_path / "one", "delta_01"), tmp_path / "out", workers=1)
     assert [(r["status"], r["explained"]) for r in rep.rows] == [
         ("calibrated", "n/a: discovery failed: LinAlgError: Singular matrix")]

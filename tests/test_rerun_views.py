@@ -135,9 +135,9 @@ def test_run_and_discovery_files_keep_their_own_layouts(robot_run, tmp_path):
 def test_discover_writes_under_its_own_application_id():
     import inspect
 
-    import pipeline.discover
+    import pipeline.views.discovery_view
 
-    assert 'application_id("discover", robot.name)' in inspect.getsource(pipeline.discover)
+    assert 'application_id("discover", robot.name)' in inspect.getsource(pipeline.views.discovery_view)
 
 
 def _text(rrd, entity):
@@ -184,7 +184,8 @@ def test_discovery_file_read_back(tmp_path):
 def test_discovery_file_marks_flagged_rows(tmp_path):
     from dataclasses import replace
 
-    from pipeline.discover import discover, write_rrd
+    from pipeline.views import write_discovery_rrd as write_rrd
+    from pipeline.workflows.discovery import discover
     from pipeline.simulation import effect_recording
 
     rec = effect_recording("joint_friction", 3, n_poses=60)

@@ -11,7 +11,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet"]
+__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs"]
 
 
 def _exists_message(path: Path) -> str:
@@ -195,3 +195,16 @@ class ResultSet:
 
     def __exit__(self, *exc) -> None:
         self.discard()
+
+
+def check_outputs(paths: dict, *, overwrite: bool) -> None:
+    """Check output paths before any work (see :class:`ResultSet`); ``paths`` maps each flag to its
+    path (``None``: not asked for).
+
+    Raises:
+        FileExistsError: a path exists and ``overwrite`` is off.
+        OutputError: a path cannot be written (the message names the flag).
+    """
+    given = {flag: path for flag, path in paths.items() if path}
+    with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
+        pass

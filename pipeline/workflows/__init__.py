@@ -6,4 +6,5 @@ from pipeline.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "calibration": ("RunSettings", "RunResult", "run_calibration"),
+    "discovery": ("DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate"),
 })

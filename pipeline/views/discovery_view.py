@@ -1,0 +1,286 @@
+"""The discovery's report in words (printed lines, the markdown summary) and its Rerun view
+(rerun-sdk 0.41 API): residuals against time, stroke, the direction of the last move and the
+verdict's quantity, candidate evidence bars named by effect."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from calib.effects import EFFECTS, EffectData
+from calib.effects.discovery import MIN_NESTED_DELTA_BIC
+from calib.robot import Robot
+from pipeline.formats import Recording
+
+from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, chart_view, log_named_bars,
+                     log_residual_scatter, save_recording)
+
+#: Size of each residual chart, chart units (about pixels at 1600x900).
+CHART_W, CHART_H = 600.0, 160.0
+
+__all__ = ["model_words", "verdict_words", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
+           "verdict_quantity", "discovery_markdown", "write_discovery_rrd"]
+
+
+def model_words(effects) -> str:
+    """``geometry alone`` or ``geometry + a + b``."""
+    return "geometry + " + " + ".join(effects) if effects else "geometry alone"
+
+
+def verdict_words(explained: bool, effects: list, remaining: dict) -> str:
+    """The verdict in one sentence (the first line the terminal prints)."""
+    model = model_words(effects)
+    if explained:
+        return f"Explained: {model} leaves {remaining['summary']}."
+    partial = (f" Named but partial: {', '.join(effects)} (structure remains)." if effects and remaining.get("follows")
+               else "")
+    return f"NOT explained: {model} leaves {remaining['summary']}.{partial}"
+
+
+def report_lines(s: dict) -> list[str]:
+    """The summary in plain words, one finding per line; the verdict first."""
+    lines = [s["verdict"]]
+    ev = s["evidence"]["geometry_chi2_test"]
+    lines.append(f"Geometry alone: chi-square {ev['chi2']:.0f} on {ev['dof']} degrees of freedom, p = {ev['p_value']:.3g} "
+                 f"({'consistent with' if ev['p_value'] > ev['alpha'] else 'NOT explained by'} the declared noise "
+                 f"by this omnibus test).")
+    lines += ["Where the geometry-only mismatch is: " + t for t in s["located"]["summary"]]
+    o = s["outliers"]
+    if s["flagged_poses"]:
+        lines.append(f"Outlier rows (gross and isolated: not shared by neighbours in time, workspace or direction), "
+                     f"left out: {', '.join(map(str, s['flagged_poses']))} (1-based data rows)")
+    if o["model_wrong"]:
+        lines.append(f"{len(o['bad_rows'])} of {s['rows']} rows look bad (more than 5%): the model is wrong, not the "
+                     f"data; no row is left out.")
+    elif o["shared"]:
+        lines.append(f"Rows with large residuals kept as evidence (shared by their neighbours): "
+                     f"{'; '.join(k + ' (' + ', '.join(v) + ')' for k, v in o['shared'].items())}")
+    named = s["effects"]
+    if not named:
+        if s["explained"]:
+            lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
+        else:
+            lines.append(f"Left-out physics: none of the candidates ({', '.join(s['candidates']) or 'none given'}) earns "
+                         f"its place; what remains is not explained (see the verdict).")
+    else:
+        status = "" if s["explained"] else " (partial: the remainder is not explained)"
+        lines.append(f"Left-out physics: {' + '.join(named)}{status}; cross-validated whitened RMS "
+                     f"{s['evidence']['none']['cv_whitened_rms']:.2f} -> {s['evidence']['cv_whitened_rms_chosen']:.2f}.")
+        for name in named:
+            params = s["effect_parameters"][name]
+            sig = params["significance"]
+            e = s["evidence"].get(name, {})
+            lines.append(f"  {name}: BIC lower by {e.get('delta_bic_when_added', float('nan')):.0f} when it entered; "
+                         f"non-zero at p = {sig['p_value']:.2g} (Wald chi-square {sig['wald_chi2']:.0f} on {sig['dof']})")
+            for k, v in params.items():
+                if k == "significance":
+                    continue
+                unc = f" +- {v['std']:.2g}" if np.isfinite(v["std"]) else ""
+                lines.append(f"    {k} = {v['value']:.6g}{unc} {v['unit']}")
+    for a in s["aliases"]:
+        if a.get("nested"):
+            lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']}, which contains it "
+                         f"(its extra parameters gain {a['delta_bic']:.1f} BIC, less than {MIN_NESTED_DELTA_BIC:.0f}); "
+                         f"the simpler {a['named']} fitted.")
+            continue
+        lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']} (evidence within "
+                     f"{a['delta_bic']:.1f} BIC, regressor correlation {a['correlation']:.2f}); {a['named']} fitted.")
+    lines.append(f"Held-out residual RMS: {1e3 * s['heldout_rms_before_mm']:.3f} um -> {1e3 * s['heldout_rms_after_mm']:.3f} um "
+                 f"(noise floor {1e3 * s['noise_floor_mm']:.3f} um; {s['heldout_basis']}).")
+    r = s.get("mujoco_resimulation")
+    if r:
+        lines.append(f"MuJoCo machine re-simulated: position RMS {r['before']['position_um']:.3f} um -> {r['after']['position_um']:.3f} um")
+        if "sysid" in r:
+            y = r["sysid"]
+            lines.append(f"  mujoco.sysid re-fit {y['parameter']}: {y['start']:.6g} -> {y['value']:.6g} +- {y['interval_95']:.2g} {y['unit']} (95%)")
+    return lines
+
+
+#: The quantities the discovery file always plots the residuals against (the fourth chart is the
+#: one the verdict names); names as in :data:`calib.effects.FOLLOWED_QUANTITIES`.
+PLOTTED_QUANTITIES = ("time", "stroke", "direction of the last move")
+
+
+def quantity_values(data: EffectData, name: str) -> tuple[np.ndarray, str]:
+    """(N, C) values of a quantity the remainder is tested against (``remaining['follows']``,
+    an effect's ``follows``: time, the direction or size of each joint's last move, its stroke,
+    the load it carries, ``position <coordinate>``) and the axis label that says its unit."""
+    robot, n, c = data.robot, data.n, data.robot.n_chains
+    unit = robot.joint_unit
+    if name == "time":
+        span = float(np.ptp(data.t_s)) if n else 0.0
+        scale, word = (60.0, "min") if span > 600 else (1.0, "s")
+        return np.broadcast_to(data.t_s[:, None] / scale, (n, c)), f"time ({word})"
+    if name == "direction of the last move":
+        # -1 decreasing, +1 increasing; each side spread by row order so that the points do not pile up.
+        spread = 0.6 * (np.arange(n) / max(n - 1, 1) - 0.5)
+        return data.direction + spread[:, None], "last move: -1 decreasing, +1 increasing (spread by row)"
+    if name == "size of the last move":
+        return np.abs(data.last_move), f"size of the last move ({unit})"
+    if name == "stroke":
+        return data.stroke, f"stroke from the centre of travel ({unit})"
+    if name == "load":
+        load = EFFECTS["compliance"].joint_regressors(robot, data.theta, data)[..., 0]
+        what = "axial share of the platform's weight" if unit == "mm" else "joint torque per unit platform weight (mm)"
+        return load, f"load: {what}"
+    if name.startswith("position "):
+        k = robot.pose_names.index(name.split(" ", 1)[1])
+        unit_k = "rad" if robot.angle_pose_mask[k] else "mm"
+        return np.broadcast_to(data.measured[:, k:k + 1], (n, c)), f"{name} ({unit_k})"
+    raise ValueError(f"unknown quantity {name!r}")
+
+
+def verdict_quantity(s: dict) -> tuple[str, str]:
+    """The quantity the discovery file plots beside time, stroke and direction, and why: what the
+    remainder follows, else what a named effect follows, else the quantity whose structure test is
+    the strongest (the size of the last move or the load before a pose coordinate)."""
+    fixed = set(PLOTTED_QUANTITIES)
+    for q in s["remaining"].get("follows", []):
+        if q not in fixed:
+            return q, "the remainder follows it"
+    for e in s["effects"]:
+        q = EFFECTS[e].follows
+        if q and q not in fixed:
+            return q, f"{e} follows it"
+    structure = s["tests"]["structure"]  # the physical quantities first, then the pose coordinates
+    rest = sorted((q for q in structure if q not in fixed), key=lambda q: (q.startswith("position "),
+                                                                         -structure[q]["score"]))
+    if rest:
+        p = structure[rest[0]]["p_value"]
+        return rest[0], f"strongest test left, p = {p:.2g}"
+    return "stroke", "no other quantity tested"
+
+
+def _um(v_mm: float) -> str:
+    return f"{1e3 * v_mm:.2f}"
+
+
+def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
+    """The discovery file's summary panel: the verdict first, then short tables."""
+    rem = s["remaining"]
+    model = model_words(s["effects"])
+    lines = [f"# {'Explained' if s['explained'] else 'NOT explained'}", "", s["verdict"], "",
+             "| what remains | |", "|---|---|",
+             f"| model | {model} |",
+             f"| residual RMS | {_um(rem['rms_mm'])} um (noise floor {_um(rem['noise_floor_mm'])} um) |",
+             f"| whitened | {rem['noise_ratio']:.2f} x the declared noise |",
+             f"| follows | {', '.join(rem['follows']) or 'none of the quantities tested'} |",
+             f"| on {chain_word}s | {', '.join(map(str, rem['chains'])) or 'none'} |",
+             f"| held-out RMS | {_um(s['heldout_rms_before_mm'])} -> {_um(s['heldout_rms_after_mm'])} um |",
+             f"| flagged rows | {', '.join(map(str, s['flagged_poses'])) or 'none'} |"]
+    if s["outliers"]["model_wrong"]:
+        lines.append(f"| bad rows | {len(s['outliers']['bad_rows'])} of {s['rows']}: model wrong, none left out |")
+    if s["effects"]:
+        lines += ["", "| effect | coefficient | value | +- | unit |", "|---|---|---|---|---|"]
+        for e in s["effects"]:
+            for k, v in s["effect_parameters"][e].items():
+                if k != "significance":
+                    unc = f"{v['std']:.2g}" if np.isfinite(v["std"]) else ""
+                    lines.append(f"| {e} | {k} | {v['value']:.4g} | {unc} | {v['unit']} |")
+    ev = s["evidence"]
+    lines += ["", "| candidate | BIC drop alone | CV RMS | named |", "|---|---|---|---|",
+              f"| (geometry) | 0 | {ev['none']['cv_whitened_rms']:.2f} | |"]
+    for c in s["candidates"]:
+        e = ev.get(c, {})
+        lines.append(f"| {c} | {e.get('delta_bic_vs_none', float('nan')):.0f} | "
+                     f"{e.get('cv_whitened_rms', float('nan')):.2f} | {'yes' if c in s['effects'] else ''} |")
+    lines += ["", "BIC drop: evidence against geometry alone (an effect needs 10 to enter); CV RMS: "
+              "cross-validated whitened residual (1 = the noise)."]
+    for a in s["aliases"]:
+        within = "contains it; the simpler one named" if a.get("nested") else f"within {a['delta_bic']:.1f} BIC"
+        lines += ["", f"Cannot tell apart: {a['named']} and {a['rival']} ({within})."]
+    r = s.get("mujoco_resimulation")
+    if r:
+        lines += ["", f"MuJoCo re-simulation, position RMS: {r['before']['position_um']:.2f} -> "
+                      f"{r['after']['position_um']:.2f} um."]
+    lines += ["", "Geometry alone, where the mismatch is:"] + [f"- {t}" for t in s["located"]["summary"]]
+    return "\n".join(lines)
+
+
+def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, overwrite: bool = False) -> Path:
+    """The discovery file of ``report`` (a :class:`pipeline.workflows.discovery.DiscoveryReport`): the verdict first, the residuals before and after against time, stroke,
+    the direction of the last move and the quantity the verdict names, the candidates' evidence
+    by name, flagged rows marked (see docs/rerun_views.md)."""
+    disc, s = report.discovery, report.summary
+    rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(rows)
+    before = 1e3 * disc.geometry.predict(data)[0]
+    after = 1e3 * disc.chosen.predict(data)[0]
+    flagged = [int(i) for i in np.flatnonzero(np.isin(rows, disc.flagged))]
+    chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]
+    model = model_words(s["effects"])
+    models = ("geometry alone", f"{model}, own scale")
+    follows = set(s["remaining"].get("follows", []))
+    extra, why = verdict_quantity(s)
+    charts = [(q, "the remainder follows it" if q in follows else "") for q in PLOTTED_QUANTITIES] + [(extra, why)]
+    candidates = s["candidates"]
+    ev = s["evidence"]
+
+    def signed_log(v):
+        v = np.asarray(v, dtype=float)
+        return np.sign(v) * np.log10(1.0 + np.abs(v))
+
+    def log(r):
+        for q, _ in charts:
+            x, label = quantity_values(data, q)
+            path = f"vs/{q.replace(' ', '_')}"
+            log_residual_scatter(r, path, x, before, after, x_label=label, chain_names=chains,
+                                 flagged=flagged, rows=rows + 1, models=models, width=CHART_W, height=CHART_H,
+                                 same_scale=False)
+            # The colour key of the chains under the charts (the same colours as in the run file).
+            r.log(f"{path}/chain_key", rr.Points2D([(60 + (CHART_W - 120) * j / max(len(chains) - 1, 1),
+                                                     2 * CHART_H + 38)
+                                                    for j in range(len(chains))], radii=3.0,
+                                                   colors=chain_colors(len(chains)), labels=chains,
+                                                   show_labels=True), static=True)
+        named = set(s["effects"])
+        order = [c for c in candidates if c in named] + [c for c in candidates if c not in named]
+        alone = [ev.get(c, {}).get("delta_bic_vs_none", np.nan) for c in order]
+        entered = [ev.get(c, {}).get("delta_bic_when_added", np.nan) for c in order]
+        log_named_bars(r, "evidence", order, [("alone (vs geometry)", signed_log(alone), (235, 205, 60)),
+                                              ("when it entered", signed_log(entered), MACHINE_COLORS["calibrated"])],
+                       unit="signed log10(1 + |BIC drop|)", groups=[1 if c in named else 0 for c in order],
+                       group_names=["not named", "named (in the model)"], title="Evidence per candidate",
+                       note="an effect needs a BIC drop of 10 (1.04 here) and a lower CV residual", name_px=130.0)
+        r.log("summary", rr.TextDocument(discovery_markdown(s, robot.chain_word), media_type=rr.MediaType.MARKDOWN),
+              static=True)
+        r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
+        r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)
+        # The RMS of each row's residual on the `measurement` timeline (the recording's 1-based row).
+        grey, blue = MACHINE_COLORS["nominal"], MACHINE_COLORS["calibrated"]
+        r.log("per_row/rms_um", rr.SeriesLines(names=["geometry alone", model], colors=[grey, blue]), static=True)
+        rms = np.c_[np.sqrt(np.mean(before ** 2, axis=1)), np.sqrt(np.mean(after ** 2, axis=1))]
+        r.send_columns("per_row/rms_um", indexes=[rr.TimeColumn("measurement", sequence=rows + 1)],
+                       columns=rr.Scalars.columns(scalars=rms))
+        if flagged:
+            r.log("per_row/rms_um/flagged", rr.SeriesPoints(colors=FLAG_COLOR, names="flagged row", marker_sizes=6.0),
+                  static=True)
+            r.send_columns("per_row/rms_um/flagged", indexes=[rr.TimeColumn("measurement", sequence=rows[flagged] + 1)],
+                           columns=rr.Scalars.columns(scalars=rms[flagged, 0]))
+
+    def view(q, note):  # framed on the two plots and the key (the default bounds leave wide margins)
+        return rrb.Spatial2DView(origin=f"vs/{q.replace(' ', '_')}",
+                                 name=f"Closure residual vs {q}" + (f" ({note})" if note else ""),
+                                 background=(18, 18, 18),
+                                 visual_bounds=rrb.VisualBounds2D(x_range=[-5.0, CHART_W + 5.0],
+                                                                  y_range=[-10.0, 2 * CHART_H + 55.0]))
+
+    views = [view(q, note) for q, note in charts]
+    bp = rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(rrb.TextDocumentView(origin="summary", name="Verdict and summary"),
+                         rrb.Tabs(chart_view("evidence", "Evidence per candidate (BIC drop, named)"),
+                                  rrb.TimeSeriesView(origin="per_row/rms_um",
+                                                     name="Residual RMS per row (um) vs measurement row")),
+                         row_shares=[2, 1]),
+            rrb.Vertical(rrb.Horizontal(views[0], views[1]), rrb.Horizontal(views[2], views[3])),
+            column_shares=[1.2, 2.6]),
+        rrb.TimePanel(timeline="measurement", play_state="paused", state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        collapse_panels=True)
+    return save_recording(path, log, application_id=application_id("discover", robot.name), overwrite=overwrite, bp=bp)

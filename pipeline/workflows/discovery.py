@@ -1,0 +1,305 @@
+"""Discovery of the physics a robot's geometric model left out, as a library function.
+
+Calibrates the geometry, locates where the residuals concentrate, names the left-out effects
+(up to three together) from the registry of physical candidates (:mod:`calib.effects`;
+``candidates`` narrows it), fits them jointly with the geometry, says first whether what remains
+is consistent with the declared noise and, if not, what it is, where and what it follows; shows
+the held-out fit improve, and re-simulates the MuJoCo machine with the effects added (their own
+:meth:`~calib.effects.Effect.machine_settings`), re-fitting a physical parameter there with
+``mujoco.sysid``. :func:`run_discovery` does what ``python -m pipeline.discover`` does (a
+recording or a seeded scenario in, the ``.rrd`` and summary out); :func:`discover` analyses a
+recording in memory. Nothing here depends on the robot or the effect.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
+                           registered_effect, effects_for, fit_effects)
+from calib.effects.discovery import MIN_ROWS
+from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, read_recording
+from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
+from pipeline.views import verdict_words, write_discovery_rrd
+
+__all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
+           "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT"]
+
+
+#: At rest to 1e-7 m/s (or rad/s) is ample for micrometre comparisons (the settled pose is then
+#: within about 1e-10 m), and several times faster than the testbed's default.
+RESIMULATION_SETTLE_VELOCITY = 1e-7
+
+
+@dataclass
+class DiscoveryReport:
+    """What :func:`discover` found (``summary`` is the JSON written by ``--summary-json``)."""
+
+    discovery: Discovery
+    summary: dict
+
+
+def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, train_rows: np.ndarray) -> dict:
+    """Held-out closure residual RMS (mm) of geometry only and geometry + the chosen effects,
+    both fitted on ``train_rows``, and the noise floor of the held-out residuals."""
+    train, test = data.subset(train_rows), data.subset(heldout_rows)
+    geo = fit_effects(train, ())
+    before = geo.predict(test)[0]
+    if chosen.models:
+        extras = {m.name: e for m, e in zip(chosen.models, chosen.extras) if e is not None}
+        after = fit_effects(train, chosen.models, extras=extras, start=geo.theta).predict(test)[0]
+    else:
+        after = before
+    floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
+    rms_b = float(np.sqrt(np.mean(before ** 2)))
+    rms_a = float(np.sqrt(np.mean(after ** 2)))
+    return {"heldout_rms_before_mm": rms_b, "heldout_rms_after_mm": rms_a, "noise_floor_mm": floor,
+            "after_over_floor": rms_a / floor, "heldout_rows": [int(i) for i in heldout_rows]}
+
+
+def _with(settings: dict, section: str, field: str, value: float) -> dict:
+    out = {k: dict(v) for k, v in settings.items()}
+    out[section][field] = value
+    return out
+
+
+def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev: int = 5,
+               sysid_rows: int = 20, seed: int = 0) -> dict:
+    """Re-simulate the recorded commands on MuJoCo machines and compare with the recording.
+
+    Before: the machine with the geometry identified alone. After: the machine with the
+    geometry identified jointly with the named effects, and their physics added (their
+    ``machine_settings``, together: :func:`pipeline.simulation.effects_settings`); the first
+    named effect that names a physical parameter (``physical_parameter``: servo stiffness,
+    friction force, drift rate) has it re-fitted in MuJoCo with ``mujoco.sysid`` (confidence
+    interval from its Jacobian). The transmission
+    effects (scale, screw) enter the joints directly, so their calib-level fit already is the
+    machine's parameter and they are simulated as fitted. The re-fit uses at most
+    ``sysid_rows`` rows (every row for an effect that depends on the motion history, such as
+    friction), since each evaluation re-simulates them.
+
+    Returns:
+        JSON-ready dict: task-space RMS of simulated minus recorded poses (um for positions,
+        urad for angles), before and after, the machine settings and the re-fitted parameter
+        with its 95% interval.
+    """
+    robot = rec.robot
+    rows = disc.kept
+    std = rec.noise.pose_std(robot.pose_units)
+    angle = robot.angle_pose_mask
+    meas = rec.measured[rows]
+    context = machine_context(robot, rec.meta.get("moving_mass_kg"))
+
+    def run(theta, settings, which=rows, history=True):
+        kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
+        if not history:
+            return simulate(robot, theta, rec.joints[which], settings, times_s=rec.t_s[which], **kw).true_poses
+        # Replay the whole record in order (the state may depend on the motion history), keep rows.
+        return simulate(robot, theta, rec.joints, settings, times_s=rec.t_s, **kw).true_poses[which]
+
+    def rms(sim):
+        d = meas - sim
+        return {"position_um": float(1e3 * np.sqrt(np.mean(np.sum(d[:, ~angle] ** 2, axis=1)))),
+                "orientation_urad": float(1e6 * np.sqrt(np.mean(np.sum(d[:, angle] ** 2, axis=1))))}
+
+    out = {"before": rms(run(disc.geometry.theta, merged_settings(context)))}
+    if not disc.effects:
+        out["after"] = out["before"]
+        return out
+    fit = disc.chosen
+    sl = fit.slices()
+    settings = effects_settings(robot, context, [(m, fit.coefficients[sl[m.name]], e)
+                                                 for m, e in zip(fit.models, fit.extras)])
+    after = run(fit.theta, settings)
+    out["after_calib_fit"] = rms(after)
+    # The first named effect that carries a machine parameter is re-fitted there.
+    eff, param = next(((m, m.physical_parameter(robot)) for m in fit.models if m.physical_parameter(robot)),
+                      (None, None))
+    if sysid and param is not None:
+        import mujoco.sysid as sysid_mod
+
+        name = param.field
+        hist = eff.history_dependent
+        sub = rows if hist or rows.size <= sysid_rows else np.sort(
+            np.random.default_rng(seed).choice(rows, sysid_rows, replace=False))
+        meas_sub = rec.measured[sub]
+        x0 = float(settings[param.section][name])
+        low, high = (x0 / 10, x0 * 10) if x0 > 0 else (-10 * abs(x0) - 1e-9, 10 * abs(x0) + 1e-9)
+        params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, low, high)})
+
+        def residual_fn(x, _params):
+            sim = run(fit.theta, _with(settings, param.section, name, float(x[0])), sub, history=hist)
+            return [((meas_sub - sim) / std).ravel()], None, None
+
+        with contextlib.redirect_stdout(io.StringIO()):  # the scipy backend prints its iterations
+            opt, res = sysid_mod.optimize(params, residual_fn, optimizer="scipy", verbose=False,
+                                          max_iters=max_nfev, diff_step=1e-3, x_scale="jac")
+        xs = float(np.ravel(opt[name].value)[0])
+        r_star = residual_fn(np.array([xs]), opt)[0]
+        _, intervals = sysid_mod.calculate_intervals(r_star, res.jac)
+        settings = _with(settings, param.section, name, xs)
+        after = run(fit.theta, settings)
+        out["sysid"] = {"parameter": name, "unit": param.unit, "start": x0, "value": xs,
+                        "interval_95": float(np.ravel(intervals)[0]), "evaluations": int(res.nfev),
+                        "rows": int(sub.size)}
+    out["after"] = rms(after)
+    out["machine"] = {section: {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()}
+                      for section, values in settings.items()}
+    return out
+
+
+def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
+             sysid: bool = True, candidates=None) -> DiscoveryReport:
+    """Run the whole discovery on a recording (see the module docstring).
+
+    Args:
+        rec: the recording.
+        seed: seed of the held-out split and of the cross-validation folds.
+        heldout_fraction: rows held out when the recording has no ``validation`` rows.
+        resim, sysid: re-simulate on the MuJoCo machine, and re-fit there with ``mujoco.sysid``.
+        candidates: effect names (or :class:`calib.effects.Effect` objects) to consider; default
+            every effect that applies to the robot.
+
+    The summary's ``flagged_poses`` and ``outliers.bad_rows`` are 1-based data rows of the
+    recording (the first measurement is row 1).
+    """
+    t0 = time.perf_counter()
+    robot = rec.robot
+    if candidates is None:
+        candidates = effects_for(robot)
+    names = [registered_effect(c).name for c in candidates]
+    cal = np.flatnonzero(rec.sets == "calibration")
+    val = np.flatnonzero(rec.sets == "validation")
+    analysed_all = cal.size < MIN_ROWS <= len(rec.sets)
+    if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
+        cal, val = np.arange(len(rec.sets)), np.zeros(0, dtype=int)
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
+    disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed)
+    kept = cal[disc.kept]
+    flagged = [int(cal[i]) for i in disc.flagged]
+    disc = replace(disc, kept=kept, flagged=tuple(flagged))
+    if val.size:
+        held, train = val, kept
+        basis = "recorded validation rows"
+    else:
+        order = np.random.default_rng(seed).permutation(kept.size)
+        n_held = max(1, int(round(heldout_fraction * kept.size)))
+        held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
+        basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
+        if analysed_all:
+            basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
+                      f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
+    h = _heldout(data, disc.chosen, held, train)
+    scan = disc.outliers
+    summary = {
+        "robot": robot.name,
+        "explained": disc.explained,
+        "verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining),
+        "remaining": disc.remaining,
+        "effects": list(disc.effects),
+        "partial": list(disc.partial),
+        "aliases": disc.aliases,
+        "candidates": [n for n in names if n != "none"],
+        "effect_parameters": disc.chosen.parameters(),
+        "heldout_rms_before_mm": h["heldout_rms_before_mm"],
+        "heldout_rms_after_mm": h["heldout_rms_after_mm"],
+        "noise_floor_mm": h["noise_floor_mm"],
+        "heldout_basis": basis,
+        "flagged_poses": [i + 1 for i in flagged],
+        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
+                     "model_wrong": bool(scan["model_wrong"]),
+                     "shared": {str(int(disc.kept[int(j)]) + 1): v for j, v in scan["shared"].items()},
+                     "threshold": scan["threshold"], "scale": scan["scale"]},
+        "tests": {"noise": disc.tests["noise"], "structure": disc.tests["structure"]},
+        "evidence": disc.evidence,
+        "identified_errors": robot.table.to_dict(disc.chosen.errors),
+        "located": disc.located,
+        "rows": int(rec.joints.shape[0]),
+    }
+    if rec.meta.get("simulation", {}).get("effect") is not None:
+        summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
+    if resim:
+        t1 = time.perf_counter()
+        summary["mujoco_resimulation"] = resimulate(rec, disc, sysid=sysid, seed=seed)
+        summary["mujoco_resimulation"]["wall_time_s"] = time.perf_counter() - t1
+    summary["wall_time_s"] = time.perf_counter() - t0
+    return DiscoveryReport(discovery=disc, summary=summary)
+
+
+#: The robot of a scenario that names none.
+DEFAULT_SCENARIO_ROBOT = "hexapod"
+
+
+@dataclass(frozen=True)
+class DiscoverySettings:
+    """What :func:`run_discovery` does (``python -m pipeline.discover --help`` describes each field).
+
+    Attributes:
+        real: recording to analyse (``.csv`` with its ``.json`` sidecar); or None with ``scenario``.
+        scenario: effect names of a seeded simulated recording of ``robot`` (None with ``real``).
+        robot: the scenario's robot (default :data:`DEFAULT_SCENARIO_ROBOT`); with ``real``, the
+            robot the file must be of (None: the one its sidecar names).
+        scenario_seed: seed of the scenario recording.
+        candidates: effect names narrowing the library (None: every effect that applies).
+        seed: seed of the held-out split and cross-validation folds.
+        resim, sysid: re-simulate on the MuJoCo machine; re-fit there with ``mujoco.sysid``.
+        out, name: folder and base name of the ``.rrd`` (default ``<recording>_discover``).
+        overwrite: allow replacing existing outputs.
+        summary_json: write the summary as JSON there.
+    """
+
+    real: Path | None = None
+    scenario: tuple[str, ...] | None = None
+    robot: str | None = None
+    scenario_seed: int = 0
+    candidates: tuple[str, ...] | None = None
+    seed: int = 0
+    resim: bool = True
+    sysid: bool = True
+    out: Path = Path("recordings")
+    name: str | None = None
+    overwrite: bool = False
+    summary_json: Path | None = None
+
+
+def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
+    """Read (or simulate) the recording, check every output before the analysis (which can take
+    a minute with re-simulation), :func:`discover`, write the ``.rrd`` (and the summary JSON).
+
+    Raises:
+        ValueError: neither or both of ``real`` and ``scenario``; a recording of another robot
+            than ``robot``; a file that cannot be read (the message names it).
+        FileExistsError: an output exists and ``overwrite`` is off.
+    """
+    if (settings.real is None) == (settings.scenario is None):
+        raise ValueError("give one of a recording (--real) and a scenario (--scenario)")
+    if settings.real is not None:
+        rec = read_recording(settings.real)
+        stem = Path(settings.real).stem
+    else:
+        robot_name = settings.robot or DEFAULT_SCENARIO_ROBOT
+        stem = f"{robot_name}_{'+'.join(settings.scenario)}_{settings.scenario_seed}"
+        rec = None
+    out = Path(settings.out)
+    rrd_path = out / f"{settings.name or f'{stem}_discover'}.rrd"
+    output_folder(out)
+    check_outputs({"--out": rrd_path, "--summary-json": settings.summary_json}, overwrite=settings.overwrite)
+    if rec is None:
+        rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name)
+    robot = rec.robot
+    if settings.robot is not None and robot.name != settings.robot:
+        raise ValueError(f"{settings.real} is a recording of the {robot.name}, not of the {settings.robot} (--robot)")
+    report = discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
+                      candidates=settings.candidates)
+    rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
+    report.summary["rrd"] = str(rrd)
+    if settings.summary_json is not None:
+        atomic_write(settings.summary_json, json.dumps(report.summary, indent=1), overwrite=settings.overwrite)
+    return report
