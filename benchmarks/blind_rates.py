@@ -15,7 +15,7 @@ import json
 import sys
 import time
 
-from pipeline.blind import KINDS, failure_lines, rates_table, run_blind_suite
+from pipeline.workflows.blind import KINDS, failure_lines, rates_table, run_blind_suite
 
 
 def main(argv=None) -> int:

@@ -15,7 +15,7 @@ Measured in one run:
    own task stream (:func:`distributed.get_task_stream`). Also checked: the three runs give the
    same numbers.
 2. **Round trip of an empty task**: 500 no-op tasks on the 2-worker cluster, wall / tasks.
-3. **Blind suite** (:func:`pipeline.blind.blind_case`, the cases of
+3. **Blind suite** (:func:`pipeline.workflows.blind.blind_case`, the cases of
    ``run_blind_suite(seeds=range(S), kinds=("single",))``: every single effect that applies to
    the robot and none, ``--blind-seeds`` S seeds each; each case simulates its recording in
    MuJoCo and runs discovery on it): on a local cluster of 1 and of 2 workers (started
@@ -29,7 +29,7 @@ Measured in one run:
    best speed-up any executor can reach from 1 to 2 processes on this machine at that time (2.0
    with two free cores; less when the cores share a physical core or the host's other guests
    take a share of them). The executor's own efficiency is its speed-up over this figure.
-5. **Fleet**: the cost of one machine (:func:`pipeline.fleet.calibrate_machine`, in this process,
+5. **Fleet**: the cost of one machine (:func:`pipeline.workflows.fleet.calibrate_machine`, in this process,
    with the fleet's default effect discovery and without) over ``--machines`` recordings (one
    simulated per robot in MuJoCo, then copies).
 
@@ -118,7 +118,7 @@ def blind_task(job):
 
     ``job``: (case, threads) with ``threads`` the testbed threads the task may use (None: the
     worker's setting)."""
-    from pipeline.blind import blind_case
+    from pipeline.workflows.blind import blind_case
 
     case, threads = job
     if threads is not None:
@@ -149,7 +149,7 @@ def blind_on(client, cases, threads=None) -> dict:
 
 
 def blind_scale(robot: str, seeds: int, compare_threads: bool) -> dict:
-    from pipeline.blind import blind_cases
+    from pipeline.workflows.blind import blind_cases
 
     cases = blind_cases(seeds=range(seeds), robot=robot, kinds=("single",))
     fig = {"cases": len(cases), "seeds": seeds}
@@ -195,7 +195,7 @@ def study_on(client, inputs, trials):
 
 def fleet_cost(n_machines: int) -> dict:
     from pipeline.workflows.calibration import RunSettings, run_calibration
-    from pipeline.fleet import calibrate_machine, input_hash
+    from pipeline.workflows.fleet import calibrate_machine, input_hash
     from pipeline.formats import read_recording, write_recording
 
     poses = {"hexapod": 12, "delta": 12, "rus": 20}

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pipeline.formats import one_line
+
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
            "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments"]
 
@@ -21,17 +23,6 @@ EXIT_INTERRUPTED = 130
 
 class UsageError(ValueError):
     """A command-line value is refused; the message names the flag."""
-
-
-def one_line(exc: BaseException) -> str:
-    """The exception's message on one line (OS errors with their path)."""
-    if isinstance(exc, KeyError) and exc.args:
-        text = str(exc.args[0])
-    elif isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
-        text = f"{exc.filename}: {exc.strerror}"
-    else:
-        text = str(exc) or type(exc).__name__
-    return " ".join(text.split())
 
 
 def cli_main(run, argv: list[str] | None = None) -> int:

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import pipeline.blind as blind
+import pipeline.workflows.blind as blind
+from pipeline.blind import run as blind_command
 import pipeline.execution as executor
 import pipeline.simulation as scenarios
 from calib.effects import effect_family, effects_for
@@ -68,7 +69,7 @@ def test_one_recording_with_no_workers_reports_progress_on_stderr(monkeypatch, c
     Several cores are claimed, so that a command deciding on its own that the job runs on a cluster
     (and leaving the count to it) would show nothing, whatever this machine has."""
     monkeypatch.setattr(executor, "default_workers", lambda: 4)
-    res = blind.run(["--effects", "none", "--seeds", "1"])
+    res = blind_command(["--effects", "none", "--seeds", "1"])
     out, err = capsys.readouterr()
     assert len(res) == 1 and res[0]["kind"] == "single" and res[0]["effects"] == []
     assert out == "\n".join(["robot: hexapod", blind.rates_table(res), *blind.failure_lines(res)]) + "\n"

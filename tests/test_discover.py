@@ -9,7 +9,7 @@ from calib.effects import effects_for
 from calib.robots import default_robot
 from calib.robots.hexapod import Hexapod, paper_hexapod
 from calib.rotation import rotation_matrix
-from pipeline.blind import run_blind_suite
+from pipeline.workflows.blind import run_blind_suite
 from pipeline.discover import main
 from pipeline.workflows.discovery import discover
 from pipeline.formats import read_recording, write_recording

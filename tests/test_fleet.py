@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from pipeline.workflows.calibration import RunSettings, run_calibration
-from pipeline.fleet import TABLE_COLUMNS, input_hash, main, run_fleet
+from pipeline.fleet import main
+from pipeline.workflows.fleet import TABLE_COLUMNS, input_hash, run_fleet
 from pipeline.formats import read_recording, sidecar_path, write_recording
 
 #: Calibration poses simulated per robot (the rus has 66 parameters: 20 poses, twice its fewest).

@@ -11,7 +11,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs"]
+__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line"]
 
 
 def _exists_message(path: Path) -> str:
@@ -208,3 +208,14 @@ def check_outputs(paths: dict, *, overwrite: bool) -> None:
     given = {flag: path for flag, path in paths.items() if path}
     with ResultSet(given, overwrite=overwrite, flags={flag: flag for flag in given}):
         pass
+
+
+def one_line(exc: BaseException) -> str:
+    """The exception's message on one line (OS errors with their path)."""
+    if isinstance(exc, KeyError) and exc.args:
+        text = str(exc.args[0])
+    elif isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())

@@ -7,4 +7,6 @@ from pipeline.lazy import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "calibration": ("RunSettings", "RunResult", "run_calibration"),
     "discovery": ("DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate"),
+    "blind": ("run_blind_suite", "blind_cases", "blind_case", "rates_table", "failure_lines", "KINDS"),
+    "fleet": ("run_fleet", "FleetReport", "calibrate_machine", "fleet_inputs", "input_hash"),
 })
