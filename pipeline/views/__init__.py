@@ -13,5 +13,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
                       "observability_views"),
     "discovery_view": ("model_words", "verdict_words", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
                        "verdict_quantity", "discovery_markdown", "write_discovery_rrd"),
+    "snapshot": ("snapshot", "renderer_available", "viewer_executable", "SnapshotError"),
     "rrd": ("rrd_entities", "rrd_application_ids", "rrd_blueprint", "empty_views", "rrd_labels"),
 })
