@@ -44,7 +44,7 @@ from calib.design import minimum_poses, robot_workspace, sample_feasible_poses, 
 from calib.noise import SensorNoise  # noqa: E402
 from calib.observability import analyze_observability, parameter_scale, pose_uncertainty  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
-from pipeline.design import DEFAULT_CANDIDATES, design_start  # noqa: E402
+from pipeline.workflows.design import DEFAULT_CANDIDATES, design_start  # noqa: E402
 from pipeline.cli import add_executor_arguments
 from pipeline.execution import dask_client, run_tasks, runs_here  # noqa: E402
 from pipeline.formats import atomic_write  # noqa: E402

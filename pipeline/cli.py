@@ -10,10 +10,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from calib.noise import SensorNoise
 from pipeline.formats import one_line
 
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
-           "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments"]
+           "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments",
+           "add_noise_arguments", "noise_from_arguments"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
 EXIT_USAGE = 2
@@ -89,3 +91,23 @@ def add_executor_arguments(parser) -> None:
                              "no cluster)")
     parser.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
                         help="run on an existing Dask cluster (e.g. tcp://host:8786) instead of a local one")
+
+
+def add_noise_arguments(p: argparse.ArgumentParser) -> None:
+    """``--noise-mm``, ``--noise-rad``, ``--noise-joint`` (Gaussian standard deviations; default
+    :data:`pipeline.workflows.design.DEFAULT_NOISE`)."""
+    from pipeline.workflows.design import DEFAULT_NOISE
+
+    p.add_argument("--noise-mm", type=float, default=DEFAULT_NOISE.position_mm, help="position noise std, mm")
+    p.add_argument("--noise-rad", type=float, default=DEFAULT_NOISE.orientation_rad,
+                   help="angle noise std, rad (robots with angle coordinates)")
+    p.add_argument("--noise-joint", type=float, default=DEFAULT_NOISE.joint,
+                   help="joint-reading noise std, the robot's joint unit (default 0: exact joints)")
+
+
+def noise_from_arguments(args) -> SensorNoise:
+    """The Gaussian :class:`SensorNoise` of :func:`add_noise_arguments`' options."""
+    try:
+        return SensorNoise(args.noise_mm, args.noise_rad, "normal", args.noise_joint)
+    except ValueError as exc:
+        raise UsageError(f"--noise-mm/--noise-rad/--noise-joint: {exc}") from None

@@ -52,7 +52,9 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, free_indices, parameter_scale, pose_uncertainty
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import ROBOTS, reference_errors, reference_poses, robot_from_description
-from pipeline.design import add_noise_arguments, load_robot, noise_from_arguments, read_command_file
+from pipeline.cli import add_noise_arguments, noise_from_arguments
+from pipeline.workflows.design import load_robot
+from pipeline.formats import read_command_file
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
 from pipeline.cli import add_executor_arguments
 from pipeline.cli import ArgumentParser, cli_main, nonnegative_int

@@ -10,17 +10,9 @@ from calib.design import design_poses, feasibility, minimum_poses, robot_workspa
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability
 from calib.robots import default_robot, reference_poses, robot_from_description
-from pipeline.design import (
-    DEFAULT_NOISE,
-    command_columns,
-    command_csv,
-    design_search,
-    main,
-    optimal_poses,
-    read_command_file,
-    start_seed,
-    write_command_file,
-)
+from pipeline.workflows.design import DEFAULT_NOISE, design_search, optimal_poses, start_seed
+from pipeline.formats import command_columns, command_csv, read_command_file, write_command_file
+from pipeline.design import main
 
 ROBOTS = sorted(calib.robots.ROBOTS)
 HEXAPOD = default_robot("hexapod")

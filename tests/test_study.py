@@ -189,7 +189,7 @@ def test_cli_writes_summary_and_rrd(tmp_path, capsys, name, poses):
 
 @pytest.mark.parametrize("name", ROBOTS)
 def test_cli_reads_a_command_file(tmp_path, name):
-    from pipeline.design import write_command_file
+    from pipeline.formats import write_command_file
 
     robot, _, poses, commanded = setup(name)
     cmd = tmp_path / "c.csv"

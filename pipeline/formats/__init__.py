@@ -2,6 +2,7 @@
 anything is fitted to it, and safe writing of every output (atomic files, sets published
 together)."""
 
+from .command_file import command_columns, command_csv, read_command_file, write_command_file
 from .checks import REFUSED_CONDITION, ROTATION_CONVENTION, WARNED_CONDITION, plausibility
 from .outputs import (OutputError, ResultSet, atomic_write, check_outputs, one_line, output_folder, publish,
                       writing)
@@ -9,7 +10,7 @@ from .recording import (FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERS
                         Recording, RecordingError, columns, read_recording, recording_texts, sidecar_path,
                         write_recording)
 
-__all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
+__all__ = ["command_columns", "command_csv", "read_command_file", "write_command_file", "Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
            "sidecar_path", "plausibility", "check_outputs", "one_line", "OutputError", "ResultSet", "atomic_write", "output_folder", "publish",
            "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS", "SIDECAR_FIELDS",
            "MIN_ROBOT_SIZE_MM", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]

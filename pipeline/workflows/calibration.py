@@ -137,13 +137,13 @@ def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str
             return poses, "the reference poses"
         return reachable_poses(robot, DEFAULT_CONFIGURATIONS, seed), f"{DEFAULT_CONFIGURATIONS} random poses"
     if settings.poses.endswith(".csv"):
-        from pipeline.design import read_command_file
+        from pipeline.formats import read_command_file
 
         poses, _ = read_command_file(settings.poses, robot)
         return poses, f"{len(poses)} poses from {settings.poses}"
     n = int(settings.poses)
     if settings.design == "optimal":
-        from pipeline.design import optimal_poses
+        from pipeline.workflows.design import optimal_poses
 
         return optimal_poses(robot, n, seed=settings.seed), f"{n} D-optimal poses"
     return reachable_poses(robot, n, seed), f"{n} random poses"
