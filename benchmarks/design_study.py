@@ -8,7 +8,7 @@ Usage::
 Noise: Gaussian, standard deviation 0.001 mm on each position coordinate and 1e-6 rad on each
 angle (declared = simulated). Machine: the robot's default machine with its reference errors
 (the hexapod paper's Table 2 geometry with Table 3 errors) or, for a robot without any, random
-errors (:func:`pipeline.study.true_errors`), simulated by the robot's forward kinematics (no
+errors (:func:`pipeline.workflows.study.true_errors`), simulated by the robot's forward kinematics (no
 MuJoCo).
 
 1. Efficiency: Monte Carlo of the forward (ML) and the chain-wise method (the hexapod paper's
@@ -48,7 +48,7 @@ from pipeline.workflows.design import DEFAULT_CANDIDATES, design_start  # noqa: 
 from pipeline.cli import add_executor_arguments
 from pipeline.execution import dask_client, run_tasks, runs_here  # noqa: E402
 from pipeline.formats import atomic_write  # noqa: E402
-from pipeline.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
+from pipeline.workflows.study import compensation_errors, monte_carlo, true_errors  # noqa: E402
 
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
 

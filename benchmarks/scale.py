@@ -7,7 +7,7 @@ Usage::
 
 Measured in one run:
 
-1. **Monte Carlo study** (:func:`pipeline.study.monte_carlo`, forward method, 10 designed poses,
+1. **Monte Carlo study** (:func:`pipeline.workflows.study.monte_carlo`, forward method, 10 designed poses,
    20 held-out poses, Gaussian noise 1 um / 1 urad): in this process (``workers=1``), then on a
    local Dask cluster of 1 and of 2 workers (cluster started beforehand; its start timed apart).
    Per-trial cost, speed-up 1 -> 2 workers, and the scheduler's overhead per task:
@@ -62,7 +62,7 @@ from calib.noise import SensorNoise  # noqa: E402
 from calib.robots import default_robot, reference_poses  # noqa: E402
 from pipeline.execution import THREADS_VAR, dask_client, run_tasks  # noqa: E402
 from pipeline.formats import atomic_write  # noqa: E402
-from pipeline.study import monte_carlo, true_errors  # noqa: E402
+from pipeline.workflows.study import monte_carlo, true_errors  # noqa: E402
 
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")
 

@@ -90,3 +90,7 @@ def run(argv: list[str] | None = None) -> DesignOutcome:
 def main(argv: list[str] | None = None) -> int:
     """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
     return cli_main(run, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -11,7 +11,8 @@ from calib.noise import SensorNoise
 from calib.observability import analyze_observability, free_indices
 from calib.robot import KinematicsError
 from calib.robots import default_robot, reference_errors, reference_poses
-from pipeline.study import compensation_errors, main, monte_carlo, trial_noise, true_errors
+from pipeline.study import main
+from pipeline.workflows.study import compensation_errors, monte_carlo, trial_noise, true_errors
 
 ROBOTS = sorted(calib.robots.ROBOTS)
 NOISE = SensorNoise(position_mm=1e-3, orientation_rad=1e-6, distribution="normal")

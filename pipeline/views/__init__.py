@@ -15,5 +15,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
                        "verdict_quantity", "discovery_markdown", "write_discovery_rrd"),
     "snapshot": ("snapshot", "renderer_available", "viewer_executable", "SnapshotError"),
     "design_view": ("write_design_rrd", "position_columns"),
+    "study_view": ("write_study_rrd", "study_markdown"),
     "rrd": ("rrd_entities", "rrd_application_ids", "rrd_blueprint", "empty_views", "rrd_labels"),
 })

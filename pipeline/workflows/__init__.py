@@ -7,6 +7,9 @@ from pipeline.lazy import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "calibration": ("RunSettings", "RunResult", "run_calibration"),
     "discovery": ("DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate"),
+    "design": ("DesignSettings", "DesignOutcome", "run_design", "optimal_poses", "design_search", "load_robot",
+               "DEFAULT_NOISE"),
+    "study": ("StudySettings", "StudyOutcome", "run_study", "monte_carlo", "true_errors", "compensation_errors"),
     "blind": ("run_blind_suite", "blind_cases", "blind_case", "rates_table", "failure_lines", "KINDS"),
     "fleet": ("run_fleet", "FleetReport", "calibrate_machine", "fleet_inputs", "input_hash"),
 })
