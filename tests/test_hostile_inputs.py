@@ -363,11 +363,13 @@ def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, mon
 
 
 def test_concurrent_runs_into_one_folder_get_their_own_names(work):
-    from pipeline.workflows.calibration import NameReservation, RunSettings
+    from pipeline.formats import NameReservation
+    from pipeline.workflows.calibration import OUTPUT_EXTENSIONS, RunSettings, default_name
 
     csv_path, out = work
-    settings = RunSettings(real=csv_path, out=out)
-    first, second = NameReservation(out, settings), NameReservation(out, settings)
+    base = default_name(RunSettings(real=csv_path, out=out))
+    first, second = (NameReservation(out, base, explicit=False, overwrite=False, extensions=OUTPUT_EXTENSIONS)
+                     for _ in range(2))
     try:
         assert first.name == "rec_calibrated" and second.name == "rec_calibrated_2"
     finally:
@@ -460,3 +462,36 @@ def test_other_command_lines_refuse_bad_input(module, argv, needle, work, capsys
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err and needle in lines[0], err
     assert snapshot(out) == before
+
+
+HOLD_NAME = """
+import sys, time
+from pathlib import Path
+from pipeline.formats import NameReservation
+out, name = Path(sys.argv[1]), sys.argv[2]
+held = NameReservation(out, name, explicit=True, overwrite=True, extensions=(".rrd",))
+(out / f".{name}.rrd.killed.tmp").write_bytes(b"x" * 1000)  # what a run killed while writing leaves
+print("held", flush=True)
+time.sleep(60)
+"""
+
+
+def test_a_killed_run_blocks_no_rerun_and_its_temporary_files_go(work, capsys):
+    import subprocess
+    import sys
+
+    csv_path, out = work
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_NAME, str(out), "x"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        # While the holder lives, the name is refused, naming the process.
+        assert main(["--real", str(csv_path), "--out", str(out), "--name", "x", "--overwrite", "--quiet"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"another run (process {holder.pid}) is writing" in err[0]
+    finally:
+        holder.kill()
+        holder.wait()
+    assert (out / ".x.lock").exists() and (out / ".x.rrd.killed.tmp").exists()  # left by the kill
+    assert main(["--real", str(csv_path), "--out", str(out), "--name", "x", "--overwrite", "--quiet"]) == 0
+    assert (out / "x.rrd").exists()
+    assert not list(out.glob(".x*"))  # the lock released, the killed run's temporary file removed

@@ -11,7 +11,8 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line"]
+__all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line",
+           "FileLock", "LockHeld", "remove_stale_temporaries", "NameReservation"]
 
 
 def _exists_message(path: Path) -> str:
@@ -219,3 +220,124 @@ def one_line(exc: BaseException) -> str:
     else:
         text = str(exc) or type(exc).__name__
     return " ".join(text.split())
+
+
+class LockHeld(OSError):
+    """The lock is held by another process (``holder``: its process id as written, or '')."""
+
+    def __init__(self, path: Path, holder: str):
+        super().__init__(f"{path} is held by another process{f' ({holder})' if holder else ''}")
+        self.holder = holder
+
+
+class FileLock:
+    """An exclusive lock on ``path`` (POSIX ``flock``), the file holding the owner's process id
+    for the message of a refused run.
+
+    The system drops the lock when its holder ends, however it ends (a kill included), so a lock
+    file left by a killed process blocks nothing, and of two processes started together exactly
+    one takes it. The file is removed on :meth:`release`, while still locked; a process that
+    opened it just before and then locks the removed file sees that the path no longer names it,
+    and tries again.
+
+    Raises:
+        LockHeld: another process holds it.
+        OSError: the file cannot be created or locked (the folder is not writable, a file system
+            without locks).
+    """
+
+    def __init__(self, path: str | Path):
+        import fcntl
+
+        self.path = Path(path)
+        while True:
+            fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.read(fd, 32).decode(errors="replace").strip()
+                os.close(fd)
+                raise LockHeld(self.path, holder if holder.isdigit() else "") from None
+            except OSError:
+                os.close(fd)
+                raise
+            try:
+                named, held = os.stat(self.path), os.fstat(fd)
+                current = (named.st_dev, named.st_ino) == (held.st_dev, held.st_ino)
+            except FileNotFoundError:
+                current = False
+            if current:
+                break
+            os.close(fd)  # locked a file its holder has just removed: take the one the path names now
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self.fd = fd
+
+    def release(self) -> None:
+        """Remove the lock file and drop the lock (once)."""
+        if self.fd is None:
+            return
+        self.path.unlink(missing_ok=True)
+        os.close(self.fd)
+        self.fd = None
+
+
+def remove_stale_temporaries(folder: Path, name: str) -> list[Path]:
+    """Remove the temporary files (``.{name}.*.tmp``, ``.{name}.*.bak``) an interrupted writer of
+    ``folder/name`` left behind; call only while holding that name's lock. Returns those removed."""
+    removed = []
+    for pattern in (f".{name}.*.tmp", f".{name}.*.bak"):
+        for path in Path(folder).glob(pattern):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                continue
+            removed.append(path)
+    return removed
+
+
+class NameReservation:
+    """The base name of a run's output files in folder ``out``, held by a lock
+    (:class:`FileLock` on ``out/.{name}.lock``) until :meth:`release`.
+
+    A default name (``explicit`` False) is numbered rather than overwritten (``base``,
+    ``base_2``, ...: the first whose files, ``base + ext`` for each of ``extensions``, do not exist
+    or may be overwritten, and whose lock is free), so two runs into one folder at the same time
+    each get their own. An explicit name is never changed: one held by another run is refused.
+    The lock goes with its process however it ends, so an interrupted run blocks nothing; the
+    temporary files it left (``.{name}.*.tmp``) are removed when the name is taken again.
+
+    Raises:
+        OutputError: an explicit name another run holds, or a folder that cannot be written.
+    """
+
+    def __init__(self, out: Path, base: str, *, explicit: bool, overwrite: bool, extensions: tuple[str, ...]):
+        self.out, self.lock = Path(out), None
+        k = 1
+        while True:
+            cand = base if k == 1 else f"{base}_{k}"
+            taken = any((self.out / f"{cand}{ext}").exists() for ext in extensions)
+            if not taken or overwrite or explicit:
+                try:
+                    self.lock = FileLock(self.out / f".{cand}.lock")
+                except LockHeld as exc:
+                    if explicit:
+                        who = f" (process {exc.holder})" if exc.holder else ""
+                        raise OutputError(f"--name {cand}: another run{who} is writing {self.out / cand}.* "
+                                          "now") from None
+                except OSError as exc:
+                    raise OutputError(f"--out {self.out}: cannot write in this folder: "
+                                      f"{exc.strerror or exc}") from None
+                else:
+                    self.name = cand
+                    remove_stale_temporaries(self.out, cand)
+                    for ext in extensions:
+                        remove_stale_temporaries(self.out, f"{cand}{ext}")
+                    return
+            k += 1
+
+    def release(self) -> None:
+        """Give the name back (remove its lock file)."""
+        if self.lock is not None:
+            self.lock.release()
+        self.lock = None

@@ -9,7 +9,6 @@ keys for every robot.
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,10 +25,10 @@ from calib.outliers import find_outliers
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import OutputError, Recording, output_folder
+from pipeline.formats import NameReservation, Recording, output_folder
 
 __all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
-           "NameReservation", "default_name", "OUTPUT_EXTENSIONS"]
+           "default_name", "OUTPUT_EXTENSIONS"]
 
 #: Calibration poses of a robot whose reference experiment names none.
 DEFAULT_CONFIGURATIONS = 20
@@ -90,44 +89,6 @@ def default_name(settings: RunSettings) -> str:
 
 
 OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json")
-
-
-class NameReservation:
-    """The base name of a run's output files, held by a hidden lock file in the output folder.
-
-    The default name is numbered rather than overwritten, and two runs into one folder at the same
-    time each get their own name (the lock is taken atomically). An explicit name is never changed:
-    a name held by another run is refused. The lock is removed on :meth:`release`.
-    """
-
-    def __init__(self, out: Path, settings: RunSettings):
-        self.out = out
-        self.lock: Path | None = None
-        base = settings.name if settings.name is not None else default_name(settings)
-        k = 1
-        while True:
-            cand = base if k == 1 else f"{base}_{k}"
-            taken = any((out / f"{cand}{ext}").exists() for ext in OUTPUT_EXTENSIONS)
-            if not taken or settings.overwrite or settings.name is not None:
-                lock = out / f".{cand}.lock"
-                try:
-                    fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-                except FileExistsError:
-                    if settings.name is not None:
-                        raise OutputError(f"--name {cand}: another run is writing {out / cand}.* now "
-                                          f"(or was interrupted: remove {lock})") from None
-                except OSError as exc:
-                    raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
-                else:
-                    os.close(fd)
-                    self.lock, self.name = lock, cand
-                    return
-            k += 1
-
-    def release(self) -> None:
-        if self.lock is not None and self.lock.exists():
-            self.lock.unlink()
-        self.lock = None
 
 
 def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str]:
@@ -288,7 +249,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     # Every output is checked before any work, and the files are published together at the end.
     out = Path(settings.out)
     output_folder(out)
-    reservation = NameReservation(out, settings)
+    reservation = NameReservation(out, settings.name if settings.name is not None else default_name(settings),
+                                  explicit=settings.name is not None, overwrite=settings.overwrite,
+                                  extensions=OUTPUT_EXTENSIONS)
     try:
         name = reservation.name
         targets_out = {"rrd": out / f"{name}.rrd"}

@@ -48,7 +48,6 @@ import csv
 import hashlib
 import io
 import json
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,7 +55,7 @@ from pathlib import Path
 from calib.engine import METHODS
 
 from pipeline.execution import dask_client, run_tasks
-from pipeline.formats import OutputError, atomic_write, one_line, output_folder, sidecar_path
+from pipeline.formats import FileLock, LockHeld, OutputError, atomic_write, one_line, output_folder, sidecar_path
 
 __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "input_hash", "calibrate_machine",
            "run_fleet", "NOT_RUN", "TABLE_NAMES"]
@@ -269,52 +268,23 @@ def _done(row: dict | None, sha: str, method: str, discover: bool) -> bool:
     return row.get("status") == "error"
 
 
-class _FleetLock:
-    """An exclusive lock on ``out/.fleet.lock`` (POSIX ``flock``), the file holding the owner's
-    process id for the message of a refused fleet.
+def lock_folder(out: Path) -> FileLock:
+    """The fleet's lock on ``out/.fleet.lock`` (:class:`pipeline.formats.FileLock`): one fleet at a
+    time writes to an output folder.
 
-    The system drops the lock when its holder ends, however it ends, so a lock file left by a
-    killed fleet blocks nothing, and of two fleets started together exactly one takes it (before,
-    a second fleet could read the first's lock file before the id was in it, judge it stale and
-    take it over too). The file is removed on release, while still locked; a fleet that opened it
-    just before and then locks the removed file sees that the path no longer names it, and tries
-    again.
+    Raises:
+        OutputError: another fleet holds it, or the folder cannot be written or locked.
     """
-
-    def __init__(self, out: Path):
-        import fcntl
-
-        self.path = out / LOCK_NAME
-        while True:
-            try:
-                fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
-            except OSError as exc:
-                raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                holder = os.read(fd, 32).decode(errors="replace").strip()
-                os.close(fd)
-                who = f" (process {holder})" if holder.isdigit() else ""
-                raise OutputError(f"--out {out}: another fleet{who} is writing this folder now") from None
-            except OSError as exc:  # a file system without locks
-                os.close(fd)
-                raise OutputError(f"--out {out}: cannot lock {self.path}: {exc.strerror or exc}") from None
-            try:
-                named, held = os.stat(self.path), os.fstat(fd)
-                current = (named.st_dev, named.st_ino) == (held.st_dev, held.st_ino)
-            except FileNotFoundError:
-                current = False
-            if current:
-                break
-            os.close(fd)  # locked a file its holder has just removed: take the one the path names now
-        os.ftruncate(fd, 0)
-        os.write(fd, str(os.getpid()).encode())
-        self.fd = fd
-
-    def release(self) -> None:
-        self.path.unlink(missing_ok=True)
-        os.close(self.fd)
+    path = out / LOCK_NAME
+    try:
+        return FileLock(path)
+    except LockHeld as exc:
+        who = f" (process {exc.holder})" if exc.holder else ""
+        raise OutputError(f"--out {out}: another fleet{who} is writing this folder now") from None
+    except OSError as exc:
+        if exc.filename is not None:  # the lock file cannot be created
+            raise OutputError(f"--out {out}: cannot write in this folder: {exc.strerror or exc}") from None
+        raise OutputError(f"--out {out}: cannot lock {path}: {exc.strerror or exc}") from None
 
 
 def run_fleet(folder, out=None, *, method: str = "chainwise", discover: bool = True, workers: int | None = None,
@@ -346,7 +316,7 @@ def run_fleet(folder, out=None, *, method: str = "chainwise", discover: bool = T
             return run_fleet(folder, out, method=method, discover=discover, client=client, redo=redo,
                              progress=progress, display=display)
     output_folder(out)
-    lock = _FleetLock(out)
+    lock = lock_folder(out)
     rows, ran, skipped, dirty = {}, [], [], False
     try:
         (out / ROWS_DIR).mkdir(exist_ok=True)
