@@ -650,6 +650,10 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
                       ftol: float = 1e-15, gauge_passes: int = 2) -> MeasuredFit:
     """Identify the geometry jointly with the instrument frame and the target offsets.
 
+    Three steps: the arguments checked (:func:`_measured_inputs`), the start of the frame and
+    target offsets (:func:`_measured_start`: detection, closed-form registration), the joint fit
+    (:func:`_fit`) and its result (:func:`_measured_fit_result`).
+
     Args:
         robot: the robot.
         joints: (N, C) commanded (or read) joints.
@@ -666,6 +670,29 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
 
     Raises:
         ValueError: bad arguments, a row the start model cannot reach, too few rows.
+    """
+    data = _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
+    joints, measured = data["joints"], data["measured"]
+    k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
+    begin = _measured_start(robot, joints, measured, frame, initial_frame, data["targets"], est_targets, theta0)
+    est_frame = begin["est_frame"]
+    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
+    m = robot.pose_dim if k == 0 else 3 * k
+    if joints.shape[0] * m < unknowns:
+        raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
+                         f"unknowns, got {joints.shape[0]}")
+    fit = _fit(robot, joints, measured, noise, theta0, idx, begin["frame0"], begin["targets0"], est_frame,
+               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
+    return _measured_fit_result(robot, joints, measured, noise, fit, data, begin)
+
+
+def _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
+    """The checked arguments of :func:`identify_measured`: ``joints`` (N, C), ``measured``
+    (N, M), ``targets`` (K, 3) or None, ``k`` = K, ``est_targets``, the free ``names`` and their
+    sorted indices ``idx``, the start vector ``theta0`` (P,).
+
+    Raises:
+        TypeError, ValueError: naming the argument that is wrong.
     """
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
@@ -685,6 +712,15 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         raise ValueError(f"free must be a non-empty list of distinct parameter names, got {names}")
     idx = np.sort(robot.table.indices(names))
     theta0 = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    return {"joints": joints, "measured": measured, "targets": targets, "k": k, "est_targets": est_targets,
+            "names": names, "idx": idx, "theta0": theta0}
+
+
+def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_targets, theta0) -> dict:
+    """Whether the frame is estimated and where the fit starts: ``detection`` (or None),
+    ``est_frame``, ``registration`` (or None), ``frame0`` (6,), ``targets0`` (K, 3) or None,
+    ``poses0`` (N, D) the start model's poses, ``notes`` (what was found, in words)."""
+    k = 0 if targets is None else targets.shape[0]
     notes, detection = [], None
     if frame == "auto":
         detection = detect_frame(robot, joints, measured, targets=targets, estimate_targets=est_targets,
@@ -706,13 +742,17 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         frame0 = np.zeros(6) if initial_frame is None or frame == "base" else as_array(initial_frame, "initial_frame", (6,))
         targets0 = None if k == 0 else (
             _fit_targets(robot, joints, measured, theta0, poses0, frame0, targets) if est_targets else targets.copy())
-    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
-    m = robot.pose_dim if k == 0 else 3 * k
-    if joints.shape[0] * m < unknowns:
-        raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
-                         f"unknowns, got {joints.shape[0]}")
-    fit = _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
-               solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
+    return {"detection": detection, "est_frame": est_frame, "registration": registration, "frame0": frame0,
+            "targets0": targets0, "poses0": poses0, "notes": notes}
+
+
+def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict) -> MeasuredFit:
+    """The :class:`MeasuredFit` of a joint fit (``fit`` from :func:`_fit`; ``data`` from
+    :func:`_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
+    solution, the geometry's covariance (P, P), the frame's and targets' uncertainties, the gauge
+    in words, the stop message with the chi-square verdict."""
+    k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
+    est_frame, detection, notes = begin["est_frame"], begin["detection"], begin["notes"]
     theta = fit["theta"]
     try:
         poses = robot.forward_kinematics(theta, joints, initial=fit["poses"])
@@ -740,14 +780,14 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         msg = f"{msg}; " + (detection.message if detection is not None else
                             "the instrument frame is estimated with the geometry")
     result = IdentificationResult(
-        method="forward", robot=robot, theta=theta, start=theta0, free_names=names, residuals=res,
+        method="forward", robot=robot, theta=theta, start=theta0, free_names=data["names"], residuals=res,
         pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
         history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]))
     return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frame_std),
                        targets=None if k == 0 else frozen_array(fit["targets"]),
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
                        targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
-                       registration=registration, notes=tuple(notes))
+                       registration=begin["registration"], notes=tuple(notes))
 
 
 def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,
