@@ -27,22 +27,25 @@ module finds such rows with a fit that never sees them (:func:`find_gross_rows`)
    smallest statistic: the objective never rises); the best start is iterated to convergence
    (the rows repeat). A subset whose fit fails (a row out of reach, a diverging or singular fit,
    condition number beyond :data:`SUBSET_CONDITION`) is replaced by another draw.
-3. **Reweighting.** Rows whose statistic against the best trimmed fit exceeds the chi-square(M)
-   quantile ``1 - alpha`` (:data:`GROSS_ALPHA`: 0.999, false-alarm probability 0.001 per
-   consistent row, the outlier test's) are gross; the fit is repeated on the rest, and the
-   rows re-judged against it, until they repeat. The last fit is the full one (Levenberg-
-   Marquardt from the nominal geometry, the frame from the trimmed fit), whose gauge is
-   :func:`calib.measurement.identify_measured`'s.
+3. **Reweighting.** Rows whose statistic (leverage-corrected, below) against the best trimmed
+   fit exceeds the chi-square(M) quantile ``1 - alpha`` (:data:`GROSS_ALPHA`: 0.999, false-alarm
+   probability 0.001 per consistent row, the outlier test's) are gross; the fit is repeated on
+   the rest, and the rows re-judged against it, until they repeat. The last fit is the full one
+   (Levenberg-Marquardt from the nominal geometry, the frame from the trimmed fit), whose gauge
+   is :func:`calib.measurement.identify_measured`'s.
 
 Fewer than ``h`` rows consistent with the best trimmed fit is not a matter of gross rows: the
 model does not fit the data at the declared noise (an unmodelled effect, noise declared too
 small, or more than ``1 - KEPT_FRACTION`` of the rows gross): no row is named and the result
 says so (``success`` False).
 
-The statistic of a row in the fit is smaller than its leave-one-out statistic (leverage), that
-of a row left out larger; the cutoff is not corrected for either: gross rows are far beyond it
-(50 times the noise is a statistic near 7500 for uniform noise), and a consistent row left out
-at one step is taken back when the fit on the kept rows explains it.
+Rows are judged by the leverage-corrected statistic, as the outlier test judges them
+(:mod:`calib.outliers`): a row in the fit by ``r^T (I - H_jj)^-1 r`` (its residual predicted by
+the fit without it), a row left out by ``r^T (I + H_jj)^-1 r`` (the fit's prediction error
+added), ``H_jj`` its block of the hat matrix: both chi-square(M) to first order at the declared
+noise. Without it a consistent row left out of a fit with many parameters (the 6-RUS: 66) can
+exceed the cutoff by its prediction error alone. The search itself ranks rows by the plain
+statistic (least trimmed squares' objective).
 """
 
 from __future__ import annotations
@@ -90,9 +93,9 @@ class GrossRowResult:
     Attributes:
         gross: 0-based indices (into the input arrays) of the rows named gross, ascending.
         kept: (N,) bool, the rows the fit used (False for gross rows).
-        statistic: (N,) squared norm of each row's whitened residual against ``fit``
-            (dimensionless, chi-square(M) at the declared noise); NaN where not computed.
-        residuals: (N, M) the whitened residuals themselves.
+        statistic: (N,) each row's leverage-corrected statistic against ``fit`` (dimensionless,
+            chi-square(M) at the declared noise: module doc); NaN where not computed.
+        residuals: (N, M) each row's whitened residual against ``fit`` (dimensionless).
         cutoff: the chi-square(M) ``1 - alpha`` quantile a gross row exceeds.
         dof: M, the coordinates of a row.
         fit: the identification on the kept rows (geometry, and frame and target offsets where
