@@ -154,10 +154,10 @@ class _State:
 
 
 class _Counter:
-    """Fits run and subset fits failed."""
+    """Fits run, subset fits failed, and why the last one failed."""
 
     def __init__(self):
-        self.fits, self.failed = 0, 0
+        self.fits, self.failed, self.last_failure = 0, 0, ""
 
 
 def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto", targets=None,
@@ -195,12 +195,16 @@ def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame
     cutoff = float(2.0 * gammaincinv(m / 2.0, 1.0 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, m)
     counter = _Counter()
     n = len(problem.joints)
+    if n < problem.min_rows + 1:
+        return _failure(problem, cutoff, mode == "estimate", None, None, counter,
+                        f"too few rows to judge any: {n}, and {problem.min_rows} rows are needed to identify the "
+                        f"unknowns, {problem.min_rows + 1} to judge one row against the others")
     est_frame, words = False, ""
     try:
         est_frame, words = _frame_needed(problem, mode)
         begin = _start_state(problem, est_frame)
         best = _trimmed_fit(problem, est_frame, begin, np.random.default_rng(seed), random_starts, counter)
-    except _SearchFailed as exc:
+    except (_SearchFailed, ValueError, np.linalg.LinAlgError) as exc:  # KinematicsError is a ValueError
         return _failure(problem, cutoff, est_frame, None, None, counter, f"{words}{exc}")
     return _reweighted(problem, est_frame, best, cutoff, alpha, counter, words)
 
@@ -369,12 +373,13 @@ def _trimmed_fit(problem: _Problem, est_frame: bool, begin: dict, rng: np.random
             break
         try:
             state = _fit_rows(problem, est_frame, rows, nominal, counter)
-        except _SearchFailed:
-            counter.failed += 1
+        except _SearchFailed as exc:
+            counter.failed, counter.last_failure = counter.failed + 1, str(exc)
             continue
         trials.append(_c_steps(problem, est_frame, state, TRIAL_C_STEPS, counter))
     if not trials:
-        raise _SearchFailed(f"no subset of the rows could be fitted ({counter.failed} tried)")
+        raise _SearchFailed(f"no subset of the rows could be fitted ({counter.failed} tried; the last: "
+                            f"{counter.last_failure})")
     best = min(trials, key=lambda s: s.objective(problem.h))
     return _c_steps(problem, est_frame, best, MAX_C_STEPS, counter)
 
