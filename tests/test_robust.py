@@ -150,3 +150,19 @@ def test_bad_arguments_raise():
                          ({"kept_fraction": 0.3}, "kept_fraction"), ({"random_starts": -1}, "random_starts")]:
         with pytest.raises(ValueError, match=word):
             find_gross_rows(robot, q, clean, NOISE, **kwargs)
+
+
+def test_position_only_targets_in_a_far_frame():
+    """Three reflectors (offsets estimated), the hexapod in a far frame, the first target of 3
+    rows at z = 1000 mm: exactly those rows named, the frame estimated."""
+    robot = default_robot("hexapod")
+    nominal = robot.table.nominal
+    cal = reachable_poses(robot, N_ROWS, 1, bounds=robot.full_workspace_bounds())
+    q = robot.inverse_kinematics(nominal, cal)
+    poses = robot.forward_kinematics(nominal + reference_errors(robot, 0), q, initial=cal)
+    targets = np.array([[60.0, 0.0, 20.0], [-30.0, 52.0, 20.0], [-30.0, -52.0, 20.0]])
+    data = instrument_measurements(robot, poses, FAR_FRAME, targets) + NOISE.sample(N_ROWS, 3, ("mm",) * 9)
+    data[list(FAR_ROWS), 2] = FAR_Z_MM
+    found = find_gross_rows(robot, q, data, NOISE, targets=np.zeros((3, 3)), seed=0)
+    assert found.success and found.gross == FAR_ROWS and found.frame_estimated and found.dof == 9, found.message
+    assert found.fit.targets_estimated
