@@ -52,7 +52,7 @@ __all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETE
            "instrument_measurements", "measurement_jacobians", "measurement_units", "measurement_names",
            "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
            "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "identify_as_measured",
-           "measured_gauge_representative", "gauge_null_space",
+           "measured_gauge_representative", "gauge_null_space", "whitened_residuals", "whitened_jacobian",
            "MeasurementObservability", "measurement_observability"]
 
 #: ``"auto"``: estimate the frame when the data show it (:func:`detect_frame`); ``"base"``: the
@@ -461,6 +461,38 @@ def _whitening(robot, theta, joints, poses, noise, Hp, n_targets) -> np.ndarray:
     return np.broadcast_to(np.diag(1.0 / std), (n, m, m)).copy()
 
 
+def whitened_residuals(robot: Robot, theta, joints, measured, noise: SensorNoise, *, frame=None, targets=None,
+                       initial=None) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's residual against a model, whitened by the declared noise as the joint fit
+    whitens it (instrument noise plus the joint noise through the manipulator Jacobian).
+
+    Args:
+        robot, theta: the robot and its (P,) parameter vector.
+        joints: (N, C) joints.
+        measured: (N, M) the instrument's data (full poses, or K target positions, M = 3K).
+        noise: declared noise.
+        frame: (6,) the instrument frame; default the base frame.
+        targets: (K, 3) target offsets, mm; None for full poses.
+        initial: (N, D) start of the forward kinematics; default the robot's home pose.
+
+    Returns:
+        ``(whitened (N, M), poses (N, D))``: the whitened residuals (dimensionless; each row's
+        squared norm is chi-square with M degrees of freedom for a row at the declared noise) and
+        the model's poses at the joints (base frame, mm and rad).
+
+    Raises:
+        KinematicsError: the model cannot reach a row.
+    """
+    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    k = 0 if targets is None else len(targets)
+    measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
+    poses = robot.forward_kinematics(theta, joints, initial=initial)
+    Hp, _, _ = measurement_jacobians(robot, poses, frame, targets)
+    winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
+    r = measurement_residuals(robot, measured, instrument_measurements(robot, poses, frame, targets), k)
+    return np.einsum("nij,nj->ni", winv, r), poses
+
+
 def gauge_null_space(A: np.ndarray, groups, rtol: float = GAUGE_RTOL) -> tuple[np.ndarray, np.ndarray]:
     """The redundant directions of a scaled Jacobian and the constraints that fix them.
 
@@ -650,6 +682,10 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
                       ftol: float = 1e-15, gauge_passes: int = 2) -> MeasuredFit:
     """Identify the geometry jointly with the instrument frame and the target offsets.
 
+    Three steps: the arguments checked (:func:`_measured_inputs`), the start of the frame and
+    target offsets (:func:`_measured_start`: detection, closed-form registration), the joint fit
+    (:func:`_fit`) and its result (:func:`_measured_fit_result`).
+
     Args:
         robot: the robot.
         joints: (N, C) commanded (or read) joints.
@@ -666,6 +702,29 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
 
     Raises:
         ValueError: bad arguments, a row the start model cannot reach, too few rows.
+    """
+    data = _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
+    joints, measured = data["joints"], data["measured"]
+    k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
+    begin = _measured_start(robot, joints, measured, frame, initial_frame, data["targets"], est_targets, theta0)
+    est_frame = begin["est_frame"]
+    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
+    m = robot.pose_dim if k == 0 else 3 * k
+    if joints.shape[0] * m < unknowns:
+        raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
+                         f"unknowns, got {joints.shape[0]}")
+    fit = _fit(robot, joints, measured, noise, theta0, idx, begin["frame0"], begin["targets0"], est_frame,
+               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
+    return _measured_fit_result(robot, joints, measured, noise, fit, data, begin)
+
+
+def _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
+    """The checked arguments of :func:`identify_measured`: ``joints`` (N, C), ``measured``
+    (N, M), ``targets`` (K, 3) or None, ``k`` = K, ``est_targets``, the free ``names`` and their
+    sorted indices ``idx``, the start vector ``theta0`` (P,).
+
+    Raises:
+        TypeError, ValueError: naming the argument that is wrong.
     """
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
@@ -685,6 +744,15 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         raise ValueError(f"free must be a non-empty list of distinct parameter names, got {names}")
     idx = np.sort(robot.table.indices(names))
     theta0 = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    return {"joints": joints, "measured": measured, "targets": targets, "k": k, "est_targets": est_targets,
+            "names": names, "idx": idx, "theta0": theta0}
+
+
+def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_targets, theta0) -> dict:
+    """Whether the frame is estimated and where the fit starts: ``detection`` (or None),
+    ``est_frame``, ``registration`` (or None), ``frame0`` (6,), ``targets0`` (K, 3) or None,
+    ``poses0`` (N, D) the start model's poses, ``notes`` (what was found, in words)."""
+    k = 0 if targets is None else targets.shape[0]
     notes, detection = [], None
     if frame == "auto":
         detection = detect_frame(robot, joints, measured, targets=targets, estimate_targets=est_targets,
@@ -706,13 +774,17 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         frame0 = np.zeros(6) if initial_frame is None or frame == "base" else as_array(initial_frame, "initial_frame", (6,))
         targets0 = None if k == 0 else (
             _fit_targets(robot, joints, measured, theta0, poses0, frame0, targets) if est_targets else targets.copy())
-    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
-    m = robot.pose_dim if k == 0 else 3 * k
-    if joints.shape[0] * m < unknowns:
-        raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
-                         f"unknowns, got {joints.shape[0]}")
-    fit = _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
-               solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
+    return {"detection": detection, "est_frame": est_frame, "registration": registration, "frame0": frame0,
+            "targets0": targets0, "poses0": poses0, "notes": notes}
+
+
+def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict) -> MeasuredFit:
+    """The :class:`MeasuredFit` of a joint fit (``fit`` from :func:`_fit`; ``data`` from
+    :func:`_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
+    solution, the geometry's covariance (P, P), the frame's and targets' uncertainties, the gauge
+    in words, the stop message with the chi-square verdict."""
+    k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
+    est_frame, detection, notes = begin["est_frame"], begin["detection"], begin["notes"]
     theta = fit["theta"]
     try:
         poses = robot.forward_kinematics(theta, joints, initial=fit["poses"])
@@ -740,14 +812,14 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         msg = f"{msg}; " + (detection.message if detection is not None else
                             "the instrument frame is estimated with the geometry")
     result = IdentificationResult(
-        method="forward", robot=robot, theta=theta, start=theta0, free_names=names, residuals=res,
+        method="forward", robot=robot, theta=theta, start=theta0, free_names=data["names"], residuals=res,
         pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
         history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]))
     return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frame_std),
                        targets=None if k == 0 else frozen_array(fit["targets"]),
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
                        targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
-                       registration=registration, notes=tuple(notes))
+                       registration=begin["registration"], notes=tuple(notes))
 
 
 def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,
@@ -823,6 +895,45 @@ class MeasurementObservability:
                 "condition_number": self.condition_number if np.isfinite(self.condition_number) else None}
 
 
+def whitened_jacobian(robot: Robot, theta, joints, poses, noise: SensorNoise, *, frame=None, targets=None,
+                      free=None, estimate_frame: bool = False,
+                      estimate_targets: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
+    """Every row's whitened measurement Jacobian with respect to the unknowns of the joint fit.
+
+    Args:
+        robot, theta: the robot and the (P,) parameter vector to linearise at.
+        joints: (N, C) joints; poses: (N, D) the model's poses at them (base frame).
+        noise: declared noise (whitening, as :func:`whitened_residuals`).
+        frame: (6,) the instrument frame; default the base frame.
+        targets: (K, 3) target offsets, mm; None for full poses.
+        free: the free parameters (default ``robot.free_default``), taken in table order.
+        estimate_frame, estimate_targets: whether the frame and the offsets are unknowns.
+
+    Returns:
+        ``(J (N, M, n), scale (n,), names)``: the whitened Jacobian (per unit of each unknown:
+        mm or rad), each unknown's scale (mm per unit: 1 for lengths, the machine's size for
+        angles) and its name (free parameters, then ``T1.x ...``, then ``frame.x ...``).
+    """
+    frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
+    k = 0 if targets is None else len(targets)
+    idx = np.sort(robot.table.indices(robot.free_default if free is None else tuple(free)))
+    Hp, HF, Ho = measurement_jacobians(robot, poses, frame, targets)
+    winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
+    blocks = [Hp @ pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]]
+    names = list(np.array(robot.table.names)[idx])
+    scale = [np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0)]
+    if estimate_targets and k:
+        blocks.append(Ho)
+        names += [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"]
+        scale.append(np.ones(3 * k))
+    if estimate_frame:
+        blocks.append(HF)
+        names += list(FRAME_NAMES)
+        scale.append(np.r_[np.ones(3), np.full(3, robot.length_scale_mm)])
+    J = np.concatenate(blocks, axis=2)
+    return np.einsum("nij,njk->nik", winv, J), np.concatenate(scale), names
+
+
 def measurement_observability(robot: Robot, theta, joints, noise: SensorNoise, *, frame=None, targets=None,
                               estimate_frame: bool = True, estimate_targets: bool = True, free=None,
                               rtol: float = GAUGE_RTOL) -> MeasurementObservability:
@@ -845,22 +956,10 @@ def measurement_observability(robot: Robot, theta, joints, noise: SensorNoise, *
     est_targets = bool(estimate_targets and k)
     idx = np.sort(robot.table.indices(robot.free_default if free is None else tuple(free)))
     poses = _nominal_poses(robot, theta, joints)
-    Hp, HF, Ho = measurement_jacobians(robot, poses, frame, targets)
-    winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
-    blocks = [Hp @ pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]]
-    names = list(np.array(robot.table.names)[idx])
-    scale = [np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0)]
-    if est_targets:
-        blocks.append(Ho)
-        names += [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"]
-        scale.append(np.ones(3 * k))
-    if estimate_frame:
-        blocks.append(HF)
-        names += list(FRAME_NAMES)
-        scale.append(np.r_[np.ones(3), np.full(3, robot.length_scale_mm)])
-    J = np.concatenate(blocks, axis=2)
-    A = np.einsum("nij,njk->nik", winv, J).reshape(-1, J.shape[2])
-    scale = np.concatenate(scale)
+    J, scale, names = whitened_jacobian(robot, theta, joints, poses, noise, frame=frame, targets=targets,
+                                        free=np.array(robot.table.names)[idx], estimate_frame=estimate_frame,
+                                        estimate_targets=est_targets)
+    A = J.reshape(-1, J.shape[2])
     ni, nt = idx.size, 3 * k if est_targets else 0
     groups = [np.arange(ni), ni + np.arange(nt), ni + nt + np.arange(6 if estimate_frame else 0)]
     null, C = gauge_null_space(A / scale, groups, rtol)
