@@ -279,57 +279,113 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     return RunResult(summary=summary, result=result, paths=paths, recording=rec)
 
 
-def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs):
-    """The analysis of :func:`run_calibration`; writes the ``.rrd`` to its temporary file."""
-    sim = None
-    if rec is not None:
-        robot, noise = rec.robot, rec.noise
-        truth = rec.meta.get("simulation", {}).get("injected_errors")
-        try:
-            injected = robot.table.vector(truth, base=np.zeros(robot.n_parameters)) if isinstance(truth, dict) else None
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"{sidecar_name(settings.real)}: field 'meta.simulation.injected_errors': {exc}") from None
-        actual = None if injected is None else robot.table.nominal + injected
-        joints, measured = rec.subset("calibration")
-        val_joints, val_meas = rec.subset("validation")
-        cal_rows = rec.rows("calibration")
-        scenario = f"recording {settings.real}"
-        where = str(settings.real)
-        if len(measured) == 0:
-            raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
-    else:
-        robot = default_robot(settings.robot or DEFAULT_ROBOT)
-        noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
-        sim = _simulate(robot, settings, noise, progress)
-        actual, injected, scenario = sim["actual"], sim["errors"], sim["scenario"]
-        joints, measured = sim["cal"].encoders, sim["cal"].measured
-        cal_rows = np.arange(len(measured))
-        where = "the simulated calibration poses"
-    nominal = robot.table.nominal
-    split["simulate"] = time.perf_counter() - t0
+@dataclass
+class CalibrationInput:
+    """The measurements a run calibrates from, simulated or read (the first step of a run).
 
-    t1 = time.perf_counter()
-    # The outlier test (closed-form leave-one-out, forward model), then the identification from
-    # the rows kept; the one from every row is kept for the comparison.
+    Attributes:
+        robot, noise: the robot and the declared noise.
+        joints: (N, C) calibration joints; measured: (N, D) calibration poses (or target positions).
+        rows: (N,) 0-based data rows of the calibration rows in the recording.
+        where: how messages name the data (the file, or the simulated poses).
+        scenario: the run's scenario in words.
+        actual, injected: the true parameter vector and its errors, when known (else None).
+        val_joints, val_meas: the recording's validation rows (empty when simulating).
+        rec: the recording read (None when simulating); sim: the simulation's parts (None when reading).
+    """
+
+    robot: Robot
+    noise: SensorNoise
+    joints: np.ndarray
+    measured: np.ndarray
+    rows: np.ndarray
+    where: str
+    scenario: str
+    actual: np.ndarray | None
+    injected: np.ndarray | None
+    val_joints: np.ndarray
+    val_meas: np.ndarray
+    rec: Recording | None = None
+    sim: dict | None = None
+
+
+def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
+    """The calibration input of a recording (``settings.real``)."""
+    robot = rec.robot
+    truth = rec.meta.get("simulation", {}).get("injected_errors")
+    try:
+        injected = robot.table.vector(truth, base=np.zeros(robot.n_parameters)) if isinstance(truth, dict) else None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{sidecar_name(settings.real)}: field 'meta.simulation.injected_errors': {exc}") from None
+    joints, measured = rec.subset("calibration")
+    val_joints, val_meas = rec.subset("validation")
+    where = str(settings.real)
+    if len(measured) == 0:
+        raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
+    return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
+                            rows=rec.rows("calibration"), where=where, scenario=f"recording {settings.real}",
+                            actual=None if injected is None else robot.table.nominal + injected, injected=injected,
+                            val_joints=val_joints, val_meas=val_meas, rec=rec)
+
+
+def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
+    """The calibration input of a simulated machine (the reference errors injected, MuJoCo)."""
+    robot = default_robot(settings.robot or DEFAULT_ROBOT)
+    noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
+    sim = _simulate(robot, settings, noise, progress)
+    cal = sim["cal"]
+    empty = np.zeros((0, robot.pose_dim))
+    return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
+                            rows=np.arange(len(cal.measured)), where="the simulated calibration poses",
+                            scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
+                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim)
+
+
+@dataclass
+class Identification:
+    """The identification step's outcome: the fit used (``result``), the fits with and without the
+    flagged rows, the outlier test, the instrument frame fit (or None) and the rows used."""
+
+    result: IdentificationResult
+    result_all: IdentificationResult
+    result_kept: IdentificationResult | None
+    solver: str
+    report: object
+    outlier_verdict: str
+    flagged_idx: list
+    flagged: list
+    keep: np.ndarray
+    left_out: bool
+    used: np.ndarray
+    instrument: object
+    measured: np.ndarray
+
+
+def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) -> Identification:
+    """The outlier test (closed-form leave-one-out, forward model), then the identification from the
+    rows kept; the one from every row is kept for the comparison. A recording that needs an
+    instrument frame or targets is fitted with them (the forward method), its poses brought into
+    the base frame for the test."""
+    robot, joints, measured, noise = inp.robot, inp.joints, inp.measured, inp.noise
     n_cal = len(measured)
-    instrument = None  # the fit of an instrument frame or targets, when the recording needs one
-    if rec is not None:
-        instrument = identify_as_measured(robot, joints, measured, noise, measurement_settings(rec.meta.get("measurement")))
-    if instrument is not None:  # the forward method with the frame and targets; poses in the base frame below
+    instrument = None
+    if inp.rec is not None:
+        instrument = identify_as_measured(robot, joints, measured, noise,
+                                          measurement_settings(inp.rec.meta.get("measurement")))
+    if instrument is not None:
         measured = instrument.base_poses(joints, measured)
     try:
         report = find_outliers(robot, joints, measured, noise)
     except (ValueError, KinematicsError) as exc:
-        report = None
-        outlier_verdict = f"outlier test not run: {exc}"
+        report, outlier_verdict = None, f"outlier test not run: {exc}"
     else:
         outlier_verdict = report.verdict
     flagged_idx = list(report.flagged) if report is not None else []
-    flagged = [int(cal_rows[i]) + 1 for i in flagged_idx]
+    flagged = [int(inp.rows[i]) + 1 for i in flagged_idx]
     if instrument is not None:
         result_all, solver = instrument.result, "lm"
     else:
-        result_all, solver = _identify(robot, joints, measured, noise, settings, where)
+        result_all, solver = _identify(robot, joints, measured, noise, settings, inp.where)
     keep = np.setdiff1d(np.arange(n_cal), flagged_idx)
     left_out = bool(flagged_idx) and not settings.keep_outliers and instrument is None
     if flagged_idx and instrument is not None:
@@ -338,86 +394,108 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     result_kept = None
     if flagged_idx and instrument is None:
         try:
-            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, where)
+            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where)
         except ValueError as exc:
             warnings.append(f"the flagged rows are kept: without them {exc}")
             left_out = False
-    result = result_kept if left_out else result_all
-    used = keep if left_out else np.arange(n_cal)
-    split["identify"] = time.perf_counter() - t1
+    return Identification(result=result_kept if left_out else result_all, result_all=result_all,
+                          result_kept=result_kept, solver=solver, report=report, outlier_verdict=outlier_verdict,
+                          flagged_idx=flagged_idx, flagged=flagged, keep=keep, left_out=left_out,
+                          used=keep if left_out else np.arange(n_cal), instrument=instrument, measured=measured)
 
-    def heldout(theta):
-        """(before, after) held-out pose errors of the model ``theta``, or None."""
-        if sim is not None and sim["val"] is not None:
-            try:
-                compensated = robot.inverse_kinematics(theta, sim["heldout"])
-                check_joint_limits(robot, compensated, "held-out pose")
-            except KinematicsError as exc:
-                raise ValueError(
-                    f"the identified model cannot command the held-out poses ({exc}); its geometry is "
-                    "implausible: the measurements carry effects the geometric model lacks (gravity, "
-                    "payload, compliance; see python -m pipeline.discover)") from exc
-            after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
-                "measuring held-out poses (compensated commands)", d, t))
-            return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
-        if instrument is not None and len(val_joints):
-            return _instrument_heldout(robot, instrument, val_joints, val_meas)
-        if sim is None and len(val_joints):
-            # A recording holds the validation poses measured under nominal commands only: the
-            # identified model's prediction error there stands for the compensated error (equal to
-            # first order), and includes the sensor noise.
-            try:
-                before = val_meas - robot.forward_kinematics(nominal, val_joints, initial=val_meas)
-                after = val_meas - robot.forward_kinematics(theta, val_joints, initial=val_meas)
-            except KinematicsError as exc:
-                raise ValueError(f"{where}: validation row {int(rec.rows('validation')[exc.index]) + 1}: "
-                                 f"the model cannot reach its joints: {exc}") from None
-            return before, after
-        return None
 
-    t2 = time.perf_counter()
-    held = heldout(result.theta)
-    n_heldout = 0 if held is None else len(held[0])
-    heldout_basis = None
-    if held is not None:
-        heldout_basis = ("simulated machine, compensated commands, noise-free settled poses "
-                         "(before: nominal commands)") if sim is not None else \
-            "recorded validation rows: measured minus model prediction (includes sensor noise)"
-        if instrument is not None:
-            heldout_basis = _instrument_basis(instrument)
-    split["simulate"] += time.perf_counter() - t2
+def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress):
+    """``(before, after)`` held-out pose errors of the model ``theta``, or None: on the simulated
+    machine, its compensated commands; on a recording, the validation rows' prediction errors."""
+    robot, sim, instrument = inp.robot, inp.sim, ident.instrument
+    if sim is not None and sim["val"] is not None:
+        try:
+            compensated = robot.inverse_kinematics(theta, sim["heldout"])
+            check_joint_limits(robot, compensated, "held-out pose")
+        except KinematicsError as exc:
+            raise ValueError(
+                f"the identified model cannot command the held-out poses ({exc}); its geometry is "
+                "implausible: the measurements carry effects the geometric model lacks (gravity, "
+                "payload, compliance; see python -m pipeline.discover)") from exc
+        after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
+            "measuring held-out poses (compensated commands)", d, t))
+        return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
+    if instrument is not None and len(inp.val_joints):
+        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas)
+    if sim is None and len(inp.val_joints):
+        # A recording holds the validation poses measured under nominal commands only: the
+        # identified model's prediction error there stands for the compensated error (equal to
+        # first order), and includes the sensor noise.
+        nominal = robot.table.nominal
+        try:
+            before = inp.val_meas - robot.forward_kinematics(nominal, inp.val_joints, initial=inp.val_meas)
+            after = inp.val_meas - robot.forward_kinematics(theta, inp.val_joints, initial=inp.val_meas)
+        except KinematicsError as exc:
+            raise ValueError(f"{inp.where}: validation row {int(inp.rec.rows('validation')[exc.index]) + 1}: "
+                             f"the model cannot reach its joints: {exc}") from None
+        return before, after
+    return None
 
+
+def heldout_basis(inp: CalibrationInput, ident: Identification) -> str:
+    """What the held-out errors are, in words."""
+    if ident.instrument is not None:
+        return _instrument_basis(ident.instrument)
+    if inp.sim is not None:
+        return "simulated machine, compensated commands, noise-free settled poses (before: nominal commands)"
+    return "recorded validation rows: measured minus model prediction (includes sensor noise)"
+
+
+def validate_step(inp: CalibrationInput, ident: Identification, settings: RunSettings, progress):
+    """``(held, truth_in_gauge, with_flagged, without_flagged)``: the held-out errors of the fit
+    used, the true parameters in the fit's gauge (or None) and the with/without-flagged-rows
+    comparison (or None)."""
+    robot, result, instrument = inp.robot, ident.result, ident.instrument
+    held = heldout_errors(inp, ident, result.theta, progress)
     free = result.free_names
-    truth_in_gauge = None if actual is None else gauge_representative(robot, actual, result.start) \
-        if instrument is None else measured_gauge_representative(
-            robot, actual, estimate_frame=instrument.frame_estimated,
-            targets=instrument.targets if instrument.targets_estimated else None, start=result.start)
+    truth_in_gauge = None
+    if inp.actual is not None:
+        truth_in_gauge = gauge_representative(robot, inp.actual, result.start) if instrument is None else \
+            measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
+                                          targets=instrument.targets if instrument.targets_estimated else None,
+                                          start=result.start)
     with_flagged = without_flagged = None
-    if result_kept is not None:
-        other = result_all if left_out else result_kept
-        held_other = heldout(other.theta)
-        blocks = {id(result): held, id(other): held_other}
-        with_flagged = _variant(robot, result_all, list(range(n_cal)), blocks[id(result_all)], truth_in_gauge, free)
-        without_flagged = _variant(robot, result_kept, list(keep), blocks[id(result_kept)], truth_in_gauge, free)
-    history = list(result.history) if (settings.method == "chainwise" and solver == "gn" and instrument is None) \
+    if ident.result_kept is not None:
+        other = ident.result_all if ident.left_out else ident.result_kept
+        blocks = {id(result): held, id(other): heldout_errors(inp, ident, other.theta, progress)}
+        n_cal = len(inp.measured)
+        with_flagged = _variant(robot, ident.result_all, list(range(n_cal)), blocks[id(ident.result_all)],
+                                truth_in_gauge, free)
+        without_flagged = _variant(robot, ident.result_kept, list(ident.keep), blocks[id(ident.result_kept)],
+                                   truth_in_gauge, free)
+    return held, truth_in_gauge, with_flagged, without_flagged
+
+
+def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gauge, comparison,
+               settings: RunSettings, warnings: list) -> dict:
+    """The run's summary (the same keys for every robot)."""
+    robot, result, instrument = inp.robot, ident.result, ident.instrument
+    free = result.free_names
+    chainwise_gn = settings.method == "chainwise" and ident.solver == "gn"
+    history = list(result.history) if (chainwise_gn and instrument is None) \
         else [float(integrated_error(robot, result.pose_residuals if instrument is None else
-                                     measured - robot.forward_kinematics(result.theta, joints))[2].max())]
-    misfit = bool(report is not None and report.misfit)
+                                     ident.measured - robot.forward_kinematics(result.theta, inp.joints))[2].max())]
+    misfit = bool(ident.report is not None and ident.report.misfit)
     summary = {
         "robot": robot.name,
-        "scenario": scenario,
+        "scenario": inp.scenario,
         "method": settings.method,
-        "solver": solver,
+        "solver": ident.solver,
         "weighted": settings.weighted if settings.method == "chainwise" else True,
-        "calibration_poses": int(n_cal),
-        "calibration_poses_used": int(used.size),
-        "heldout_poses": n_heldout,
-        "declared_noise": noise.to_dict(),
+        "calibration_poses": int(len(inp.measured)),
+        "calibration_poses_used": int(ident.used.size),
+        "heldout_poses": 0 if held is None else len(held[0]),
+        "declared_noise": inp.noise.to_dict(),
         "seed": settings.seed,
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
         "free_parameters": list(free),
         "fixed_parameters": [n for n in robot.table.names if n not in free],
-        "injected_errors": None if injected is None else robot.table.to_dict(injected),
+        "injected_errors": None if inp.injected is None else robot.table.to_dict(inp.injected),
         "identified_errors": robot.table.to_dict(result.errors),
         "identified_std": robot.table.to_dict(result.std),
         "parameter_error": None if truth_in_gauge is None else
@@ -433,16 +511,16 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         "max_dqint_history": history,
         "condition_numbers": result.condition_numbers.tolist(),
         "row_numbering": ROW_NUMBERING,
-        "flagged_poses": flagged,
+        "flagged_poses": ident.flagged,
         "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
                              "against the declared noise), forward model",
-                     "verdict": outlier_verdict, "flagged_rows": flagged, "left_out": left_out,
+                     "verdict": ident.outlier_verdict, "flagged_rows": ident.flagged, "left_out": ident.left_out,
                      "model_misfit": misfit},
         "model_misfit": misfit,
-        "with_flagged": with_flagged,
-        "without_flagged": without_flagged,
+        "with_flagged": comparison[0],
+        "without_flagged": comparison[1],
         "warnings": warnings,
-        "heldout_basis": heldout_basis,
+        "heldout_basis": None if held is None else heldout_basis(inp, ident),
         "heldout_position_error_mm": None,
         "heldout_orientation_error_rad": None,
     }
@@ -450,56 +528,90 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         summary.update(_heldout_block(robot, *held))
     if instrument is not None:
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
-    heldout_before, heldout_after = (None, None) if held is None else held
-    if sim is not None:
-        cal = sim["cal"]
-        summary["settle_steps_per_pose"] = {"mean": float(cal.steps.mean()), "max": int(cal.steps.max())}
-        summary["simulation"] = {"gravity": settings.gravity, "payload_kg": settings.payload_kg,
-                                 "stiffness": settings.stiffness, "friction": settings.friction}
-        # How far the settled machine departs from its own kinematics (load, compliance...).
-        dep = cal.true_poses - robot.forward_kinematics(actual, cal.commanded, initial=cal.true_poses)
-        pos, ang = pose_error_norms(robot, dep)
-        summary["kinematic_departure"] = {"position_mm": {"mean": float(pos.mean()), "max": float(pos.max())},
-                                          "orientation_rad": {"mean": float(ang.mean()), "max": float(ang.max())}}
-        parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
-        simulation = {"injected_errors": robot.table.to_dict(injected),
-                      "gravity": settings.gravity, "payload_kg": settings.payload_kg,
-                      "stiffness": settings.stiffness, "friction": settings.friction}
-        summary["_recording"] = Recording(
-            robot=robot, noise=noise, t_s=np.concatenate([p.t_s for p in parts]),
-            joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
-            sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
-            meta={"scenario": scenario, "seed": settings.seed, "simulation": simulation})
+    if inp.sim is not None:
+        summary.update(simulation_block(inp, settings))
+    return summary
 
-    t3 = time.perf_counter()
+
+def simulation_block(inp: CalibrationInput, settings: RunSettings) -> dict:
+    """Summary keys of a simulated run: settling, the machine's options, how far the settled
+    machine departs from its own kinematics (load, compliance, ...)."""
+    robot, cal = inp.robot, inp.sim["cal"]
+    options = {"gravity": settings.gravity, "payload_kg": settings.payload_kg, "stiffness": settings.stiffness,
+               "friction": settings.friction}
+    dep = cal.true_poses - robot.forward_kinematics(inp.actual, cal.commanded, initial=cal.true_poses)
+    pos, ang = pose_error_norms(robot, dep)
+    return {"settle_steps_per_pose": {"mean": float(cal.steps.mean()), "max": int(cal.steps.max())},
+            "simulation": options,
+            "kinematic_departure": {"position_mm": {"mean": float(pos.mean()), "max": float(pos.max())},
+                                    "orientation_rad": {"mean": float(ang.mean()), "max": float(ang.max())}}}
+
+
+def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recording:
+    """The recording of a simulated run (calibration rows, then the held-out rows measured under
+    nominal commands)."""
+    robot, sim = inp.robot, inp.sim
+    parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
+    simulation = {"injected_errors": robot.table.to_dict(inp.injected), "gravity": settings.gravity,
+                  "payload_kg": settings.payload_kg, "stiffness": settings.stiffness, "friction": settings.friction}
+    return Recording(
+        robot=robot, noise=inp.noise, t_s=np.concatenate([p.t_s for p in parts]),
+        joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
+        sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
+        meta={"scenario": inp.scenario, "seed": settings.seed, "simulation": simulation})
+
+
+def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, settings: RunSettings,
+             rrd_path: Path) -> None:
+    """Write the run's ``.rrd`` (its default layout, the robot's application id)."""
     from calib.observability import analyze_observability
     from pipeline.views import (application_id, blueprint, log_calibration_run, run_eye, run_magnification,
                                 save_recording, summary_markdown)
 
-    analysis = analyze_observability(robot, result.start, measured[used], noise)
+    robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
+    nominal = robot.table.nominal
+    analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise)
     summary["observability"] = {"condition_number": float(analysis.condition_number),
                                 "crb_std": robot.table.to_dict(analysis.crb_std)}
-    targets = sim["targets"] if sim is not None else _predicted_or(robot, nominal, joints, measured)
+    targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)
     predicted = _predicted_or(robot, result.theta, joints, measured)
-
-    magnified = run_magnification(robot, nominal, actual, result.theta, targets, measured)
-    history_label = "max dQint (mm)" if (settings.method == "chainwise" and solver == "gn") else "cost"
+    magnified = run_magnification(robot, nominal, inp.actual, result.theta, targets, measured)
+    history_label = "max dQint (mm)" if (settings.method == "chainwise" and ident.solver == "gn") else "cost"
+    heldout_before, heldout_after = (None, None) if held is None else held
     if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim:  # target positions
         heldout_before = heldout_after = None
 
     def log(stream):
-        log_calibration_run(stream, robot=robot, nominal=nominal, actual=actual, identified=result.theta,
+        log_calibration_run(stream, robot=robot, nominal=nominal, actual=inp.actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
                             predicted=predicted, history=result.history, heldout_before=heldout_before,
                             heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
-                            observability=analysis, flagged=flagged_idx, history_label=history_label,
+                            observability=analysis, flagged=ident.flagged_idx, history_label=history_label,
                             magnified=magnified)
 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
                    has_heldout=heldout_before is not None, history_label=history_label)
-    save_recording(outputs.temp("rrd"), log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
+    save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
+
+
+def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs):
+    """The analysis of :func:`run_calibration`, in its named steps: simulate or read, identify,
+    validate, summarise, log (the ``.rrd`` to its temporary file); the caller publishes."""
+    inp = read_input(settings, rec) if rec is not None else simulate_input(settings, progress)
+    split["simulate"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    ident = identify_step(inp, settings, warnings)
+    split["identify"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    held, truth_in_gauge, *comparison = validate_step(inp, ident, settings, progress)
+    split["simulate"] += time.perf_counter() - t2
+    summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
+    if inp.sim is not None:
+        summary["_recording"] = simulated_recording(inp, settings)
+    t3 = time.perf_counter()
+    log_step(inp, ident, held, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
-    return summary, result
+    return summary, ident.result
 
 
 def _predicted_or(robot: Robot, theta, joints, measured) -> np.ndarray:
