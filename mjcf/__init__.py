@@ -1,5 +1,7 @@
-"""MuJoCo machines of the robots, composed with ``mujoco.MjSpec`` from ``calib`` parameter vectors
-(MuJoCo in SI metres; the conversion lives in :mod:`mjcf.units`).
+"""The simulated machine, in one place: MuJoCo machines of the robots composed with
+``mujoco.MjSpec`` from ``calib`` parameter vectors (:mod:`mjcf.machine` and one builder module a
+robot), commanded, settled and read by :class:`mjcf.simulator.MachineSimulator` (MuJoCo in SI
+metres; the conversion lives in :mod:`mjcf.units`).
 
 Adding a robot: write its builder module (``build_machine(robot, theta, options) -> Machine``, the
 contract of :mod:`mjcf.machine`) and add one line to :data:`MACHINES`.
@@ -22,7 +24,7 @@ if TYPE_CHECKING:
     from .machine import Machine, MachineOptions
 
 __all__ = ["MACHINES", "build_machine", "Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2",
-           "M_PER_MM", "m_to_mm", "mm_to_m"]
+           "MachineSimulator", "SettleError", "M_PER_MM", "m_to_mm", "mm_to_m"]
 
 
 class _Builders(Mapping):
@@ -70,8 +72,10 @@ def build_machine(robot: Robot, theta, options: MachineOptions | None = None) ->
 
 
 def __getattr__(name: str):
-    if name in ("Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2"):
-        value = getattr(importlib.import_module(".machine", __name__), name)
+    module = {"Machine": "machine", "MachineOptions": "machine", "MachineEffects": "machine",
+              "GRAVITY_M_S2": "machine", "MachineSimulator": "simulator", "SettleError": "simulator"}.get(name)
+    if module is not None:
+        value = getattr(importlib.import_module(f".{module}", __name__), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'mjcf' has no attribute {name!r}")

@@ -187,8 +187,8 @@ def test_after_a_rollout_the_machine_rests_at_the_last_pose():
     joints = commands(3, 4)
     bed = Testbed(ROBOT, ACTUAL, settle="rollout")
     m = bed.measure(joints)
-    np.testing.assert_allclose(bed.machine.read_pose(bed.data), m.true_poses[-1], atol=1e-9)
-    assert bed.data.time == pytest.approx(m.t_s[-1])
+    np.testing.assert_allclose(bed.simulator.read_pose(), m.true_poses[-1], atol=1e-9)
+    assert bed.simulator.time == pytest.approx(m.t_s[-1])
     # A sequential settle of the same command from there is already at rest.
     pose, steps = bed.settle(joints[-1])
     assert steps == 6
