@@ -136,31 +136,48 @@ def main(argv=None) -> int:
         return study(args, client)
 
 
-def study(args, client) -> int:
-    bench = Bench(args.robot, args.seed)
-    tasks = {"workers": args.workers, "client": client}
+def _ten_pose_sets(bench: Bench, args, tasks: dict, full, small) -> dict:
+    """The sets of 10 poses compared: the robot's reference poses (if it has some), the D- and
+    E-optimal designs in each workspace (each design_poses(robot, nominal, 10, ws, NOISE,
+    criterion=c, seed=args.seed), as a task) and a random feasible set."""
     robot, nominal = bench.robot, bench.nominal
-    full, small = robot_workspace(robot, "full"), robot_workspace(robot, "default")
-    held = {"full": sample_feasible_poses(robot, nominal, full, 100, [args.seed, 1]),
-            "default": sample_feasible_poses(robot, nominal, small, 100, [args.seed, 1])}
-    out = {"robot": robot.name, "noise": NOISE.to_dict(), "trials": args.trials, "seed": args.seed}
-    scale = parameter_scale(robot)[robot.table.indices(robot.free_default)]
-
-    # ---- designs with 10 poses -------------------------------------------------------------
     reference = reference_poses(robot)
     sets = {} if reference is None else {"reference poses": reference}
     designs = [(c, wsn, ws) for wsn, ws in (("full", full), ("default", small)) for c in ("d", "e")]
     base = {"robot": robot.name, "description": robot.description(), "theta": nominal, "n": 10,
             "noise": NOISE.to_dict(), "free": None, "seed": args.seed, "start": 0, "n_candidates": DEFAULT_CANDIDATES}
     t0 = time.perf_counter()
-    # Each design_poses(robot, nominal, 10, ws, NOISE, criterion=c, seed=args.seed), as a task.
     done = dict(run_tasks(design_start, [{**base, "workspace": ws.to_dict(), "criterion": c} for c, _, ws in designs],
                           **tasks))
     for k, (c, wsn, _) in enumerate(designs):
         sets[f"{c.upper()}-optimal, {wsn} workspace"] = done[k].poses
     log(f"designs ({', '.join(f'{c} {wsn}' for c, wsn, _ in designs)}): {time.perf_counter() - t0:.1f} s")
     sets["random, full workspace"] = sample_feasible_poses(robot, nominal, full, 10, [args.seed, 2])
+    return sets
 
+
+def _ten_pose_row(name: str, m: str, errors: np.ndarray, crb, scale: np.ndarray) -> tuple[dict, np.ndarray]:
+    """One row of the 10-pose table (pose set ``name``, method ``m``, Monte Carlo ``errors``) and
+    its MSE / CRB ratio per parameter."""
+    mse = np.mean(errors ** 2, axis=0)
+    ratio = mse / crb.crb_std ** 2
+    row = {
+        "poses": name, "method": m,
+        "scaled_condition_number": crb.scaled_condition_number,
+        "crb_rms_mm": crb.crb_rms,
+        "mc_param_rms_mm": float(np.sqrt(np.mean(mse * scale ** 2))),
+        "mse_over_crb_min": float(ratio.min()), "mse_over_crb_mean": float(ratio.mean()),
+        "mse_over_crb_max": float(ratio.max()),
+        "mse_over_crb_max_parameter": crb.names[int(np.argmax(ratio))],
+    }
+    return row, ratio
+
+
+def _ten_pose_rows(bench: Bench, args, client, sets: dict, held: dict) -> tuple[list, dict]:
+    """Monte Carlo of every 10-pose set (forward, and chain-wise for the reference and the
+    D-optimal full-workspace set): the table's rows and the MSE / CRB ratios per parameter."""
+    robot = bench.robot
+    scale = parameter_scale(robot)[robot.table.indices(robot.free_default)]
     rows, eff = [], {}
     ref_rms = None
     for name, poses in sets.items():
@@ -169,18 +186,8 @@ def study(args, client) -> int:
         log(f"{name}: {args.trials} trials x {len(methods)} methods in {dt:.1f} s")
         for m in methods:
             e = r[m]["errors"]
-            mse = np.mean(e ** 2, axis=0)
-            ratio = mse / crb.crb_std ** 2
-            row = {
-                "poses": name, "method": m,
-                "scaled_condition_number": crb.scaled_condition_number,
-                "crb_rms_mm": crb.crb_rms,
-                "mc_param_rms_mm": float(np.sqrt(np.mean(mse * scale ** 2))),
-                "mse_over_crb_min": float(ratio.min()), "mse_over_crb_mean": float(ratio.mean()),
-                "mse_over_crb_max": float(ratio.max()),
-                "mse_over_crb_max_parameter": crb.names[int(np.argmax(ratio))],
-                "success_rate": float(r[m]["success"].mean()),
-            }
+            row, ratio = _ten_pose_row(name, m, e, crb, scale)
+            row["success_rate"] = float(r[m]["success"].mean())
             n_eval = min(args.trials, 200)
             for hw in ("full", "default"):
                 row[f"heldout_{hw}"] = bench.heldout_errors(e[:n_eval], held[hw])
@@ -193,10 +200,11 @@ def study(args, client) -> int:
         if row["method"] == "forward" and ref_rms is not None:
             row["crb_rms_gain_vs_reference_poses"] = ref_rms["crb_rms_mm"] / row["crb_rms_mm"]
             row["mc_rms_gain_vs_reference_poses"] = ref_rms["mc_param_rms_mm"] / row["mc_param_rms_mm"]
-    out["ten_poses"] = rows
-    out["mse_over_crb_per_parameter"] = eff
+    return rows, eff
 
-    print(f"\n## {robot.name}: 10 calibration poses ({args.trials} Monte Carlo trials per row; noise std 1 um, "
+
+def _print_ten_poses(robot_name: str, trials: int, rows: list) -> None:
+    print(f"\n## {robot_name}: 10 calibration poses ({trials} Monte Carlo trials per row; noise std 1 um, "
           f"1e-6 rad)\n")
     print("| poses | method | cond. (col-scaled) | CRB param RMS (mm) | MC param RMS (mm) | gain vs reference poses "
           "(CRB / MC) | MSE/CRB min / mean / max (param) | held-out pos. RMS full ws (um, MC / pred.) "
@@ -211,12 +219,14 @@ def study(args, client) -> int:
               f"{r_['heldout_full']['rms_um']:.3g} / {r_['heldout_full']['predicted_rms_um']:.3g} | "
               f"{r_['heldout_default']['rms_um']:.3g} / {r_['heldout_default']['predicted_rms_um']:.3g} |")
 
-    # ---- poses needed for 1 um -------------------------------------------------------------
-    grid = list(range(minimum_poses(robot), 31)) + [35, 40, 50, 60, 80, 100, 130, 160, 200, 260, 330, 420, 540, 700]
-    need = {}
+
+def _heldout_curves(bench: Bench, args, tasks: dict, workspaces: dict, held: dict, grid: list) -> dict:
+    """Predicted held-out position RMS (um) against the number of poses, designed and random,
+    per workspace: ``curves[workspace][kind][n]`` (designed absent where no design was found)."""
+    robot, nominal = bench.robot, bench.nominal
     curves = {}
     points = []
-    for wsn, ws in (("full", full), ("default", small)):
+    for wsn, ws in workspaces.items():
         cands = sample_feasible_poses(robot, nominal, ws, 3000, [args.seed, 3])
         curves[wsn] = {"designed": {}, "random": {}}
         points += [{"robot": robot.name, "seed": args.seed, "wsn": wsn, "workspace": ws, "candidates": cands,
@@ -233,17 +243,26 @@ def study(args, client) -> int:
         if designed is not None:
             curves[point["wsn"]]["designed"][point["n"]] = designed
         curves[point["wsn"]]["random"][point["n"]] = random
+    return curves
+
+
+def _poses_needed(curves: dict) -> dict:
+    """``need[(workspace, kind, target um)]``: the fewest poses whose predicted held-out RMS is at
+    most the target (None: none on the grid)."""
+    need = {}
     for wsn in ("full", "default"):
         for target in (1.0, 0.5):
             for kind in ("designed", "random"):
                 ns = [n for n, v in sorted(curves[wsn][kind].items()) if v <= target]
                 need[(wsn, kind, target)] = ns[0] if ns else None
-    out["heldout_curves_um"] = {w: {k: {str(n): v for n, v in c.items()} for k, c in d.items()}
-                                for w, d in curves.items()}
+    return need
 
-    # Monte Carlo check at the reported N (designed and random, 1 um target).
+
+def _mc_checks(bench: Bench, args, client, workspaces: dict, held: dict, need: dict) -> dict:
+    """Monte Carlo check at the reported N (designed and random, 1 um target)."""
+    robot, nominal = bench.robot, bench.nominal
     checks = {}
-    for wsn, ws in (("full", full), ("default", small)):
+    for wsn, ws in workspaces.items():
         for kind in ("designed", "random"):
             n = need[(wsn, kind, 1.0)]
             if n is None:
@@ -262,9 +281,10 @@ def study(args, client) -> int:
                                        **bench.heldout_errors(r["forward"]["errors"], held[wsn]),
                                        "predicted_rms_um": bench.predicted_heldout_rms_um(poses, held[wsn])}
             log(f"MC check {wsn}/{kind} N={n}: {checks[f'{wsn}/{kind}']}")
-    out["poses_needed"] = {f"{w}/{k}/{t}um": v for (w, k, t), v in need.items()}
-    out["poses_needed_mc_check"] = checks
+    return checks
 
+
+def _print_poses_needed(need: dict, checks: dict, curves: dict, grid: list) -> None:
     print("\n## Poses needed for a held-out position error RMS of 1 um (0.5 um)\n")
     print("| workspace | designed (D-optimal) | random feasible (median of 5 draws) "
           "| MC check at that N, designed / random (um) |")
@@ -286,6 +306,35 @@ def study(args, client) -> int:
                 v = curves[w][k].get(n)
                 cells.append(f"{v:.3g}" if v is not None else "-")
         print(f"| {n} | " + " | ".join(cells) + " |")
+
+
+def study(args, client) -> int:
+    bench = Bench(args.robot, args.seed)
+    tasks = {"workers": args.workers, "client": client}
+    robot, nominal = bench.robot, bench.nominal
+    full, small = robot_workspace(robot, "full"), robot_workspace(robot, "default")
+    workspaces = {"full": full, "default": small}
+    held = {"full": sample_feasible_poses(robot, nominal, full, 100, [args.seed, 1]),
+            "default": sample_feasible_poses(robot, nominal, small, 100, [args.seed, 1])}
+    out = {"robot": robot.name, "noise": NOISE.to_dict(), "trials": args.trials, "seed": args.seed}
+
+    # ---- designs with 10 poses -------------------------------------------------------------
+    sets = _ten_pose_sets(bench, args, tasks, full, small)
+    rows, eff = _ten_pose_rows(bench, args, client, sets, held)
+    out["ten_poses"] = rows
+    out["mse_over_crb_per_parameter"] = eff
+    _print_ten_poses(robot.name, args.trials, rows)
+
+    # ---- poses needed for 1 um -------------------------------------------------------------
+    grid = list(range(minimum_poses(robot), 31)) + [35, 40, 50, 60, 80, 100, 130, 160, 200, 260, 330, 420, 540, 700]
+    curves = _heldout_curves(bench, args, tasks, workspaces, held, grid)
+    need = _poses_needed(curves)
+    out["heldout_curves_um"] = {w: {k: {str(n): v for n, v in c.items()} for k, c in d.items()}
+                                for w, d in curves.items()}
+    checks = _mc_checks(bench, args, client, workspaces, held, need)
+    out["poses_needed"] = {f"{w}/{k}/{t}um": v for (w, k, t), v in need.items()}
+    out["poses_needed_mc_check"] = checks
+    _print_poses_needed(need, checks, curves, grid)
 
     if args.out:
         atomic_write(args.out, json.dumps(out, indent=2) + "\n", overwrite=args.overwrite)

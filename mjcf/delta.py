@@ -26,6 +26,8 @@ Modelling choices (see docs/delta.md):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 
@@ -91,6 +93,98 @@ def integration_step(options: MachineOptions, arm_m: float) -> float:
     return float(options.timestep if omega * options.timestep <= 1.0 else 0.3 / omega)
 
 
+@dataclass(frozen=True)
+class _Geometry:
+    """The Delta machine ``theta``'s geometry in the model's metres: ``p`` its parameters,
+    ``home_q`` (3,) the arm angles at the home pose, ``home_plate`` (3,) the plate there, and per
+    chain (3, 3) the plate's attachment points (plate frame), the shoulders, the arm vectors
+    (arm frame), and (3,) the forearm lengths."""
+
+    p: object
+    home_q: np.ndarray
+    home_plate: np.ndarray
+    attach: np.ndarray
+    shoulders: np.ndarray
+    arms: np.ndarray
+    forearms: np.ndarray
+
+
+def _geometry(robot: Delta, theta: np.ndarray) -> _Geometry:
+    p = robot.params(theta)
+    home_q = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
+    home_plate = mm_to_m(robot.forward_kinematics(theta, home_q[None])[0])
+    attach = mm_to_m(robot.rn_mm * np.stack([np.cos(p.theta), np.sin(p.theta), np.zeros(3)], axis=1))
+    return _Geometry(p=p, home_q=home_q, home_plate=home_plate, attach=attach,
+                     shoulders=mm_to_m(p.shoulders()) + attach,
+                     arms=mm_to_m(np.stack([p.Lax, np.zeros(3), p.Lay], axis=1)), forearms=mm_to_m(p.Lb))
+
+
+def _add_plate(world, geo: _Geometry, options: MachineOptions) -> None:
+    """The base's disc, and the plate (three slides) with its sites and the payload."""
+    platform_kg = DEFAULT_PLATFORM_MASS_KG if options.platform_mass_kg is None else options.platform_mass_kg
+    world.add_geom(name="base", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0.0, 0.0, 0.01],
+                   size=[float(np.linalg.norm(geo.shoulders, axis=1).max()) + 0.02, 0.01, 0.0],
+                   rgba=[0.5, 0.5, 0.5, 0.5])
+    plate = world.add_body(name="plate", pos=geo.home_plate)
+    for axis, label in (([1.0, 0.0, 0.0], "x"), ([0.0, 1.0, 0.0], "y"), ([0.0, 0.0, 1.0], "z")):
+        plate.add_joint(name=f"plate_{label}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis, damping=PASSIVE_DAMPING)
+    plate.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                   size=[float(np.linalg.norm(geo.attach, axis=1).max()) + 0.01, 0.005, 0],
+                   mass=platform_kg, rgba=[0.3, 0.7, 0.3, 1.0])
+    plate.add_site(name=PLATFORM_SITE, size=[0.01, 0, 0])
+    for i in range(3):
+        plate.add_site(name=f"plate_c{i + 1}", pos=geo.attach[i], size=[0.008, 0, 0])
+    if options.payload_kg > 0:
+        payload = plate.add_body(name="payload", pos=[0.0, 0.0, options.payload_height_m])
+        payload.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.01, 0.0], mass=options.payload_kg,
+                         rgba=[0.6, 0.2, 0.2, 1.0])
+
+
+def _forearm_frame(geo: _Geometry, i: int, r_arm: np.ndarray) -> np.ndarray:
+    """Chain i's forearm frame in its arm frame at home: z along the bar, x along the actuated
+    axis (orthogonalised)."""
+    r_home = r_arm @ _ry(geo.home_q[i])
+    zf = r_home.T @ (geo.home_plate + geo.attach[i] - geo.shoulders[i] - r_home @ geo.arms[i])
+    zf /= np.linalg.norm(zf)
+    ey = np.array([0.0, 1.0, 0.0])
+    xf = ey - (ey @ zf) * zf
+    xf /= np.linalg.norm(xf)
+    return np.stack([xf, np.cross(zf, xf), zf], axis=1)
+
+
+def _add_chain(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOptions, step: float,
+               gear: float) -> None:
+    """Chain i: the actuated arm, the forearm on its two-hinge universal joint, the closure to the
+    plate and the position servo (gear ``gear``: it holds the hinge at ctrl / gear)."""
+    k = i + 1
+    r_arm = _rz(geo.p.theta[i]) @ _ry(geo.p.alpha[i])  # arm frame at q = 0
+    elbow = geo.arms[i]
+    arm = spec.worldbody.add_body(name=f"arm{k}", pos=geo.shoulders[i], quat=_quat(r_arm))
+    arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
+                  damping=ARM_DAMPING, frictionloss=options.joint_friction)
+    arm.explicitinertial = True
+    arm.ipos, arm.mass, arm.inertia = elbow / 2, ARM_MASS_KG, [ARM_INERTIA] * 3
+    arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.r_[np.zeros(3), elbow], size=[0.012, 0, 0],
+                 rgba=[0.2, 0.4, 0.8, 1.0])
+    arm.add_site(name=f"elbow{k}", pos=elbow, size=[0.01, 0, 0])
+    fore = arm.add_body(name=f"forearm{k}", pos=elbow, quat=_quat(_forearm_frame(geo, i, r_arm)))
+    for axis, label in (([1.0, 0.0, 0.0], "u1"), ([0.0, 1.0, 0.0], "u2")):
+        fore.add_joint(name=f"fa{k}_{label}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=PASSIVE_DAMPING)
+    lb = float(geo.forearms[i])
+    fore.explicitinertial = True
+    fore.ipos, fore.mass, fore.inertia = [0.0, 0.0, lb / 2], FOREARM_MASS_KG, [0.002, 0.002, 0.0002]
+    fore.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, lb], size=[0.006, 0, 0],
+                  rgba=[0.8, 0.5, 0.2, 1.0])
+    fore.add_site(name=f"fa{k}_end", pos=[0.0, 0.0, lb], size=[0.008, 0, 0])
+    spec.add_equality(name=f"close{k}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                      name1=f"fa{k}_end", name2=f"plate_c{k}", solref=[2 * step, 1.0],
+                      solimp=list(CLOSURE_SOLIMP))
+    kv = DEFAULT_DAMPING_NMS_PER_RAD if options.actuator_damping is None else options.actuator_damping
+    act = spec.add_actuator(name=f"motor{k}", target=ARM_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                            gear=[gear, 0, 0, 0, 0, 0])
+    act.set_to_position(kp=_stiffness(options) / gear**2, kv=kv / gear**2)
+
+
 def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = MachineOptions(),
                name: str = "delta") -> mujoco.MjSpec:
     """The Delta machine ``theta`` as an uncompiled ``MjSpec`` (see the module docstring).
@@ -104,79 +198,21 @@ def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = Machin
     theta = np.asarray(theta, dtype=float)
     if theta.shape != (robot.n_parameters,):
         raise ValueError(f"theta must have shape ({robot.n_parameters},), got {theta.shape}")
-    p = robot.params(theta)
     scale = np.zeros(3) if options.transmission_scale is None else np.asarray(options.transmission_scale, dtype=float)
     if scale.shape != (3,):
         raise ValueError(f"transmission_scale must have 3 values (one per chain), got {scale.size}")
-    home_q = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
-    home_plate = mm_to_m(robot.forward_kinematics(theta, home_q[None])[0])
-    attach = mm_to_m(robot.rn_mm * np.stack([np.cos(p.theta), np.sin(p.theta), np.zeros(3)], axis=1))
-    shoulders = mm_to_m(p.shoulders()) + attach
-    arms = mm_to_m(np.stack([p.Lax, np.zeros(3), p.Lay], axis=1))
-    forearms = mm_to_m(p.Lb)
-    step = integration_step(options, float(np.linalg.norm(arms, axis=1).max()))
-    kp = _stiffness(options)
-    kv = DEFAULT_DAMPING_NMS_PER_RAD if options.actuator_damping is None else options.actuator_damping
-    platform_kg = DEFAULT_PLATFORM_MASS_KG if options.platform_mass_kg is None else options.platform_mass_kg
-
+    geo = _geometry(robot, theta)
+    step = integration_step(options, float(np.linalg.norm(geo.arms, axis=1).max()))
     spec = new_spec(name, step, options.gravity)
-    world = spec.worldbody
-    world.add_geom(name="base", type=mujoco.mjtGeom.mjGEOM_CYLINDER, pos=[0.0, 0.0, 0.01],
-                   size=[float(np.linalg.norm(shoulders, axis=1).max()) + 0.02, 0.01, 0.0], rgba=[0.5, 0.5, 0.5, 0.5])
-    plate = world.add_body(name="plate", pos=home_plate)
-    for axis, label in (([1.0, 0.0, 0.0], "x"), ([0.0, 1.0, 0.0], "y"), ([0.0, 0.0, 1.0], "z")):
-        plate.add_joint(name=f"plate_{label}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis, damping=PASSIVE_DAMPING)
-    plate.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[float(np.linalg.norm(attach, axis=1).max()) + 0.01, 0.005, 0],
-                   mass=platform_kg, rgba=[0.3, 0.7, 0.3, 1.0])
-    plate.add_site(name=PLATFORM_SITE, size=[0.01, 0, 0])
-    for i in range(3):
-        plate.add_site(name=f"plate_c{i + 1}", pos=attach[i], size=[0.008, 0, 0])
-    if options.payload_kg > 0:
-        payload = plate.add_body(name="payload", pos=[0.0, 0.0, options.payload_height_m])
-        payload.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.01, 0.0], mass=options.payload_kg,
-                         rgba=[0.6, 0.2, 0.2, 1.0])
+    _add_plate(spec.worldbody, geo, options)
     home_qpos = [0.0, 0.0, 0.0]
     for i in range(3):
-        k = i + 1
-        r_arm = _rz(p.theta[i]) @ _ry(p.alpha[i])  # arm frame at q = 0
-        elbow = arms[i]
-        # Forearm frame at home: z along the bar, x along the actuated axis (orthogonalised).
-        r_home = r_arm @ _ry(home_q[i])
-        zf = r_home.T @ (home_plate + attach[i] - shoulders[i] - r_home @ elbow)
-        zf /= np.linalg.norm(zf)
-        ey = np.array([0.0, 1.0, 0.0])
-        xf = ey - (ey @ zf) * zf
-        xf /= np.linalg.norm(xf)
-        r_fore = np.stack([xf, np.cross(zf, xf), zf], axis=1)  # forearm frame in the arm frame
-        arm = world.add_body(name=f"arm{k}", pos=shoulders[i], quat=_quat(r_arm))
-        arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
-                      damping=ARM_DAMPING, frictionloss=options.joint_friction)
-        arm.explicitinertial = True
-        arm.ipos, arm.mass, arm.inertia = elbow / 2, ARM_MASS_KG, [ARM_INERTIA] * 3
-        arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.r_[np.zeros(3), elbow], size=[0.012, 0, 0],
-                     rgba=[0.2, 0.4, 0.8, 1.0])
-        arm.add_site(name=f"elbow{k}", pos=elbow, size=[0.01, 0, 0])
-        fore = arm.add_body(name=f"forearm{k}", pos=elbow, quat=_quat(r_fore))
-        for axis, label in (([1.0, 0.0, 0.0], "u1"), ([0.0, 1.0, 0.0], "u2")):
-            fore.add_joint(name=f"fa{k}_{label}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis, damping=PASSIVE_DAMPING)
-        lb = float(forearms[i])
-        fore.explicitinertial = True
-        fore.ipos, fore.mass, fore.inertia = [0.0, 0.0, lb / 2], FOREARM_MASS_KG, [0.002, 0.002, 0.0002]
-        fore.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, lb], size=[0.006, 0, 0],
-                      rgba=[0.8, 0.5, 0.2, 1.0])
-        fore.add_site(name=f"fa{k}_end", pos=[0.0, 0.0, lb], size=[0.008, 0, 0])
-        spec.add_equality(name=f"close{k}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                          name1=f"fa{k}_end", name2=f"plate_c{k}", solref=[2 * step, 1.0],
-                          solimp=list(CLOSURE_SOLIMP))
-        g = 1.0 / (1.0 + scale[i])
-        act = spec.add_actuator(name=f"motor{k}", target=ARM_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT,
-                                gear=[g, 0, 0, 0, 0, 0])
-        act.set_to_position(kp=kp / g**2, kv=kv / g**2)
-        home_qpos += [float(home_q[i]), 0.0, 0.0]
+        _add_chain(spec, geo, i, options, step, 1.0 / (1.0 + scale[i]))
+        home_qpos += [float(geo.home_q[i]), 0.0, 0.0]
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)
     # The servo holds the hinge at ctrl / g.
-    spec.add_key(name=HOME_KEY, qpos=home_qpos, ctrl=home_q / (1.0 + scale))
+    spec.add_key(name=HOME_KEY, qpos=home_qpos, ctrl=geo.home_q / (1.0 + scale))
     return spec
 
 

@@ -58,35 +58,28 @@ def _rz(t: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions = MachineOptions()) -> Machine:
-    """The machine of parameter set ``theta`` (66,) (mm, rad) of ``robot`` (see the module docstring).
+def _servo(o: MachineOptions, r: np.ndarray) -> tuple[float, np.ndarray, float]:
+    """``(kp, kv (6,), step)``: the motors' servo stiffness and damping (near-critical for a motor
+    carrying its crank, its rod and a sixth of the platform, unless given) and the integration
+    step (lowered so that the explicit stiffness stays stable)."""
+    platform_mass = DEFAULT_PLATFORM_MASS_KG if o.platform_mass_kg is None else o.platform_mass_kg
+    kp = DEFAULT_STIFFNESS_NM_PER_RAD if o.actuator_stiffness is None else o.actuator_stiffness
+    crank_inertia = MOTOR_ARMATURE_KG_M2 + CRANK_MASS_KG * r ** 2 / 3.0
+    loaded = crank_inertia + (ROD_MASS_KG + (platform_mass + o.payload_kg) / 6.0) * r ** 2
+    kv = 2.0 * np.sqrt(kp * loaded) if o.actuator_damping is None else np.full(6, o.actuator_damping)
+    omega = float(np.sqrt(kp / crank_inertia.min()))
+    step = o.timestep if omega * o.timestep <= 1.0 else 0.3 / omega
+    return kp, kv, step
 
-    Raises:
-        calib.robot.KinematicsError: ``theta`` cannot reach the robot's home pose.
-        ValueError: ``options.transmission_scale`` is not six numbers.
-    """
-    o = options
-    scale = (0.0,) * 6 if o.transmission_scale is None else o.transmission_scale
-    if len(scale) != 6:
-        raise ValueError(f"transmission_scale must have 6 entries for the rotary hexapod, got {len(scale)}")
-    p = robot.split(theta)
+
+def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: MachineOptions) -> None:
+    """The base's disc and each chain's motor, crank and rod, the rod pointing at its platform
+    joint with the motor at ``q_home``."""
     home = robot.home_pose
-    q_home = robot.inverse_kinematics(theta, home[None])[0]
     u, v, a = crank_frames(p["az"], p["el"])
     M, P = mm_to_m(p["M"]), mm_to_m(p["P"])
     r, s = mm_to_m(p["r"]), mm_to_m(p["s"])
     R_home, t_home = rotation_matrix(home[3:6]), mm_to_m(home[0:3])
-    platform_mass = DEFAULT_PLATFORM_MASS_KG if o.platform_mass_kg is None else o.platform_mass_kg
-    kp = DEFAULT_STIFFNESS_NM_PER_RAD if o.actuator_stiffness is None else o.actuator_stiffness
-    crank_inertia = MOTOR_ARMATURE_KG_M2 + CRANK_MASS_KG * r ** 2 / 3.0
-    # Near-critical damping of a motor carrying its crank, its rod and a sixth of the platform.
-    loaded = crank_inertia + (ROD_MASS_KG + (platform_mass + o.payload_kg) / 6.0) * r ** 2
-    kv = 2.0 * np.sqrt(kp * loaded) if o.actuator_damping is None else np.full(6, o.actuator_damping)
-    omega = float(np.sqrt(kp / crank_inertia.min()))
-    step = o.timestep if omega * o.timestep <= 1.0 else 0.3 / omega  # the explicit stiffness stays stable
-
-    spec = new_spec("rus", step, o.gravity)
-    world = spec.worldbody
     world.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[float(np.linalg.norm(M, axis=1).max()) + 0.03, 0.005, 0],
                    pos=[0, 0, float(M[:, 2].min()) - 0.03], contype=0, conaffinity=0, rgba=[0.25, 0.25, 0.3, 1])
     platform_joints = R_home @ P.T + t_home[:, None]  # (3, 6) base frame, m
@@ -107,7 +100,14 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
         rod.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, s[i]], size=[0.004, 0, 0],
                      mass=ROD_MASS_KG, contype=0, conaffinity=0, rgba=[0.8, 0.55, 0.2, 1])
         rod.add_site(name=f"rod{i + 1}_end", pos=[0, 0, s[i]])
-    plat = world.add_body(name="platform", pos=t_home, quat=quaternion_from_euler(home[3:6]))
+
+
+def _add_platform(world, robot: RotaryHexapod, p: dict, o: MachineOptions) -> None:
+    """The platform (a free body at the home pose) with its joints' sites and the payload."""
+    home = robot.home_pose
+    P = mm_to_m(p["P"])
+    platform_mass = DEFAULT_PLATFORM_MASS_KG if o.platform_mass_kg is None else o.platform_mass_kg
+    plat = world.add_body(name="platform", pos=mm_to_m(home[0:3]), quat=quaternion_from_euler(home[3:6]))
     plat.add_freejoint(name="platform_free")
     radius = float(np.linalg.norm(P, axis=1).max())
     plat.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius + 0.01, 0.004, 0], mass=platform_mass,
@@ -118,6 +118,10 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
     if o.payload_kg > 0:
         plat.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.5 * radius, 0.01, 0], pos=[0, 0, o.payload_height_m],
                       mass=o.payload_kg, contype=0, conaffinity=0, rgba=[0.6, 0.2, 0.2, 1])
+
+
+def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: float, kv: np.ndarray, step: float) -> None:
+    """Each chain's closure (rod end onto platform joint), its position servo and the pose sensors."""
     for i in range(6):
         # The closure's time constant follows the step (two steps, MuJoCo's stable minimum).
         spec.add_equality(name=f"chain{i + 1}_close", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
@@ -132,6 +136,26 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
                     objname=PLATFORM_SITE)
     spec.add_sensor(name=SENSOR_QUAT, type=mujoco.mjtSensor.mjSENS_FRAMEQUAT, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)
+
+
+def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions = MachineOptions()) -> Machine:
+    """The machine of parameter set ``theta`` (66,) (mm, rad) of ``robot`` (see the module docstring).
+
+    Raises:
+        calib.robot.KinematicsError: ``theta`` cannot reach the robot's home pose.
+        ValueError: ``options.transmission_scale`` is not six numbers.
+    """
+    o = options
+    scale = (0.0,) * 6 if o.transmission_scale is None else o.transmission_scale
+    if len(scale) != 6:
+        raise ValueError(f"transmission_scale must have 6 entries for the rotary hexapod, got {len(scale)}")
+    p = robot.split(theta)
+    q_home = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
+    kp, kv, step = _servo(o, mm_to_m(p["r"]))
+    spec = new_spec("rus", step, o.gravity)
+    _add_chains(spec.worldbody, robot, p, q_home, o)
+    _add_platform(spec.worldbody, robot, p, o)
+    _add_closures_and_servos(spec, scale, kp, kv, step)
     model = spec.compile()
     qpos = model.qpos0.copy()
     motors = tuple(f"motor{i + 1}" for i in range(6))

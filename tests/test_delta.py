@@ -198,6 +198,8 @@ def test_constraint_jacobian_params_matches_fd(seed):
             full[8 * i : 8 * i + 8] = v
             return constraint_residuals(DeltaParams.from_vector(full), q, x)[:, i]
 
+        # central differences, h = 1e-6: rounding eps |terms| / h ~ 1e-7 (terms up to ~500 mm),
+        # truncation ~h^2 |third derivative|
         np.testing.assert_allclose(jac[:, i, :], _fd(f, p.chain_vector(i), 1e-6), rtol=1e-6, atol=1e-6)
 
 
@@ -210,6 +212,8 @@ def test_constraint_jacobians_position_and_joints_match_fd(seed):
     jq = constraint_jacobian_joints(p, q, x)
     for k in range(4):
         fdx = _fd(lambda xx: constraint_residuals(p, q[k : k + 1], xx[None])[0], x[k].copy(), 1e-5)
+        # central differences: rounding eps |terms| / h ~ 1e-8 at h = 1e-5 mm, ~1e-6 at h = 1e-7 rad
+        # (terms up to ~500 mm), truncation ~h^2
         np.testing.assert_allclose(jx[k], fdx, atol=1e-7)
         fdq = _fd(lambda qq: constraint_residuals(p, qq[None], x[k : k + 1])[0], q[k].copy(), 1e-7)
         np.testing.assert_allclose(np.diag(jq[k]), fdq, rtol=1e-6, atol=1e-6)
@@ -223,6 +227,8 @@ def test_fk_jacobian_params_matches_fd(seed):
     jac = fk_jacobian_params(p, q)
     assert jac.shape == (4, 3, 24)
     fd = _fd(lambda v: forward_kinematics(DeltaParams.from_vector(v), q), p.to_vector(), 1e-6)
+    # central differences, h = 1e-6: rounding eps |pose| / h ~ 1e-7 plus the forward kinematics'
+    # residual over h, truncation ~h^2
     np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-6)
 
 
@@ -233,6 +239,8 @@ def test_fk_jacobian_joints_matches_fd(seed):
     jac = fk_jacobian_joints(p, q)
     for k in range(4):
         fd = _fd(lambda qq: forward_kinematics(p, qq[None])[0], q[k].copy(), 1e-7)
+        # central differences, h = 1e-7 rad: rounding eps |pose| / h ~ 1e-6 (the atol's tenth)
+        # plus the forward kinematics' residual over h, truncation ~h^2
         np.testing.assert_allclose(jac[k], fd, rtol=1e-6, atol=1e-5)
 
 

@@ -159,12 +159,16 @@ def test_compliance_is_the_gradient_of_the_potential_energy_by_finite_difference
         dq = np.zeros_like(q)
         dq[:, c] = h
         grad0 = (z_com(q + dq, 0.0) - z_com(q - dq, 0.0)) / (2 * h)
+        # central differences through the forward kinematics (h 1e-5 mm / 1e-7 rad): truncation
+        # ~h^2 and rounding eps |z| / h relative to a gradient of order 1; the second-order term
+        # with a 100 mm lever, a difference of two such gradients, gets 1e-5
         np.testing.assert_allclose(Xq[:, c, 0], -grad0, rtol=1e-6, atol=1e-9)
         if rotates:
             grad1 = (z_com(q + dq, 100.0) - z_com(q - dq, 100.0)) / (2 * h) - grad0
             np.testing.assert_allclose(Xq[:, c, 1], -grad1, rtol=1e-5, atol=1e-9)
     # The generic statics use the pose Jacobian of the closure (implicit function theorem).
     J = pose_jacobian_of_joints(robot, theta, q, poses)
+    # the same function on the same inputs (calib/effects/compliance.py): equal to the last bits
     np.testing.assert_allclose(Xq[:, :, 0], -J[:, robot.pose_names.index("z"), :], rtol=1e-12)
     # The chains' own weight, lumped at their interior points (a Delta's elbows, a 6-RUS's crank
     # tips; none on a hexapod): V = m g sum_i z(point_i(q, FK(q))).
@@ -180,6 +184,7 @@ def test_compliance_is_the_gradient_of_the_potential_energy_by_finite_difference
         dq = np.zeros_like(q)
         dq[:, c] = h * 100
         grad = (z_points(q + dq) - z_points(q - dq)) / (200 * h)
+        # central differences with a 100 times larger step: truncation ~(100 h)^2 dominates
         np.testing.assert_allclose(Xq[:, c, Xq.shape[2] - k:], -grad, rtol=1e-5, atol=1e-7)
 
 

@@ -665,6 +665,167 @@ def _lag1(z: np.ndarray, values: np.ndarray) -> float:
     return float(zz[:-1] @ zz[1:] / den * np.sqrt(zz.size))
 
 
+def _noise_tests(fit: EffectFit, z: np.ndarray, noise_alpha: float) -> dict:
+    """The chi-square tests of the remainder against the declared noise: overall (``fit.p_value``)
+    and per chain (Bonferroni, ``noise_alpha / C``), as :func:`remainder_tests` reports them."""
+    n, C = z.shape
+    dof_chain = max(n - fit.n_params / C, 1.0)
+    chain_chi2 = np.sum(z ** 2, axis=0)
+    p_chain = chi2_dist.sf(chain_chi2, dof_chain)
+    chains_noisy = [int(i) for i in np.flatnonzero(p_chain < noise_alpha / C)]
+    noise_ok = fit.p_value > noise_alpha and not chains_noisy
+    return {"chi2": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "alpha": noise_alpha,
+            "chi2_per_chain": chain_chi2.tolist(), "dof_per_chain": dof_chain,
+            "p_value_per_chain": p_chain.tolist(), "chains_failing": [c + 1 for c in chains_noisy],
+            "consistent": bool(noise_ok)}
+
+
+@dataclass(frozen=True, eq=False)
+class _Remainder:
+    """The fitted model's whitened space, where the remainder's F tests run: ``jac`` the closure
+    Jacobians at the fit, ``winv`` the whitening, ``Q`` an orthonormal basis of the model's
+    columns, ``w`` the whitened remainder."""
+
+    fit: EffectFit
+    jac: object
+    winv: np.ndarray
+    Q: np.ndarray
+    w: np.ndarray
+
+    def f_test(self, X):
+        """F test of the whitened remainder on columns ``X`` (the model's columns projected out):
+        ``(p, beta, cov, keep)``."""
+        from scipy.stats import f as f_dist
+
+        fit, Q = self.fit, self.Q
+        X = X - Q @ (Q.T @ X)
+        keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
+        X = X[:, keep]
+        k = int(np.linalg.matrix_rank(X)) if X.size else 0
+        if k == 0 or fit.dof - k <= 0:
+            return 1.0, None, None, keep
+        beta = _solve(X, self.w)
+        d2 = float(np.sum((X @ beta) ** 2))
+        s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
+        return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(X.T @ X, hermitian=True) * s2, keep
+
+    def joint_test(self, Xq: np.ndarray, k: int):
+        """:meth:`f_test` of joint displacements ``Xq`` (N, C, k), mapped to the closure."""
+        return self.f_test(_whiten(self.winv, closure_regressors(self.jac.joints, Xq)).reshape(-1, k))
+
+
+def _pose_drift_test(data: EffectData, rem: _Remainder) -> tuple[float, np.ndarray]:
+    """The measured pose drifting with time: every pose coordinate off in proportion to time, the
+    same at every pose (the measurement frame moving; nothing the joints do), through the
+    closure's pose Jacobian; one F test over the pose coordinates: ``(p, t per coordinate)``."""
+    robot = data.robot
+    tc = data.t_s - data.t_s.mean()
+    p_pose, t_pose = 1.0, np.zeros(robot.pose_dim)
+    if np.ptp(tc) > 0:
+        p_pose, beta, cov, keep = rem.f_test(_whiten(rem.winv, rem.jac.pose * tc[:, None, None])
+                                             .reshape(-1, robot.pose_dim))
+        if beta is not None:
+            t_pose[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    return p_pose, t_pose
+
+
+def _quantity_tests(rem: _Remainder, kind: str, values: np.ndarray, z: np.ndarray, R: np.ndarray) -> dict:
+    """One quantity's tests (:func:`remainder_tests`): in proportion to it (F, per-chain t) and,
+    for an ordered one, smooth in it (serial correlation per chain and combined) and common and
+    smooth in it (a cubic shared by every chain, F)."""
+    n, C = z.shape
+    v = values - values.mean(axis=0)
+    Xq = np.zeros((n, C, C))
+    Xq[:, np.arange(C), np.arange(C)] = v
+    p_f, beta, cov, keep = rem.joint_test(Xq, C)
+    t_chain = np.zeros(C)
+    if beta is not None:
+        t_chain[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    p_t = 2 * norm.sf(np.abs(t_chain))
+    p_smooth = 1.0
+    if kind == "ordered":
+        lag = np.array([_lag1(z[:, c], values[:, c]) for c in range(C)])
+        comb = float(np.sum(lag) / np.sqrt(max(np.sum(R ** 2), 1e-12)))
+        p_lag = norm.sf(lag)
+        p_comb = float(norm.sf(comb))
+        # Common and smooth: every joint displaced by one cubic function of its own value
+        # of the quantity (a warm-up, a drift that levels off: shared by every chain, so a
+        # test per chain is six times weaker against it).
+        span = float(np.ptp(values))
+        if span > 0:
+            u = 2 * (values - values.min()) / span - 1
+            p_smooth = rem.joint_test(np.stack([u, 1.5 * u ** 2 - 0.5, 2.5 * u ** 3 - 1.5 * u], axis=-1), 3)[0]
+    else:
+        lag, comb, p_lag, p_comb = np.zeros(C), 0.0, np.ones(C), 1.0
+    p_per = np.minimum(p_t, p_lag)
+    return {"p_f": p_f, "p_smooth": p_smooth, "p_comb": p_comb, "t_chain": t_chain, "lag": lag, "comb": comb,
+            "p_per": p_per, "p_min": min(p_f, p_comb, p_smooth, float(p_per.min()))}
+
+
+def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -> tuple[dict, np.ndarray, bool]:
+    """Every quantity's tests, Bonferroni over every statistic at ``alpha``: ``(structure, the
+    pose drift's t per coordinate, whether the pose drift is time's strongest)``."""
+    robot = data.robot
+    C = robot.n_chains
+    R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if data.n > 2 else np.eye(C)
+    feats = _features(data)
+    n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
+    # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth;
+    # the measured pose drifting with time
+    m_tests = len(feats) * (2 * C + 2) + n_ordered + 1
+    p_pose, t_pose = _pose_drift_test(data, rem)
+    pose_best = False
+    structure = {}
+    for name, kind, values in feats:
+        q = _quantity_tests(rem, kind, values, z, R)
+        p_min = q["p_min"]
+        extra = {}
+        if name == "time":
+            # Said in the words when the pose-space description beats every joint-space one.
+            pose_best = p_pose < p_min
+            p_min = min(p_min, p_pose)
+            extra = {"p_value_pose_drift": p_pose, "t_pose_drift": dict(zip(robot.pose_names, t_pose.tolist()))}
+        structure[name] = {"p_value_proportional": q["p_f"], "p_value_common_smooth": q["p_smooth"], **extra,
+                           "t_per_chain": q["t_chain"].tolist(),
+                           "serial_correlation_per_chain": q["lag"].tolist(),
+                           "serial_correlation_combined": q["comb"],
+                           "p_value": min(1.0, p_min * m_tests),
+                           "chains": [int(c) for c in np.flatnonzero(q["p_per"] * m_tests < alpha)],
+                           "score": float(-np.log10(max(p_min, 1e-300)))}
+    return structure, t_pose, pose_best
+
+
+def _remaining(robot: Robot, fit: EffectFit, std: np.ndarray, z: np.ndarray, noise: dict, structure: dict,
+               t_pose: np.ndarray, pose_best: bool, alpha: float) -> dict:
+    """What the remainder's tests leave (:func:`remainder_tests`' ``remaining``), in numbers and
+    in words."""
+    follows = sorted((k for k, v in structure.items() if v["p_value"] < alpha), key=lambda k: -structure[k]["score"])
+    explained = bool(noise["consistent"] and not follows)
+    floor = float(_rms(std))
+    rms = float(_rms(fit.residuals))
+    ratio = float(np.sqrt(fit.chi2 / max(fit.dof, 1)))
+    chains_noisy = [c - 1 for c in noise["chains_failing"]]
+    chains = sorted(set(chains_noisy) | {c for k in follows for c in structure[k]["chains"]})
+    remaining = {
+        "present": not explained,
+        "noise_ratio": ratio,
+        "rms_mm": rms,
+        "noise_floor_mm": floor,
+        "excess_rms_mm": float(np.sqrt(max(rms ** 2 - floor ** 2, 0.0))),
+        "rms_per_chain_noise": _rms(z, axis=0).tolist(),
+        "chains": [c + 1 for c in chains],
+        "follows": follows,
+        "does_not_follow": [k for k in ("time", "direction of the last move", "size of the last move", "stroke", "load")
+                            if k in structure and k not in follows],
+        # The measured pose drifting with time (alike at every pose; it follows time in pose space
+        # better than in any chain's joint): the coordinates that drift.
+        "pose_drift": [k for k, t in zip(robot.pose_names, t_pose) if abs(t) > POSE_DRIFT_Z]
+        if "time" in follows and pose_best else [],
+    }
+    remaining["summary"] = _remaining_words(remaining, robot.chain_word, explained)
+    return remaining
+
+
 def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_ALPHA,
                     noise_alpha: float = NOISE_ALPHA) -> dict:
     """Test what the fitted model leaves against the declared noise and for structure.
@@ -701,126 +862,17 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
         ``structure`` (per quantity: statistics, corrected p-value, chains), ``remaining``
         (what is left, in numbers and in words).
     """
-    from scipy.stats import f as f_dist
-
     robot = data.robot
-    C = robot.n_chains
     std = closure_noise_std(robot, fit.theta, data)
     z = fit.residuals / std
-    n = data.n
-    p_overall = fit.p_value
-    dof_chain = max(n - fit.n_params / C, 1.0)
-    chain_chi2 = np.sum(z ** 2, axis=0)
-    p_chain = chi2_dist.sf(chain_chi2, dof_chain)
-    chains_noisy = [int(i) for i in np.flatnonzero(p_chain < noise_alpha / C)]
-    noise_ok = p_overall > noise_alpha and not chains_noisy
+    noise = _noise_tests(fit, z, noise_alpha)
     # The generic effects' columns in the fitted model's whitened space.
     jac = robot.closure_jacobians(fit.theta, data.joints + fit.joint_displacement(data), data.measured)
     winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
-    Q = _orth(fit.design)
-    w = fit.whitened.ravel()
-    R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if n > 2 else np.eye(C)
-    feats = _features(data)
-    n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
-    # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth;
-    # the measured pose drifting with time
-    m_tests = len(feats) * (2 * C + 2) + n_ordered + 1
-
-    def f_test(X):
-        """F test of the whitened remainder on columns ``X`` (the model's columns projected out):
-        ``(p, beta, cov, keep)``."""
-        X = X - Q @ (Q.T @ X)
-        keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
-        X = X[:, keep]
-        k = int(np.linalg.matrix_rank(X)) if X.size else 0
-        if k == 0 or fit.dof - k <= 0:
-            return 1.0, None, None, keep
-        beta = _solve(X, w)
-        d2 = float(np.sum((X @ beta) ** 2))
-        s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
-        return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(X.T @ X, hermitian=True) * s2, keep
-
-    # The measured pose drifting with time: every pose coordinate off in proportion to time, the
-    # same at every pose (the measurement frame moving; nothing the joints do), through the
-    # closure's pose Jacobian; one F test over the pose coordinates.
-    tc = data.t_s - data.t_s.mean()
-    p_pose, t_pose = 1.0, np.zeros(robot.pose_dim)
-    if np.ptp(tc) > 0:
-        p_pose, beta, cov, keep = f_test(_whiten(winv, jac.pose * tc[:, None, None]).reshape(-1, robot.pose_dim))
-        if beta is not None:
-            t_pose[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    pose_best = False
-    structure = {}
-    for name, kind, values in feats:
-        v = values - values.mean(axis=0)
-        Xq = np.zeros((n, C, C))
-        Xq[:, np.arange(C), np.arange(C)] = v
-        p_f, beta, cov, keep = f_test(_whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, C))
-        t_chain = np.zeros(C)
-        if beta is not None:
-            t_chain[keep] = beta / np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-        p_t = 2 * norm.sf(np.abs(t_chain))
-        p_smooth = 1.0
-        if kind == "ordered":
-            lag = np.array([_lag1(z[:, c], values[:, c]) for c in range(C)])
-            comb = float(np.sum(lag) / np.sqrt(max(np.sum(R ** 2), 1e-12)))
-            p_lag = norm.sf(lag)
-            p_comb = float(norm.sf(comb))
-            # Common and smooth: every joint displaced by one cubic function of its own value
-            # of the quantity (a warm-up, a drift that levels off: shared by every chain, so a
-            # test per chain is six times weaker against it).
-            span = float(np.ptp(values))
-            if span > 0:
-                u = 2 * (values - values.min()) / span - 1
-                Xq = np.stack([u, 1.5 * u ** 2 - 0.5, 2.5 * u ** 3 - 1.5 * u], axis=-1)
-                p_smooth = f_test(_whiten(winv, closure_regressors(jac.joints, Xq)).reshape(-1, 3))[0]
-        else:
-            lag, comb, p_lag, p_comb = np.zeros(C), 0.0, np.ones(C), 1.0
-        p_per = np.minimum(p_t, p_lag)
-        p_min = min(p_f, p_comb, p_smooth, float(p_per.min()))
-        extra = {}
-        if name == "time":
-            # Said in the words when the pose-space description beats every joint-space one.
-            pose_best = p_pose < p_min
-            p_min = min(p_min, p_pose)
-            extra = {"p_value_pose_drift": p_pose, "t_pose_drift": dict(zip(robot.pose_names, t_pose.tolist()))}
-        structure[name] = {"p_value_proportional": p_f, "p_value_common_smooth": p_smooth, **extra,
-                           "t_per_chain": t_chain.tolist(),
-                           "serial_correlation_per_chain": lag.tolist(), "serial_correlation_combined": comb,
-                           "p_value": min(1.0, p_min * m_tests),
-                           "chains": [int(c) for c in np.flatnonzero(p_per * m_tests < alpha)],
-                           "score": float(-np.log10(max(p_min, 1e-300)))}
-    follows = sorted((k for k, v in structure.items() if v["p_value"] < alpha), key=lambda k: -structure[k]["score"])
-    explained = bool(noise_ok and not follows)
-    floor = float(_rms(std))
-    rms = float(_rms(fit.residuals))
-    ratio = float(np.sqrt(fit.chi2 / max(fit.dof, 1)))
-    chains = sorted(set(chains_noisy) | {c for k in follows for c in structure[k]["chains"]})
-    chain = robot.chain_word
-    chain_rms = _rms(z, axis=0)
-    remaining = {
-        "present": not explained,
-        "noise_ratio": ratio,
-        "rms_mm": rms,
-        "noise_floor_mm": floor,
-        "excess_rms_mm": float(np.sqrt(max(rms ** 2 - floor ** 2, 0.0))),
-        "rms_per_chain_noise": chain_rms.tolist(),
-        "chains": [c + 1 for c in chains],
-        "follows": follows,
-        "does_not_follow": [k for k in ("time", "direction of the last move", "size of the last move", "stroke", "load")
-                            if k in structure and k not in follows],
-        # The measured pose drifting with time (alike at every pose; it follows time in pose space
-        # better than in any chain's joint): the coordinates that drift.
-        "pose_drift": [k for k, t in zip(robot.pose_names, t_pose) if abs(t) > POSE_DRIFT_Z]
-        if "time" in follows and pose_best else [],
-    }
-    remaining["summary"] = _remaining_words(remaining, chain, explained)
-    return {"explained": explained,
-            "noise": {"chi2": fit.chi2, "dof": fit.dof, "p_value": p_overall, "alpha": noise_alpha,
-                      "chi2_per_chain": chain_chi2.tolist(), "dof_per_chain": dof_chain,
-                      "p_value_per_chain": p_chain.tolist(), "chains_failing": [c + 1 for c in chains_noisy],
-                      "consistent": bool(noise_ok)},
-            "structure": structure, "remaining": remaining}
+    rem = _Remainder(fit, jac, winv, _orth(fit.design), fit.whitened.ravel())
+    structure, t_pose, pose_best = _structure(data, rem, z, alpha)
+    remaining = _remaining(robot, fit, std, z, noise, structure, t_pose, pose_best, alpha)
+    return {"explained": not remaining["present"], "noise": noise, "structure": structure, "remaining": remaining}
 
 
 def _chain_list(word: str, chains: list) -> str:
