@@ -20,7 +20,7 @@ from calib.rotation import rotation_matrix
 from .machine import PLATFORM_SITE, Machine
 from .units import mm_to_m
 
-__all__ = ["MachineSimulator", "SettleError", "MIN_SETTLE_STEPS"]
+__all__ = ["MachineSimulator", "WarmStart", "SettleError", "MIN_SETTLE_STEPS"]
 
 #: Fewest steps a pose is simulated before it may be declared at rest.
 MIN_SETTLE_STEPS = 6
@@ -57,8 +57,7 @@ class MachineSimulator:
 
     Attributes:
         home_joints: (C,) joint values at the home keyframe, robot joint unit.
-        warm_start_available: whether the rollout's warm start (the assembly) applies to this
-            machine (every actuator on a joint, a non-zero gear, a dense constraint Jacobian).
+        warm: the :class:`WarmStart` of the rollout.
     """
 
     def __init__(self, machine: Machine, *, settle_velocity: float, max_steps: int, threads: int):
@@ -69,16 +68,7 @@ class MachineSimulator:
         self.home_joints = machine.read_joints(self.data)
         self._last_ctrl = self.data.ctrl.copy()
         self._direction = np.zeros(self.robot.n_chains)
-        m = self.model
-        warm = not (np.any(m.actuator_trntype != int(mujoco.mjtTrn.mjTRN_JOINT)) or mujoco.mj_isSparse(m)
-                    or np.any(m.actuator_gear[:, 0] == 0))
-        self.warm_start_available = bool(warm)
-        #: dofs the assembly solves (all but the actuated ones); None when the warm start is unavailable.
-        self._free_dofs = np.setdiff1d(np.arange(m.nv), m.jnt_dofadr[m.actuator_trnid[:, 0]]) if warm else None
-        self._actuated_qpos = m.jnt_qposadr[m.actuator_trnid[:, 0]]
-        self._actuated_gear = m.actuator_gear[:, 0].copy()
-        self._site = m.site(PLATFORM_SITE).id
-        self._rest_inverse = None
+        self.warm = WarmStart(machine, settle_velocity=self.settle_velocity)
 
     @property
     def time(self) -> float:
@@ -133,6 +123,132 @@ class MachineSimulator:
                 return mc.read_pose(d), step
         raise self._settle_error(reference if commanded is None else commanded, np.max(np.abs(d.qvel)))
 
+    def settle_many(self, references: np.ndarray, progress=None, commanded=None):
+        """Every pose from its own warm start, stepped together by ``mujoco.rollout`` in batches
+        of steps (8, 16, 32, ... up to :data:`MAX_BATCH_STEPS`) until each is at rest (at least
+        :data:`MIN_SETTLE_STEPS` steps, every joint speed below the settle velocity); physics without
+        history (no friction) is assumed. The machine is left where the last pose settled.
+
+        Args:
+            references: (N, C) servo references, robot joint unit.
+            progress: optional ``progress(done, total)``.
+            commanded: (N, C) the commanded joints, for the message of a :class:`SettleError`
+                (default ``references``).
+
+        Returns:
+            ``(true (N, D), joints (N, C), t (N,), steps (N,))``: settled poses (mm, rad), where the
+            joints settled, the time each pose is reached settling one after another, steps.
+
+        Raises:
+            SettleError: a pose not at rest after ``max_steps`` steps.
+        """
+        from mujoco import rollout as mj_rollout
+
+        m, mc, v = self.model, self.machine, self.settle_velocity
+        references = np.asarray(references, dtype=float)
+        joints = references if commanded is None else np.asarray(commanded, dtype=float)
+        n, c = references.shape
+        if n == 0:
+            return np.empty((0, self.robot.pose_dim)), np.empty((0, c)), np.empty(0), np.empty(0, dtype=int)
+        ctrl = mc.ctrl(references)
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        nstate = mujoco.mj_stateSize(m, full)
+        q0 = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME)
+        v0 = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME | mujoco.mjtState.mjSTATE_QPOS)
+        scratch = mujoco.MjData(m)
+        start = self.warm_starts(references, scratch)
+        true = np.empty((n, self.robot.pose_dim))
+        read = np.empty((n, c))
+        steps = np.zeros(n, dtype=int)
+        last = np.empty(nstate)
+        pending = np.arange(n)
+        done, batch = 0, FIRST_BATCH_STEPS
+        with mj_rollout.Rollout(nthread=self.threads if self.threads > 1 else 0) as pool:
+            workers = [mujoco.MjData(m) for _ in range(max(1, self.threads))]
+            while pending.size:
+                nstep = min(batch, self.max_steps - done)
+                if nstep <= 0:
+                    raise self._settle_error(joints[pending[0]], np.max(np.abs(start[0, v0:v0 + m.nv])))
+                state, sensors = pool.rollout(m, workers, start, ctrl[pending][:, None, :], nstep=nstep)
+                rest = np.max(np.abs(state[:, :, v0:v0 + m.nv]), axis=2) < v
+                rest[:, :max(0, MIN_SETTLE_STEPS - 1 - done)] = False  # step j is step done + j + 1
+                settled = rest.any(axis=1)
+                first = rest.argmax(axis=1)
+                for i in np.flatnonzero(settled):
+                    k, j = pending[i], first[i]
+                    steps[k] = done + j + 1
+                    scratch.sensordata[:] = sensors[i, j]
+                    true[k] = mc.read_pose(scratch)
+                    scratch.qpos[:] = state[i, j, q0:v0]
+                    read[k] = mc.read_joints(scratch)
+                    if k == n - 1:
+                        last[:] = state[i, j]
+                start, pending = state[~settled, -1], pending[~settled]
+                done += nstep
+                batch = min(2 * batch, MAX_BATCH_STEPS)
+                if progress is not None:
+                    progress(n - pending.size, n)
+        t = self.data.time + np.cumsum(steps) * m.opt.timestep
+        self._leave_at(last, t[-1], ctrl[-1])
+        return true, read, t, steps
+
+    def warm_starts(self, references: np.ndarray, scratch: mujoco.MjData) -> np.ndarray:
+        """(N, S) full physics states, each pose's warm start: assembled at its servo references
+        on the branch the forward kinematics picks (the platform's pose at the actuated joints'
+        unloaded values), then brought to rest under load (:meth:`WarmStart.assemble`, :meth:`WarmStart.rest`)."""
+        m, mc = self.model, self.machine
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        ctrl = mc.ctrl(references)
+        start = np.empty((len(references), mujoco.mj_stateSize(m, full)))
+        at = ctrl / self.warm.actuated_gear / mc.joint_scale + mc.joint_offset
+        try:
+            poses = self.robot.forward_kinematics(mc.theta, at)
+        except (ValueError, ArithmeticError):  # no solution found: the closures alone
+            poses = [None] * len(references)
+        for k in range(len(references)):
+            self.warm.assemble(scratch, references[k], poses[k])
+            scratch.ctrl[:] = ctrl[k]
+            self.warm.rest(scratch)
+            mujoco.mj_getState(m, scratch, start[k], full)
+        return start
+
+    def _leave_at(self, state: np.ndarray, time_s: float, ctrl: np.ndarray) -> None:
+        """The machine left at ``state`` (where the last pose settled, as after the sequential
+        settle), its controls ``ctrl``; the friction's direction follows the move there."""
+        m = self.model
+        mujoco.mj_setState(m, self.data, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        self.data.time = time_s
+        self.data.ctrl[:] = ctrl
+        mujoco.mj_forward(m, self.data)
+        move = np.sign(ctrl - self._last_ctrl)
+        self._direction = np.where(move != 0, move, self._direction)
+        self._last_ctrl = ctrl.copy()
+
+
+class WarmStart:
+    """Where a pose of the rollout starts: the machine assembled at its servo references
+    (:meth:`assemble`) and, loaded, brought to where its forces balance (:meth:`rest`); physics
+    then settles it. The stiffness of the last :meth:`rest` is reused while it still converges.
+
+    Attributes:
+        available: whether the assembly applies to this machine (every actuator on a joint, a
+            non-zero gear, a dense constraint Jacobian); without it a pose starts from home.
+        actuated_gear: (C,) the actuators' gears.
+    """
+
+    def __init__(self, machine: Machine, *, settle_velocity: float):
+        self.machine, self.model, self.settle_velocity = machine, machine.model, settle_velocity
+        m = self.model
+        self.available = not (np.any(m.actuator_trntype != int(mujoco.mjtTrn.mjTRN_JOINT)) or mujoco.mj_isSparse(m)
+                              or np.any(m.actuator_gear[:, 0] == 0))
+        #: dofs the assembly solves (all but the actuated ones); None when unavailable.
+        self._free_dofs = np.setdiff1d(np.arange(m.nv), m.jnt_dofadr[m.actuator_trnid[:, 0]]) \
+            if self.available else None
+        self._actuated_qpos = m.jnt_qposadr[m.actuator_trnid[:, 0]]
+        self.actuated_gear = m.actuator_gear[:, 0].copy()
+        self._site = m.site(PLATFORM_SITE).id
+        self._rest_inverse = None
+
     def assemble(self, data: mujoco.MjData, reference: np.ndarray, pose: np.ndarray | None = None) -> bool:
         """Put ``data`` at rest in the machine assembled at servo ``reference`` ((C,), robot unit):
         each actuated joint where its servo reference holds it unloaded, the other joints solved by
@@ -156,7 +272,7 @@ class MachineSimulator:
         if free is None:
             return False
         ctrl = mc.ctrl(np.asarray(reference, dtype=float))
-        data.qpos[self._actuated_qpos] = ctrl / self._actuated_gear
+        data.qpos[self._actuated_qpos] = ctrl / self.actuated_gear
         if pose is not None:
             pose = np.asarray(pose, dtype=float)
             target_pos = mm_to_m(pose[:3])
@@ -199,6 +315,7 @@ class MachineSimulator:
             mujoco.mj_integratePos(m, data.qpos, step, 1.0)
         mc.reset(data)
         return False
+
 
     def rest(self, data: mujoco.MjData) -> bool:
         """Move ``data`` (at rest, its controls set) to where the machine's forces balance:
@@ -259,90 +376,3 @@ class MachineSimulator:
         data.qpos[:] = start
         mujoco.mj_forward(m, data)
         return False
-
-    def settle_many(self, references: np.ndarray, progress=None, commanded=None):
-        """Every pose from its own warm start, stepped together by ``mujoco.rollout`` in batches
-        of steps (8, 16, 32, ... up to :data:`MAX_BATCH_STEPS`) until each is at rest (at least
-        :data:`MIN_SETTLE_STEPS` steps, every joint speed below the settle velocity); physics without
-        history (no friction) is assumed. The machine is left where the last pose settled.
-
-        Args:
-            references: (N, C) servo references, robot joint unit.
-            progress: optional ``progress(done, total)``.
-            commanded: (N, C) the commanded joints, for the message of a :class:`SettleError`
-                (default ``references``).
-
-        Returns:
-            ``(true (N, D), joints (N, C), t (N,), steps (N,))``: settled poses (mm, rad), where the
-            joints settled, the time each pose is reached settling one after another, steps.
-
-        Raises:
-            SettleError: a pose not at rest after ``max_steps`` steps.
-        """
-        from mujoco import rollout as mj_rollout
-
-        m, mc, v = self.model, self.machine, self.settle_velocity
-        references = np.asarray(references, dtype=float)
-        joints = references if commanded is None else np.asarray(commanded, dtype=float)
-        n, c = references.shape
-        if n == 0:
-            return np.empty((0, self.robot.pose_dim)), np.empty((0, c)), np.empty(0), np.empty(0, dtype=int)
-        ctrl = mc.ctrl(references)
-        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        nstate = mujoco.mj_stateSize(m, full)
-        q0 = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME)
-        v0 = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME | mujoco.mjtState.mjSTATE_QPOS)
-        scratch = mujoco.MjData(m)
-        start = np.empty((n, nstate))
-        # The platform's pose at the actuated joints' unloaded values picks each pose's branch.
-        at = ctrl / self._actuated_gear / mc.joint_scale + mc.joint_offset
-        try:
-            poses = self.robot.forward_kinematics(mc.theta, at)
-        except (ValueError, ArithmeticError):  # no solution found: the closures alone
-            poses = [None] * n
-        for k in range(n):
-            self.assemble(scratch, references[k], poses[k])
-            scratch.ctrl[:] = ctrl[k]
-            self.rest(scratch)
-            mujoco.mj_getState(m, scratch, start[k], full)
-        true = np.empty((n, self.robot.pose_dim))
-        read = np.empty((n, c))
-        steps = np.zeros(n, dtype=int)
-        last = np.empty(nstate)
-        pending = np.arange(n)
-        done, batch = 0, FIRST_BATCH_STEPS
-        with mj_rollout.Rollout(nthread=self.threads if self.threads > 1 else 0) as pool:
-            workers = [mujoco.MjData(m) for _ in range(max(1, self.threads))]
-            while pending.size:
-                nstep = min(batch, self.max_steps - done)
-                if nstep <= 0:
-                    raise self._settle_error(joints[pending[0]], np.max(np.abs(start[0, v0:v0 + m.nv])))
-                state, sensors = pool.rollout(m, workers, start, ctrl[pending][:, None, :], nstep=nstep)
-                rest = np.max(np.abs(state[:, :, v0:v0 + m.nv]), axis=2) < v
-                rest[:, :max(0, MIN_SETTLE_STEPS - 1 - done)] = False  # step j is step done + j + 1
-                settled = rest.any(axis=1)
-                first = rest.argmax(axis=1)
-                for i in np.flatnonzero(settled):
-                    k, j = pending[i], first[i]
-                    steps[k] = done + j + 1
-                    scratch.sensordata[:] = sensors[i, j]
-                    true[k] = mc.read_pose(scratch)
-                    scratch.qpos[:] = state[i, j, q0:v0]
-                    read[k] = mc.read_joints(scratch)
-                    if k == n - 1:
-                        last[:] = state[i, j]
-                start, pending = state[~settled, -1], pending[~settled]
-                done += nstep
-                batch = min(2 * batch, MAX_BATCH_STEPS)
-                if progress is not None:
-                    progress(n - pending.size, n)
-        t = self.data.time + np.cumsum(steps) * m.opt.timestep
-        # The machine is left where the last pose settled, as after the sequential settle.
-        mujoco.mj_setState(m, self.data, last, full)
-        self.data.time = t[-1]
-        self.data.ctrl[:] = ctrl[-1]
-        mujoco.mj_forward(m, self.data)
-        move = np.sign(ctrl[-1] - self._last_ctrl)
-        self._direction = np.where(move != 0, move, self._direction)
-        self._last_ctrl = ctrl[-1].copy()
-        return true, read, t, steps
