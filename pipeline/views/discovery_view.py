@@ -202,9 +202,10 @@ def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
 
 
 def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, overwrite: bool = False) -> Path:
-    """The discovery file of ``report`` (a :class:`pipeline.workflows.discovery.DiscoveryReport`): the verdict first, the residuals before and after against time, stroke,
-    the direction of the last move and the quantity the verdict names, the candidates' evidence
-    by name, flagged rows marked (see docs/rerun_views.md)."""
+    """The discovery file of ``report`` (a :class:`pipeline.workflows.discovery.DiscoveryReport`):
+    the verdict first, the residuals before and after against time, stroke, the direction of the
+    last move and the quantity the verdict names, the candidates' evidence by name, flagged rows
+    marked (see docs/rerun_views.md)."""
     disc, s = report.discovery, report.summary
     rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(rows)
@@ -219,10 +220,6 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
     charts = [(q, "the remainder follows it" if q in follows else "") for q in PLOTTED_QUANTITIES] + [(extra, why)]
     candidates = s["candidates"]
     ev = s["evidence"]
-
-    def signed_log(v):
-        v = np.asarray(v, dtype=float)
-        return np.sign(v) * np.log10(1.0 + np.abs(v))
 
     def log(r):
         for q, _ in charts:
@@ -262,6 +259,20 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
             r.send_columns("per_row/rms_um/flagged", indexes=[rr.TimeColumn("measurement", sequence=rows[flagged] + 1)],
                            columns=rr.Scalars.columns(scalars=rms[flagged, 0]))
 
+    bp = discovery_blueprint(charts)
+    return save_recording(path, log, application_id=application_id("discover", robot.name), overwrite=overwrite, bp=bp)
+
+
+def signed_log(v) -> np.ndarray:
+    """``sign(v) log10(1 + |v|)``: BIC drops of any size on one bar scale."""
+    v = np.asarray(v, dtype=float)
+    return np.sign(v) * np.log10(1.0 + np.abs(v))
+
+
+def discovery_blueprint(charts: list) -> rrb.Blueprint:
+    """The discovery file's layout: the verdict and the evidence on the left, the four residual
+    charts (``charts``: ``(quantity, note)`` pairs) on the right, the ``measurement`` timeline."""
+
     def view(q, note):  # framed on the two plots and the key (the default bounds leave wide margins)
         return rrb.Spatial2DView(origin=f"vs/{q.replace(' ', '_')}",
                                  name=f"Closure residual vs {q}" + (f" ({note})" if note else ""),
@@ -270,7 +281,7 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
                                                                   y_range=[-10.0, 2 * CHART_H + 55.0]))
 
     views = [view(q, note) for q, note in charts]
-    bp = rrb.Blueprint(
+    return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(rrb.TextDocumentView(origin="summary", name="Verdict and summary"),
                          rrb.Tabs(chart_view("evidence", "Evidence per candidate (BIC drop, named)"),
@@ -283,4 +294,3 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         collapse_panels=True)
-    return save_recording(path, log, application_id=application_id("discover", robot.name), overwrite=overwrite, bp=bp)

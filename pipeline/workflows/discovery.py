@@ -92,24 +92,16 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     """
     robot = rec.robot
     rows = disc.kept
-    std = rec.noise.pose_std(robot.pose_units)
     angle = robot.angle_pose_mask
     meas = rec.measured[rows]
     context = machine_context(robot, rec.meta.get("moving_mass_kg"))
-
-    def run(theta, settings, which=rows, history=True):
-        kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
-        if not history:
-            return simulate(robot, theta, rec.joints[which], settings, times_s=rec.t_s[which], **kw).true_poses
-        # Replay the whole record in order (the state may depend on the motion history), keep rows.
-        return simulate(robot, theta, rec.joints, settings, times_s=rec.t_s, **kw).true_poses[which]
 
     def rms(sim):
         d = meas - sim
         return {"position_um": float(1e3 * np.sqrt(np.mean(np.sum(d[:, ~angle] ** 2, axis=1)))),
                 "orientation_urad": float(1e6 * np.sqrt(np.mean(np.sum(d[:, angle] ** 2, axis=1))))}
 
-    out = {"before": rms(run(disc.geometry.theta, merged_settings(context)))}
+    out = {"before": rms(replay(rec, disc.geometry.theta, merged_settings(context), rows))}
     if not disc.effects:
         out["after"] = out["before"]
         return out
@@ -117,42 +109,60 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     sl = fit.slices()
     settings = effects_settings(robot, context, [(m, fit.coefficients[sl[m.name]], e)
                                                  for m, e in zip(fit.models, fit.extras)])
-    after = run(fit.theta, settings)
+    after = replay(rec, fit.theta, settings, rows)
     out["after_calib_fit"] = rms(after)
     # The first named effect that carries a machine parameter is re-fitted there.
     eff, param = next(((m, m.physical_parameter(robot)) for m in fit.models if m.physical_parameter(robot)),
                       (None, None))
     if sysid and param is not None:
-        import mujoco.sysid as sysid_mod
-
-        name = param.field
-        hist = eff.history_dependent
-        sub = rows if hist or rows.size <= sysid_rows else np.sort(
-            np.random.default_rng(seed).choice(rows, sysid_rows, replace=False))
-        meas_sub = rec.measured[sub]
-        x0 = float(settings[param.section][name])
-        low, high = (x0 / 10, x0 * 10) if x0 > 0 else (-10 * abs(x0) - 1e-9, 10 * abs(x0) + 1e-9)
-        params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, low, high)})
-
-        def residual_fn(x, _params):
-            sim = run(fit.theta, _with(settings, param.section, name, float(x[0])), sub, history=hist)
-            return [((meas_sub - sim) / std).ravel()], None, None
-
-        with contextlib.redirect_stdout(io.StringIO()):  # the scipy backend prints its iterations
-            opt, res = sysid_mod.optimize(params, residual_fn, optimizer="scipy", verbose=False,
-                                          max_iters=max_nfev, diff_step=1e-3, x_scale="jac")
-        xs = float(np.ravel(opt[name].value)[0])
-        r_star = residual_fn(np.array([xs]), opt)[0]
-        _, intervals = sysid_mod.calculate_intervals(r_star, res.jac)
-        settings = _with(settings, param.section, name, xs)
-        after = run(fit.theta, settings)
-        out["sysid"] = {"parameter": name, "unit": param.unit, "start": x0, "value": xs,
-                        "interval_95": float(np.ravel(intervals)[0]), "evaluations": int(res.nfev),
-                        "rows": int(sub.size)}
+        settings, out["sysid"] = sysid_refit(rec, fit.theta, settings, eff, param, rows, max_nfev=max_nfev,
+                                             sysid_rows=sysid_rows, seed=seed)
+        after = replay(rec, fit.theta, settings, rows)
     out["after"] = rms(after)
     out["machine"] = {section: {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()}
                       for section, values in settings.items()}
     return out
+
+
+def replay(rec: Recording, theta: np.ndarray, settings: dict, which: np.ndarray, history: bool = True) -> np.ndarray:
+    """(len(which), D) the true poses of the MuJoCo machine ``theta`` with ``settings`` commanded the
+    recording's joints at its times, rows ``which``: the whole record replayed in order (the state
+    may depend on the motion history) or, without ``history``, those rows alone."""
+    kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
+    if not history:
+        return simulate(rec.robot, theta, rec.joints[which], settings, times_s=rec.t_s[which], **kw).true_poses
+    return simulate(rec.robot, theta, rec.joints, settings, times_s=rec.t_s, **kw).true_poses[which]
+
+
+def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, rows: np.ndarray, *, max_nfev: int,
+                sysid_rows: int, seed: int) -> tuple[dict, dict]:
+    """Re-fit the machine parameter ``param`` of effect ``eff`` with ``mujoco.sysid`` on at most
+    ``sysid_rows`` seeded rows (every row for an effect that depends on the motion history):
+    ``(settings with the value found, JSON-ready report with its 95% interval)``."""
+    import mujoco.sysid as sysid_mod
+
+    name, hist = param.field, eff.history_dependent
+    std = rec.noise.pose_std(rec.robot.pose_units)
+    sub = rows if hist or rows.size <= sysid_rows else np.sort(
+        np.random.default_rng(seed).choice(rows, sysid_rows, replace=False))
+    meas_sub = rec.measured[sub]
+    x0 = float(settings[param.section][name])
+    low, high = (x0 / 10, x0 * 10) if x0 > 0 else (-10 * abs(x0) - 1e-9, 10 * abs(x0) + 1e-9)
+    params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, low, high)})
+
+    def residual_fn(x, _params):
+        sim = replay(rec, theta, _with(settings, param.section, name, float(x[0])), sub, history=hist)
+        return [((meas_sub - sim) / std).ravel()], None, None
+
+    with contextlib.redirect_stdout(io.StringIO()):  # the scipy backend prints its iterations
+        opt, res = sysid_mod.optimize(params, residual_fn, optimizer="scipy", verbose=False,
+                                      max_iters=max_nfev, diff_step=1e-3, x_scale="jac")
+    xs = float(np.ravel(opt[name].value)[0])
+    r_star = residual_fn(np.array([xs]), opt)[0]
+    _, intervals = sysid_mod.calculate_intervals(r_star, res.jac)
+    report = {"parameter": name, "unit": param.unit, "start": x0, "value": xs,
+              "interval_95": float(np.ravel(intervals)[0]), "evaluations": int(res.nfev), "rows": int(sub.size)}
+    return _with(settings, param.section, name, xs), report
 
 
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
