@@ -536,8 +536,30 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     if n * d < idx.size:
         raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
                          f"{idx.size} parameters, got {n}")
-    # Without joint noise the whitening is the same diagonal for every pose (a product) and needs
-    # no poses; joint noise is propagated through the manipulator Jacobian at the start model's.
+    white, white_jac, start_poses = _forward_whitening(robot, theta0, joints, measured, noise)
+    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
+                                        measured if start_poses is None else start_poses) \
+        if solver == "lm" else "not asked for"
+    if not isinstance(simultaneous, str):
+        theta, predicted, J, gram, iters, history, msg = simultaneous
+        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
+                               iters, history, True, msg)
+    if start_poses is None:
+        start_poses = _start_poses(robot, theta0, joints, measured)
+    theta, predicted, J, iters, history, ok, msg = _forward_through_kinematics(
+        robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver, max_iter, xtol, ftol,
+        simultaneous)
+    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
+                           history, ok, msg)
+
+
+def _forward_whitening(robot, theta0, joints, measured, noise):
+    """The forward fit's whitening: ``(white, white_jac, start_poses)``, ``white`` (N, D) -> (N, D)
+    whitened residuals, ``white_jac`` (N, D, K) -> (N D, K) whitened Jacobian, ``start_poses``
+    (N, D) the start model's forward kinematics where the whitening needed it (joint noise is
+    propagated through the manipulator Jacobian there), else None: without joint noise the
+    whitening is the same diagonal for every pose (a product) and needs no poses."""
+    n, d = measured.shape
     start_poses = None
     if noise.joint_std > 0:
         start_poses = _start_poses(robot, theta0, joints, measured)
@@ -552,16 +574,16 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv, jp)
         return jw.reshape(n * d, jp.shape[2])
 
-    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
-                                        measured if start_poses is None else start_poses) \
-        if solver == "lm" else "not asked for"
-    if not isinstance(simultaneous, str):
-        theta, predicted, J, gram, iters, history, msg = simultaneous
-        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
-                               iters, history, True, msg)
-    if start_poses is None:
-        start_poses = _start_poses(robot, theta0, joints, measured)
+    return white, white_jac, start_poses
 
+
+def _forward_through_kinematics(robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver,
+                                max_iter, xtol, ftol, simultaneous):
+    """The forward fit through the exact forward kinematics (Levenberg-Marquardt, where
+    ``simultaneous`` says why :func:`_simultaneous_newton` could not vouch for its answer, or
+    Gauss-Newton). Returns ``(theta (P,), predicted (N, D) its forward kinematics (NaN where it
+    failed), J (N D, K) the whitened residual Jacobian there or None, iterations, history,
+    success, message)``."""
     # The last forward kinematics: each evaluation starts from it (a small perturbation),
     # moved to first order by the last Jacobian (Newton then has one step less to go), and the
     # Jacobian at a point just evaluated (as the solvers ask for it) reuses its poses.
@@ -612,8 +634,7 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     else:
         predicted = _predicted(robot, theta, joints, measured)
     J = white_jac(residual_jac(theta, predicted)) if np.all(np.isfinite(predicted)) else None
-    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
-                           history, ok, msg)
+    return theta, predicted, J, iters, history, ok, msg
 
 
 def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram, iterations,
@@ -692,119 +713,175 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         w = 1.0 / np.maximum(sigma, 1e-12)
     else:
         w = None  # unit weights, not multiplied in
+    if solver == "gn":
+        fit = _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol, max_iter)
+    else:
+        fit = _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol, ftol)
+    return _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise if noise_given else None, fit)
+
+
+@dataclass
+class _ChainwiseFit:
+    """Where a chain-wise solver stopped: ``theta`` (P,), the closure ``r`` (N, C) and its
+    Jacobians ``jac`` at the measured poses for it, the ``corrected`` (N, D) poses (its forward
+    kinematics, NaN where it failed), the Gauss-Newton step's last ``systems`` (per group ``(A,
+    A^T A)``) and the Jacobians ``systems_jac`` they are from (None for Levenberg-Marquardt),
+    ``history``, ``iterations``, ``success`` and ``message``."""
+
+    theta: np.ndarray
+    r: np.ndarray
+    jac: ClosureJacobians
+    corrected: np.ndarray
+    systems: list | None
+    systems_jac: ClosureJacobians | None
+    history: list
+    iterations: int
+    success: bool
+    message: str
+
+
+def _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol,
+                            max_iter) -> _ChainwiseFit:
+    """The hexapod paper's iteration (see :func:`identify_chainwise`): a Gauss-Newton step per
+    chain, the integrated error of the corrected model after each, judged on the exact forward
+    kinematics where a stopping rule holds (:func:`_chainwise_stop`)."""
     theta = theta0.copy()
     history: list[float] = []
-    cond = np.full(robot.n_chains, np.nan)
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
     systems = systems_jac = None  # the Gauss-Newton step's last systems and the Jacobians they are from
-    if solver == "gn":
-        # The closure and its Jacobians at the measured poses, for the current vector: computed
-        # once per vector, they serve its Gauss-Newton step, the integrated error of the
-        # corrected model and, for the final vector, the result.
-        r, jac = robot.closure_with_jacobians(theta, joints, measured)
-        dQ = None  # the corrected poses' offset from the measured ones, to second order
-        corrected = None
-        for it in range(1, max_iter + 1):
-            J = jac.parameters
-            step = np.zeros_like(theta)
-            systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
-            for chains, params in groups:
-                A, b = _chain_systems(J, r, w, chains, params)
-                step[params], gram = _chain_steps(A, b)
-                systems.append((A, gram))
-            update = float(np.max(np.abs(step)))
-            small_step = update <= step_tol
-            if not small_step:
-                try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
-                    r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
-                except KinematicsError as exc:
-                    message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
-                    break
-                theta, r, jac = theta + step, r_new, jac_new
-                iterations = it
-                dQ = _newton_offset(jac, r)
-                history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
-                if not history[-1] <= epsilon:
-                    continue
-            # A stopping rule holds (the paper's to second order, or the next update is negligible
-            # and not taken): decide on the exact forward kinematics.
-            if dQ is None:  # the start is the answer
-                dQ = _newton_offset(jac, r)
-            try:
-                corrected = robot.forward_kinematics(
-                    theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
+    # The closure and its Jacobians at the measured poses, for the current vector: computed
+    # once per vector, they serve its Gauss-Newton step, the integrated error of the
+    # corrected model and, for the final vector, the result.
+    r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    dQ = None  # the corrected poses' offset from the measured ones, to second order
+    corrected = None
+    for it in range(1, max_iter + 1):
+        J = jac.parameters
+        step = np.zeros_like(theta)
+        systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
+        for chains, params in groups:
+            A, b = _chain_systems(J, r, w, chains, params)
+            step[params], gram = _chain_steps(A, b)
+            systems.append((A, gram))
+        update = float(np.max(np.abs(step)))
+        small_step = update <= step_tol
+        if not small_step:
+            try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
+                r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
             except KinematicsError as exc:
-                corrected = None
-                message = f"forward kinematics of the corrected model failed: {exc}"
+                message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
                 break
-            exact = float(integrated_error(robot, measured - corrected)[2].max())
-            if history:
-                history[-1] = exact
-            else:
-                history.append(exact)
-            if exact <= epsilon:
-                success = True
-                message = f"paper's criterion met: max dQint = {exact:.3g} <= epsilon = {epsilon:g}"
-                break
-            if small_step:
-                success = True
-                message = (f"the next parameter update, {update:.3g}, is below step_tol = {step_tol:g} "
-                           f"and not taken; the paper's criterion is not reachable: max dQint stays at "
-                           f"{exact:.3g} (> epsilon = {epsilon:g})")
-                break
-            corrected = None
-        if corrected is None:
-            corrected = _predicted(robot, theta, joints, measured)
-    else:
-        messages, oks = [], []
-        in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
-        for c, ix in in_order:
-
-            def full(x, ix=ix):
-                th = theta.copy()
-                th[ix] = x
-                return th
-
-            def fun(x, c=c, full=full):
-                r = robot.closure(full(x), joints, measured)[:, c]
-                return r if w is None else r * w[:, c]
-
-            def jac(x, c=c, ix=ix, full=full):
-                A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
-                return A if w is None else A * w[:, c, None]
-
-            x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
-            theta[ix] = x
-            iterations += it
-            oks.append(ok)
-            messages.append(f"{robot.chain_word} {c + 1}: {msg}")
-        success, message = all(oks), "; ".join(messages)
+            theta, r, jac = theta + step, r_new, jac_new
+            iterations = it
+            dQ = _newton_offset(jac, r)
+            history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
+            if not history[-1] <= epsilon:
+                continue
+        # A stopping rule holds (the paper's to second order, or the next update is negligible
+        # and not taken): decide on the exact forward kinematics.
+        if dQ is None:  # the start is the answer
+            dQ = _newton_offset(jac, r)
+        corrected, stop = _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon,
+                                          update if small_step else None, step_tol)
+        if stop is not None:
+            success, message = stop
+            break
+    if corrected is None:
         corrected = _predicted(robot, theta, joints, measured)
-        r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    return _ChainwiseFit(theta, r, jac, corrected, systems, systems_jac, history, iterations, success, message)
+
+
+def _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon, update, step_tol):
+    """Judge a stopping rule of the chain-wise Gauss-Newton on the exact forward kinematics,
+    started from the measured poses less ``dQ`` (N, D); ``update`` is the largest entry of the
+    next update when it is below ``step_tol`` (not taken), else None. The exact max dQint
+    replaces (or, at the start, becomes) the last entry of ``history``. Returns ``(corrected
+    (N, D) or None, (success, message) or None to go on)``."""
+    try:
+        corrected = robot.forward_kinematics(
+            theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
+    except KinematicsError as exc:
+        return None, (False, f"forward kinematics of the corrected model failed: {exc}")
+    exact = float(integrated_error(robot, measured - corrected)[2].max())
+    if history:
+        history[-1] = exact
+    else:
+        history.append(exact)
+    if exact <= epsilon:
+        return corrected, (True, f"paper's criterion met: max dQint = {exact:.3g} <= epsilon = {epsilon:g}")
+    if update is not None:
+        return corrected, (True, f"the next parameter update, {update:.3g}, is below step_tol = {step_tol:g} "
+                                 f"and not taken; the paper's criterion is not reachable: max dQint stays at "
+                                 f"{exact:.3g} (> epsilon = {epsilon:g})")
+    return None, None
+
+
+def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol,
+                                   ftol) -> _ChainwiseFit:
+    """Each chain fitted to convergence by Levenberg-Marquardt (the Delta paper's IKM), in chain order."""
+    theta = theta0.copy()
+    history: list[float] = []
+    iterations = 0
+    messages, oks = [], []
+    in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
+    for c, ix in in_order:
+
+        def full(x, ix=ix):
+            th = theta.copy()
+            th[ix] = x
+            return th
+
+        def fun(x, c=c, full=full):
+            r = robot.closure(full(x), joints, measured)[:, c]
+            return r if w is None else r * w[:, c]
+
+        def jac(x, c=c, ix=ix, full=full):
+            A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
+            return A if w is None else A * w[:, c, None]
+
+        x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
+        theta[ix] = x
+        iterations += it
+        oks.append(ok)
+        messages.append(f"{robot.chain_word} {c + 1}: {msg}")
+    corrected = _predicted(robot, theta, joints, measured)
+    r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    return _ChainwiseFit(theta, r, jac, corrected, None, None, history, iterations, all(oks), "; ".join(messages))
+
+
+def _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise, fit: _ChainwiseFit) -> IdentificationResult:
+    """The chain-wise identification's result: per-chain covariances and condition numbers
+    (from the fit's last Gauss-Newton systems where they are the returned vector's), chi-square
+    against ``noise`` (None: none declared, no judgement)."""
+    n = measured.shape[0]
+    r, jac = fit.r, fit.jac
+    cond = np.full(robot.n_chains, np.nan)
     cov = np.zeros((robot.n_parameters,) * 2)
     for k, (chains, params) in enumerate(groups):
         # The systems of the step not taken (the noisy stop) are those of the returned vector.
-        A, gram = systems[k] if systems_jac is jac else (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
+        A, gram = fit.systems[k] if fit.systems_jac is jac else \
+            (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
         block, cond[chains] = _covariance_and_conditions(A, gram)  # (M, K, K) and (M,), per chain
         dof = n - params.shape[1]
-        if not weighted:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
+        if w is None:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
             rc = r[:, chains]
             block = block * (np.einsum("nm,nm->m", rc, rc) / dof)[:, None, None] if dof > 0 else \
                 np.full_like(block, np.nan)
         cov[params[:, :, None], params[:, None, :]] = block
-    if noise_given:
+    message = fit.message
+    if noise is not None:
         white = r / np.maximum(_closure_std(robot, jac, noise), 1e-12)
         chi2 = float(np.sum(white ** 2))
     else:
         chi2 = float("nan")
     dof_total = n * robot.n_chains - idx.size
-    if noise_given and dof_total > 0 and np.isfinite(chi2):  # converged or not
+    if noise is not None and dof_total > 0 and np.isfinite(chi2):  # converged or not
         message += "; " + noise_verdict(chi2, dof_total)
     return IdentificationResult(
-        method="chainwise", robot=robot, theta=theta, start=theta0, free_names=free, residuals=r,
-        pose_residuals=measured - corrected, covariance=cov, chi2=chi2, dof=dof_total,
-        iterations=iterations, history=tuple(history), success=success, message=message,
+        method="chainwise", robot=robot, theta=fit.theta, start=theta0, free_names=free, residuals=r,
+        pose_residuals=measured - fit.corrected, covariance=cov, chi2=chi2, dof=dof_total,
+        iterations=fit.iterations, history=tuple(fit.history), success=fit.success, message=message,
         condition_numbers=cond)
 
 
