@@ -612,12 +612,7 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
                 return "singular normal equations"
             theta[idx] += dx
             p = newton - H @ dx
-            # With a prior the step is judged against the offset from its mean (the errors): the
-            # absolute values, hundreds of mm, would call a step converged that still moves a
-            # direction the data leave to the prior.
-            size = theta[idx] if prior_rows is None else np.maximum(np.abs(theta[idx] - prior_rows[0]),
-                                                                     1.0 / prior_rows[1])
-            relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * size))
+            relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * theta[idx]))
             converged = relative <= _CONVERGED_STEP
     return "no convergence"
 
