@@ -14,6 +14,9 @@ machine, its leg lengths, measured poses = poses + the paper's sensor noise (+-1
   engine does around them;
 * forward: ``calib.engine.identify_forward`` (all 42 parameters through the forward kinematics:
   Gauss-Newton with the poses Newton-stepped along, Levenberg-Marquardt as its fallback);
+* both fits with the robot's default prior (``prior=ParameterPrior.default(robot)``, maximum
+  a posteriori), timed in the same run, and their ratio to the plain fits (the issue's budget:
+  at most 1.2x at 100 poses);
 * the generic fit the engine replaces, timed in the same run: ``scipy.optimize.least_squares``
   (its default trust-region solver) with a finite-difference Jacobian (``jac="2-point"``) on the
   same whitened forward residual (the engine's forward kinematics, warm-started from the
@@ -48,6 +51,7 @@ from scipy.optimize import least_squares
 
 from calib.engine import identify_chainwise, identify_forward
 from calib.noise import SensorNoise
+from calib.prior import ParameterPrior
 from calib.robots import default_robot, reference_errors
 from calib.workspace import reachable_poses
 
@@ -105,6 +109,10 @@ def hexapod_rows(n: int, seed: int, repeat: int, n_kin: int) -> list[str]:
     lengths = robot.inverse_kinematics(theta, poses)
     near = poses + SensorNoise(0.001, 1e-6).sample(n_kin, seed + 4, robot.pose_units)
     t_fwd = best_of(fwd, repeat)
+    prior = ParameterPrior.default(robot)
+    chain_map = lambda: identify_chainwise(robot, joints, measured, noise, solver="gn", prior=prior)  # noqa: E731
+    fwd_map = lambda: identify_forward(robot, joints, measured, noise, prior=prior)  # noqa: E731
+    t_chain_map, t_fwd_map = best_of(chain_map, repeat), best_of(fwd_map, repeat)
     t_generic = best_of(generic, max(1, repeat // 3))
     fit, base = fwd(), generic()
     free = robot.table.indices(robot.free_default)
@@ -131,6 +139,10 @@ def hexapod_rows(n: int, seed: int, repeat: int, n_kin: int) -> list[str]:
         f"{1e3 * (t_chain - t_floor):.2f} ms, is the engine's per-{robot.chain_word} steps, stopping rule and "
         f"covariance |",
         row(f"hexapod forward identification, {n} poses", t_fwd, fit, "iterations"),
+        row(f"hexapod chain-wise GN with the default prior, {n} poses", t_chain_map, chain_map(), "iterations")[:-2]
+        + f"; {t_chain_map / t_chain:.2f}x the plain chain-wise fit |",
+        row(f"hexapod forward identification with the default prior, {n} poses", t_fwd_map, fwd_map(),
+            "iterations")[:-2] + f"; {t_fwd_map / t_fwd:.2f}x the plain forward fit |",
         f"| generic scipy fit (least_squares, jac='2-point'), {n} poses | {1e3 * t_generic:.2f} ms | "
         f"{base.nfev} evaluations + {base.nfev and base.njev or 0} finite-difference Jacobians; forward "
         f"is {t_generic / t_fwd:.0f}x faster; answers differ by {diff:.2g} mm at most |",

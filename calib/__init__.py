@@ -25,7 +25,7 @@ __all__ = [
     "matrix_from_quaternion", "quaternion_from_euler", "rotation_matrix", "random_poses",
     "reachable_poses", "DesignResult", "Workspace", "design_poses", "robot_workspace",
     "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
-    "identification_jacobian", "pose_uncertainty",
+    "identification_jacobian", "pose_uncertainty", "ParameterPrior",
 ]
 
 #: submodule -> the names this package re-exports from it (imported on first use).
@@ -44,6 +44,7 @@ _EXPORTS = {
     "design": ("DesignResult", "Workspace", "design_poses", "robot_workspace"),
     "observability": ("ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
                       "identification_jacobian", "pose_uncertainty"),
+    "prior": ("ParameterPrior",),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 

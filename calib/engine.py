@@ -28,6 +28,7 @@ from scipy.special import gammaincinv
 
 from .validation import as_array
 from .noise import SensorNoise
+from .prior import ParameterPrior, parameter_sources
 from .robot import (
     FORWARD_KINEMATICS_TOL_MM,
     SINGULAR_CONDITION,
@@ -78,7 +79,13 @@ class IdentificationResult:
         success: whether a stopping criterion was met.
         message: which criterion stopped it, in words.
         condition_numbers: column-scaled condition numbers of the identification Jacobian at
-            the solution: (C,) one per chain (chain-wise) or (1,) (forward).
+            the solution: (C,) one per chain (chain-wise) or (1,) (forward); with a prior, of the
+            system with its prior rows.
+        prior: the :class:`~calib.prior.ParameterPrior` of a maximum a posteriori fit, or None
+            (plain least squares). With one, ``covariance`` is the posterior covariance
+            ``(J^T W J + diag(1 / std^2))^-1``, ``chi2`` counts the prior rows
+            ``|(theta - mean) / std|^2`` (free parameters) as observations and ``dof`` is the
+            number of measurement residuals.
     """
 
     method: str
@@ -96,6 +103,7 @@ class IdentificationResult:
     success: bool
     message: str
     condition_numbers: np.ndarray
+    prior: ParameterPrior | None = None
 
     @property
     def errors(self) -> np.ndarray:
@@ -115,6 +123,55 @@ class IdentificationResult:
     def errors_by_name(self) -> dict[str, float]:
         """``{name: identified - nominal}`` of every parameter."""
         return self.robot.table.to_dict(self.errors)
+
+    @property
+    def free_indices(self) -> np.ndarray:
+        """(K,) int, flat indices of the identified parameters, table order."""
+        return np.sort(self.robot.table.indices(self.free_names))
+
+    def parameter_sources(self) -> dict[str, str]:
+        """``{name: source}`` of every parameter: ``"data"`` where the posterior standard deviation
+        is below :data:`calib.prior.DATA_SOURCE_RATIO` (one half) of the prior's, ``"prior"``
+        where it is not (the poses left it to the tolerance), ``"held"`` for a fixed parameter.
+        Without a prior every identified parameter's source is ``"data"``."""
+        out = dict.fromkeys(self.robot.table.names, "held")
+        idx = self.free_indices
+        if self.prior is None:
+            src = ["data"] * idx.size
+        else:
+            src = parameter_sources(self.std[idx], self.prior.std[idx])
+        out.update({self.robot.table.names[i]: str(v) for i, v in zip(idx, src)})
+        return out
+
+    def determination(self) -> dict[str, dict]:
+        """JSON-ready, per parameter: ``{name: {"value", "error", "posterior_std", "prior_std",
+        "source", "unit"}}`` (parameter units; ``prior_std`` None without a prior, both stds 0 for a
+        held parameter)."""
+        table, std, sources = self.robot.table, self.std, self.parameter_sources()
+        out = {}
+        for k, name in enumerate(table.names):
+            held = sources[name] == "held"
+            out[name] = {"value": float(self.theta[k]), "error": float(self.errors[k]), "unit": table.units[k],
+                         "posterior_std": 0.0 if held else float(std[k]),
+                         "prior_std": None if self.prior is None else (0.0 if held else float(self.prior.std[k])),
+                         "source": sources[name]}
+        return out
+
+    def left_to_prior(self, n_terms: int = 4) -> tuple[dict, ...]:
+        """The parameter combinations the poses left to the prior, in words.
+
+        Those along which the posterior standard deviation is at least
+        :data:`calib.prior.DATA_SOURCE_RATIO` of the prior's (the data did not halve the
+        tolerance): see :func:`calib.observability.combinations_left_to_prior`. Empty without a
+        prior (a plain fit has none; its undetermined directions are
+        :func:`calib.observability.analyze_observability`'s ``not_identifiable``)."""
+        if self.prior is None:
+            return ()
+        from .observability import combinations_left_to_prior  # it imports this module
+
+        idx = self.free_indices
+        return combinations_left_to_prior(self.robot, self.covariance[np.ix_(idx, idx)], self.prior.std[idx],
+                                          idx, n_terms=n_terms)
 
 
 def integrated_error(robot: Robot, dQ: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,6 +213,23 @@ def _check(robot, joints, measured, noise, free, start, solver):
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     return joints, measured, free, np.sort(idx), start
+
+
+def _prior_rows(robot: Robot, prior, idx: np.ndarray):
+    """The free parameters' prior rows: ``(mean (K,), 1 / std (K,))`` (the whitened row of
+    parameter k is ``(theta_k - mean_k) / std_k``), or None without a prior."""
+    if prior is None:
+        return None
+    if not isinstance(prior, ParameterPrior):
+        raise TypeError(f"prior must be a calib.prior.ParameterPrior or None, got {type(prior).__name__}")
+    prior.check(robot)
+    return prior.mean[idx], 1.0 / prior.std[idx]
+
+
+def _refuse_empty(n: int) -> None:
+    """With a prior any pose set is accepted but none at all: the answer would be the prior alone."""
+    if n == 0:
+        raise ValueError("measured has no rows: the data determine nothing, and the prior alone is no calibration")
 
 
 def pose_whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
@@ -261,26 +335,50 @@ def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: n
 NORMAL_EQUATIONS_CONDITION = 1e6
 
 
-def _chain_steps(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _chain_steps(A: np.ndarray, b: np.ndarray, prior=None) -> tuple[np.ndarray, np.ndarray]:
     """(M, K) least-squares steps ``argmin |A_m x + b_m|`` of a stack of chain systems (``A``
     (M, N, K), ``b`` (M, N)), and the Gram matrices ``A^T A`` (M, K, K) they were solved with
     (the covariance of a fit that stops at these systems reuses them), in one batched solve of
     the column-scaled normal equations; a
     stack with a chain whose (Cholesky-estimated) column-scaled condition number exceeds
     :data:`NORMAL_EQUATIONS_CONDITION` (or is rank deficient) is solved chain by chain by
-    ``numpy.linalg.lstsq`` instead (the normal equations square the condition number)."""
+    ``numpy.linalg.lstsq`` instead (the normal equations square the condition number).
+
+    ``prior``: ``(inv_std (M, K), e (M, K))``, each chain's prior rows ``diag(inv_std) x + e``
+    appended to its system (``e`` the whitened prior residual at the current vector), or None;
+    the Gram matrices returned are then still those of the measurement rows alone."""
     gram = np.swapaxes(A, 1, 2) @ A
-    norms = np.sqrt(np.diagonal(gram, axis1=1, axis2=2))
+    normal = gram if prior is None else gram + _diagonal_stack(prior[0] ** 2)
+    norms = np.sqrt(np.diagonal(normal, axis1=1, axis2=2))
     if np.all(norms > 0):
-        G = gram / (norms[:, :, None] * norms[:, None, :])
-        g = np.einsum("mnk,mn->mk", A, b) / norms
+        G = normal / (norms[:, :, None] * norms[:, None, :])
+        g = np.einsum("mnk,mn->mk", A, b)
+        if prior is not None:
+            g = g + prior[0] * prior[1]
+        g = g / norms
         try:
             d = np.diagonal(np.linalg.cholesky(G), axis1=1, axis2=2)
             if np.all(d.max(axis=1) <= NORMAL_EQUATIONS_CONDITION * d.min(axis=1)):
                 return -np.linalg.solve(G, g[..., None])[..., 0] / norms, gram
         except np.linalg.LinAlgError:
             pass
+    if prior is not None:
+        A, b = _with_prior_rows(A, prior[0]), np.concatenate([b, prior[1]], axis=1)
     return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])]), gram
+
+
+def _diagonal_stack(d: np.ndarray) -> np.ndarray:
+    """(M, K, K) diagonal matrices of the rows of ``d`` (M, K)."""
+    out = np.zeros(d.shape + d.shape[-1:])
+    k = np.arange(d.shape[-1])
+    out[:, k, k] = d
+    return out
+
+
+def _with_prior_rows(A: np.ndarray, inv_std: np.ndarray) -> np.ndarray:
+    """(M, N + K, K) the stack of systems ``A`` (M, N, K) with the prior rows ``diag(inv_std[m])``
+    (``inv_std`` (M, K)) below each."""
+    return np.concatenate([A, _diagonal_stack(inv_std)], axis=1)
 
 
 def _gauss_newton(fun, jac, x0, max_iter, xtol):
@@ -300,7 +398,7 @@ def _gauss_newton(fun, jac, x0, max_iter, xtol):
 _CONVERGED_STEP = 1e-9
 
 
-def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol):
+def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None):
     """Levenberg-Marquardt (Marquardt's scaling by the diagonal of ``J^T J``, Nielsen's damping
     update, started and kept near Gauss-Newton while steps succeed) on a small dense problem: one Jacobian and one ``(K, K)`` solve per iteration and no
     call-back layer, the fast path of :func:`identify_forward`. Stops when both the actual and
@@ -308,18 +406,22 @@ def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol):
     at most ``xtol`` relative, or when a step the model predicts to help no longer lowers the
     cost at rounding level (``1e-13`` relative: the minimum to machine precision). A trial
     point the robot cannot evaluate (``KinematicsError``) is rejected like a step that raises
-    the cost. Returns ``(x, Jacobian evaluations, success, message)``."""
+    the cost. Returns ``(x, Jacobian evaluations, success, message)``. ``fixed_scale`` (K,): a
+    fixed scaling instead of Marquardt's (a prior's inverse standard deviations: the damping is
+    then negligible against every direction's curvature, the prior's at least, while steps are
+    taken, however ill-conditioned the data leave the columns)."""
     x = np.array(x0, dtype=float)
     f = fun(x)
     cost = float(f @ f)
     J = jac(x)
     njev = 1
     A, g = J.T @ J, J.T @ f
-    scale = np.sqrt(np.diag(A)).copy()
+    scale = np.sqrt(np.diag(A)).copy() if fixed_scale is None else np.array(fixed_scale, dtype=float)
     scale[scale == 0] = 1.0
     mu, nu = 1e-10, 2.0  # start as Gauss-Newton: these fits are nearly linear
     while True:
-        scale = np.maximum(scale, np.sqrt(np.diag(A)))  # MINPACK keeps the largest seen
+        if fixed_scale is None:
+            scale = np.maximum(scale, np.sqrt(np.diag(A)))  # MINPACK keeps the largest seen
         D2 = scale ** 2
         try:
             dx = np.linalg.solve(A + mu * np.diag(D2), -g)
@@ -441,7 +543,7 @@ def _start_poses(robot, theta0, joints, measured) -> np.ndarray:
 SIMULTANEOUS_NEWTON_STEPS = 12
 
 
-def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac, poses0):
+def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac, poses0, prior_rows=None):
     """Gauss-Newton on the parameters with the forward kinematics solved along, one Newton step of
     the poses per iteration (the fast path of :func:`identify_forward`).
 
@@ -453,9 +555,11 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
     Jacobian. Stopped when the scaled step is at most ``1e-9`` of the scaled parameters and,
     at the point it leads to, every closure residual is at most :data:`FORWARD_KINEMATICS_TOL_MM`
     (the poses are then the forward kinematics to its own tolerance) and the pose Jacobian is
-    well conditioned (Frobenius bound below :data:`SINGULAR_CONDITION`).
+    well conditioned (Frobenius bound below :data:`SINGULAR_CONDITION`). ``prior_rows``
+    (:func:`_prior_rows`, or None) adds the prior's rows to the cost and the normal equations.
 
-    Returns ``(theta (P,), poses (N, D), J (N D, K) whitened residual Jacobian at them, J^T J,
+    Returns ``(theta (P,), poses (N, D), J (N D, K) whitened residual Jacobian at them, J^T J
+    (of the measurement rows alone),
     iterations, costs (0.5 |whitened residual of the Newton-corrected poses|^2 per iteration),
     message)``, or, where it cannot vouch for the answer (a step that raised the cost, a singular
     or non-finite evaluation, no convergence in :data:`SIMULTANEOUS_NEWTON_STEPS`), why, in words:
@@ -478,6 +582,9 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
             e = white(measured - newton).ravel()
             J = white_jac(H)
             cost = 0.5 * float(e @ e)
+            if prior_rows is not None:
+                e_prior = (theta[idx] - prior_rows[0]) * prior_rows[1]
+                cost += 0.5 * float(e_prior @ e_prior)
             if not np.isfinite(cost):
                 return f"a non-finite residual at iteration {it}"
             if history and cost > history[-1] * (1.0 + 1e-8):
@@ -493,10 +600,14 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
                 return theta, p, J, gram, it, history, f"converged: the last step was {relative:.1e} relative"
             if it == SIMULTANEOUS_NEWTON_STEPS:
                 return f"no convergence in {it} iterations"
-            scale = np.sqrt(np.diag(gram))
+            normal, gradient = gram, J.T @ e
+            if prior_rows is not None:
+                normal = gram + np.diag(prior_rows[1] ** 2)
+                gradient = gradient + prior_rows[1] * e_prior
+            scale = np.sqrt(np.diag(normal))
             scale[scale == 0] = 1.0
             try:
-                dx = -np.linalg.solve(gram / scale / scale[:, None], (J.T @ e) / scale) / scale
+                dx = -np.linalg.solve(normal / scale / scale[:, None], gradient / scale) / scale
             except np.linalg.LinAlgError:
                 return "singular normal equations"
             theta[idx] += dx
@@ -508,7 +619,7 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
 
 def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free=None, start=None,
                      solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
-                     ftol: float = 1e-15) -> IdentificationResult:
+                     ftol: float = 1e-15, prior: ParameterPrior | None = None) -> IdentificationResult:
     """Forward identification: all free parameters at once through the forward kinematics.
 
     Minimises ``sum_j |W_j (QM_j - FK(theta, q_j))|^2``, ``W_j`` the whitening of pose j's
@@ -530,14 +641,42 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
             forward kinematics (Marquardt's scaling, MINPACK's rules); ``"gn"``: Gauss-Newton
             through the forward kinematics. All reach the same minimum.
         max_iter, xtol, ftol: stopping controls (of the solvers through the forward kinematics).
+        prior: a :class:`~calib.prior.ParameterPrior`: maximum a posteriori (its whitened rows
+            ``(theta_k - mean_k) / std_k`` of the free parameters join the system; any pose set
+            but an empty one is accepted). None: plain (weighted) least squares.
     """
     joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
+    prior_rows = _prior_rows(robot, prior, idx)
     n, d = measured.shape
-    if n * d < idx.size:
+    if prior_rows is not None:
+        _refuse_empty(n)
+    elif n * d < idx.size:
         raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
                          f"{idx.size} parameters, got {n}")
-    # Without joint noise the whitening is the same diagonal for every pose (a product) and needs
-    # no poses; joint noise is propagated through the manipulator Jacobian at the start model's.
+    white, white_jac, start_poses = _forward_whitening(robot, theta0, joints, measured, noise)
+    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
+                                        measured if start_poses is None else start_poses, prior_rows) \
+        if solver == "lm" else "not asked for"
+    if not isinstance(simultaneous, str):
+        theta, predicted, J, gram, iters, history, msg = simultaneous
+        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
+                               iters, history, True, msg, prior)
+    if start_poses is None:
+        start_poses = _start_poses(robot, theta0, joints, measured)
+    theta, predicted, J, iters, history, ok, msg = _forward_through_kinematics(
+        robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver, max_iter, xtol, ftol,
+        simultaneous, prior_rows)
+    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
+                           history, ok, msg, prior)
+
+
+def _forward_whitening(robot, theta0, joints, measured, noise):
+    """The forward fit's whitening: ``(white, white_jac, start_poses)``, ``white`` (N, D) -> (N, D)
+    whitened residuals, ``white_jac`` (N, D, K) -> (N D, K) whitened Jacobian, ``start_poses``
+    (N, D) the start model's forward kinematics where the whitening needed it (joint noise is
+    propagated through the manipulator Jacobian there), else None: without joint noise the
+    whitening is the same diagonal for every pose (a product) and needs no poses."""
+    n, d = measured.shape
     start_poses = None
     if noise.joint_std > 0:
         start_poses = _start_poses(robot, theta0, joints, measured)
@@ -552,16 +691,16 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv, jp)
         return jw.reshape(n * d, jp.shape[2])
 
-    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
-                                        measured if start_poses is None else start_poses) \
-        if solver == "lm" else "not asked for"
-    if not isinstance(simultaneous, str):
-        theta, predicted, J, gram, iters, history, msg = simultaneous
-        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
-                               iters, history, True, msg)
-    if start_poses is None:
-        start_poses = _start_poses(robot, theta0, joints, measured)
+    return white, white_jac, start_poses
 
+
+def _forward_through_kinematics(robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver,
+                                max_iter, xtol, ftol, simultaneous, prior_rows=None):
+    """The forward fit through the exact forward kinematics (Levenberg-Marquardt, where
+    ``simultaneous`` says why :func:`_simultaneous_newton` could not vouch for its answer, or
+    Gauss-Newton). Returns ``(theta (P,), predicted (N, D) its forward kinematics (NaN where it
+    failed), J (N D, K) the whitened residual Jacobian there (measurement rows) or None,
+    iterations, history, success, message)``; ``prior_rows`` (or None) join the residual."""
     # The last forward kinematics: each evaluation starts from it (a small perturbation),
     # moved to first order by the last Jacobian (Newton then has one step less to go), and the
     # Jacobian at a point just evaluated (as the solvers ask for it) reuses its poses.
@@ -585,6 +724,8 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
 
     def fun(x):
         f = white(measured - reached(x)).ravel()
+        if prior_rows is not None:
+            f = np.concatenate([f, (x - prior_rows[0]) * prior_rows[1]])
         history.append(0.5 * float(f @ f))
         return f
 
@@ -596,11 +737,21 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         poses = reached(x)
         rj = residual_jac(full(x), poses)
         state["dpose"] = (np.array(x), poses, -rj)
-        return white_jac(rj)
+        return white_jac(rj) if prior_rows is None else np.vstack([white_jac(rj), np.diag(prior_rows[1])])
 
     if solver == "lm":
+        # With a prior, in offsets from its mean scaled by its standard deviations: the relative
+        # step tests then measure the errors in tolerances, not the absolute values, and the
+        # damping is negligible along the combinations only the prior holds (curvature 1e-12 of
+        # the data's in Marquardt's column scaling).
+        origin = None if prior_rows is None else prior_rows[0]
         try:
-            x, iters, ok, msg = _levenberg_marquardt(fun, jac, theta0[idx], max_iter, xtol, ftol)
+            if origin is None:
+                x, iters, ok, msg = _levenberg_marquardt(fun, jac, theta0[idx], max_iter, xtol, ftol)
+            else:
+                x, iters, ok, msg = _levenberg_marquardt(lambda v: fun(origin + v), lambda v: jac(origin + v),
+                                                         theta0[idx] - origin, max_iter, xtol, ftol, prior_rows[1])
+                x = origin + x
         except (KinematicsError, np.linalg.LinAlgError) as exc:
             x, iters, ok, msg = theta0[idx], 0, False, f"the fit left the workspace: {exc}"
         msg = f"Levenberg-Marquardt through the forward kinematics (Gauss-Newton met {simultaneous}): {msg}"
@@ -612,32 +763,38 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     else:
         predicted = _predicted(robot, theta, joints, measured)
     J = white_jac(residual_jac(theta, predicted)) if np.all(np.isfinite(predicted)) else None
-    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
-                           history, ok, msg)
+    return theta, predicted, J, iters, history, ok, msg
 
 
 def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram, iterations,
-                    history, success, message) -> IdentificationResult:
+                    history, success, message, prior=None) -> IdentificationResult:
     """The forward identification's result at ``theta``: ``predicted`` (N, D) its forward
     kinematics (NaN where it failed), ``J`` (N D, K) the whitened residual Jacobian there (None
-    if it failed) and ``gram`` its ``J^T J`` when already formed (else None)."""
+    if it failed) and ``gram`` its ``J^T J`` when already formed (else None); with a ``prior``
+    its rows join the covariance (posterior) and the chi-square."""
     n, d = measured.shape
     res = measured - predicted
     cov = np.zeros((robot.n_parameters,) * 2)
+    dof = n * d - idx.size if prior is None else n * d  # the prior rows count as observations
     if J is not None and np.all(np.isfinite(res)):
         r = white(res).ravel()
+        if prior is not None:
+            mean, inv_std = _prior_rows(robot, prior, idx)
+            r = np.concatenate([r, (theta[idx] - mean) * inv_std])
+            gram = (J.T @ J if gram is None else gram) + np.diag(inv_std ** 2)
+            J = np.vstack([J, np.diag(inv_std)])
         block, cond = _covariance_and_conditions(J[None], None if gram is None else gram[None])
         chi2 = float(r @ r)
         cov[np.ix_(idx, idx)] = block[0]
     else:
         chi2, cond = float("nan"), np.array([np.nan])
         cov[np.ix_(idx, idx)] = np.nan
-    if n * d > idx.size and np.isfinite(chi2):  # converged or not, say where the residual stands
-        message = f"{message}; {noise_verdict(chi2, n * d - idx.size)}"
+    if dof > 0 and np.isfinite(chi2):  # converged or not, say where the residual stands
+        message = f"{message}; {noise_verdict(chi2, dof)}"
     return IdentificationResult(
         method="forward", robot=robot, theta=theta, start=theta0, free_names=free, residuals=res,
-        pose_residuals=res, covariance=cov, chi2=chi2, dof=n * d - idx.size, iterations=iterations,
-        history=tuple(history), success=success, message=message, condition_numbers=cond)
+        pose_residuals=res, covariance=cov, chi2=chi2, dof=dof, iterations=iterations,
+        history=tuple(history), success=success, message=message, condition_numbers=cond, prior=prior)
 
 
 # --------------------------------------------------------------------------- chain-wise
@@ -646,7 +803,7 @@ def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white,
 def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None = None, *, free=None,
                        start=None, solver: str = "gn", weighted: bool = False, epsilon: float = 1e-6,
                        step_tol: float = 1e-10, max_iter: int = 20, xtol: float = 1e-12,
-                       ftol: float = 1e-14) -> IdentificationResult:
+                       ftol: float = 1e-14, prior: ParameterPrior | None = None) -> IdentificationResult:
     """Chain-wise identification from the closure residuals at the measured poses.
 
     ``solver="gn"`` (the hexapod paper's method, Sections 2, 3 and 5): each iteration solves, for
@@ -674,17 +831,29 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         epsilon: the paper's tolerance on max dQint (mm + rad, Eq. 17).
         step_tol: tolerance on the largest parameter update (GN): a smaller one is not taken.
         max_iter: outer iterations (GN) or iterations per chain (LM).
+        prior: a :class:`~calib.prior.ParameterPrior`: maximum a posteriori, each chain's free
+            parameters' whitened prior rows ``(theta_k - mean_k) / std_k`` in that chain's
+            system; the closure residuals are then whitened by the declared noise (``weighted``
+            implied: the prior needs the data's scale, so ``noise`` is required), and any pose set
+            but an empty one is accepted. None: plain least squares.
     """
+    if prior is not None and noise is None:
+        raise ValueError("a prior needs the declared noise: pass noise (the closure residuals are "
+                         "weighted by it against the prior)")
     noise_given = noise is not None
     noise = SensorNoise() if noise is None else noise
     joints, measured, free, idx, theta0 = _check(robot, joints, measured, noise, free, start, solver)
+    prior_rows = _prior_rows(robot, prior, idx)
     n = measured.shape[0]
     # Chains with free parameters, grouped by their number: each group is one stack of problems
     # (the hexapod's six legs of seven parameters are one stack), gathered from the Jacobian,
     # conditioned and turned into covariances in one batched call each.
     groups = _chain_groups(robot, idx)
     most = max(p.shape[1] for _, p in groups)
-    if n < most:
+    if prior is not None:
+        _refuse_empty(n)
+        weighted = True
+    elif n < most:
         raise ValueError(f"measured must have at least {most} rows ({most} unknowns in one "
                          f"{robot.chain_word}), got {n}")
     if weighted:
@@ -692,120 +861,210 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         w = 1.0 / np.maximum(sigma, 1e-12)
     else:
         w = None  # unit weights, not multiplied in
+    # Each chain's prior: the free parameters' (mean, 1 / std) in the robot's flat layout.
+    chain_prior = None
+    if prior is not None:
+        chain_prior = (np.zeros(robot.n_parameters), np.zeros(robot.n_parameters))
+        chain_prior[0][idx], chain_prior[1][idx] = prior_rows
+    if solver == "gn":
+        fit = _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol, max_iter,
+                                      chain_prior)
+    else:
+        fit = _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol, ftol,
+                                             chain_prior)
+    return _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise if noise_given else None, fit,
+                             prior, chain_prior)
+
+
+@dataclass
+class _ChainwiseFit:
+    """Where a chain-wise solver stopped: ``theta`` (P,), the closure ``r`` (N, C) and its
+    Jacobians ``jac`` at the measured poses for it, the ``corrected`` (N, D) poses (its forward
+    kinematics, NaN where it failed), the Gauss-Newton step's last ``systems`` (per group ``(A,
+    A^T A)``) and the Jacobians ``systems_jac`` they are from (None for Levenberg-Marquardt),
+    ``history``, ``iterations``, ``success`` and ``message``."""
+
+    theta: np.ndarray
+    r: np.ndarray
+    jac: ClosureJacobians
+    corrected: np.ndarray
+    systems: list | None
+    systems_jac: ClosureJacobians | None
+    history: list
+    iterations: int
+    success: bool
+    message: str
+
+
+def _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol,
+                            max_iter, chain_prior=None) -> _ChainwiseFit:
+    """The hexapod paper's iteration (see :func:`identify_chainwise`): a Gauss-Newton step per
+    chain, the integrated error of the corrected model after each, judged on the exact forward
+    kinematics where a stopping rule holds (:func:`_chainwise_stop`). ``chain_prior``: ``(mean
+    (P,), 1 / std (P,))`` whose entries at each chain's parameters join its system, or None."""
     theta = theta0.copy()
     history: list[float] = []
-    cond = np.full(robot.n_chains, np.nan)
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
     systems = systems_jac = None  # the Gauss-Newton step's last systems and the Jacobians they are from
-    if solver == "gn":
-        # The closure and its Jacobians at the measured poses, for the current vector: computed
-        # once per vector, they serve its Gauss-Newton step, the integrated error of the
-        # corrected model and, for the final vector, the result.
-        r, jac = robot.closure_with_jacobians(theta, joints, measured)
-        dQ = None  # the corrected poses' offset from the measured ones, to second order
-        corrected = None
-        for it in range(1, max_iter + 1):
-            J = jac.parameters
-            step = np.zeros_like(theta)
-            systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
-            for chains, params in groups:
-                A, b = _chain_systems(J, r, w, chains, params)
-                step[params], gram = _chain_steps(A, b)
-                systems.append((A, gram))
-            update = float(np.max(np.abs(step)))
-            small_step = update <= step_tol
-            if not small_step:
-                try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
-                    r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
-                except KinematicsError as exc:
-                    message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
-                    break
-                theta, r, jac = theta + step, r_new, jac_new
-                iterations = it
-                dQ = _newton_offset(jac, r)
-                history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
-                if not history[-1] <= epsilon:
-                    continue
-            # A stopping rule holds (the paper's to second order, or the next update is negligible
-            # and not taken): decide on the exact forward kinematics.
-            if dQ is None:  # the start is the answer
-                dQ = _newton_offset(jac, r)
-            try:
-                corrected = robot.forward_kinematics(
-                    theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
+    # The closure and its Jacobians at the measured poses, for the current vector: computed
+    # once per vector, they serve its Gauss-Newton step, the integrated error of the
+    # corrected model and, for the final vector, the result.
+    r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    dQ = None  # the corrected poses' offset from the measured ones, to second order
+    corrected = None
+    for it in range(1, max_iter + 1):
+        J = jac.parameters
+        step = np.zeros_like(theta)
+        systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
+        for chains, params in groups:
+            A, b = _chain_systems(J, r, w, chains, params)
+            rows = None
+            if chain_prior is not None:
+                inv_std = chain_prior[1][params]
+                rows = (inv_std, (theta[params] - chain_prior[0][params]) * inv_std)
+            step[params], gram = _chain_steps(A, b, rows)
+            systems.append((A, gram))
+        update = float(np.max(np.abs(step)))
+        small_step = update <= step_tol
+        if not small_step:
+            try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
+                r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
             except KinematicsError as exc:
-                corrected = None
-                message = f"forward kinematics of the corrected model failed: {exc}"
+                message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
                 break
-            exact = float(integrated_error(robot, measured - corrected)[2].max())
-            if history:
-                history[-1] = exact
-            else:
-                history.append(exact)
-            if exact <= epsilon:
-                success = True
-                message = f"paper's criterion met: max dQint = {exact:.3g} <= epsilon = {epsilon:g}"
-                break
-            if small_step:
-                success = True
-                message = (f"the next parameter update, {update:.3g}, is below step_tol = {step_tol:g} "
-                           f"and not taken; the paper's criterion is not reachable: max dQint stays at "
-                           f"{exact:.3g} (> epsilon = {epsilon:g})")
-                break
-            corrected = None
-        if corrected is None:
-            corrected = _predicted(robot, theta, joints, measured)
-    else:
-        messages, oks = [], []
-        in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
-        for c, ix in in_order:
-
-            def full(x, ix=ix):
-                th = theta.copy()
-                th[ix] = x
-                return th
-
-            def fun(x, c=c, full=full):
-                r = robot.closure(full(x), joints, measured)[:, c]
-                return r if w is None else r * w[:, c]
-
-            def jac(x, c=c, ix=ix, full=full):
-                A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
-                return A if w is None else A * w[:, c, None]
-
-            x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
-            theta[ix] = x
-            iterations += it
-            oks.append(ok)
-            messages.append(f"{robot.chain_word} {c + 1}: {msg}")
-        success, message = all(oks), "; ".join(messages)
+            theta, r, jac = theta + step, r_new, jac_new
+            iterations = it
+            dQ = _newton_offset(jac, r)
+            history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
+            if not history[-1] <= epsilon:
+                continue
+        # A stopping rule holds (the paper's to second order, or the next update is negligible
+        # and not taken): decide on the exact forward kinematics.
+        if dQ is None:  # the start is the answer
+            dQ = _newton_offset(jac, r)
+        corrected, stop = _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon,
+                                          update if small_step else None, step_tol)
+        if stop is not None:
+            success, message = stop
+            break
+    if corrected is None:
         corrected = _predicted(robot, theta, joints, measured)
-        r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    return _ChainwiseFit(theta, r, jac, corrected, systems, systems_jac, history, iterations, success, message)
+
+
+def _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon, update, step_tol):
+    """Judge a stopping rule of the chain-wise Gauss-Newton on the exact forward kinematics,
+    started from the measured poses less ``dQ`` (N, D); ``update`` is the largest entry of the
+    next update when it is below ``step_tol`` (not taken), else None. The exact max dQint
+    replaces (or, at the start, becomes) the last entry of ``history``. Returns ``(corrected
+    (N, D) or None, (success, message) or None to go on)``."""
+    try:
+        corrected = robot.forward_kinematics(
+            theta, joints, initial=measured - dQ if np.all(np.isfinite(dQ)) else measured)
+    except KinematicsError as exc:
+        return None, (False, f"forward kinematics of the corrected model failed: {exc}")
+    exact = float(integrated_error(robot, measured - corrected)[2].max())
+    if history:
+        history[-1] = exact
+    else:
+        history.append(exact)
+    if exact <= epsilon:
+        return corrected, (True, f"paper's criterion met: max dQint = {exact:.3g} <= epsilon = {epsilon:g}")
+    if update is not None:
+        return corrected, (True, f"the next parameter update, {update:.3g}, is below step_tol = {step_tol:g} "
+                                 f"and not taken; the paper's criterion is not reachable: max dQint stays at "
+                                 f"{exact:.3g} (> epsilon = {epsilon:g})")
+    return None, None
+
+
+def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol,
+                                   ftol, chain_prior=None) -> _ChainwiseFit:
+    """Each chain fitted to convergence by Levenberg-Marquardt (the Delta paper's IKM), in chain
+    order; ``chain_prior`` as :func:`_chainwise_gauss_newton`'s."""
+    theta = theta0.copy()
+    history: list[float] = []
+    iterations = 0
+    messages, oks = [], []
+    in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
+    for c, ix in in_order:
+
+        def full(x, ix=ix):
+            th = theta.copy()
+            th[ix] = x
+            return th
+
+        def fun(x, c=c, ix=ix, full=full):
+            r = robot.closure(full(x), joints, measured)[:, c]
+            r = r if w is None else r * w[:, c]
+            if chain_prior is None:
+                return r
+            return np.concatenate([r, (x - chain_prior[0][ix]) * chain_prior[1][ix]])
+
+        def jac(x, c=c, ix=ix, full=full):
+            A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
+            A = A if w is None else A * w[:, c, None]
+            return A if chain_prior is None else np.vstack([A, np.diag(chain_prior[1][ix])])
+
+        if chain_prior is None:
+            x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
+        else:  # in offsets from the prior's mean, as the forward fit (its relative step test)
+            origin = chain_prior[0][ix]
+            x, it, ok, msg = _least_squares(lambda v, f=fun, o=origin: f(o + v), lambda v, j=jac, o=origin: j(o + v),
+                                            theta[ix] - origin, "lm", max_iter, xtol, ftol, history)
+            x = origin + x
+        theta[ix] = x
+        iterations += it
+        oks.append(ok)
+        messages.append(f"{robot.chain_word} {c + 1}: {msg}")
+    corrected = _predicted(robot, theta, joints, measured)
+    r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    return _ChainwiseFit(theta, r, jac, corrected, None, None, history, iterations, all(oks), "; ".join(messages))
+
+
+def _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise, fit: _ChainwiseFit, prior=None,
+                      chain_prior=None) -> IdentificationResult:
+    """The chain-wise identification's result: per-chain covariances and condition numbers
+    (from the fit's last Gauss-Newton systems where they are the returned vector's), chi-square
+    against ``noise`` (None: none declared, no judgement); with a ``prior`` (``chain_prior`` its
+    rows as :func:`_chainwise_gauss_newton` takes them) the posterior covariance and its rows
+    in the chi-square."""
+    n = measured.shape[0]
+    r, jac = fit.r, fit.jac
+    cond = np.full(robot.n_chains, np.nan)
     cov = np.zeros((robot.n_parameters,) * 2)
     for k, (chains, params) in enumerate(groups):
         # The systems of the step not taken (the noisy stop) are those of the returned vector.
-        A, gram = systems[k] if systems_jac is jac else (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
+        A, gram = fit.systems[k] if fit.systems_jac is jac else \
+            (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
+        if chain_prior is not None:
+            inv_std = chain_prior[1][params]
+            gram = None if gram is None else gram + _diagonal_stack(inv_std ** 2)
+            A = _with_prior_rows(A, inv_std)
         block, cond[chains] = _covariance_and_conditions(A, gram)  # (M, K, K) and (M,), per chain
         dof = n - params.shape[1]
-        if not weighted:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
+        if w is None:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
             rc = r[:, chains]
             block = block * (np.einsum("nm,nm->m", rc, rc) / dof)[:, None, None] if dof > 0 else \
                 np.full_like(block, np.nan)
         cov[params[:, :, None], params[:, None, :]] = block
-    if noise_given:
+    message = fit.message
+    if noise is not None:
         white = r / np.maximum(_closure_std(robot, jac, noise), 1e-12)
         chi2 = float(np.sum(white ** 2))
+        if chain_prior is not None:
+            e_prior = (fit.theta[idx] - chain_prior[0][idx]) * chain_prior[1][idx]
+            chi2 += float(e_prior @ e_prior)
     else:
         chi2 = float("nan")
-    dof_total = n * robot.n_chains - idx.size
-    if noise_given and dof_total > 0 and np.isfinite(chi2):  # converged or not
+    dof_total = n * robot.n_chains - (idx.size if prior is None else 0)  # prior rows count as observations
+    if noise is not None and dof_total > 0 and np.isfinite(chi2):  # converged or not
         message += "; " + noise_verdict(chi2, dof_total)
     return IdentificationResult(
-        method="chainwise", robot=robot, theta=theta, start=theta0, free_names=free, residuals=r,
-        pose_residuals=measured - corrected, covariance=cov, chi2=chi2, dof=dof_total,
-        iterations=iterations, history=tuple(history), success=success, message=message,
-        condition_numbers=cond)
+        method="chainwise", robot=robot, theta=fit.theta, start=theta0, free_names=free, residuals=r,
+        pose_residuals=measured - fit.corrected, covariance=cov, chi2=chi2, dof=dof_total,
+        iterations=fit.iterations, history=tuple(fit.history), success=fit.success, message=message,
+        condition_numbers=cond, prior=prior)
 
 
 def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
@@ -831,12 +1090,14 @@ def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
 
 
 def identify(robot: Robot, joints, measured, noise: SensorNoise, *, method: str = "forward",
-             **options) -> IdentificationResult:
-    """Either method by name: ``"forward"`` or ``"chainwise"`` (options passed on)."""
+             prior: ParameterPrior | None = None, **options) -> IdentificationResult:
+    """Either method by name: ``"forward"`` or ``"chainwise"`` (options passed on); ``prior``
+    (a :class:`~calib.prior.ParameterPrior`, e.g. ``ParameterPrior.default(robot)``): maximum a
+    posteriori; None: plain least squares."""
     if method == "forward":
-        return identify_forward(robot, joints, measured, noise, **options)
+        return identify_forward(robot, joints, measured, noise, prior=prior, **options)
     if method == "chainwise":
-        return identify_chainwise(robot, joints, measured, noise, **options)
+        return identify_chainwise(robot, joints, measured, noise, prior=prior, **options)
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 

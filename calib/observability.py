@@ -47,6 +47,7 @@ import numpy as np
 from .validation import as_array, frozen_array
 from .engine import pose_whitening
 from .noise import SensorNoise
+from .prior import DATA_SOURCE_RATIO
 from .robot import Robot, pose_jacobian_of_parameters
 
 __all__ = [
@@ -59,6 +60,7 @@ __all__ = [
     "analyze_observability",
     "PoseUncertainty",
     "pose_uncertainty",
+    "combinations_left_to_prior",
 ]
 
 #: Coefficients below this (after normalising the largest to 1) are left out of a
@@ -477,3 +479,52 @@ def pose_uncertainty(robot: Robot, theta, targets, parameter_covariance) -> Pose
     ori = np.sqrt(np.clip(np.trace(cov[:, angle][:, :, angle], axis1=1, axis2=2), 0.0, None))
     return PoseUncertainty(targets=frozen_array(targets), covariance=frozen_array(cov),
                            position_rms_mm=frozen_array(pos), orientation_rms_rad=frozen_array(ori))
+
+
+def combinations_left_to_prior(robot: Robot, covariance, prior_std, indices, *, n_terms: int = 4) -> tuple[dict, ...]:
+    """The parameter combinations a maximum a posteriori fit's poses left to its prior.
+
+    In tolerance units (each parameter divided by its prior standard deviation, so that the
+    prior is the identity) the posterior covariance ``Cw = S^-1 C S^-1`` has eigenvalues in
+    ``(0, 1]``: the squared ratio of posterior to prior standard deviation along each
+    eigenvector. The eigenvectors whose ratio is at least :data:`calib.prior.DATA_SOURCE_RATIO`
+    (the data did not halve the tolerance along them) are left to the prior. Chain by chain
+    where the covariance has no entries across chains (a chain-wise fit), over all parameters
+    otherwise.
+
+    Args:
+        robot: the robot.
+        covariance: (K, K) posterior covariance of the free parameters, parameter units squared.
+        prior_std: (K,) their prior standard deviations, parameter units.
+        indices: (K,) int, their flat indices in the robot's parameter vector (table order).
+        n_terms: largest terms named in each combination.
+
+    Returns:
+        One dict per combination, least determined first: ``{"chain": 0-based chain or None,
+        "std_ratio": posterior / prior standard deviation along it, "combination": "0.71 B1.z -
+        0.70 P1.z" (unit vector in tolerance units, see :func:`describe_combination`),
+        "coefficients": {name: coefficient}}``.
+    """
+    _check_robot(robot)
+    indices = np.asarray(indices, dtype=int)
+    k = indices.size
+    C = as_array(covariance, "covariance", (k, k))
+    s = as_array(prior_std, "prior_std", (k,))
+    Cw = C / np.outer(s, s)
+    names = [robot.table.names[i] for i in indices]
+    chains = robot.table.chains[indices]
+    across = chains[:, None] != chains[None, :]
+    blocks = [np.flatnonzero(chains == c) for c in np.unique(chains)] if not np.any(Cw[across]) else [np.arange(k)]
+    out = []
+    for cols in blocks:
+        lam, V = np.linalg.eigh(0.5 * (Cw[np.ix_(cols, cols)] + Cw[np.ix_(cols, cols)].T))
+        for j in np.flatnonzero(lam >= DATA_SOURCE_RATIO ** 2)[::-1]:
+            v = np.zeros(k)
+            v[cols] = V[:, j]
+            v = v if v[np.argmax(np.abs(v))] >= 0 else -v
+            top = np.argsort(-np.abs(v), kind="stable")[:n_terms]
+            out.append({"chain": int(chains[cols[0]]) if len(blocks) > 1 else None,
+                        "std_ratio": float(np.sqrt(max(lam[j], 0.0))),
+                        "combination": describe_combination(v, names, n_terms=n_terms),
+                        "coefficients": {names[i]: float(v[i]) for i in top}})
+    return tuple(sorted(out, key=lambda c: -c["std_ratio"]))

@@ -172,6 +172,13 @@ class Robot(ABC):
     #: Parameters held at their start value by default because pose data cannot identify them
     #: (a gauge choice), e.g. the Delta's ``Lay1..3``.
     gauge_fixed: tuple[str, ...] = ()
+    #: Manufacturing tolerance of the parameters, the standard deviation of the default prior
+    #: (:class:`calib.prior.ParameterPrior`): ``{"mm": value, "rad": value}`` per unit and/or
+    #: ``{name: value}``, each in its parameter's unit. This generic one (0.1 mm on lengths,
+    #: 1e-3 rad on angles: a machined and assembled part's usual general tolerance, ISO 2768-m
+    #: for sizes of 30-400 mm, and about 0.1 mm at 100 mm for an angle) is for robots that
+    #: declare none; every registered robot declares its own, with its reasons.
+    default_parameter_tolerance: ClassVar[dict[str, float]] = {"mm": 0.1, "rad": 1e-3}
 
     # -- description ----------------------------------------------------------------------
     @property

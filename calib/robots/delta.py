@@ -614,6 +614,11 @@ class Delta(Robot):
     joint_symbol = "q"
     chain_word = "chain"
     gauge_fixed = ("Lay1", "Lay2", "Lay3")
+    #: Tolerance of the parameters, the default prior's standard deviation: 0.5 mm on lengths
+    #: and 0.01 rad (0.6 degree) on angles. A Delta's arms and forearms are long welded or
+    #: bonded tubes and its motors' zero is set by hand, looser than a machined part: the
+    #: reference experiment's errors (its paper's primary study) reach 1 mm and 1 degree.
+    default_parameter_tolerance = {"mm": 0.5, "rad": 0.01}
 
     def __init__(self, nominal: DeltaParams | None = None, *, rn_mm: float = NOMINAL_GEOMETRY["Rn_mm"],
                  home_position_mm=HOME_POSITION_MM, workspace_mm=WORKSPACE_BOUNDS_MM):

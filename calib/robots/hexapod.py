@@ -64,6 +64,11 @@ class Hexapod(Robot):
     joint_unit = "mm"
     joint_symbol = "l"
     chain_word = "leg"
+    #: Tolerance of every parameter (all lengths), mm: the default prior's standard deviation.
+    #: 0.1 mm: the joint centres of a machined base and platform and a leg's length offset, as
+    #: built and assembled to a precision hexapod's drawing (ISO 2768-f gives +-0.15 mm for
+    #: 120-400 mm; the paper's Table 3 errors are within +-0.05 mm).
+    default_parameter_tolerance = {"mm": 0.1}
 
     def __init__(self, base_joints, platform_joints, home_lengths, home_pose=paper.TABLE2_HOME_POSE,
                  stroke_mm: float = DEFAULT_STROKE_MM):

@@ -68,6 +68,11 @@ class RotaryHexapod(Robot):
     joint_unit = "rad"
     joint_symbol = "q"
     chain_word = "chain"
+    #: Tolerance of the parameters, the default prior's standard deviation: 0.2 mm on lengths
+    #: and 5e-3 rad on angles. Motor mounts, crank and rod lengths and joint centres of a
+    #: machined 6-RUS, assembled (crank clamping and the motors' zero set by hand add to the
+    #: parts' own tolerance); the reference experiment's errors are within 0.5 mm and 0.5 degree.
+    default_parameter_tolerance = {"mm": 0.2, "rad": 5e-3}
 
     def __init__(self, chains, home_pose, workspace_half_widths=WORKSPACE_HALF_WIDTHS,
                  joint_range_rad=JOINT_RANGE_RAD):
