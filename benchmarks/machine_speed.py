@@ -70,8 +70,8 @@ print(json.dumps({"s": wall, "steps": float(m.steps.mean())}))
 
 
 #: What the default run imports (its modules, and through them the libraries), nothing run.
-RUN_IMPORTS = ("import pipeline.run, pipeline.calibration, pipeline.recording, pipeline.testbed, "
-               "pipeline.rerun_log, calib.observability, mjcf.hexapod")
+RUN_IMPORTS = ("import pipeline.run, pipeline.workflows.calibration, pipeline.formats, pipeline.simulation.testbed, "
+               "pipeline.views.run_view, calib.observability, mjcf.hexapod")
 #: Whether the children may use compiled bytecode (``--bytecode``).
 BYTECODE = {"on": False}
 
