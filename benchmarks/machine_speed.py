@@ -70,8 +70,8 @@ print(json.dumps({"s": wall, "steps": float(m.steps.mean())}))
 
 
 #: What the default run imports (its modules, and through them the libraries), nothing run.
-RUN_IMPORTS = ("import pipeline.run, pipeline.calibration, pipeline.recording, pipeline.testbed, "
-               "pipeline.rerun_log, calib.observability, mjcf.hexapod")
+RUN_IMPORTS = ("import pipeline.run, pipeline.workflows.calibration, pipeline.formats, pipeline.simulation.testbed, "
+               "pipeline.views.run_view, calib.observability, mjcf.hexapod")
 #: Whether the children may use compiled bytecode (``--bytecode``).
 BYTECODE = {"on": False}
 
@@ -142,7 +142,7 @@ def time_process(tree: Path, args: list[str], env_extra: dict | None = None) -> 
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--poses", type=int, default=100)
     p.add_argument("--repeats", type=int, default=3)
@@ -153,7 +153,91 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--command-only", action="store_true", help="only the command (part 2)")
     p.add_argument("--bytecode", action="store_true",
                    help="compile both trees first and let the children use bytecode (as an installed package)")
-    a = p.parse_args(argv)
+    return p.parse_args(argv)
+
+
+def testbed_part(a: argparse.Namespace, base: Path | None, tmp: Path) -> None:
+    """Part 1: each robot's testbed, every variant once a repeat, best of ``a.repeats``; prints a
+    table (best wall time in ms, mean settling steps a pose, ratios, the largest difference of
+    the settled poses from the sequential ones, mm and rad)."""
+    variants = (["baseline"] if base else []) + ["sequential", "rollout-1thread", "rollout"]
+    robots = [] if a.command_only else a.robots.split(",")
+    if robots:
+        print(f"\n1. testbed, {a.poses} poses, gravity {'on' if a.gravity else 'off'} "
+              f"(rollout: {os.cpu_count()} threads; rollout-1thread: the warm start alone)")
+        print(f"  {'robot':<8}{'variant':<17}{'best ms':>9}{'steps/pose':>12}{'vs sequential':>15}"
+              f"{'vs baseline':>13}{'max |d pose|':>14}")
+    for robot in robots:
+        best: dict[str, float] = {}
+        steps: dict[str, float] = {}
+        for _ in range(a.repeats):
+            for v in variants:
+                r = time_testbed(base if v == "baseline" else ROOT, robot, a.poses, v, a.gravity, tmp / f"{v}.npy")
+                best[v] = min(best.get(v, np.inf), r["s"])
+                steps[v] = r["steps"]
+        ref = np.load(tmp / "sequential.npy")
+        for v in variants:
+            d = np.abs(np.load(tmp / f"{v}.npy") - ref).max()
+            vs_base = f"{best['baseline'] / best[v]:.1f}x" if base else "-"
+            print(f"  {robot:<8}{v:<17}{1e3 * best[v]:>9.0f}{steps[v]:>12.0f}"
+                  f"{best['sequential'] / best[v]:>14.1f}x{vs_base:>13}{d:>14.2g}")
+
+
+#: Part 2's processes: label, arguments of ``python`` (None: the default run, written to a folder).
+COMMAND_RUNS = (("--help", ["-m", "pipeline.run", "--help"]), ("default run", None),
+                ("its imports", ["-c", RUN_IMPORTS]))
+
+
+def command_timings(repeats: int, trees: list[tuple[str, Path]], tmp: Path) -> tuple[dict, dict, dict]:
+    """``(wall, cpu, split)``: best seconds of each of :data:`COMMAND_RUNS` in each tree
+    (``wall[label][tree]``, ``cpu[label][tree]``) and the default run's own split (simulate,
+    identify, log; ``split[tree][step]``), best of each over ``repeats``."""
+    wall = {label: {} for label, _ in COMMAND_RUNS}
+    cpu = {label: {} for label, _ in COMMAND_RUNS}
+    split: dict[str, dict] = {}
+    for _ in range(repeats):  # every variant once a repeat: the load moves them alike
+        for label, args in COMMAND_RUNS:
+            for name, tree in trees:
+                out = tmp / f"out-{name.replace(' ', '_')}"
+                argv_ = args or ["-m", "pipeline.run", "--out", str(out), "--overwrite", "--name", "bench",
+                                 "--quiet", "--summary-json", str(out / "summary.json")]
+                w, c = time_process(tree, argv_, {"MUJOCO_GL": "disable"} if label == "its imports" else None)
+                wall[label][name] = min(wall[label].get(name, np.inf), w)
+                cpu[label][name] = min(cpu[label].get(name, np.inf), c)
+                if args is None:
+                    got = json.loads((out / "summary.json").read_text())["wall_time_split_s"]
+                    split[name] = {k: min(v, split.get(name, {}).get(k, np.inf)) for k, v in got.items()}
+    return wall, cpu, split
+
+
+def command_part(a: argparse.Namespace, base: Path | None, here: Path, tmp: Path) -> None:
+    """Part 2: the command's processes in each tree (:func:`command_timings`), the default run
+    split into its imports and the rest, and the floor (the libraries alone); prints seconds."""
+    print("\n2. python -m pipeline.run, wall time of the process (best of "
+          f"{a.repeats}; {'this tree and ' + a.baseline_ref if base else 'this tree'})")
+    trees = ([("baseline", base)] if base else []) + [("this tree", here)]
+    wall, cpu, split = command_timings(a.repeats, trees, tmp)
+    for label, _ in COMMAND_RUNS:
+        line = ", ".join(f"{name} {wall[label][name]:.2f} s wall ({cpu[label][name]:.2f} s CPU)"
+                         for name, _ in trees)
+        ratio = f"  {wall[label]['baseline'] / wall[label]['this tree']:.2f}x wall" if base else ""
+        print(f"  {label:<12} {line}{ratio}")
+    for name, _ in trees:
+        w = wall["default run"][name]
+        print(f"  {name}: default run {w:.2f} s wall, of which its imports {wall['its imports'][name]:.2f} s "
+              f"and the rest {w - wall['its imports'][name]:.2f} s; the run's own split (best of each): "
+              + ", ".join(f"{k} {v:.3f} s" for k, v in split[name].items())
+              + " (log: importing Rerun and writing the .rrd)")
+    # What the default run cannot go below: the libraries it needs, nothing else.
+    w = c = np.inf
+    for _ in range(a.repeats):
+        wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.special, mujoco, rerun"], {"MUJOCO_GL": "disable"})
+        w, c = min(w, wi), min(c, ci)
+    print(f"  {'floor':<12} import numpy, scipy.special, mujoco (no OpenGL), rerun: {w:.2f} s wall ({c:.2f} s CPU)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parse_args(argv)
     BYTECODE["on"] = a.bytecode
     caching = "on (--bytecode)" if a.bytecode else ("off (PYTHONDONTWRITEBYTECODE)" if os.environ.get(
         "PYTHONDONTWRITEBYTECODE") else "as Python does by default")
@@ -165,67 +249,9 @@ def main(argv: list[str] | None = None) -> int:
         if a.bytecode:
             for tree in ([base] if base else []) + [here]:
                 compile_tree(tree)
-        variants = (["baseline"] if base else []) + ["sequential", "rollout-1thread", "rollout"]
-        robots = [] if a.command_only else a.robots.split(",")
-        if robots:
-            print(f"\n1. testbed, {a.poses} poses, gravity {'on' if a.gravity else 'off'} "
-                  f"(rollout: {os.cpu_count()} threads; rollout-1thread: the warm start alone)")
-            print(f"  {'robot':<8}{'variant':<17}{'best ms':>9}{'steps/pose':>12}{'vs sequential':>15}"
-                  f"{'vs baseline':>13}{'max |d pose|':>14}")
-        for robot in robots:
-            best: dict[str, float] = {}
-            steps: dict[str, float] = {}
-            for _ in range(a.repeats):
-                for v in variants:
-                    r = time_testbed(base if v == "baseline" else ROOT, robot, a.poses, v, a.gravity, tmp / f"{v}.npy")
-                    best[v] = min(best.get(v, np.inf), r["s"])
-                    steps[v] = r["steps"]
-            ref = np.load(tmp / "sequential.npy")
-            for v in variants:
-                d = np.abs(np.load(tmp / f"{v}.npy") - ref).max()
-                vs_base = f"{best['baseline'] / best[v]:.1f}x" if base else "-"
-                print(f"  {robot:<8}{v:<17}{1e3 * best[v]:>9.0f}{steps[v]:>12.0f}"
-                      f"{best['sequential'] / best[v]:>14.1f}x{vs_base:>13}{d:>14.2g}")
+        testbed_part(a, base, tmp)
         if not a.skip_command:
-            print("\n2. python -m pipeline.run, wall time of the process (best of "
-                  f"{a.repeats}; {'this tree and ' + a.baseline_ref if base else 'this tree'})")
-            trees = ([("baseline", base)] if base else []) + [("this tree", here)]
-            runs = (("--help", ["-m", "pipeline.run", "--help"]), ("default run", None),
-                    ("its imports", ["-c", RUN_IMPORTS]))
-            wall = {label: {} for label, _ in runs}
-            cpu = {label: {} for label, _ in runs}
-            split: dict[str, dict] = {}  # the run's own split (simulate, identify, log), best of each
-            for _ in range(a.repeats):  # every variant once a repeat: the load moves them alike
-                for label, args in runs:
-                    for name, tree in trees:
-                        out = tmp / f"out-{name.replace(' ', '_')}"
-                        argv_ = args or ["-m", "pipeline.run", "--out", str(out), "--overwrite", "--name", "bench",
-                                         "--quiet", "--summary-json", str(out / "summary.json")]
-                        w, c = time_process(tree, argv_, {"MUJOCO_GL": "disable"} if label == "its imports" else None)
-                        wall[label][name] = min(wall[label].get(name, np.inf), w)
-                        cpu[label][name] = min(cpu[label].get(name, np.inf), c)
-                        if args is None:
-                            got = json.loads((out / "summary.json").read_text())["wall_time_split_s"]
-                            split[name] = {k: min(v, split.get(name, {}).get(k, np.inf)) for k, v in got.items()}
-            for label, _ in runs:
-                line = ", ".join(f"{name} {wall[label][name]:.2f} s wall ({cpu[label][name]:.2f} s CPU)"
-                                 for name, _ in trees)
-                ratio = f"  {wall[label]['baseline'] / wall[label]['this tree']:.2f}x wall" if base else ""
-                print(f"  {label:<12} {line}{ratio}")
-            for name, _ in trees:
-                w = wall["default run"][name]
-                print(f"  {name}: default run {w:.2f} s wall, of which its imports {wall['its imports'][name]:.2f} s "
-                      f"and the rest {w - wall['its imports'][name]:.2f} s; the run's own split (best of each): "
-                      + ", ".join(f"{k} {v:.3f} s" for k, v in split[name].items())
-                      + " (log: importing Rerun and writing the .rrd)")
-            # What the default run cannot go below: the libraries it needs, nothing else.
-            w = c = np.inf
-            for _ in range(a.repeats):
-                wi, ci = time_process(ROOT, ["-c", "import numpy, scipy.special, mujoco, rerun"],
-                                      {"MUJOCO_GL": "disable"})
-                w, c = min(w, wi), min(c, ci)
-            print(f"  {'floor':<12} import numpy, scipy.special, mujoco (no OpenGL), rerun: "
-                  f"{w:.2f} s wall ({c:.2f} s CPU)")
+            command_part(a, base, here, tmp)
     print(f"\n{load()}")
     return 0
 

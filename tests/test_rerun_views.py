@@ -1,5 +1,6 @@
 """The Rerun files read back: every view of the default blueprint shows data on the timeline active
-at open, parameter bars carry names, each tool has its own application id, the snapshot command."""
+at open, parameter bars carry names, each tool and robot has its own application id (files of two
+robots opened in one viewer keep their layouts), the snapshot command."""
 
 import json
 
@@ -234,3 +235,70 @@ def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys, mon
         assert code == 2 and len(err.strip().splitlines()) == 1 and "error:" in err
     assert main([str(tmp_path / "missing.rrd"), "--out", str(png)]) == 2
     assert "no such recording" in capsys.readouterr().err
+
+
+#: Pixels whose largest channel difference (0-255) exceeds this count as different. Pictures of the
+#: same view drawn twice differ by less (anti-aliasing, the 256-colour re-encoding).
+PIXEL_TOLERANCE = 32
+#: Largest fraction of different pixels between two pictures of the same layout. Measured at
+#: 800x450 with the software renderer (lavapipe): the Delta file opened after a hexapod file vs the
+#: Delta file alone, 0 (identical pictures); the same with both files written under ONE application
+#: id (the fault this guards against: the Delta drawn with the hexapod's camera and titles), 1.1%;
+#: the hexapod alone vs the Delta alone, 8.6%. The bound sits well below the fault, above
+#: renderer noise.
+SAME_LAYOUT_MAX = 0.003
+#: Smallest fraction of different pixels between the two robots' pictures (measured 8.6%).
+OTHER_LAYOUT_MIN = 0.03
+
+
+def _different_pixels(a, b) -> float:
+    """Fraction of the pixels of two PNGs of the same size (H, W) that differ by more than
+    :data:`PIXEL_TOLERANCE` in some channel (Pillow is a dependency of rerun-sdk)."""
+    from PIL import Image
+
+    pa, pb = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (a, b))
+    assert pa.shape == pb.shape
+    return float(np.mean(np.abs(pa - pb).max(axis=2) > PIXEL_TOLERANCE))
+
+
+def test_files_of_two_robots_opened_together_keep_their_own_layouts(tmp_path):
+    """A hexapod run file then a Delta run file opened in ONE viewer: distinct application ids,
+    each file's blueprint its robot's (chain word, orientation view), and the viewer draws the
+    Delta with the Delta's layout (its picture is that of the Delta file opened alone, not like
+    the hexapod's). Without a renderer the picture is not checked and the test says so: the
+    snapshot's one-line refusal is asserted and a warning names why."""
+    import warnings
+
+    from pipeline.snapshot import SnapshotError, renderer_available, snapshot
+
+    files = {}
+    for robot in ("hexapod", "delta"):
+        run(["--robot", robot, "--heldout", "5", "--out", str(tmp_path), "--name", robot, "--quiet"])
+        files[robot] = tmp_path / f"{robot}.rrd"
+    assert rrd_application_ids(files["hexapod"]) == {"parallel-calib-run-hexapod"}
+    assert rrd_application_ids(files["delta"]) == {"parallel-calib-run-delta"}
+    words = {robot: default_robot(robot).chain_word for robot in files}
+    assert words["hexapod"] != words["delta"]
+    for robot, rrd in files.items():
+        names = [v["name"] for v in rrd_blueprint(rrd)["views"]]
+        own, other = words[robot], words["delta" if robot == "hexapod" else "hexapod"]
+        for model in ("nominal", "identified"):
+            assert f"Closure residual per {own}, {model} model (um) vs pose" in names
+        assert not any(f" {other}," in n for n in names)
+        orientation = "Held-out orientation error (urad) vs held-out pose" in names
+        assert orientation == bool(default_robot(robot).angle_pose_mask.any())  # the hexapod's, not the Delta's
+
+    size, settle_s = "800x450", 2.0  # the pictures were identical after 2 s and after the default 7 s
+    both = tmp_path / "hexapod_then_delta.png"
+    why = renderer_available()
+    if why is not None:
+        with pytest.raises(SnapshotError) as refused:
+            snapshot([files["hexapod"], files["delta"]], both, size=size)
+        assert str(refused.value) == why and len(why.splitlines()) == 1
+        warnings.warn(f"files of two robots opened together: the rendering was not checked: {why}")
+        return
+    snapshot([files["hexapod"], files["delta"]], both, size=size, settle_s=settle_s)
+    alone = {robot: snapshot(rrd, tmp_path / f"{robot}.png", size=size, settle_s=settle_s)
+             for robot, rrd in files.items()}
+    assert _different_pixels(both, alone["delta"]) <= SAME_LAYOUT_MAX
+    assert _different_pixels(alone["hexapod"], alone["delta"]) >= OTHER_LAYOUT_MIN

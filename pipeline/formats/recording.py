@@ -231,6 +231,88 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
     return robot, noise, meta
 
 
+def _csv_rows(csv_path: Path, text: str, expected: tuple[str, ...]) -> list[list[str]]:
+    """The CSV's rows (cells as text), trailing blank lines dropped; at least the header."""
+    try:
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise RecordingError(f"{csv_path}: not a readable CSV file: {exc}") from None
+    while rows and not any(c.strip() for c in rows[-1]):
+        rows.pop()  # trailing blank lines
+    if not rows:
+        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
+    return rows
+
+
+def _header(csv_path: Path, row: list[str], expected: tuple[str, ...], robot: Robot) -> list[str]:
+    """The header row's column names, checked: comma-separated, each once, the ``expected``
+    columns all there (in any order), nothing else but ``set``."""
+    header = [h.strip() for h in row]
+    if len(header) == 1 and ";" in header[0]:
+        raise RecordingError(f"{csv_path}: line 1: the fields are separated by ';'; a recording is "
+                             "comma-separated (t_s,...)")
+    if len(header) == 1 and "\t" in header[0]:
+        raise RecordingError(f"{csv_path}: line 1: the fields are separated by tabs; a recording is "
+                             "comma-separated (t_s,...)")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise RecordingError(f"{csv_path}: line 1: column(s) {', '.join(dup)} appear more than once")
+    missing = [c for c in expected if c not in header]
+    if missing:
+        raise RecordingError(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} "
+                             f"(a {robot.name} recording, per its sidecar); got {', '.join(header)}")
+    unknown = [h for h in header if h not in expected + ("set",)]
+    if unknown:
+        raise RecordingError(f"{csv_path}: line 1: unknown column(s) {', '.join(unknown)}")
+    return header
+
+
+def _data_row(where: str, row: list[str], idx: dict[str, int], expected: tuple[str, ...]) -> tuple[list[float], str]:
+    """One data row's values (finite numbers, in the ``expected`` columns' order) and its set;
+    ``idx``: each column's place in the file; ``where``: how messages name the row."""
+    if not any(c.strip() for c in row):
+        raise RecordingError(f"{where}: blank line inside the data")
+    if len(row) != len(idx):
+        raise RecordingError(f"{where}: expected {len(idx)} fields, got {len(row)}")
+    values = []
+    for name in expected:
+        cell = row[idx[name]].strip()
+        try:
+            v = float(cell)
+        except ValueError:
+            raise RecordingError(f"{where}, column {name!r}: {cell!r} is not a number") from None
+        if not np.isfinite(v):
+            raise RecordingError(f"{where}, column {name!r}: {cell!r} is not finite")
+        values.append(v)
+    s = row[idx["set"]].strip() if "set" in idx else "calibration"
+    if s not in SETS:
+        raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
+    return values, s
+
+
+def _data(csv_path: Path, data: list[list[str]], header: list[str],
+          expected: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """``(values, sets)``: (N, len(expected)) the data rows' values in the ``expected`` columns'
+    order (s, the joint unit, mm and rad) and (N,) str their sets; time must not go backwards
+    (a row that repeats an earlier one exactly is named as copied)."""
+    idx = {h: i for i, h in enumerate(header)}
+    values = np.empty((len(data), len(expected)))
+    sets = np.empty(len(data), dtype=object)
+    for r, row in enumerate(data, start=1):
+        where = f"{csv_path}: row {r} (line {r + 1})"
+        values[r - 1], s = _data_row(where, row, idx, expected)
+        sets[r - 1] = s
+        if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
+            same = np.flatnonzero((values[:r - 1] == values[r - 1]).all(axis=1) & (sets[:r - 1] == s))
+            if same.size:
+                raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
+                                     "delete it")
+            raise RecordingError(f"{where}, column 't_s': time goes backwards "
+                                 f"({float(values[r - 1, 0])!r} after {float(values[r - 2, 0])!r}); rows must be in "
+                                 "the order taken")
+    return values, sets.astype(str)
+
+
 def read_recording(csv_path: str | Path) -> Recording:
     """Read and validate a recording (CSV + JSON sidecar).
 
@@ -250,67 +332,11 @@ def read_recording(csv_path: str | Path) -> Recording:
     robot, noise, meta = _read_sidecar(sidecar_path(csv_path))
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
     expected = ("t_s",) + joint_cols + pose_cols
-    try:
-        rows = list(csv.reader(io.StringIO(text, newline="")))
-    except csv.Error as exc:
-        raise RecordingError(f"{csv_path}: not a readable CSV file: {exc}") from None
-    while rows and not any(c.strip() for c in rows[-1]):
-        rows.pop()  # trailing blank lines
-    if not rows:
-        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
-    header = [h.strip() for h in rows[0]]
-    if len(header) == 1 and ";" in header[0]:
-        raise RecordingError(f"{csv_path}: line 1: the fields are separated by ';'; a recording is "
-                             "comma-separated (t_s,...)")
-    if len(header) == 1 and "\t" in header[0]:
-        raise RecordingError(f"{csv_path}: line 1: the fields are separated by tabs; a recording is "
-                             "comma-separated (t_s,...)")
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise RecordingError(f"{csv_path}: line 1: column(s) {', '.join(dup)} appear more than once")
-    missing = [c for c in expected if c not in header]
-    if missing:
-        raise RecordingError(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} "
-                             f"(a {robot.name} recording, per its sidecar); got {', '.join(header)}")
-    unknown = [h for h in header if h not in expected + ("set",)]
-    if unknown:
-        raise RecordingError(f"{csv_path}: line 1: unknown column(s) {', '.join(unknown)}")
-    idx = {h: i for i, h in enumerate(header)}
-    data = rows[1:]
-    if not data:
+    rows = _csv_rows(csv_path, text, expected)
+    header = _header(csv_path, rows[0], expected, robot)
+    if len(rows) == 1:
         raise RecordingError(f"{csv_path}: no data rows (the header alone)")
-    values = np.empty((len(data), len(expected)))
-    sets = np.empty(len(data), dtype=object)
-    for r, row in enumerate(data, start=1):
-        where = f"{csv_path}: row {r} (line {r + 1})"
-        if not any(c.strip() for c in row):
-            raise RecordingError(f"{where}: blank line inside the data")
-        if len(row) != len(header):
-            raise RecordingError(f"{where}: expected {len(header)} fields, got {len(row)}")
-        for c, name in enumerate(expected):
-            cell = row[idx[name]].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                raise RecordingError(f"{where}, column {name!r}: {cell!r} is not a number") from None
-            if not np.isfinite(v):
-                raise RecordingError(f"{where}, column {name!r}: {cell!r} is not finite")
-            values[r - 1, c] = v
-        s = row[idx["set"]].strip() if "set" in idx else "calibration"
-        if s not in SETS:
-            raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
-        sets[r - 1] = s
-        if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
-            same = np.flatnonzero((values[:r - 1] == values[r - 1]).all(axis=1) & (sets[:r - 1] == s))
-            if same.size:
-                raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
-                                     "delete it")
-            raise RecordingError(f"{where}, column 't_s': time goes backwards "
-                                 f"({float(values[r - 1, 0])!r} after {float(values[r - 2, 0])!r}); rows must be in "
-                                 "the order taken")
-    sets = sets.astype(str)
+    values, sets = _data(csv_path, rows[1:], header, expected)
     c = len(joint_cols)
     return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
                      measured=values[:, 1 + c:], sets=sets, meta=meta)
-
-

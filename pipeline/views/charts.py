@@ -10,6 +10,7 @@ viewer's only font has no emoji and it stops on a missing glyph.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,159 @@ def _columns_of(groups: list[int], rows_per_column: int) -> list[list[int]]:
     return cols + ([cur] if cur else [])
 
 
+@dataclass(frozen=True)
+class _BarRows:
+    """What a named bar chart draws, one entry a row: ``names`` (R,), ``vals`` [(R,)] one array a
+    series (value unit), ``sig`` (R,) or None (value unit), ``groups`` (R,) int."""
+
+    names: list[str]
+    vals: list[np.ndarray]
+    sig: np.ndarray | None
+    groups: list[int]
+    group_names: list[str] | None
+    names_above: bool
+
+
+@dataclass(frozen=True)
+class _BarLayout:
+    """Where a named bar chart's parts go, in the pixel-like units of :data:`ROW_PX`: ``cols``,
+    the row indices of each column; ``col_w``, a column's width; ``name_px``, the width kept for
+    the names; ``half``, the bars' half-width (``full`` value units); ``px``, units a value unit;
+    ``step``, the grid step (value unit); ``n_rows``, the rows of the longest column (headers
+    and key included); ``thick``, a bar's thickness."""
+
+    cols: list[list[int]]
+    col_w: float
+    name_px: float
+    half: float
+    px: float
+    step: float
+    full: float
+    n_rows: float
+    thick: float
+
+
+@dataclass
+class _BarMarks:
+    """The pieces of a named bar chart before they are logged: per series the bars (strips
+    ``[[(x, y), (x, y)]]`` and their row names), the row names and group headers (points, text,
+    colours), grid lines, tick points and text, +-2 sigma whiskers."""
+
+    bars: list[tuple[list, list]]
+    name_xy: list = field(default_factory=list)
+    name_lab: list = field(default_factory=list)
+    name_col: list = field(default_factory=list)
+    head_xy: list = field(default_factory=list)
+    head_lab: list = field(default_factory=list)
+    head_col: list = field(default_factory=list)
+    grid: list = field(default_factory=list)
+    tick_xy: list = field(default_factory=list)
+    ticks: list = field(default_factory=list)
+    whisk: list = field(default_factory=list)
+
+
+def _bar_extent(rows: _BarRows) -> float:
+    """The largest |value| drawn, whiskers (+-2 sigma of the first series) included (value unit)."""
+    ext = [np.abs(v[np.isfinite(v)]) for v in rows.vals]
+    if rows.sig is not None:
+        ok = np.isfinite(rows.vals[0]) & np.isfinite(rows.sig)
+        ext.append(np.abs(rows.vals[0][ok]) + 2 * rows.sig[ok])
+    return max((float(e.max()) for e in ext if e.size), default=0.0)
+
+
+def _bar_layout(rows: _BarRows, rows_per_column: int, name_px: float) -> _BarLayout:
+    """The scale (a 1-2-5 step, the ends at whole steps) and the columns of a named bar chart."""
+    vmax = _bar_extent(rows)
+    step = nice_step(vmax, 2)
+    full = step * max(1, int(np.ceil(vmax / step - 1e-9)))
+    cols = _columns_of(rows.groups, rows_per_column)
+    name_px = 0.0 if rows.names_above else name_px
+    col_w = CHART_PX / len(cols)
+    half = (col_w - name_px - 16) / 2
+    n_rows = (max(len(c) for c in cols) * (1.9 if rows.names_above else 1.0)
+              + (len(set(rows.groups)) // len(cols) if rows.group_names is not None else 0) + 1)
+    return _BarLayout(cols=cols, col_w=col_w, name_px=name_px, half=half, px=half / full, step=step, full=full,
+                      n_rows=n_rows, thick=min(7.0, 0.75 * ROW_PX / len(rows.vals)))
+
+
+def _draw_bar_row(m: _BarMarks, rows: _BarRows, lay: _BarLayout, i: int, x0: float, y: float) -> float:
+    """Row ``i`` of the column starting at ``x0``, at height ``y``: its group's header when the
+    group starts here, its name, one bar a series, the whiskers. Returns the next row's height."""
+    zx = x0 + lay.name_px + lay.half
+    k = len(rows.vals)
+    if rows.names_above:
+        m.name_xy.append((zx, y - 0.1 * ROW_PX))
+        y += 0.9 * ROW_PX
+    else:
+        m.name_xy.append((x0 + lay.name_px / 2, y))
+    m.name_lab.append(rows.names[i])
+    m.name_col.append(chain_color(rows.groups[i]) if rows.group_names is not None else TEXT_COLOR)
+    for s in range(k):
+        v = rows.vals[s][i]
+        ys = y + (s - (k - 1) / 2) * lay.thick * 1.15
+        v = 0.0 if not np.isfinite(v) else v
+        m.bars[s][0].append([[zx, ys], [zx + v * lay.px, ys]])
+        m.bars[s][1].append(rows.names[i])
+    sig = rows.sig
+    if sig is not None and np.isfinite(sig[i]) and np.isfinite(rows.vals[0][i]):
+        ys = y + (0 - (k - 1) / 2) * lay.thick * 1.15
+        a, b = zx + (rows.vals[0][i] - 2 * sig[i]) * lay.px, zx + (rows.vals[0][i] + 2 * sig[i]) * lay.px
+        m.whisk += [[[a, ys], [b, ys]], [[a, ys - 3], [a, ys + 3]], [[b, ys - 3], [b, ys + 3]]]
+    return y + ROW_PX
+
+
+def _draw_bar_column(m: _BarMarks, rows: _BarRows, lay: _BarLayout, ci: int) -> None:
+    """Column ``ci``: its rows (a header above each group's first row), then its grid and the
+    ticks at the ends and zero."""
+    x0 = ci * lay.col_w
+    zx = x0 + lay.name_px + lay.half
+    y = 0.0
+    last = None
+    for i in lay.cols[ci]:
+        if rows.group_names is not None and rows.groups[i] != last:
+            m.head_xy.append((x0 + lay.name_px / 2, y))
+            m.head_lab.append(rows.group_names[rows.groups[i]])
+            m.head_col.append(chain_color(rows.groups[i]))
+            y += ROW_PX
+            last = rows.groups[i]
+        y = _draw_bar_row(m, rows, lay, i, x0, y)
+    full, step = lay.full, lay.step
+    for t in np.arange(-full, full + step / 2, step):
+        gx = zx + t * lay.px
+        m.grid.append([[gx, -0.6 * ROW_PX], [gx, y - 0.4 * ROW_PX]])
+        if abs(abs(t) - full) < 1e-9 * full or abs(t) < 1e-9 * full:  # the ends and zero only
+            m.tick_xy.append((gx, -1.2 * ROW_PX))
+            m.ticks.append(("+" if t > 0 else "") + _fmt(t) if abs(t) > 1e-12 * full else "0")
+
+
+def _log_bar_marks(rec: rr.RecordingStream, path: str, m: _BarMarks, series, lay: _BarLayout, *, unit: str,
+                   title: str, note: str, with_sigma: bool) -> None:
+    """Log the drawn pieces under ``path``, then the title, the key, the note and the frame."""
+    for s, (label, _, color) in enumerate(series):
+        strips, labels = m.bars[s]
+        rec.log(f"{path}/bars/{_slug(label)}", rr.LineStrips2D(strips, radii=lay.thick / 2, colors=color,
+                labels=labels, show_labels=False), static=True)
+    rec.log(f"{path}/grid", rr.LineStrips2D(m.grid, radii=0.5, colors=GRID_COLOR), static=True)
+    if m.whisk:
+        rec.log(f"{path}/sigma2", rr.LineStrips2D(m.whisk, radii=0.9, colors=(240, 240, 240)), static=True)
+    _text(rec, f"{path}/names", m.name_xy, m.name_lab, m.name_col)
+    if m.head_xy:
+        _text(rec, f"{path}/groups", m.head_xy, m.head_lab, m.head_col)
+    _text(rec, f"{path}/ticks", m.tick_xy, m.ticks, (160, 160, 160))
+    width = len(lay.cols) * lay.col_w
+    scale = f"[{unit}, grid step {_fmt(lay.step)}]"
+    _text(rec, f"{path}/title", [(width / 2, -2.3 * ROW_PX)], [f"{title}  {scale}" if title else scale])
+    key = [lab + (" +-2 sigma" if (s == 0 and with_sigma) else "") for s, (lab, _, _) in enumerate(series)]
+    kx = width / (len(key) + 1)
+    key_y = (lay.n_rows + 0.6) * ROW_PX
+    rec.log(f"{path}/key", rr.Points2D([(kx * (s + 1), key_y) for s in range(len(key))], radii=0.01,
+                                      colors=[c for _, _, c in series], labels=key, show_labels=True), static=True)
+    if note:
+        _text(rec, f"{path}/note", [(width / 2, key_y + ROW_PX)], [note], (160, 160, 160))
+    top, bottom = -3.0 * ROW_PX, (lay.n_rows + 2.5) * ROW_PX
+    _frame(rec, f"{path}/frame", -6, top, width - 6, max(bottom, key_y + 1.6 * ROW_PX))
+
+
 def log_named_bars(rec: rr.RecordingStream, path: str, names, series, *, unit: str, sigma=None,
                    groups=None, group_names=None, title: str = "", rows_per_column: int = 24,
                    note: str = "", name_px: float = NAME_PX, names_above: bool = False) -> None:
@@ -165,87 +319,15 @@ def log_named_bars(rec: rr.RecordingStream, path: str, names, series, *, unit: s
     """
     names = [str(n) for n in names]
     r = len(names)
-    vals = [np.asarray(v, dtype=float).reshape(r) for _, v, _ in series]
-    groups = [0] * r if groups is None else [int(g) for g in groups]
-    sig = None if sigma is None else np.asarray(sigma, dtype=float).reshape(r)
-    ext = [np.abs(v[np.isfinite(v)]) for v in vals]
-    if sig is not None:
-        ok = np.isfinite(vals[0]) & np.isfinite(sig)
-        ext.append(np.abs(vals[0][ok]) + 2 * sig[ok])
-    vmax = max((float(e.max()) for e in ext if e.size), default=0.0)
-    step = nice_step(vmax, 2)
-    full = step * max(1, int(np.ceil(vmax / step - 1e-9)))
-    cols = _columns_of(groups, rows_per_column)
-    name_px = 0.0 if names_above else name_px
-    col_w = CHART_PX / len(cols)
-    half = (col_w - name_px - 16) / 2
-    px = half / full
-    n_rows = (max(len(c) for c in cols) * (1.9 if names_above else 1.0)
-              + (len(set(groups)) // len(cols) if group_names is not None else 0) + 1)
-    top, bottom = -3.0 * ROW_PX, (n_rows + 2.5) * ROW_PX
-    k = len(series)
-    thick = min(7.0, 0.75 * ROW_PX / k)
-    bars = {i: ([], [], []) for i in range(k)}  # strips, labels, colours
-    name_xy, name_lab, name_col, grid, ticks, tick_xy, whisk = [], [], [], [], [], [], []
-    head_xy, head_lab, head_col = [], [], []
-    for ci, rows in enumerate(cols):
-        x0 = ci * col_w
-        zx = x0 + name_px + half
-        y = 0.0
-        last = None
-        for i in rows:
-            if group_names is not None and groups[i] != last:
-                head_xy.append((x0 + name_px / 2, y))
-                head_lab.append(group_names[groups[i]])
-                head_col.append(chain_color(groups[i]))
-                y += ROW_PX
-                last = groups[i]
-            if names_above:
-                name_xy.append((zx, y - 0.1 * ROW_PX))
-                y += 0.9 * ROW_PX
-            else:
-                name_xy.append((x0 + name_px / 2, y))
-            name_lab.append(names[i])
-            name_col.append(chain_color(groups[i]) if group_names is not None else TEXT_COLOR)
-            for s in range(k):
-                v = vals[s][i]
-                ys = y + (s - (k - 1) / 2) * thick * 1.15
-                v = 0.0 if not np.isfinite(v) else v
-                bars[s][0].append([[zx, ys], [zx + v * px, ys]])
-                bars[s][1].append(names[i])
-            if sig is not None and np.isfinite(sig[i]) and np.isfinite(vals[0][i]):
-                ys = y + (0 - (k - 1) / 2) * thick * 1.15
-                a, b = zx + (vals[0][i] - 2 * sig[i]) * px, zx + (vals[0][i] + 2 * sig[i]) * px
-                whisk += [[[a, ys], [b, ys]], [[a, ys - 3], [a, ys + 3]], [[b, ys - 3], [b, ys + 3]]]
-            y += ROW_PX
-        for t in np.arange(-full, full + step / 2, step):
-            gx = zx + t * px
-            grid.append([[gx, -0.6 * ROW_PX], [gx, y - 0.4 * ROW_PX]])
-            if abs(abs(t) - full) < 1e-9 * full or abs(t) < 1e-9 * full:  # the ends and zero only
-                tick_xy.append((gx, -1.2 * ROW_PX))
-                ticks.append(("+" if t > 0 else "") + _fmt(t) if abs(t) > 1e-12 * full else "0")
-    for s, (label, _, color) in enumerate(series):
-        strips, labels, _ = bars[s]
-        rec.log(f"{path}/bars/{_slug(label)}", rr.LineStrips2D(strips, radii=thick / 2, colors=color,
-                labels=labels, show_labels=False), static=True)
-    rec.log(f"{path}/grid", rr.LineStrips2D(grid, radii=0.5, colors=GRID_COLOR), static=True)
-    if whisk:
-        rec.log(f"{path}/sigma2", rr.LineStrips2D(whisk, radii=0.9, colors=(240, 240, 240)), static=True)
-    _text(rec, f"{path}/names", name_xy, name_lab, name_col)
-    if head_xy:
-        _text(rec, f"{path}/groups", head_xy, head_lab, head_col)
-    _text(rec, f"{path}/ticks", tick_xy, ticks, (160, 160, 160))
-    width = len(cols) * col_w
-    title_line = f"{title}  [{unit}, grid step {_fmt(step)}]" if title else f"[{unit}, grid step {_fmt(step)}]"
-    _text(rec, f"{path}/title", [(width / 2, -2.3 * ROW_PX)], [title_line])
-    key = [lab + (" +-2 sigma" if (s == 0 and sig is not None) else "") for s, (lab, _, _) in enumerate(series)]
-    kx = width / (len(key) + 1)
-    key_y = (n_rows + 0.6) * ROW_PX
-    rec.log(f"{path}/key", rr.Points2D([(kx * (s + 1), key_y) for s in range(len(key))], radii=0.01,
-                                      colors=[c for _, _, c in series], labels=key, show_labels=True), static=True)
-    if note:
-        _text(rec, f"{path}/note", [(width / 2, key_y + ROW_PX)], [note], (160, 160, 160))
-    _frame(rec, f"{path}/frame", -6, top, width - 6, max(bottom, key_y + 1.6 * ROW_PX))
+    rows = _BarRows(names=names, vals=[np.asarray(v, dtype=float).reshape(r) for _, v, _ in series],
+                    sig=None if sigma is None else np.asarray(sigma, dtype=float).reshape(r),
+                    groups=[0] * r if groups is None else [int(g) for g in groups], group_names=group_names,
+                    names_above=names_above)
+    lay = _bar_layout(rows, rows_per_column, name_px)
+    marks = _BarMarks(bars=[([], []) for _ in series])
+    for ci in range(len(lay.cols)):
+        _draw_bar_column(marks, rows, lay, ci)
+    _log_bar_marks(rec, path, marks, series, lay, unit=unit, title=title, note=note, with_sigma=rows.sig is not None)
 
 
 def chart_view(origin: str, name: str) -> rrb.Spatial2DView:

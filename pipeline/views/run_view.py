@@ -167,6 +167,129 @@ def _bar_unit(robot: Robot):
     return np.where(angle, 1e3 * robot.length_scale_mm, 1e3), angle.any()
 
 
+def _log_machines(rec: rr.RecordingStream, robot: Robot, thetas, joints: np.ndarray, targets: np.ndarray,
+                  measured: np.ndarray, predicted: np.ndarray, m: float, chains: list[str]) -> float:
+    """The three machines at every calibration pose (timeline ``pose``) and the chain labels.
+
+    ``thetas``: (nominal, drawn, identified) parameter vectors, (P,) each (``drawn``: the actual
+    machine, or the identified one for a real machine); ``joints`` (N, C); ``targets``,
+    ``measured``, ``predicted``: (N, D) poses (mm, rad); ``m``: the departures' magnification.
+    Returns the machine's size (mm: the largest extent of the nominal machine over the poses).
+    """
+    nominal, drawn, identified = thetas
+    n, c = joints.shape
+    rec.log("machine", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    nominal_joints = robot.inverse_kinematics(nominal, targets)
+    nom = robot.chain_points(nominal, nominal_joints, targets)
+    act = robot.chain_points(drawn, joints, measured)
+    cal = robot.chain_points(identified, joints, predicted)
+    size = float(np.ptp(nom.reshape(-1, 3), axis=0).max())
+    _log_machine(rec, "machine/nominal", nom, MACHINE_COLORS["nominal"], size * 0.006)
+    _log_machine(rec, "machine/actual", nom + m * (act - nom), MACHINE_COLORS["actual"], size * 0.004)
+    _log_machine(rec, "machine/calibrated", nom + m * (cal - nom), MACHINE_COLORS["calibrated"], size * 0.0022)
+    per_chain = rr.Points3D.columns(positions=nom[:, :, 0].reshape(-1, 3), labels=chains * n,
+                                    colors=np.tile(np.asarray(chain_colors(c), dtype=np.uint8), (n, 1))
+                                    ).partition([c] * n)
+    rec.send_columns("machine/chain_labels", indexes=[rr.TimeColumn("pose", sequence=np.arange(n))],
+                     columns=[*per_chain, *rr.Points3D.columns(radii=[size * 0.012] * n, show_labels=[True] * n)])
+    return size
+
+
+def _log_pose_errors(rec: rr.RecordingStream, robot: Robot, targets: np.ndarray, measured: np.ndarray,
+                     predicted: np.ndarray, m: float, size: float, flagged: list[int]) -> float:
+    """Arrows of the position error at each calibration pose, before (measured - intended) and
+    after (measured - predicted), magnified ``m`` times, and rings at the ``flagged`` poses.
+    ``targets``, ``measured``, ``predicted``: (N, D) poses (mm, rad); ``size``: the machine's (mm).
+    Returns the colour scale's top (um): the largest error before."""
+    pos = ~robot.angle_pose_mask
+    centre = targets[:, pos][:, :3]
+    before = (measured - targets)[:, pos][:, :3]
+    after = (measured - predicted)[:, pos][:, :3]
+    mag_b, mag_a = np.linalg.norm(before, axis=1) * 1e3, np.linalg.norm(after, axis=1) * 1e3
+    vmax = float(np.nanmax(mag_b)) if len(targets) else 1.0
+    rec.log("machine/errors/before", rr.Arrows3D(origins=centre, vectors=m * before, colors=magnitude_colors(mag_b, vmax),
+                                                 radii=size * 0.004, labels=[f"pose {k + 1}: {v:.0f} um" for k, v in
+                                                                              enumerate(mag_b)], show_labels=False),
+            static=True)
+    rec.log("machine/errors/after", rr.Arrows3D(origins=centre, vectors=m * after, colors=magnitude_colors(mag_a, vmax),
+                                                radii=size * 0.002), static=True)
+    if flagged:
+        rec.log("machine/flagged", rr.Points3D(centre[flagged], radii=size * 0.02, colors=FLAG_COLOR,
+                                               labels=[f"flagged pose {k + 1}" for k in flagged], show_labels=True),
+                static=True)
+    return vmax
+
+
+def _log_key(rec: rr.RecordingStream, robot: Robot, m: float, vmax_um: float, *, simulated: bool,
+             flagged: bool) -> None:
+    """The 3D view's key: the machines' colours, the magnification, the arrows' colour scale."""
+    what = "actual" if simulated else "measured (identified geometry)"
+    key = (f"**grey** nominal, **orange** {what}, **blue** calibrated model; departures from nominal and "
+           f"error arrows drawn **x{m:g}**. Arrows: position error at each calibration pose, thick before "
+           f"(measured - intended), thin after (measured - calibrated), colour green 0 to red {vmax_um:.0f} um. "
+           + ("Red ring: flagged pose. " if flagged else "") + f"Labels: one colour per {robot.chain_word}.")
+    rec.log("key", rr.TextDocument(key, media_type=rr.MediaType.MARKDOWN), static=True)
+
+
+def _log_residuals(rec: rr.RecordingStream, robot: Robot, nominal: np.ndarray, identified: np.ndarray,
+                   joints: np.ndarray, measured: np.ndarray, chains: list[str], flagged: list[int]) -> None:
+    """Joint-space (closure) residual of each chain per calibration pose (um, timeline ``pose``),
+    nominal and identified model; the flagged poses marked at their largest residual."""
+    colors = chain_colors(len(chains))
+    for name, theta in (("before", nominal), ("after", identified)):
+        res = robot.closure(theta, joints, measured) * 1e3
+        log_series_by_pose(rec, f"residuals/{name}_um", res, chains, colors)
+        if flagged:
+            rec.log(f"residuals/{name}_um/flagged", rr.SeriesPoints(colors=FLAG_COLOR, names="flagged pose",
+                                                                    marker_sizes=6.0), static=True)
+            rec.send_columns(f"residuals/{name}_um/flagged", indexes=[rr.TimeColumn("pose", sequence=flagged)],
+                             columns=rr.Scalars.columns(scalars=np.abs(res[flagged]).max(axis=1)))
+
+
+def _log_heldout(rec: rr.RecordingStream, robot: Robot, before: np.ndarray, after: np.ndarray) -> None:
+    """Held-out errors (``before``, ``after``: (M, D), mm and rad) as norms per held-out pose on
+    the ``pose`` timeline (numbered within their own set): position in um, orientation in urad."""
+    angle = robot.angle_pose_mask
+    pos = ~angle
+    hb = np.linalg.norm(before[:, pos], axis=1) * 1e3
+    ha = np.linalg.norm(after[:, pos], axis=1) * 1e3
+    grey, blue = MACHINE_COLORS["nominal"], MACHINE_COLORS["calibrated"]
+    log_series_by_pose(rec, "heldout/position_error_um", np.c_[hb, ha],
+                       ["before (nominal commands)", "after (compensated)"], [grey, blue])
+    if angle.any():
+        ob = np.linalg.norm(before[:, angle], axis=1) * 1e6
+        oa = np.linalg.norm(after[:, angle], axis=1) * 1e6
+        log_series_by_pose(rec, "heldout/orientation_error_urad", np.c_[ob, oa],
+                           ["before (nominal commands)", "after (compensated)"], [grey, blue])
+
+
+def _log_convergence(rec: rr.RecordingStream, history, history_label: str) -> None:
+    """``history`` (per iteration) as a static log chart (any timeline) and on the ``iteration`` timeline."""
+    hist = np.asarray(history, dtype=float)
+    if hist.size:
+        it = np.arange(1, hist.size + 1)
+        log_plot(rec, "convergence/chart", [(history_label, it, hist, (240, 200, 60))], x_label="iteration",
+                 y_label=history_label, log_y=True, width=340.0, height=150.0)
+        with np.errstate(divide="ignore"):
+            rec.send_columns("convergence/log10", indexes=[rr.TimeColumn("iteration", sequence=it)],
+                             columns=rr.Scalars.columns(scalars=np.log10(hist)))
+
+
+def _log_parameter_bars(rec: rr.RecordingStream, robot: Robot, nominal: np.ndarray, actual: np.ndarray | None,
+                        identified: np.ndarray, std: np.ndarray, chains: list[str]) -> None:
+    """Parameters by name: identified - nominal (+-2 ``std``) beside injected, one scale (um;
+    angles as arcs, :func:`_bar_unit`). The vectors are (P,) in the parameters' units."""
+    to_um, has_angles = _bar_unit(robot)
+    series = [("identified", to_um * (identified - nominal), MACHINE_COLORS["calibrated"])]
+    if actual is not None:
+        series.append(("injected", to_um * (actual - nominal), MACHINE_COLORS["actual"]))
+    note = (f"angles drawn as the arc they make at {robot.length_scale_mm:.0f} mm (1 urad = "
+            f"{robot.length_scale_mm / 1e3:.3g} um)") if has_angles else ""
+    log_named_bars(rec, "parameters/chart", list(robot.table.names), series, unit="um", sigma=to_um * std,
+                   groups=[p.chain for p in robot.table], group_names=chains, title="identified - nominal",
+                   note=note, rows_per_column=48)
+
+
 def log_calibration_run(
     rec: rr.RecordingStream, *, robot: Robot, nominal: np.ndarray, actual: np.ndarray | None,
     identified: np.ndarray, std: np.ndarray, joints: np.ndarray, targets: np.ndarray, measured: np.ndarray,
@@ -193,96 +316,19 @@ def log_calibration_run(
         history_label: what ``history`` holds.
         magnified: factor of the drawn departures from nominal (default :func:`run_magnification`).
     """
-    angle = robot.angle_pose_mask
-    n, c = joints.shape
-    names = list(robot.table.names)
-    chains = [f"{robot.chain_word} {i + 1}" for i in range(c)]
-    colors = chain_colors(c)
+    chains = [f"{robot.chain_word} {i + 1}" for i in range(joints.shape[1])]
     flagged = [int(i) for i in flagged]
     m = magnified if magnified is not None else run_magnification(robot, nominal, actual, identified, targets,
                                                                   measured)
-
-    # 3D machine, one pose a step of the `pose` timeline.
-    rec.log("machine", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    nominal_joints = robot.inverse_kinematics(nominal, targets)
-    nom = robot.chain_points(nominal, nominal_joints, targets)
     drawn = actual if actual is not None else identified
-    act = robot.chain_points(drawn, joints, measured)
-    cal = robot.chain_points(identified, joints, predicted)
-    size = float(np.ptp(nom.reshape(-1, 3), axis=0).max())
-    _log_machine(rec, "machine/nominal", nom, MACHINE_COLORS["nominal"], size * 0.006)
-    _log_machine(rec, "machine/actual", nom + m * (act - nom), MACHINE_COLORS["actual"], size * 0.004)
-    _log_machine(rec, "machine/calibrated", nom + m * (cal - nom), MACHINE_COLORS["calibrated"], size * 0.0022)
-    per_chain = rr.Points3D.columns(positions=nom[:, :, 0].reshape(-1, 3), labels=chains * n,
-                                    colors=np.tile(np.asarray(colors, dtype=np.uint8), (n, 1))).partition([c] * n)
-    rec.send_columns("machine/chain_labels", indexes=[rr.TimeColumn("pose", sequence=np.arange(n))],
-                     columns=[*per_chain, *rr.Points3D.columns(radii=[size * 0.012] * n, show_labels=[True] * n)])
-    pos = ~angle
-    centre = targets[:, pos][:, :3]
-    before = (measured - targets)[:, pos][:, :3]
-    after = (measured - predicted)[:, pos][:, :3]
-    mag_b, mag_a = np.linalg.norm(before, axis=1) * 1e3, np.linalg.norm(after, axis=1) * 1e3
-    vmax = float(np.nanmax(mag_b)) if n else 1.0
-    rec.log("machine/errors/before", rr.Arrows3D(origins=centre, vectors=m * before, colors=magnitude_colors(mag_b, vmax),
-                                                 radii=size * 0.004, labels=[f"pose {k + 1}: {v:.0f} um" for k, v in
-                                                                              enumerate(mag_b)], show_labels=False),
-            static=True)
-    rec.log("machine/errors/after", rr.Arrows3D(origins=centre, vectors=m * after, colors=magnitude_colors(mag_a, vmax),
-                                                radii=size * 0.002), static=True)
-    if flagged:
-        rec.log("machine/flagged", rr.Points3D(centre[flagged], radii=size * 0.02, colors=FLAG_COLOR,
-                                               labels=[f"flagged pose {k + 1}" for k in flagged], show_labels=True),
-                static=True)
-    what = "actual" if actual is not None else "measured (identified geometry)"
-    key = (f"**grey** nominal, **orange** {what}, **blue** calibrated model; departures from nominal and "
-           f"error arrows drawn **x{m:g}**. Arrows: position error at each calibration pose, thick before "
-           f"(measured - intended), thin after (measured - calibrated), colour green 0 to red {vmax:.0f} um. "
-           + ("Red ring: flagged pose. " if flagged else "") + f"Labels: one colour per {robot.chain_word}.")
-    rec.log("key", rr.TextDocument(key, media_type=rr.MediaType.MARKDOWN), static=True)
-
-    # Joint-space (closure) residual of each chain per pose, nominal and identified model.
-    for name, theta in (("before", nominal), ("after", identified)):
-        res = robot.closure(theta, joints, measured) * 1e3
-        log_series_by_pose(rec, f"residuals/{name}_um", res, chains, colors)
-        if flagged:
-            rec.log(f"residuals/{name}_um/flagged", rr.SeriesPoints(colors=FLAG_COLOR, names="flagged pose",
-                                                                    marker_sizes=6.0), static=True)
-            rec.send_columns(f"residuals/{name}_um/flagged", indexes=[rr.TimeColumn("pose", sequence=flagged)],
-                             columns=rr.Scalars.columns(scalars=np.abs(res[flagged]).max(axis=1)))
-
-    # Held-out poses, on the same `pose` timeline (numbered within their own set).
+    size = _log_machines(rec, robot, (nominal, drawn, identified), joints, targets, measured, predicted, m, chains)
+    vmax = _log_pose_errors(rec, robot, targets, measured, predicted, m, size, flagged)
+    _log_key(rec, robot, m, vmax, simulated=actual is not None, flagged=bool(flagged))
+    _log_residuals(rec, robot, nominal, identified, joints, measured, chains, flagged)
     if heldout_before is not None and heldout_after is not None:
-        hb = np.linalg.norm(heldout_before[:, pos], axis=1) * 1e3
-        ha = np.linalg.norm(heldout_after[:, pos], axis=1) * 1e3
-        grey, blue = MACHINE_COLORS["nominal"], MACHINE_COLORS["calibrated"]
-        log_series_by_pose(rec, "heldout/position_error_um", np.c_[hb, ha],
-                           ["before (nominal commands)", "after (compensated)"], [grey, blue])
-        if angle.any():
-            ob = np.linalg.norm(heldout_before[:, angle], axis=1) * 1e6
-            oa = np.linalg.norm(heldout_after[:, angle], axis=1) * 1e6
-            log_series_by_pose(rec, "heldout/orientation_error_urad", np.c_[ob, oa],
-                               ["before (nominal commands)", "after (compensated)"], [grey, blue])
-
-    # Convergence: a static log chart (any timeline) and the `iteration` timeline.
-    hist = np.asarray(history, dtype=float)
-    if hist.size:
-        it = np.arange(1, hist.size + 1)
-        log_plot(rec, "convergence/chart", [(history_label, it, hist, (240, 200, 60))], x_label="iteration",
-                 y_label=history_label, log_y=True, width=340.0, height=150.0)
-        with np.errstate(divide="ignore"):
-            rec.send_columns("convergence/log10", indexes=[rr.TimeColumn("iteration", sequence=it)],
-                             columns=rr.Scalars.columns(scalars=np.log10(hist)))
-
-    # Parameters by name: identified +-2 sigma beside injected, one scale.
-    to_um, has_angles = _bar_unit(robot)
-    series = [("identified", to_um * (identified - nominal), MACHINE_COLORS["calibrated"])]
-    if actual is not None:
-        series.append(("injected", to_um * (actual - nominal), MACHINE_COLORS["actual"]))
-    note = (f"angles drawn as the arc they make at {robot.length_scale_mm:.0f} mm (1 urad = "
-            f"{robot.length_scale_mm / 1e3:.3g} um)") if has_angles else ""
-    log_named_bars(rec, "parameters/chart", names, series, unit="um", sigma=to_um * std,
-                   groups=[p.chain for p in robot.table], group_names=chains, title="identified - nominal",
-                   note=note, rows_per_column=48)
+        _log_heldout(rec, robot, heldout_before, heldout_after)
+    _log_convergence(rec, history, history_label)
+    _log_parameter_bars(rec, robot, nominal, actual, identified, std, chains)
     if observability is not None:
         log_observability(rec, observability, "observability", title="Observability of the calibration poses")
     rec.log("summary", rr.TextDocument(summary_markdown, media_type=rr.MediaType.MARKDOWN), static=True)
