@@ -269,7 +269,7 @@ def test_files_of_two_robots_opened_together_keep_their_own_layouts(tmp_path):
     snapshot's one-line refusal is asserted and a warning names why."""
     import warnings
 
-    from pipeline.snapshot import SnapshotError, renderer_available, snapshot
+    from pipeline.views import SnapshotError, renderer_available, snapshot
 
     files = {}
     for robot in ("hexapod", "delta"):
