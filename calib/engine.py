@@ -35,12 +35,12 @@ from .robot import (
     ClosureJacobians,
     KinematicsError,
     Robot,
-    pose_jacobian_of_joints,
+    pose_whitening,
 )
 from .workspace import reachable_poses
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
-           "pose_whitening", "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative",
+           "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative",
            "minimise"]
 
 #: Solvers of both methods.
@@ -230,23 +230,6 @@ def _refuse_empty(n: int) -> None:
     """With a prior any pose set is accepted but none at all: the answer would be the prior alone."""
     if n == 0:
         raise ValueError("measured has no rows: the data determine nothing, and the prior alone is no calibration")
-
-
-def pose_whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
-    """(N, D, D) whitening ``L^-1`` of each pose's measurement covariance
-    ``S_pose + Jq S_joint Jq^T`` (pose sensor plus joint noise through the manipulator Jacobian).
-
-    ``theta`` (P,), ``joints`` (N, C) and ``poses`` (N, D) consistent (``poses`` reached by the
-    machine ``theta`` at ``joints``); rows of ``L^-1 (measured - predicted)`` are dimensionless.
-    Used by the forward identification and by :mod:`calib.observability`."""
-    n, d = poses.shape
-    std = noise.pose_std(robot.pose_units)
-    cov = np.broadcast_to(np.diag(std ** 2), (n, d, d)).copy()
-    if noise.joint_std > 0:
-        jq = pose_jacobian_of_joints(robot, theta, joints, poses)
-        cov += noise.joint_std ** 2 * jq @ np.swapaxes(jq, 1, 2)
-        return np.linalg.inv(np.linalg.cholesky(cov))
-    return np.broadcast_to(np.diag(1.0 / std), (n, d, d)).copy()
 
 
 def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:

@@ -10,7 +10,7 @@ Linearised about ``theta``, over the free parameters (default ``robot.free_defau
 * identification Jacobian ``J`` (D N, F): the stacked
   :func:`~calib.robot.pose_jacobian_of_parameters` (d pose / d theta at fixed joints);
 * noise-whitened Jacobian ``A = W J`` with ``W`` the whitening of each pose's measurement
-  covariance (:func:`calib.engine.pose_whitening`, the weights of ``identify_forward``): its
+  covariance (:func:`calib.robot.pose_whitening`, the weights of ``identify_forward``): its
   rows are dimensionless per unit of parameter, so mm and rad are never mixed raw;
 * Fisher information ``F = A^T A`` and Cramer-Rao bound ``CRB = F^-1`` (parameter units
   squared): the smallest covariance of any unbiased estimator of the free parameters. The
@@ -45,10 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .validation import as_array, frozen_array
-from .engine import pose_whitening
 from .noise import SensorNoise
 from .prior import DATA_SOURCE_RATIO
-from .robot import Robot, pose_jacobian_of_parameters
+from .robot import Robot, pose_jacobian_of_parameters, pose_whitening
 
 __all__ = [
     "parameter_scale",
@@ -129,7 +128,7 @@ def identification_jacobian(robot: Robot, theta, poses, noise: SensorNoise, *, j
         theta: (P,) parameter vector at which to linearise (the machine's, or the nominal one
             when designing an experiment before the errors are known).
         poses: (N, D) poses the machine ``theta`` reaches, in the robot's pose units.
-        noise: declared sensor noise (pose and joint noise, see :func:`calib.engine.pose_whitening`).
+        noise: declared sensor noise (pose and joint noise, see :func:`calib.robot.pose_whitening`).
         joints: (N, C) the joints commanded there; default ``robot.inverse_kinematics(theta, poses)``.
         free: names of the free parameters; default ``robot.free_default``.
 

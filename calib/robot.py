@@ -27,11 +27,12 @@ from typing import ClassVar, Iterator, Sequence
 import numpy as np
 
 from .batched_lu import BatchedLU
+from .noise import SensorNoise
 from .validation import as_array, frozen_array
 
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
-           "check_joint_limits", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
+           "check_joint_limits", "pose_whitening", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
            "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES", "raise_if_singular"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
@@ -521,3 +522,20 @@ def check_joint_limits(robot: Robot, joints: np.ndarray, what: str = "row") -> N
             f"{what} {n} is unreachable: {robot.chain_word} {c + 1} needs {joints[n, c]:.6f} "
             f"{robot.joint_unit}, outside its range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] "
             f"{robot.joint_unit}", n)
+
+
+def pose_whitening(robot: Robot, theta, joints, poses, noise: SensorNoise) -> np.ndarray:
+    """(N, D, D) whitening ``L^-1`` of each pose's measurement covariance
+    ``S_pose + Jq S_joint Jq^T`` (pose sensor plus joint noise through the manipulator Jacobian).
+
+    ``theta`` (P,), ``joints`` (N, C) and ``poses`` (N, D) consistent (``poses`` reached by the
+    machine ``theta`` at ``joints``); rows of ``L^-1 (measured - predicted)`` are dimensionless.
+    Used by the forward identification (:mod:`calib.engine`) and by :mod:`calib.observability`."""
+    n, d = poses.shape
+    std = noise.pose_std(robot.pose_units)
+    cov = np.broadcast_to(np.diag(std ** 2), (n, d, d)).copy()
+    if noise.joint_std > 0:
+        jq = pose_jacobian_of_joints(robot, theta, joints, poses)
+        cov += noise.joint_std ** 2 * jq @ np.swapaxes(jq, 1, 2)
+        return np.linalg.inv(np.linalg.cholesky(cov))
+    return np.broadcast_to(np.diag(1.0 / std), (n, d, d)).copy()
