@@ -1,7 +1,7 @@
 """``python -m pipeline.snapshot FILE.rrd [FILE.rrd ...] --out FILE.png``: the default view of a
 recording as a PNG, rendered headless.
 
-A thin front end of :func:`pipeline.views.snapshot.snapshot` (which says what it needs and does):
+A thin front end of :func:`pipeline.views.headless.snapshot` (which says what it needs and does):
 with several files the viewer shows the last one opened, the others loaded beside it. Exit 2 and
 one line when the file is missing or no renderer is available.
 """
@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pipeline.views.snapshot import DEFAULT_SIZE, SnapshotError, snapshot
+from pipeline.views.headless import DEFAULT_SIZE, SnapshotError, snapshot
 
 __all__ = ["main"]
 

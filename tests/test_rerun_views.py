@@ -207,7 +207,7 @@ def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys, mon
     import os
     import subprocess
 
-    import pipeline.views.snapshot as snapshot
+    import pipeline.views.headless as snapshot
     from pipeline.snapshot import main
     from pipeline.views import renderer_available
 

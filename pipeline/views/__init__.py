@@ -13,7 +13,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
                       "observability_views"),
     "discovery_view": ("model_words", "verdict_words", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
                        "verdict_quantity", "discovery_markdown", "write_discovery_rrd"),
-    "snapshot": ("snapshot", "renderer_available", "viewer_executable", "SnapshotError"),
+    "headless": ("snapshot", "renderer_available", "viewer_executable", "SnapshotError"),
     "design_view": ("write_design_rrd", "position_columns"),
     "study_view": ("write_study_rrd", "study_markdown"),
     "rrd": ("rrd_entities", "rrd_application_ids", "rrd_blueprint", "empty_views", "rrd_labels"),
