@@ -11,25 +11,10 @@ not load SciPy).
 
 from __future__ import annotations
 
-import importlib
-
 from . import paper
+from .lazy import lazy_exports
 
-__all__ = [
-    "paper", "IdentificationResult", "gauge_representative", "identify", "identify_chainwise",
-    "identify_forward", "integrated_error", "noise_verdict", "CompensationEvaluation",
-    "ConsistencyCheck", "GainReport", "calibration_gain", "consistency_check", "evaluate_compensation",
-    "pose_error_norms", "SensorNoise", "OutlierReport", "find_outliers", "ClosureJacobians",
-    "KinematicsError", "Parameter", "ParameterTable", "Robot", "ROBOTS", "Delta", "Hexapod",
-    "default_robot", "robot_from_description", "euler_from_matrix", "euler_from_quaternion",
-    "matrix_from_quaternion", "quaternion_from_euler", "rotation_matrix", "random_poses",
-    "reachable_poses", "DesignResult", "Workspace", "design_poses", "robot_workspace",
-    "ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
-    "identification_jacobian", "pose_uncertainty", "ParameterPrior",
-]
-
-#: submodule -> the names this package re-exports from it (imported on first use).
-_EXPORTS = {
+lazily_exported, __getattr__, __dir__ = lazy_exports(__name__, {
     "engine": ("IdentificationResult", "gauge_representative", "identify", "identify_chainwise",
                "identify_forward", "integrated_error", "noise_verdict"),
     "metrics": ("CompensationEvaluation", "ConsistencyCheck", "GainReport", "calibration_gain", "consistency_check",
@@ -45,18 +30,5 @@ _EXPORTS = {
     "observability": ("ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
                       "identification_jacobian", "pose_uncertainty"),
     "prior": ("ParameterPrior",),
-}
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-
-
-def __getattr__(name: str):
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module 'calib' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_MODULE_OF))
+})
+__all__ = ["paper", *lazily_exported]

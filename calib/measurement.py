@@ -53,7 +53,7 @@ __all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETE
            "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
            "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "identify_as_measured",
            "measured_gauge_representative", "gauge_null_space", "whitened_residuals", "whitened_jacobian",
-           "MeasurementObservability", "measurement_observability"]
+           "MeasurementObservability", "measurement_observability", "checked_measured_inputs"]
 
 #: ``"auto"``: estimate the frame when the data show it (:func:`detect_frame`); ``"base"``: the
 #: poses are in the base frame; ``"estimate"``: always estimate it.
@@ -682,7 +682,7 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
                       ftol: float = 1e-15, gauge_passes: int = 2) -> MeasuredFit:
     """Identify the geometry jointly with the instrument frame and the target offsets.
 
-    Three steps: the arguments checked (:func:`_measured_inputs`), the start of the frame and
+    Three steps: the arguments checked (:func:`checked_measured_inputs`), the start of the frame and
     target offsets (:func:`_measured_start`: detection, closed-form registration), the joint fit
     (:func:`_fit`) and its result (:func:`_measured_fit_result`).
 
@@ -703,7 +703,7 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
     Raises:
         ValueError: bad arguments, a row the start model cannot reach, too few rows.
     """
-    data = _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
+    data = checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
     joints, measured = data["joints"], data["measured"]
     k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
     begin = _measured_start(robot, joints, measured, frame, initial_frame, data["targets"], est_targets, theta0)
@@ -718,7 +718,7 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
     return _measured_fit_result(robot, joints, measured, noise, fit, data, begin)
 
 
-def _measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
+def checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
     """The checked arguments of :func:`identify_measured`: ``joints`` (N, C), ``measured``
     (N, M), ``targets`` (K, 3) or None, ``k`` = K, ``est_targets``, the free ``names`` and their
     sorted indices ``idx``, the start vector ``theta0`` (P,).
@@ -780,7 +780,7 @@ def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_
 
 def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict) -> MeasuredFit:
     """The :class:`MeasuredFit` of a joint fit (``fit`` from :func:`_fit`; ``data`` from
-    :func:`_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
+    :func:`checked_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
     solution, the geometry's covariance (P, P), the frame's and targets' uncertainties, the gauge
     in words, the stop message with the chi-square verdict."""
     k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]

@@ -56,12 +56,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincinv
 
-from .measurement import (FRAME_DETECTION_FRACTION, FRAME_DETECTION_RAD, FRAME_MODES, MAX_TARGETS, MeasuredFit,
-                          GAUGE_RTOL, detect_frame, identify_measured, instrument_measurements,
+from .measurement import (FRAME_DETECTION_FRACTION, FRAME_DETECTION_RAD, GAUGE_RTOL, MeasuredFit,
+                          checked_measured_inputs, detect_frame, identify_measured, instrument_measurements,
                           measurement_residuals, register_frame, whitened_jacobian, whitened_residuals)
 from .noise import SensorNoise
 from .robot import KinematicsError, Robot
-from .validation import as_array
 
 __all__ = ["GrossRowResult", "find_gross_rows", "GROSS_ALPHA", "KEPT_FRACTION", "RANDOM_STARTS",
            "SUBSET_FACTOR", "TRIAL_C_STEPS", "STEP_ITERATIONS", "SUBSET_CONDITION"]
@@ -216,28 +215,15 @@ class _SearchFailed(Exception):
 def _problem(robot, joints, measured, noise, frame, targets, estimate_targets, free, start, alpha, kept_fraction,
              random_starts) -> tuple[_Problem, str]:
     """The checked arguments of :func:`find_gross_rows` (raises TypeError / ValueError)."""
-    if not isinstance(robot, Robot):
-        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
-    if not isinstance(noise, SensorNoise):
-        raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
-    if frame not in FRAME_MODES:
-        raise ValueError(f"frame must be one of {FRAME_MODES}, got {frame!r}")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
     if not 0.5 <= kept_fraction < 1:
         raise ValueError(f"kept_fraction must be in [0.5, 1), got {kept_fraction!r}")
     if int(random_starts) != random_starts or random_starts < 0:
         raise ValueError(f"random_starts must be a whole number >= 0, got {random_starts!r}")
-    targets = None if targets is None else as_array(targets, "targets", (-1, 3))
-    k = 0 if targets is None else targets.shape[0]
-    if targets is not None and not 1 <= k <= MAX_TARGETS:
-        raise ValueError(f"targets must hold 1 to {MAX_TARGETS} offsets, got {k}")
-    est_targets = k > 0 and (True if estimate_targets is None else bool(estimate_targets))
-    joints = as_array(joints, "joints", (-1, robot.n_chains))
-    measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
-    free = robot.free_default if free is None else tuple(free)
-    robot.table.indices(free)  # KeyError naming an unknown parameter
-    theta0 = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    args = checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
+    joints, measured, targets, k = args["joints"], args["measured"], args["targets"], args["k"]
+    est_targets, free, theta0 = args["est_targets"], args["names"], args["theta0"]
     m = measured.shape[1]
     unknowns = len(free) + 6 * (frame != "base") + (3 * k if est_targets else 0)
     min_rows = -(-unknowns // m)

@@ -15,7 +15,7 @@ from the commands down; see docs/architecture.md):
 The names below are imported from their rooms when first used.
 """
 
-from .lazy import lazy_exports
+from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "formats": ("Recording", "RecordingError", "read_recording", "write_recording"),

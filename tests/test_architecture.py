@@ -18,7 +18,7 @@ LAYERS = (
     ("commands",),
     ("pipeline.workflows",),
     ("pipeline.views", "pipeline.simulation"),
-    ("pipeline.formats", "pipeline.execution", "pipeline.lazy"),
+    ("pipeline.formats", "pipeline.execution"),
     ("mjcf",),
     ("calib",),
 )
@@ -66,8 +66,8 @@ def import_graph() -> dict[str, set[str]]:
 
 
 def layer_of(module: str) -> int:
-    if module.startswith("pipeline.") and module.count(".") == 1 and module not in (
-            "pipeline.lazy",) and not any(module == room for layer in LAYERS for room in layer):
+    if module.startswith("pipeline.") and module.count(".") == 1 and \
+            not any(module == room for layer in LAYERS for room in layer):
         return 0  # a command (pipeline.run, ...) or pipeline.cli
     if module == "pipeline":
         return 0

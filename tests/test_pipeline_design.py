@@ -168,10 +168,10 @@ HEADER = ",".join(command_columns(HEXAPOD))
     (HEADER + "\n" + ",".join(["1"] * 12) + "\n", DELTA, r"header must be x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad"),
     (HEADER + "\n" + ",".join(["1"] * 11) + "\n", None, r"cmd.csv: line 2: expected 12 columns, got 11"),
     (HEADER + "\n" + ",".join(["1"] * 12) + "\n" + ",".join(["1"] * 4 + ["abc"] + ["1"] * 7) + "\n", None,
-     r"cmd.csv: line 3, column beta_rad: not a number: 'abc'"),
+     r"cmd.csv: line 3, column beta_rad: 'abc' is not a number"),
     (HEADER + "\n" + ",".join(["1"] * 7 + ["nan"] + ["1"] * 4) + "\n", None,
-     r"cmd.csv: line 2, column l2_mm: not finite"),
-    ("x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad\n1,2,3,4,inf,6\n", None, r"line 2, column q2_rad: not finite"),
+     r"cmd.csv: line 2, column l2_mm: 'nan' is not finite"),
+    ("x_mm,y_mm,z_mm,q1_rad,q2_rad,q3_rad\n1,2,3,4,inf,6\n", None, r"line 2, column q2_rad: 'inf' is not finite"),
     (HEADER + "\n", None, r"cmd.csv: no data rows"),
 ])
 def test_read_command_file_validation(tmp_path, text, robot, match):

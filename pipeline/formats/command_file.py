@@ -16,7 +16,7 @@ from calib.robot import Robot
 from calib.robots import ROBOTS, default_robot
 
 from .outputs import atomic_write
-from .recording import sidecar_path
+from .recording import finite_number, sidecar_path
 
 __all__ = ["command_columns", "command_csv", "write_command_file", "read_command_file"]
 
@@ -124,16 +124,8 @@ def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tu
             continue
         if len(row) != len(columns):
             raise ValueError(f"{path}: line {line}: expected {len(columns)} columns, got {len(row)}")
-        values = []
-        for col, cell in zip(columns, row):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise ValueError(f"{path}: line {line}, column {col}: not a number: {cell!r}") from None
-            if not np.isfinite(v):
-                raise ValueError(f"{path}: line {line}, column {col}: not finite: {cell!r}")
-            values.append(v)
-        data.append(values)
+        data.append([finite_number(cell, f"{path}: line {line}, column {col}: {{cell!r}} is")
+                     for col, cell in zip(columns, row)])
     if not data:
         raise ValueError(f"{path}: no data rows after the header")
     a = np.array(data, dtype=float)

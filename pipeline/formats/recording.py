@@ -35,7 +35,7 @@ from calib.robots import ROBOTS, robot_from_description
 from .outputs import ResultSet
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
-           "sidecar_path", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
+           "sidecar_path", "finite_number", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM"]
 
 SETS = ("calibration", "validation")
@@ -274,20 +274,24 @@ def _data_row(where: str, row: list[str], idx: dict[str, int], expected: tuple[s
         raise RecordingError(f"{where}: blank line inside the data")
     if len(row) != len(idx):
         raise RecordingError(f"{where}: expected {len(idx)} fields, got {len(row)}")
-    values = []
-    for name in expected:
-        cell = row[idx[name]].strip()
-        try:
-            v = float(cell)
-        except ValueError:
-            raise RecordingError(f"{where}, column {name!r}: {cell!r} is not a number") from None
-        if not np.isfinite(v):
-            raise RecordingError(f"{where}, column {name!r}: {cell!r} is not finite")
-        values.append(v)
+    values = [finite_number(row[idx[name]].strip(), f"{where}, column {name!r}: {{cell!r}} is",
+                            RecordingError) for name in expected]
     s = row[idx["set"]].strip() if "set" in idx else "calibration"
     if s not in SETS:
         raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
     return values, s
+
+
+def finite_number(cell: str, message: str, error: type[Exception] = ValueError) -> float:
+    """``float(cell)``, or ``error`` saying what is wrong: ``message`` with ``{cell!r}`` in it, then
+    ``not a number`` or ``not finite``."""
+    try:
+        v = float(cell)
+    except ValueError:
+        raise error(f"{message.format(cell=cell)} not a number") from None
+    if not np.isfinite(v):
+        raise error(f"{message.format(cell=cell)} not finite")
+    return v
 
 
 def _data(csv_path: Path, data: list[list[str]], header: list[str],

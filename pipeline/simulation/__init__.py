@@ -3,7 +3,7 @@ the seeded scenarios of the discovery studies (effects drawn, poses drawn, recor
 MuJoCo itself (building, commanding, settling and reading the machine) lives in :mod:`mjcf`;
 this package is imported on first use."""
 
-from pipeline.lazy import lazy_exports
+from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "testbed": ("Testbed", "Measurements", "SettleError", "SETTLE_MODES"),

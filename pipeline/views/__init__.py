@@ -2,7 +2,7 @@
 (one application id per tool and robot), and reading an ``.rrd`` back. Rerun is imported on first
 use."""
 
-from pipeline.lazy import lazy_exports
+from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "charts": ("TOOLS", "application_id", "MACHINE_COLORS", "FLAG_COLOR", "chain_color", "chain_colors", "magnitude_colors",

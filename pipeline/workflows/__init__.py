@@ -2,7 +2,7 @@
 Python with the commands' defaults (:func:`run_calibration`, ...). The commands
 (``python -m pipeline.<tool>``) parse their flags, call one of these and print its result."""
 
-from pipeline.lazy import lazy_exports
+from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "calibration": ("RunSettings", "RunResult", "run_calibration"),

@@ -46,6 +46,8 @@ from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_desc
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
 from pipeline.formats import atomic_write, check_outputs, command_columns, sidecar_path, write_command_file
 
+from .options import ToolOptions
+
 __all__ = ["DEFAULT_NOISE", "DEFAULT_CANDIDATES", "PROBE_POSES", "optimal_poses", "DesignSearch", "criterion_value",
            "design_search", "design_start", "start_seed", "load_robot", "DesignSettings", "DesignOutcome",
            "run_design", "check_design_settings", "predicted_uncertainty", "design_records"]
@@ -211,8 +213,8 @@ def load_robot(name: str, geometry: str | None) -> Robot:
         raise ValueError(f"--geometry {geometry}: cannot read a {name} description: {exc}") from None
 
 
-@dataclass(frozen=True)
-class DesignSettings:
+@dataclass(frozen=True, kw_only=True)
+class DesignSettings(ToolOptions):
     """What :func:`run_design` does (``python -m pipeline.design --help`` describes each field)."""
 
     poses: int
@@ -224,12 +226,6 @@ class DesignSettings:
     noise: SensorNoise = DEFAULT_NOISE
     candidates: int = DEFAULT_CANDIDATES
     starts: int = 1
-    workers: int | None = None
-    scheduler: str | None = None
-    geometry: str | None = None
-    summary_json: str | None = None
-    rrd: str | None = None
-    overwrite: bool = False
 
 
 @dataclass

@@ -46,6 +46,7 @@ from pipeline.execution import run_tasks, worker_count
 from pipeline.formats import atomic_write, check_outputs, read_command_file
 
 from .design import DEFAULT_NOISE, load_robot
+from .options import ToolOptions
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
            "compensation_errors", "run_trials", "monte_carlo", "summarize", "StudySettings", "StudyOutcome",
@@ -283,8 +284,8 @@ def summarize(results: dict, names, scale: np.ndarray, crb_var: np.ndarray, tria
     return out
 
 
-@dataclass(frozen=True)
-class StudySettings:
+@dataclass(frozen=True, kw_only=True)
+class StudySettings(ToolOptions):
     """What :func:`run_study` does (``python -m pipeline.study --help`` describes each field).
 
     ``poses``: ``designed``, ``reference`` (the robot's published poses), ``random`` or a command
@@ -306,12 +307,6 @@ class StudySettings:
     error_rad: float = DEFAULT_ERROR_RAD
     heldout: int = 100
     seed: int = 0
-    workers: int | None = None
-    scheduler: str | None = None
-    geometry: str | None = None
-    summary_json: str | None = None
-    rrd: str | None = None
-    overwrite: bool = False
 
 
 @dataclass

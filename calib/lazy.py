@@ -1,5 +1,6 @@
 """Package exports imported on first use, so that a command loads only what it needs
-(``python -m pipeline.run --help`` loads neither MuJoCo nor Rerun)."""
+(``python -m pipeline.run --help`` loads neither MuJoCo nor Rerun; ``import calib`` loads no
+module of it before one is used)."""
 
 from __future__ import annotations
 
