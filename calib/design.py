@@ -63,6 +63,7 @@ __all__ = [
     "DesignResult",
     "select_poses",
     "design_poses",
+    "augment_poses",
 ]
 
 #: The named workspaces of every robot (see the module docstring).
@@ -474,3 +475,47 @@ def design_poses(robot: Robot, theta, n: int, workspace: Workspace, noise: Senso
     n_candidates = _check_count(n_candidates, "n_candidates", n)
     cands = sample_feasible_poses(robot, theta, workspace, n_candidates, seed)
     return select_poses(robot, theta, cands, n, noise, free=free, criterion=criterion)
+
+
+def augment_poses(robot: Robot, theta, measured_poses, n: int, noise: SensorNoise, prior_std, *, free=None,
+                  workspace: Workspace | None = None, seed: int = 0, n_candidates: int = 2000) -> np.ndarray:
+    """(n, D) poses to measure next: greedy D-optimal additions to the poses already measured.
+
+    Each step adds the feasible candidate that most raises ``log det`` of the information of the
+    measured poses plus the prior's (``diag(1 / prior_std**2)``) plus the poses already added (by
+    the matrix determinant lemma, ``log det(I + A F^-1 A^T)`` of each candidate's whitened rows
+    ``A``): the poses that determine what the measured ones left to the prior.
+
+    Args:
+        robot, theta: the robot and the parameters to linearise at (the identified ones).
+        measured_poses: (N, D) the poses measured so far (may be rank-deficient).
+        n: poses to add.
+        noise: declared noise.
+        prior_std: (P,) the prior's standard deviations (parameter units).
+        free: the parameters identified; default ``robot.free_default``.
+        workspace: where the candidates are drawn; default the robot's full workspace.
+        seed: seed of the candidate draw.
+        n_candidates: feasible candidates drawn.
+    """
+    _check_robot(robot)
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    n = _check_count(n, "n", 1)
+    workspace = robot_workspace(robot, "full") if workspace is None else workspace
+    _, idx = free_indices(robot, free)
+    d = robot.pose_dim
+    info = np.diag(1.0 / as_array(prior_std, "prior_std", (robot.n_parameters,))[idx] ** 2)
+    measured_poses = _poses(robot, measured_poses, "measured_poses")
+    if len(measured_poses):
+        A0 = identification_jacobian(robot, theta, measured_poses, noise, free=free).reshape(-1, idx.size)
+        info = info + A0.T @ A0
+    cands = sample_feasible_poses(robot, theta, workspace, n_candidates, seed)
+    A = identification_jacobian(robot, theta, cands, noise, free=free).reshape(-1, d, idx.size)
+    chosen: list[int] = []
+    for _ in range(min(n, len(cands))):
+        inv = np.linalg.inv(info)
+        gain = np.linalg.slogdet(np.eye(d) + A @ inv @ np.swapaxes(A, 1, 2))[1]
+        gain[chosen] = -np.inf
+        best = int(np.argmax(gain))
+        chosen.append(best)
+        info = info + A[best].T @ A[best]
+    return cands[chosen]

@@ -44,6 +44,7 @@ from .validation import as_array, frozen_array
 from .engine import IdentificationResult, minimise, noise_verdict
 from .noise import SensorNoise
 from .observability import describe_combination
+from .prior import ParameterPrior
 from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
 from .rotation import euler_from_matrix, rotation_matrix, rotation_matrix_derivatives
 
@@ -536,8 +537,9 @@ def _complement(constraints: np.ndarray, n: int) -> np.ndarray:
 
 
 def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
-         solver, max_iter, xtol, ftol, gauge_passes=2, reference=None):
-    """The joint fit of geometry ``idx``, frame and targets; see :func:`identify_measured`."""
+         solver, max_iter, xtol, ftol, gauge_passes=2, reference=None, prior=None):
+    """The joint fit of geometry ``idx``, frame and targets; see :func:`identify_measured`. With a
+    ``prior``, its whitened rows ``(theta[idx] - mean) / std`` follow the measurements' rows."""
     n = joints.shape[0]
     k = 0 if targets0 is None else targets0.shape[0]
     nt, nf = (3 * k if est_targets else 0), (6 if est_frame else 0)
@@ -565,10 +567,15 @@ def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_fram
     Hp0, _, _ = measurement_jacobians(robot, poses0, fr0, tg0)
     winv = _whitening(robot, th0, joints, poses0, noise, Hp0, k)
 
+    prior_rows = None if prior is None else np.zeros((idx.size, z_ref.size))
+    if prior_rows is not None:
+        prior_rows[:, :idx.size] = np.diag(1.0 / prior.std[idx])
+
     def residual(z):
         th, tg, fr = unpack(z)
         pred = instrument_measurements(robot, poses_of(th), fr, tg)
-        return np.einsum("nij,nj->ni", winv, measurement_residuals(robot, measured, pred, k)).ravel()
+        r = np.einsum("nij,nj->ni", winv, measurement_residuals(robot, measured, pred, k)).ravel()
+        return r if prior is None else np.concatenate([r, (th[idx] - prior.mean[idx]) / prior.std[idx]])
 
     def jacobian(z):
         th, tg, fr = unpack(z)
@@ -582,7 +589,8 @@ def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_fram
         if nf:
             blocks.append(HF)
         J = np.concatenate(blocks, axis=2)
-        return -np.einsum("nij,njk->nik", winv, J).reshape(n * J.shape[1], -1)
+        J = -np.einsum("nij,njk->nik", winv, J).reshape(n * J.shape[1], -1)
+        return J if prior_rows is None else np.concatenate([J, prior_rows])
 
     history: list[float] = []
     iters, ok, msg = 0, False, "not run"
@@ -606,8 +614,10 @@ def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_fram
     th, tg, fr = unpack(z)
     norms = np.linalg.norm(Jy, axis=0)
     cond = float(np.linalg.cond(Jy / norms)) if np.all(norms > 0) and Jy.size else float("inf")
+    n_measured = r.size - (0 if prior is None else idx.size)
     return {"theta": th, "targets": None if k == 0 else np.array(tg, dtype=float), "frame": np.array(fr, dtype=float),
-            "poses": state["poses"], "chi2": float(r @ r), "dof": int(r.size - Q.shape[1]), "cov": cov,
+            "poses": state["poses"], "chi2": float(r @ r), "dof": int(n_measured - Q.shape[1]) if prior is None
+            else int(n_measured), "cov": cov,
             "iterations": iters, "history": tuple(history), "success": ok, "message": msg,
             "null": null / scale[:, None], "cond": cond, "n_theta": idx.size, "nt": nt, "nf": nf}
 
@@ -679,7 +689,7 @@ def _invert(frame: np.ndarray) -> np.ndarray:
 def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto",
                       initial_frame=None, targets=None, estimate_targets: bool | None = None, free=None,
                       start=None, solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
-                      ftol: float = 1e-15, gauge_passes: int = 2) -> MeasuredFit:
+                      ftol: float = 1e-15, gauge_passes: int = 2, prior: ParameterPrior | None = None) -> MeasuredFit:
     """Identify the geometry jointly with the instrument frame and the target offsets.
 
     Three steps: the arguments checked (:func:`checked_measured_inputs`), the start of the frame and
@@ -699,9 +709,13 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
         free, start, solver, max_iter, xtol, ftol: as :func:`calib.engine.identify_forward`.
         gauge_passes: fits with the null space re-taken at the last solution (2: the gauge holds
             beyond first order).
+        prior: the geometry's prior (:class:`calib.prior.ParameterPrior`): maximum a posteriori,
+            its rows beside the measurements' (as :func:`calib.engine.identify_forward`). The
+            directions the poses cannot separate between geometry, frame and targets are then held
+            by the prior, no longer by the gauge; fewer rows than unknowns are accepted.
 
     Raises:
-        ValueError: bad arguments, a row the start model cannot reach, too few rows.
+        ValueError: bad arguments, a row the start model cannot reach, too few rows (without a prior).
     """
     data = checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
     joints, measured = data["joints"], data["measured"]
@@ -710,12 +724,14 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
     est_frame = begin["est_frame"]
     unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
     m = robot.pose_dim if k == 0 else 3 * k
-    if joints.shape[0] * m < unknowns:
+    if joints.shape[0] * m < unknowns and prior is None:
         raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
                          f"unknowns, got {joints.shape[0]}")
+    if prior is not None:
+        prior.check(robot)
     fit = _fit(robot, joints, measured, noise, theta0, idx, begin["frame0"], begin["targets0"], est_frame,
-               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes)
-    return _measured_fit_result(robot, joints, measured, noise, fit, data, begin)
+               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes, prior=prior)
+    return _measured_fit_result(robot, joints, measured, noise, fit, data, begin, prior)
 
 
 def checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
@@ -778,7 +794,8 @@ def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_
             "targets0": targets0, "poses0": poses0, "notes": notes}
 
 
-def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict) -> MeasuredFit:
+def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict,
+                         prior: ParameterPrior | None = None) -> MeasuredFit:
     """The :class:`MeasuredFit` of a joint fit (``fit`` from :func:`_fit`; ``data`` from
     :func:`checked_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
     solution, the geometry's covariance (P, P), the frame's and targets' uncertainties, the gauge
@@ -814,7 +831,8 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
     result = IdentificationResult(
         method="forward", robot=robot, theta=theta, start=theta0, free_names=data["names"], residuals=res,
         pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
-        history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]))
+        history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]),
+        prior=prior)
     return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frame_std),
                        targets=None if k == 0 else frozen_array(fit["targets"]),
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),

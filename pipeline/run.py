@@ -73,6 +73,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-outliers", action="store_true",
                    help="identify from every calibration row, the ones the outlier test flags included "
                         "(default: flagged rows are left out; the summary gives both results)")
+    p.add_argument("--no-prior", dest="prior", action="store_false",
+                   help="plain least squares: no parameter prior (default: each parameter's nominal value with "
+                        "the sidecar's meta.parameter_tolerance, or the robot's default tolerance, as its prior; "
+                        "maximum a posteriori)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -123,19 +127,46 @@ def _progress(enabled: bool):
     return report
 
 
+def print_heldout(s: dict) -> None:
+    """The held-out errors: mean, RMS and max, before and after."""
+    h, o = s.get("heldout_position_error_mm"), s.get("heldout_orientation_error_rad")
+    if not h:
+        return
+    print(f"  {'held-out (' + str(s['heldout_poses']) + ' poses)':<28}{'before':>12}{'after':>12}")
+    for label, block, scale in (("position error, um", h, 1e3), ("orientation error, urad", o, 1e6)):
+        if not block:
+            continue
+        for fig in ("mean", "rms", "max"):
+            b, a = block["before_figures"][fig], block["after_figures"][fig]
+            print(f"  {label + ' ' + fig:<28}{scale * b:>12.3f}{scale * a:>12.3f}")
+    if h["after"] > 0:
+        print(f"  improvement of mean position error: {h['before'] / h['after']:.1f}x  ({s['heldout_basis']})")
+
+
+def print_determination(s: dict) -> None:
+    """What the data determined and what they left to the prior."""
+    prior, by = s.get("prior") or {}, s.get("determined_by") or {}
+    if not prior.get("used"):
+        print("  prior: none (--no-prior: plain least squares)")
+        return
+    left = by.get("prior") or []
+    print(f"  prior: {prior['source']}; determined by the data: {len(by.get('data') or [])} parameters, left to "
+          f"the prior: {len(left)}" + (f" ({', '.join(left[:8])}{', ...' if len(left) > 8 else ''})" if left else ""))
+    for words in (s.get("left_to_prior") or [])[:3]:
+        print(f"    left to the prior: {words}")
+    if len(s.get("left_to_prior") or []) > 3:
+        print(f"    ... {len(s['left_to_prior']) - 3} more combination(s) in the summary JSON")
+    if s.get("suggested_poses"):
+        sp = s["suggested_poses"]
+        print(f"  suggested: measure {sp['poses']} more poses ({sp['what']}): {s.get('suggested_poses_path', '')}")
+
+
 def print_summary(s: dict) -> None:
     """The summary in plain words, for the terminal."""
     print(f"Calibration of the {s['robot']} - {s['scenario']}")
     print(f"  method {s['method']} ({s['solver']}): {s['iterations']} iterations; {s['message']}")
     print(f"  max dQint per iteration: {', '.join(f'{v:.3g}' for v in s['max_dqint_history'])}")
-    h, o = s.get("heldout_position_error_mm"), s.get("heldout_orientation_error_rad")
-    if h:
-        print(f"  {'held-out (' + str(s['heldout_poses']) + ' poses)':<28}{'before':>12}{'after':>12}{'max after':>12}")
-        print(f"  {'position error, um':<28}{1e3 * h['before']:>12.3f}{1e3 * h['after']:>12.3f}{1e3 * h['max_after']:>12.3f}")
-        if o:
-            print(f"  {'orientation error, urad':<28}{1e6 * o['before']:>12.3f}{1e6 * o['after']:>12.3f}{1e6 * o['max_after']:>12.3f}")
-        if h["after"] > 0:
-            print(f"  improvement of mean position error: {h['before'] / h['after']:.1f}x  ({s['heldout_basis']})")
+    print_heldout(s)
     pe = s.get("parameter_error")
     if pe:
         parts = [f"{1e3 * pe['rms_mm']:.3f} um" if pe["rms_mm"] is not None else None,
@@ -155,6 +186,7 @@ def print_summary(s: dict) -> None:
     if w and wo and w.get("heldout_position_error_mm") and wo.get("heldout_position_error_mm"):
         print(f"  held-out position error after: {1e3 * wo['heldout_position_error_mm']['after']:.3f} um without the "
               f"flagged rows, {1e3 * w['heldout_position_error_mm']['after']:.3f} um with them")
+    print_determination(s)
     for warning in s.get("warnings") or ():
         print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")

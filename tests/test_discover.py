@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calib.effects import effects_for
-from calib.robots import default_robot
+from calib.robots import ROBOTS, default_robot
 from calib.robots.hexapod import Hexapod, paper_hexapod
 from calib.rotation import rotation_matrix
 from pipeline.workflows.blind import run_blind_suite
@@ -218,3 +218,34 @@ def test_a_run_recording_with_few_calibration_rows_is_analysed_whole(tmp_path):
     rep = discover(read_recording(tmp_path / "r.csv"), resim=False)
     assert rep.summary["explained"] and rep.summary["effects"] == []
     assert "every row analysed" in rep.summary["heldout_basis"]
+
+
+FAR_FRAME = np.array([500.0, -300.0, 150.0, 0.4, -0.2, 0.3])  # 0.5 m away, turned 0.4 rad
+
+
+@pytest.mark.parametrize("robot", sorted(ROBOTS))
+@pytest.mark.parametrize("effect", ["none", "joint_friction"])
+def test_discovery_reads_a_recording_in_an_instrument_frame_as_the_run_does(robot, effect, tmp_path):
+    """pipeline.discover --real registers the instrument frame as pipeline.run --real does (the
+    same code): a recording measured 0.5 m away and turned 0.4 rad gets the base frame's answer."""
+    from dataclasses import replace as with_fields
+
+    from calib.measurement import compose
+    from pipeline.formats import write_recording
+    from pipeline.simulation import effect_recording
+    from pipeline.workflows import DiscoverySettings, run_discovery
+
+    rec = effect_recording(effect, 4, robot=robot, n_poses=80)
+    far = with_fields(rec, measured=compose(FAR_FRAME, rec.robot, rec.measured))
+    answers = {}
+    for name, r in (("base", rec), ("far", far)):
+        write_recording(tmp_path / f"{name}.csv", r)
+        s = run_discovery(DiscoverySettings(real=tmp_path / f"{name}.csv", resim=False, out=tmp_path)).summary
+        answers[name] = (s["explained"], s["effects"])
+        if name == "far":
+            assert "measurement_frame" in s
+        else:
+            assert "measurement_frame" not in s
+    assert answers["far"] == answers["base"]
+    if effect == "none":
+        assert answers["far"] == (True, [])

@@ -142,7 +142,6 @@ CSV_CASES = {
     "latin-1 text": (lambda p: p.write_bytes("t_s,l1_mm\n0,233\xb5\n".encode("latin-1")), ["rec.csv", "not UTF-8"]),
     "copied row": (lambda p: _write_lines(p, _lines(p)[:6] + [_lines(p)[3]] + _lines(p)[6:]),
                    ["rec.csv: row 6 (line 7)", "repeats row 3 exactly"]),
-    "too few rows": (lambda p: _write_lines(p, _lines(p)[:4]), ["rec.csv", "3 calibration rows are too few", "at least 7"]),
     "no calibration rows": (lambda p: _write_lines(p, [ln.replace(",calibration", ",validation") for ln in _lines(p)]),
                             ["rec.csv", "no calibration rows"]),
     "all-identical poses": (lambda p: _write_lines(p, _lines(p)[:1] + [
@@ -174,6 +173,23 @@ def test_bad_csv_is_refused(case, work, capsys):
     edit, needles = CSV_CASES[case]
     edit(csv_path)
     refused(["--real", str(csv_path)], out, capsys, *needles)
+
+
+def test_too_few_rows_are_refused_without_a_prior_and_left_to_it_with_one(work, capsys):
+    """Three rows cannot determine the 42 parameters: plain least squares refuses them; with the
+    tolerances as a prior (the default) the data determine what they can and the summary names
+    what is left to the prior, with poses suggested to measure next."""
+    csv_path, out = work
+    _write_lines(csv_path, _lines(csv_path)[:4])
+    refused(["--real", str(csv_path), "--no-prior"], out, capsys, "rec.csv", "3 calibration rows are too few",
+            "at least 7")
+    s = run(["--real", str(csv_path), "--out", str(out), "--quiet"]).summary
+    assert s["prior"]["used"] and len(s["determined_by"]["prior"]) > 0 and s["left_to_prior"]
+    # Three poses determine at most 18 directions: in prior-whitened coordinates the posterior
+    # variance falls by a rank-18 amount (trace <= 18), and a parameter counts as "data" only where
+    # its variance fell by more than 3/4 (std below half the prior's): at most 18 / 0.75 = 24 of them.
+    assert len(s["determined_by"]["data"]) <= 24
+    assert Path(s["suggested_poses_path"]).is_file()
 
 
 # --------------------------------------------------------------------------- the sidecar

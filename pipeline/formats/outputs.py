@@ -185,6 +185,13 @@ class ResultSet:
             if backup is not None:
                 backup.unlink()
 
+    def drop(self, key: str) -> None:
+        """Leave ``paths[key]`` out of this set (an optional output not needed after all): its
+        temporary file is removed and :meth:`publish` skips it."""
+        tmp = self._tmp.pop(key)
+        self.paths.pop(key)
+        tmp.unlink(missing_ok=True)
+
     def discard(self) -> None:
         """Remove the temporary files that were not published."""
         for tmp in self._tmp.values():

@@ -10,24 +10,27 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from calib import paper
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
-from calib.measurement import frame_to_dict, identify_as_measured, instrument_measurements, \
+from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
     measured_gauge_representative, measurement_residuals, measurement_settings
 from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
+from calib.robust import GROSS_ALPHA, find_gross_rows
+from calib.design import augment_poses
+from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import NameReservation, Recording, output_folder
+from pipeline.formats import NameReservation, Recording, command_columns, command_csv, output_folder
 
-__all__ = ["RunSettings", "RunResult", "run_calibration", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
+__all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "default_name", "OUTPUT_EXTENSIONS"]
 
 #: Calibration poses of a robot whose reference experiment names none.
@@ -65,6 +68,24 @@ class RunSettings:
     overwrite: bool = False
     summary_json: Path | None = None
     keep_outliers: bool = False
+    prior: bool = True
+
+
+@dataclass
+class AsRead:
+    """A recording as a run reads it: the poses in the base frame (the instrument frame it
+    registered taken out), the gross rows it named, what it found in summary keys.
+
+    Attributes:
+        recording: the recording with its poses in the (gauge) base frame, every row.
+        gross_rows: 0-based rows of the recording named gross (left out of any fit).
+        block: summary keys: ``gross_rows``, and ``measurement_frame``/``measurement_frame_std``
+            where an instrument frame was registered.
+    """
+
+    recording: Recording
+    gross_rows: list
+    block: dict
 
 
 @dataclass
@@ -76,6 +97,8 @@ class RunResult:
     paths: dict = field(default_factory=dict)
     #: The recording read from ``RunSettings.real`` (None for a simulated run).
     recording: Recording | None = None
+    #: The recording as the run read it (None for a simulated run): what discovery analyses.
+    as_read: AsRead | None = None
 
 
 def default_name(settings: RunSettings) -> str:
@@ -88,7 +111,9 @@ def default_name(settings: RunSettings) -> str:
     return f"{robot}_{Path(settings.poses).stem}"
 
 
-OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json")
+OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json", ".suggested_poses.csv", ".suggested_poses.json")
+#: Poses suggested when the measured ones leave parameter combinations to the prior.
+SUGGESTED_POSES = 10
 
 
 def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str]:
@@ -134,15 +159,24 @@ def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress)
                 scenario=scenario)
 
 
+def error_figures(norms: np.ndarray) -> dict:
+    """``{"rms", "mean", "max"}`` of per-pose error norms (N,)."""
+    return {"rms": float(np.sqrt(np.mean(norms ** 2))), "mean": float(norms.mean()), "max": float(norms.max())}
+
+
 def _heldout_block(robot: Robot, before: np.ndarray, after: np.ndarray) -> dict:
+    """Held-out position and orientation errors, before and after: the mean (``before``,
+    ``after``), the largest after (``max_after``), and all three figures of each
+    (``before_figures``, ``after_figures``: RMS, mean, max)."""
     pb, ob = pose_error_norms(robot, before)
     pa, oa = pose_error_norms(robot, after)
-    block = {"heldout_position_error_mm": {"before": float(pb.mean()), "after": float(pa.mean()),
-                                           "max_after": float(pa.max())}}
-    block["heldout_orientation_error_rad"] = (
-        {"before": float(ob.mean()), "after": float(oa.mean()), "max_after": float(oa.max())}
-        if robot.angle_pose_mask.any() else None)
-    return block
+
+    def block(b, a):
+        return {"before": float(b.mean()), "after": float(a.mean()), "max_after": float(a.max()),
+                "before_figures": error_figures(b), "after_figures": error_figures(a)}
+
+    return {"heldout_position_error_mm": block(pb, pa),
+            "heldout_orientation_error_rad": block(ob, oa) if robot.angle_pose_mask.any() else None}
 
 
 def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, free) -> dict:
@@ -186,20 +220,21 @@ def _instrument_block(fit, before, after) -> dict:
         block["measurement_targets_mm"] = fit.targets.tolist()
         block["measurement_targets_estimated"] = fit.targets_estimated
         if before is not None:  # one position error per target and row
-            b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2) for e in (before, after))
+            b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
             block["heldout_position_error_mm"] = {"before": float(b.mean()), "after": float(a.mean()),
-                                                  "max_after": float(a.max())}
+                                                  "max_after": float(a.max()), "before_figures": error_figures(b),
+                                                  "after_figures": error_figures(a)}
             block["heldout_orientation_error_rad"] = None
     return block
 
 
-def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str):
+def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str, prior=None):
     solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
     options = {"solver": solver}
     if settings.method == "chainwise":
         options.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
     try:
-        return identify(robot, joints, measured, noise, method=settings.method, **options), solver
+        return identify(robot, joints, measured, noise, method=settings.method, prior=prior, **options), solver
     except KinematicsError as exc:
         raise ValueError(f"{where}: the nominal {robot.name} cannot reach the recorded joints: {exc}") from None
     except ValueError as exc:
@@ -254,19 +289,31 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                                   extensions=OUTPUT_EXTENSIONS)
     try:
         name = reservation.name
-        targets_out = {"rrd": out / f"{name}.rrd"}
+        targets_out = {"rrd": out / f"{name}.rrd", "suggested_poses": out / f"{name}.suggested_poses.csv",
+                       "suggested_poses_json": out / f"{name}.suggested_poses.json"}
         if rec is None:
             targets_out.update(csv=out / f"{name}.csv", json=out / f"{name}.json")
         if settings.summary_json is not None:
             targets_out["summary_json"] = Path(settings.summary_json)
-        flags = {k: "--out" for k in ("rrd", "csv", "json")} | {"summary_json": "--summary-json"}
+        flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
             summary, result = _run(settings, rec, warnings, progress, split, t0, outputs)
+            suggestion = summary.pop("_suggested_poses", None)
+            if suggestion is None:
+                for key in ("suggested_poses", "suggested_poses_json"):
+                    outputs.drop(key)
+                    targets_out.pop(key)
+            else:
+                outputs.temp("suggested_poses").write_text(suggestion[0])
+                outputs.temp("suggested_poses_json").write_text(suggestion[1])
             paths = {k: str(v) for k, v in targets_out.items()}
-            summary.update({k: v for k, v in paths.items() if k != "summary_json"})
+            summary.update({k: v for k, v in paths.items() if k not in ("summary_json", "suggested_poses")})
+            if "suggested_poses" in paths:
+                summary["suggested_poses_path"] = paths["suggested_poses"]
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
             recording = summary.pop("_recording", None)
+            as_read = summary.pop("_as_read", None)
             if "summary_json" in targets_out:
                 outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
             if recording is not None:
@@ -276,7 +323,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, paths=paths, recording=rec)
+    return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=as_read)
 
 
 @dataclass
@@ -307,6 +354,30 @@ class CalibrationInput:
     val_meas: np.ndarray
     rec: Recording | None = None
     sim: dict | None = None
+    prior: ParameterPrior | None = None
+    prior_source: str = "none (--no-prior: plain least squares)"
+
+
+def parameter_prior(robot: Robot, settings: RunSettings, meta: dict | None, where: str):
+    """``(prior, source in words)``: the parameters' prior from the sidecar's
+    ``meta.parameter_tolerance`` (by parameter name, or one value per unit: ``{"mm": 0.05, "rad":
+    0.001}``; what it leaves out takes the robot class's default), or the robot class's
+    documented default; ``(None, ...)`` with ``settings.prior`` off.
+
+    Raises:
+        ValueError: a tolerance naming no parameter or unit, or not a number > 0 (file and key named).
+    """
+    if not settings.prior:
+        return None, "none (--no-prior: plain least squares)"
+    tolerance = (meta or {}).get("parameter_tolerance")
+    if tolerance is None:
+        default = ", ".join(f"{v:g} {u}" for u, v in robot.default_parameter_tolerance.items())
+        return ParameterPrior.default(robot), f"the {robot.name}'s default tolerance ({default}, one standard deviation)"
+    try:
+        prior = ParameterPrior.from_tolerance(robot, tolerance)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: field 'meta.parameter_tolerance': {exc}") from None
+    return prior, f"the sidecar's parameter_tolerance ({where})"
 
 
 def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
@@ -322,10 +393,11 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     where = str(settings.real)
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
+    prior, prior_source = parameter_prior(robot, settings, rec.meta, sidecar_name(settings.real))
     return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
                             rows=rec.rows("calibration"), where=where, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
-                            val_joints=val_joints, val_meas=val_meas, rec=rec)
+                            val_joints=val_joints, val_meas=val_meas, rec=rec, prior=prior, prior_source=prior_source)
 
 
 def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
@@ -335,10 +407,12 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))
+    prior, prior_source = parameter_prior(robot, settings, None, "")
     return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
                             rows=np.arange(len(cal.measured)), where="the simulated calibration poses",
                             scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
-                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim)
+                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, prior=prior,
+                            prior_source=prior_source)
 
 
 @dataclass
@@ -359,49 +433,86 @@ class Identification:
     used: np.ndarray
     instrument: object
     measured: np.ndarray
+    gross: object = None
+    gross_idx: list = field(default_factory=list)
+    kept: np.ndarray | None = None
+
+
+def gross_row_stage(inp: CalibrationInput, settings: RunSettings):
+    """``(search, kept rows)``: the gross rows of a recording found before anything is fitted to
+    them (:func:`calib.robust.find_gross_rows`: trimmed fits, a row named only when no consistent
+    fit explains it; the instrument frame inferred from the rows it makes consistent); simulated
+    runs skip it: ``(None, every row)``. With ``keep_outliers`` the rows are named, not left out."""
+    n = len(inp.measured)
+    if inp.rec is None:
+        return None, np.arange(n)
+    ms = measurement_settings(inp.rec.meta.get("measurement"))
+    search = find_gross_rows(inp.robot, inp.joints, inp.measured, inp.noise, frame=ms.frame, targets=ms.targets,
+                             estimate_targets=ms.estimate_targets if ms.targets is not None else None,
+                             seed=settings.seed)
+    if not search.success or settings.keep_outliers:
+        return search, np.arange(n)
+    return search, np.flatnonzero(search.kept)
+
+
+def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
+    """The geometry fitted with the recording's instrument frame and target offsets, on the rows
+    the gross-row stage kept, where the recording needs them (None: plain poses in the base frame)."""
+    if inp.rec is None:
+        return None
+    ms = measurement_settings(inp.rec.meta.get("measurement"))
+    joints, measured = inp.joints[kept], inp.measured[kept]
+    if search is None or not search.success:  # the search could not judge: the frame test on every row
+        return identify_as_measured(inp.robot, joints, measured, inp.noise, ms, prior=inp.prior)
+    if not search.frame_estimated and ms.n_targets == 0:
+        return None
+    start = search.fit.frame if search.frame_estimated and search.fit is not None else ms.initial_frame
+    # "auto" on the rows kept: the frame test of every run, now on rows the frame makes consistent.
+    return identify_measured(inp.robot, joints, measured, inp.noise,
+                             frame="auto" if search.frame_estimated else "base", initial_frame=start,
+                             targets=ms.targets, estimate_targets=ms.estimate_targets if ms.n_targets else None,
+                             prior=inp.prior)
 
 
 def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) -> Identification:
-    """The outlier test (closed-form leave-one-out, forward model), then the identification from the
-    rows kept; the one from every row is kept for the comparison. A recording that needs an
-    instrument frame or targets is fitted with them (the forward method), its poses brought into
-    the base frame for the test."""
-    robot, joints, measured, noise = inp.robot, inp.joints, inp.measured, inp.noise
-    n_cal = len(measured)
-    instrument = None
-    if inp.rec is not None:
-        instrument = identify_as_measured(robot, joints, measured, noise,
-                                          measurement_settings(inp.rec.meta.get("measurement")))
-    if instrument is not None:
-        measured = instrument.base_poses(joints, measured)
+    """Gross rows first (:func:`gross_row_stage`), then, on the rows kept, the instrument frame
+    where the recording needs one (:func:`instrument_fit`), the outlier test (closed-form
+    leave-one-out, forward model, poses in the base frame) and the identification from the rows it
+    keeps; the one with its flagged rows is kept for the comparison."""
+    robot, joints, noise = inp.robot, inp.joints, inp.noise
+    search, kept = gross_row_stage(inp, settings)
+    gross_idx = [] if search is None or not search.success else [int(i) for i in search.gross]
+    instrument = instrument_fit(inp, search, kept)
+    measured = inp.measured if instrument is None else instrument.base_poses(joints, inp.measured)
     try:
-        report = find_outliers(robot, joints, measured, noise)
+        report = find_outliers(robot, joints[kept], measured[kept], noise)
     except (ValueError, KinematicsError) as exc:
         report, outlier_verdict = None, f"outlier test not run: {exc}"
     else:
         outlier_verdict = report.verdict
-    flagged_idx = list(report.flagged) if report is not None else []
-    flagged = [int(inp.rows[i]) + 1 for i in flagged_idx]
+    loo_idx = [int(kept[i]) for i in report.flagged] if report is not None else []
+    flagged_idx = sorted(set(gross_idx) | set(loo_idx))
     if instrument is not None:
         result_all, solver = instrument.result, "lm"
     else:
-        result_all, solver = _identify(robot, joints, measured, noise, settings, inp.where)
-    keep = np.setdiff1d(np.arange(n_cal), flagged_idx)
-    left_out = bool(flagged_idx) and not settings.keep_outliers and instrument is None
-    if flagged_idx and instrument is not None:
-        warnings.append("the flagged rows are kept: leaving rows out is not done with an instrument frame or "
-                        "targets estimated")
+        result_all, solver = _identify(robot, joints[kept], measured[kept], noise, settings, inp.where, inp.prior)
+    keep = np.setdiff1d(kept, loo_idx)
+    left_out = bool(loo_idx) and not settings.keep_outliers and instrument is None
+    if loo_idx and instrument is not None:
+        warnings.append("the rows the leave-one-out test flags are kept: leaving them out is not done with an "
+                        "instrument frame or targets estimated (gross rows are left out before the frame is fitted)")
     result_kept = None
-    if flagged_idx and instrument is None:
+    if loo_idx and instrument is None:
         try:
-            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where)
+            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where, inp.prior)
         except ValueError as exc:
             warnings.append(f"the flagged rows are kept: without them {exc}")
             left_out = False
     return Identification(result=result_kept if left_out else result_all, result_all=result_all,
                           result_kept=result_kept, solver=solver, report=report, outlier_verdict=outlier_verdict,
-                          flagged_idx=flagged_idx, flagged=flagged, keep=keep, left_out=left_out,
-                          used=keep if left_out else np.arange(n_cal), instrument=instrument, measured=measured)
+                          flagged_idx=flagged_idx, flagged=[int(inp.rows[i]) + 1 for i in flagged_idx], keep=keep,
+                          left_out=left_out, used=keep if left_out else kept, instrument=instrument,
+                          measured=measured, gross=search, gross_idx=gross_idx, kept=kept)
 
 
 def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress):
@@ -463,8 +574,7 @@ def validate_step(inp: CalibrationInput, ident: Identification, settings: RunSet
     if ident.result_kept is not None:
         other = ident.result_all if ident.left_out else ident.result_kept
         blocks = {id(result): held, id(other): heldout_errors(inp, ident, other.theta, progress)}
-        n_cal = len(inp.measured)
-        with_flagged = _variant(robot, ident.result_all, list(range(n_cal)), blocks[id(ident.result_all)],
+        with_flagged = _variant(robot, ident.result_all, list(ident.kept), blocks[id(ident.result_all)],
                                 truth_in_gauge, free)
         without_flagged = _variant(robot, ident.result_kept, list(ident.keep), blocks[id(ident.result_kept)],
                                    truth_in_gauge, free)
@@ -486,7 +596,7 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         "scenario": inp.scenario,
         "method": settings.method,
         "solver": ident.solver,
-        "weighted": settings.weighted if settings.method == "chainwise" else True,
+        "weighted": (settings.weighted or inp.prior is not None) if settings.method == "chainwise" else True,
         "calibration_poses": int(len(inp.measured)),
         "calibration_poses_used": int(ident.used.size),
         "heldout_poses": 0 if held is None else len(held[0]),
@@ -517,6 +627,7 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
                      "verdict": ident.outlier_verdict, "flagged_rows": ident.flagged, "left_out": ident.left_out,
                      "model_misfit": misfit},
         "model_misfit": misfit,
+        "gross_rows": gross_block(inp, ident),
         "with_flagged": comparison[0],
         "without_flagged": comparison[1],
         "warnings": warnings,
@@ -528,9 +639,101 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         summary.update(_heldout_block(robot, *held))
     if instrument is not None:
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
+    summary.update(prior_block(inp, result))
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
+
+
+def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
+    """The recording as the run read it (see :class:`AsRead`).
+
+    Raises:
+        ValueError: position-only target data (their poses are the model's, not measurements).
+    """
+    rec, instrument = inp.rec, ident.instrument
+    block = {"gross_rows": gross_block(inp, ident)}
+    measured = rec.measured
+    if instrument is not None:
+        if instrument.targets is not None:
+            raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
+                             "needs full poses")
+        measured = instrument.to_base(rec.measured)
+        block["measurement_frame"] = instrument.frame_dict()
+        block["measurement_frame_std"] = frame_to_dict(instrument.frame_std)
+    gross = [int(inp.rows[i]) for i in ident.gross_idx]
+    return AsRead(recording=replace(rec, measured=measured), gross_rows=gross, block=block)
+
+
+def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
+    """``rec`` (read from ``path``) as :func:`run_calibration` reads it, without calibrating: the
+    same gross-row stage and instrument frame registration (one code path for every command that
+    reads a recording)."""
+    settings = RunSettings(real=Path(path), seed=seed)
+    inp = read_input(settings, rec)
+    return as_read(inp, identify_step(inp, settings, []))
+
+
+def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
+    """Summary key of the gross-row stage (None for a simulated run): the rows named (1-based data
+    rows), whether they were left out, whether an instrument frame was inferred from the rest, the
+    finding in words."""
+    search = ident.gross
+    if search is None:
+        return None
+    return {"test": "trimmed fits (random subsets and concentration steps), then rows beyond the chi-square "
+                    f"{1 - GROSS_ALPHA:g} quantile of their coordinates named gross",
+            "rows": [int(inp.rows[i]) + 1 for i in ident.gross_idx], "left_out": bool(ident.gross_idx) and
+            len(ident.kept) < len(inp.measured), "frame_estimated": bool(search.frame_estimated),
+            "success": bool(search.success), "message": search.message}
+
+
+def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
+    """Summary keys of what the data determined: the prior used, per parameter its posterior
+    standard deviation and source (``data`` below half the prior's, else ``prior``; ``held``),
+    the combinations the poses left to the prior, in words."""
+    left = [c["combination"] + (f" ({inp.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
+            + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
+    sources = result.parameter_sources()
+    return {"prior": {"used": inp.prior is not None, "source": inp.prior_source,
+                      "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot)},
+            "parameter_determination": result.determination(),
+            "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
+            "left_to_prior": left}
+
+
+def suggested_poses(inp: CalibrationInput, ident: Identification, settings: RunSettings, summary: dict):
+    """``(command file CSV text, its sidecar JSON text)``: :data:`SUGGESTED_POSES` poses that
+    determine what the measured ones left to the prior (:func:`calib.design.augment_poses`, over
+    the robot's full workspace), with the joints the nominal controller commands for them, ready to
+    measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words."""
+    robot, result = inp.robot, ident.result
+    measured = ident.measured[ident.used]
+    poses = augment_poses(robot, result.theta, measured, SUGGESTED_POSES, inp.noise, inp.prior.std,
+                          free=result.free_names, seed=settings.seed)
+    joints = robot.inverse_kinematics(robot.table.nominal, poses)
+    words = pose_kind_words(robot, measured, poses)
+    summary["suggested_poses"] = {"poses": int(len(poses)), "what": words,
+                                  "why": f"the measured poses leave {len(summary['left_to_prior'])} parameter "
+                                         "combination(s) to the prior"}
+    meta = {"robot": robot.name, "kind": "calibration command file", "purpose": "suggested calibration poses",
+            "columns": list(command_columns(robot)),
+            "units": "pose and joint units in the column names; joints are the nominal controller's commands",
+            "why": summary["suggested_poses"]["why"], "what": words, "left_to_prior": summary["left_to_prior"]}
+    return command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"
+
+
+def pose_kind_words(robot: Robot, measured: np.ndarray, suggested: np.ndarray) -> str:
+    """Which pose coordinates the suggested poses (K, D) explore beyond the measured ones (N, D),
+    in words: ``"z from 240 to 280 mm (measured: 260 to 260 mm); ..."``."""
+    lo, hi = robot.workspace_bounds()[:, 0], robot.workspace_bounds()[:, 1]
+    span = np.where(hi > lo, hi - lo, 1.0)
+    parts = []
+    for d, (name, unit) in enumerate(zip(robot.pose_names, robot.pose_units)):
+        m_lo, m_hi, s_lo, s_hi = measured[:, d].min(), measured[:, d].max(), suggested[:, d].min(), suggested[:, d].max()
+        if (m_lo - s_lo) + (s_hi - m_hi) > 0.1 * span[d]:
+            parts.append(f"{name} from {s_lo:.4g} to {s_hi:.4g} {unit} (measured: {m_lo:.4g} to {m_hi:.4g} {unit})")
+    return "; ".join(parts) if parts else "poses like the measured ones, more of them"
 
 
 def simulation_block(inp: CalibrationInput, settings: RunSettings) -> dict:
@@ -608,6 +811,13 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
+    if summary["left_to_prior"]:
+        summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
+    if inp.rec is not None:
+        try:
+            summary["_as_read"] = as_read(inp, ident)
+        except ValueError:  # position-only targets: nothing for a pose analysis to read
+            pass
     t3 = time.perf_counter()
     log_step(inp, ident, held, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3

@@ -25,9 +25,12 @@ import numpy as np
 from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
-from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, read_recording
+from mjcf.simulator import SettleError
+from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, plausibility, read_recording
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.views import verdict_words, write_discovery_rrd
+
+from .calibration import read_as_a_run_does
 
 __all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
            "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT"]
@@ -166,7 +169,7 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
 
 
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
-             sysid: bool = True, candidates=None) -> DiscoveryReport:
+             sysid: bool = True, candidates=None, exclude=()) -> DiscoveryReport:
     """Run the whole discovery on a recording (see the module docstring).
 
     Args:
@@ -176,6 +179,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         resim, sysid: re-simulate on the MuJoCo machine, and re-fit there with ``mujoco.sysid``.
         candidates: effect names (or :class:`calib.effects.Effect` objects) to consider; default
             every effect that applies to the robot.
+        exclude: 0-based rows left out of every fit (the gross rows a run named); the motion
+            history still counts them.
 
     The summary's ``flagged_poses`` and ``outliers.bad_rows`` are 1-based data rows of the
     recording (the first measurement is row 1).
@@ -187,9 +192,11 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     names = [registered_effect(c).name for c in candidates]
     cal = np.flatnonzero(rec.sets == "calibration")
     val = np.flatnonzero(rec.sets == "validation")
-    analysed_all = cal.size < MIN_ROWS <= len(rec.sets)
+    exclude = np.asarray(exclude, dtype=int)
+    cal, val = np.setdiff1d(cal, exclude), np.setdiff1d(val, exclude)
+    analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
     if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
-        cal, val = np.arange(len(rec.sets)), np.zeros(0, dtype=int)
+        cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
     disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed)
     kept = cal[disc.kept]
@@ -279,6 +286,27 @@ class DiscoverySettings:
     summary_json: Path | None = None
 
 
+def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) -> DiscoveryReport:
+    """:func:`discover` with its numerical failures said as causes, naming the file: a singular
+    fit (the rows do not determine geometry and effects together), a re-simulation that does not
+    settle.
+
+    Raises:
+        ValueError: the cause in words.
+    """
+    where = settings.real if settings.real is not None else "the scenario recording"
+    try:
+        return discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
+                        candidates=settings.candidates, exclude=() if read is None else read.gross_rows)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{where}: the rows do not determine the geometry and the candidate effects together "
+                         "(a singular fit: too few distinct poses, or a machine that barely moved); measure poses "
+                         "spread over the workspace") from None
+    except SettleError as exc:
+        raise ValueError(f"{where}: the MuJoCo re-simulation did not settle ({exc}); the identified machine may be "
+                         "implausible; rerun with --no-resim") from None
+
+
 def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     """Read (or simulate) the recording, check every output before the analysis (which can take
     a minute with re-simulation), :func:`discover`, write the ``.rrd`` (and the summary JSON).
@@ -290,9 +318,11 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     """
     if (settings.real is None) == (settings.scenario is None):
         raise ValueError("give one of a recording (--real) and a scenario (--scenario)")
+    read = None
     if settings.real is not None:
         rec = read_recording(settings.real)
         stem = Path(settings.real).stem
+        warnings = plausibility(rec, settings.real)  # the checks every command that reads a recording makes
     else:
         robot_name = settings.robot or DEFAULT_SCENARIO_ROBOT
         stem = f"{robot_name}_{'+'.join(settings.scenario)}_{settings.scenario_seed}"
@@ -306,8 +336,13 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     robot = rec.robot
     if settings.robot is not None and robot.name != settings.robot:
         raise ValueError(f"{settings.real} is a recording of the {robot.name}, not of the {settings.robot} (--robot)")
-    report = discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
-                      candidates=settings.candidates)
+    if settings.real is not None:  # as pipeline.run --real reads it: gross rows named, instrument frame taken out
+        read = read_as_a_run_does(settings.real, rec, seed=settings.seed)
+        rec = read.recording
+    report = discover_in_words(rec, settings, read)
+    if read is not None:
+        report.summary.update(read.block)
+        report.summary["warnings"] = warnings
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
     if settings.summary_json is not None:

@@ -89,7 +89,10 @@ class FleetReport:
 
 def fleet_inputs(folder) -> list[Path]:
     """The recordings of a fleet: every file of ``folder`` (not its sub-folders) whose name ends in
-    ``.csv``, in any case (``.CSV`` as written by some instruments' software), by name.
+    ``.csv``, in any case (``.CSV`` as written by some instruments' software), by name; a link
+    that leads nowhere (dangling, a loop) is one too, so that its row says why it cannot be read.
+    Command files (poses to measure, whose sidecar's ``kind`` says so: ``pipeline.design``'s, the
+    poses a run suggests) are not recordings and are left out.
 
     Raises:
         ValueError: ``folder`` is not a folder, or two recordings would be one machine (their
@@ -100,7 +103,8 @@ def fleet_inputs(folder) -> list[Path]:
     if not folder.is_dir():
         raise ValueError(f"{folder}: " + ("is a file, not a folder of recordings" if folder.exists()
                                           else "folder not found"))
-    inputs = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".csv" and p.is_file())
+    inputs = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".csv" and (p.is_file() or p.is_symlink())
+                    and not is_command_file(p))
     seen: dict[str, Path] = {}
     for p in inputs:
         other = seen.setdefault(p.stem.casefold(), p)
@@ -108,6 +112,16 @@ def fleet_inputs(folder) -> list[Path]:
             raise ValueError(f"{other} and {p}: two recordings of one machine name {p.stem!r} "
                              "(names that differ only in case give the same outputs); rename one")
     return inputs
+
+
+def is_command_file(csv_path: Path) -> bool:
+    """Whether ``csv_path``'s sidecar describes a command file (``"kind"`` ending in ``command
+    file``), not a recording."""
+    try:
+        side = json.loads(sidecar_path(csv_path).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(side, dict) and str(side.get("kind", "")).endswith("command file")
 
 
 def input_hash(csv_path) -> str:
@@ -170,26 +184,30 @@ def calibrate_machine(job: dict) -> dict:
                    heldout_after_um=None if not held else 1e3 * held["after"],
                    rrd=s.get("rrd"), summary=str(summary_path))
         if searched:
-            row.update(_discovered(result.recording, out / f"{machine}.discovery.json"))
+            row.update(_discovered(result.as_read, out / f"{machine}.discovery.json"))
     row["wall_s"] = time.perf_counter() - t0
     return row
 
 
-def _discovered(rec, summary_path: Path) -> dict:
+def _discovered(read, summary_path: Path) -> dict:
     """``explained`` and ``discovery`` (the summary's path) of a calibrated recording's discovery
-    (``rec``: the :class:`pipeline.recording.Recording` the calibration read)."""
+    (``read``: the :class:`pipeline.workflows.calibration.AsRead` of the calibration: its poses in
+    the base frame, its gross rows left out)."""
     from numpy.linalg import LinAlgError
 
     from pipeline.views import model_words
     from pipeline.workflows.discovery import discover
 
+    if read is None:
+        return {"explained": f"{NOT_RUN}: position-only target data: discovery needs full poses", "discovery": None}
     try:
-        report = discover(rec, resim=False)
+        report = discover(read.recording, resim=False, exclude=read.gross_rows)
     except Exception as exc:  # noqa: BLE001 - refused (too few measurements) or failed: the calibration stands
         refused = isinstance(exc, ValueError) and not isinstance(exc, LinAlgError)  # LinAlgError is a ValueError
         why = one_line(exc) if refused else f"discovery failed: {type(exc).__name__}: {one_line(exc)}"
         return {"explained": f"{NOT_RUN}: {why}", "discovery": None}
     s = report.summary
+    s.update(read.block)
     atomic_write(summary_path, json.dumps(s, indent=1) + "\n", overwrite=True)
     return {"explained": f"{'yes' if s['explained'] else 'no'}: {model_words(s['effects'])}",
             "discovery": str(summary_path)}

@@ -1,0 +1,70 @@
+"""pipeline.run --real on recordings with gross rows, on every robot: the rows are named before
+anything is fitted to them, and the calibration from the rest predicts as the clean file's."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from calib.robots import ROBOTS
+from pipeline.formats import read_recording, write_recording
+from pipeline.run import run
+
+
+@pytest.fixture(autouse=True)
+def _home(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))  # rerun writes analytics under HOME
+
+
+@pytest.fixture(scope="module", params=sorted(ROBOTS))
+def clean(request, tmp_path_factory):
+    """A simulated machine's recording, 60 calibration rows and 20 validation rows, and the
+    calibration of it as recorded."""
+    out = tmp_path_factory.mktemp(f"real_{request.param}")
+    run(["--robot", request.param, "--poses", "60", "--heldout", "20", "--seed", "3", "--out", str(out),
+         "--name", "rec", "--quiet"])
+    summary = run(["--real", str(out / "rec.csv"), "--out", str(out), "--name", "clean", "--quiet"]).summary
+    return out, read_recording(out / "rec.csv"), summary
+
+
+def heldout_after(summary) -> float:
+    return summary["heldout_position_error_mm"]["after_figures"]["rms"]
+
+
+def calibrate(out, rec, measured, name):
+    write_recording(out / f"{name}.csv", replace(rec, measured=measured), overwrite=True)
+    return run(["--real", str(out / f"{name}.csv"), "--out", str(out), "--name", f"{name}_cal", "--overwrite",
+                "--quiet"]).summary
+
+
+def test_a_clean_recording_names_no_row(clean):
+    _, _, summary = clean
+    assert summary["gross_rows"]["rows"] == [] and summary["flagged_poses"] == []
+    assert summary["success"]
+
+
+def test_three_gross_rows_are_named_and_leave_the_calibration_as_clean(clean):
+    out, rec, summary = clean
+    m = rec.measured.copy()
+    rows = np.array([5, 17, 40])  # 0-based calibration rows (the calibration rows come first)
+    m[rows, 2] = 1000.0  # z = 1000 mm: a tracker that lost the target
+    s = calibrate(out, rec, m, "gross3")
+    assert s["gross_rows"]["rows"] == list(rows + 1)
+    assert "measurement_frame" not in s  # no instrument frame invented to absorb them
+    assert heldout_after(s) <= 1.2 * heldout_after(summary)
+
+
+def test_thirty_percent_of_rows_off_by_fifty_times_the_noise(clean):
+    out, rec, summary = clean
+    rng = np.random.default_rng(11)
+    n_cal = int((rec.sets == "calibration").sum())
+    rows = np.sort(rng.choice(n_cal, int(0.3 * n_cal), replace=False))
+    std = rec.noise.pose_std(rec.robot.pose_units)[:3]
+    direction = rng.normal(size=(rows.size, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    m = rec.measured.copy()
+    m[rows, :3] += 50 * np.linalg.norm(std) * direction
+    s = calibrate(out, rec, m, "gross30")
+    named = set(s["gross_rows"]["rows"]) | set(s["flagged_poses"])
+    assert len(named & set(rows + 1)) >= 0.9 * rows.size
+    assert heldout_after(s) <= 1.5 * heldout_after(summary)
