@@ -246,47 +246,65 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
     fold_of_row = fold_assignment(n, folds, seed)
     fold_of_row.setflags(write=False)
     n_targets = 0 if measurement is None else measurement.n_targets
-    residuals = np.full(measured.shape, np.nan)
-    failed, unconverged, reasons = [], [], []
-    for k in range(folds):
-        test = fold_of_row == k
-        try:
-            predict, ok, msg = _fold_model(robot, joints[~test], measured[~test], noise, method, prior,
-                                           fit_kwargs, measurement)
-        except FIT_FAILURES as exc:
-            failed.append(k)
-            reasons.append(f"fold {k + 1}: the fit failed: {exc}")
-            continue
-        if not ok:
-            unconverged.append(k)
-            reasons.append(f"fold {k + 1}: the fit stopped without meeting its rule ({msg.split(';')[0]})")
-        predicted = _predicted_rows(predict, joints[test], measured[test])
-        residuals[test] = measurement_residuals(robot, measured[test], predicted, n_targets)
-        unreached = int(np.count_nonzero(~np.all(np.isfinite(predicted), axis=1)))
-        if unreached:
-            failed.append(k)
-            reasons.append(f"fold {k + 1}: its model cannot reach {unreached} of its left-out rows")
+    residuals, failed, unconverged = _run_folds(robot, joints, measured, noise, fold_of_row, folds, method, prior,
+                                                fit_kwargs, measurement)
     position, orientation = _row_errors(robot, residuals, n_targets)
     scheme = "leave-one-out" if folds == n else f"{folds}-fold"
-    message = _message(method, scheme, folds, n, int(np.count_nonzero(np.isfinite(position))), seed, reasons)
+    message = _message(method, scheme, folds, n, int(np.count_nonzero(np.isfinite(position))), seed, failed,
+                       unconverged)
     return CrossValidation(
         method=method, scheme=scheme, folds=folds, fits=folds, seed=int(seed), fold_of_row=fold_of_row,
         residuals=frozen_array(residuals), position_error=frozen_array(position),
         orientation_error=None if orientation is None else frozen_array(orientation),
         position_summary=error_summary(position),
         orientation_summary=None if orientation is None else error_summary(orientation),
-        failed_folds=tuple(failed), unconverged_folds=tuple(unconverged),
+        failed_folds=tuple(sorted(failed)), unconverged_folds=tuple(sorted(unconverged)),
         success=bool(np.all(np.isfinite(position))), message=message)
 
 
-def _message(method: str, scheme: str, folds: int, n: int, predicted: int, seed: int, reasons: list) -> str:
-    """The cross-validation in words: which it is, what failed."""
+def _run_folds(robot, joints, measured, noise, fold_of_row, folds, method, prior, fit_kwargs, measurement):
+    """Fit each fold's complement and predict the fold: ``(residuals (N, W) measured - predicted,
+    NaN where none; failed {fold: why}; unconverged {fold: the fit's stop message})``."""
+    n_targets = 0 if measurement is None else measurement.n_targets
+    residuals = np.full(measured.shape, np.nan)
+    failed, unconverged = {}, {}
+    for k in range(folds):
+        test = fold_of_row == k
+        try:
+            predict, ok, msg = _fold_model(robot, joints[~test], measured[~test], noise, method, prior,
+                                           fit_kwargs, measurement)
+        except FIT_FAILURES as exc:
+            failed[k] = f"the fit failed: {exc}"
+            continue
+        if not ok:
+            unconverged[k] = msg.split(";")[0]
+        predicted = _predicted_rows(predict, joints[test], measured[test])
+        residuals[test] = measurement_residuals(robot, measured[test], predicted, n_targets)
+        unreached = int(np.count_nonzero(~np.all(np.isfinite(predicted), axis=1)))
+        if unreached:
+            failed[k] = f"its model cannot reach {unreached} of its {int(test.sum())} left-out rows"
+    return residuals, failed, unconverged
+
+
+#: Folds whose reason a message spells out; the others are counted.
+REASONS_SPELLED_OUT = 3
+
+
+def _message(method: str, scheme: str, folds: int, n: int, predicted: int, seed: int, failed: dict,
+             unconverged: dict) -> str:
+    """The cross-validation in words: which it is, which folds failed or did not converge (1-based)."""
     if folds == n:
         how = f"each of the {n} rows predicted by the {method} model fitted without it ({n} fits)"
     else:
         how = (f"the {n} rows split at random (seed {seed}) into {folds} folds, each predicted by the "
                f"{method} model fitted to the others ({folds} fits)")
-    text = f"{scheme} cross-validation: {how}; measured minus prediction, includes sensor noise"
+    parts = [f"{scheme} cross-validation: {how}; measured minus prediction, includes sensor noise"]
     if predicted < n:
-        text += f"; {n - predicted} of {n} rows without a prediction"
-    return "; ".join([text, *reasons])
+        parts.append(f"{n - predicted} of {n} rows without a prediction")
+    for what, folds_with in (("failed", failed), ("stopped without meeting its stopping rule (kept)", unconverged)):
+        if folds_with:
+            ks = sorted(folds_with)
+            spelled = "; ".join(f"fold {k + 1}: {folds_with[k]}" for k in ks[:REASONS_SPELLED_OUT])
+            more = f"; and {len(ks) - REASONS_SPELLED_OUT} more" if len(ks) > REASONS_SPELLED_OUT else ""
+            parts.append(f"{len(ks)} of {folds} fold fits {what}: {spelled}{more}")
+    return "; ".join(parts)
