@@ -32,12 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .engine import METHODS, identify
-from .measurement import MeasurementSettings, identify_measured, measurement_residuals
+from .measurement import MeasurementSettings, checked_measured_inputs, identify_measured, measurement_residuals
 from .metrics import pose_error_norms
 from .noise import SensorNoise
 from .prior import ParameterPrior
 from .robot import KinematicsError, Robot
-from .validation import as_array, frozen_array
+from .validation import frozen_array
 
 __all__ = ["CrossValidation", "crossvalidate", "fold_assignment", "error_summary", "DEFAULT_CHAINWISE_FOLDS",
            "SUMMARY_STATISTICS"]
@@ -139,22 +139,12 @@ def fold_assignment(n: int, folds: int, seed: int = 0) -> np.ndarray:
 
 
 def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, measurement):
-    """The checked arguments: ``(joints (N, C), measured (N, M), folds, fit_kwargs dict)``."""
-    if not isinstance(robot, Robot):
-        raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
-    if not isinstance(noise, SensorNoise):
-        raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
+    """The checked arguments: ``(joints (N, C), measured (N, M), folds, fit_kwargs dict)``; the robot,
+    noise, data, free names and start as :func:`calib.measurement.checked_measured_inputs` checks them."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if prior is not None and not isinstance(prior, ParameterPrior):
         raise TypeError(f"prior must be a calib.prior.ParameterPrior or None, got {type(prior).__name__}")
-    fit_kwargs = {} if fit_kwargs is None else dict(fit_kwargs)
-    clash = sorted(set(fit_kwargs) & {"method", "prior", "frame", "targets"})
-    if clash:
-        raise ValueError(f"fit_kwargs must not set {', '.join(clash)}: pass them as crossvalidate's own arguments")
-    joints = as_array(joints, "joints", (-1, robot.n_chains))
-    width = robot.pose_dim if measurement is None or measurement.n_targets == 0 else 3 * measurement.n_targets
-    measured = as_array(measured, "measured", (joints.shape[0], width))
     if measurement is not None:
         if not isinstance(measurement, MeasurementSettings):
             raise TypeError(f"measurement must be a calib.measurement.MeasurementSettings or None, got "
@@ -162,10 +152,17 @@ def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, m
         if method != "forward" or prior is not None:
             raise ValueError("with an instrument frame or targets (measurement=) only the forward method "
                              "without a prior is fitted (calib.measurement.identify_measured)")
-    n = joints.shape[0]
+    fit_kwargs = {} if fit_kwargs is None else dict(fit_kwargs)
+    clash = sorted(set(fit_kwargs) & {"method", "prior", "frame", "targets", "initial_frame", "estimate_targets"})
+    if clash:
+        raise ValueError(f"fit_kwargs must not set {', '.join(clash)}: pass them as crossvalidate's own arguments")
+    settings = MeasurementSettings(frame="base") if measurement is None else measurement
+    data = checked_measured_inputs(robot, joints, measured, noise, settings.frame, settings.targets,
+                                   settings.estimate_targets, fit_kwargs.get("free"), fit_kwargs.get("start"))
+    n = data["joints"].shape[0]
     if folds is None:
         folds = n if method == "forward" else min(DEFAULT_CHAINWISE_FOLDS, n)
-    return joints, measured, folds, fit_kwargs
+    return data["joints"], data["measured"], folds, fit_kwargs
 
 
 def _fold_model(robot, joints, measured, noise, method, prior, fit_kwargs, measurement):
