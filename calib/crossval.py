@@ -23,6 +23,9 @@ A fold whose fit raises (too few rows left, a start the model cannot reach, a st
 workspace) or whose model cannot reach a left-out row leaves those rows without a prediction
 (NaN); the result is returned all the same and its message names the folds. A fold fit that
 returns without meeting its stopping rule is kept and named.
+
+:func:`crossvalidate_model` runs the same folds for any model a caller fits (a ``fit_fold``
+call-back): the geometry with effects of a discovery, for one.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from .prior import ParameterPrior
 from .robot import KinematicsError, Robot
 from .validation import frozen_array
 
-__all__ = ["CrossValidation", "crossvalidate", "fold_assignment", "error_summary", "DEFAULT_CHAINWISE_FOLDS",
+__all__ = ["CrossValidation", "crossvalidate", "crossvalidate_model", "FIT_FAILURES", "fold_assignment", "error_summary", "DEFAULT_CHAINWISE_FOLDS",
            "SUMMARY_STATISTICS"]
 
 #: Folds of the chain-wise method's K-fold cross-validation when none are asked for.
@@ -55,7 +58,8 @@ class CrossValidation:
     """Each row's prediction error by a model fitted without it.
 
     Attributes:
-        method: ``"forward"`` or ``"chainwise"`` (the identification cross-validated).
+        method: ``"forward"`` or ``"chainwise"`` (the identification cross-validated), or the
+            name :func:`crossvalidate_model` was given.
         scheme: ``"leave-one-out"`` or ``"K-fold"`` (K the number of folds).
         folds: number of folds (N for leave-one-out).
         fits: fits run (one per fold).
@@ -239,12 +243,38 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
     """
     joints, measured, folds, fit_kwargs = _checked(robot, joints, measured, noise, method, folds, prior,
                                                    fit_kwargs, measurement)
+
+    def fit_fold(train: np.ndarray):
+        return _fold_model(robot, joints[train], measured[train], noise, method, prior, fit_kwargs, measurement)
+
+    return crossvalidate_model(robot, joints, measured, fit_fold, folds=folds, seed=seed, method=method,
+                               n_targets=0 if measurement is None else measurement.n_targets)
+
+
+def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int, seed: int = 0,
+                        method: str = "model", n_targets: int = 0) -> CrossValidation:
+    """Cross-validated prediction error of any model fitted to rows (what :func:`crossvalidate` runs
+    for the engine's fits; a caller with another model, e.g. the geometry and the effects of
+    :mod:`calib.effects.discovery`, passes its own ``fit_fold``).
+
+    Args:
+        robot: the robot (which pose coordinates are angles).
+        joints: (N, C) joints; measured: (N, W) measurements (poses, or 3 ``n_targets`` positions).
+        fit_fold: ``fit_fold(train (N,) bool) -> (predict, success, message)``, the model fitted to
+            the rows ``train`` marks; ``predict(joints (M, C), measured (M, W)) -> (M, W)`` its
+            prediction of rows (``measured`` only as the start of a forward kinematics), raising
+            :class:`~calib.robot.KinematicsError` where it cannot reach one. A ``fit_fold`` that
+            raises one of :data:`FIT_FAILURES` fails its fold.
+        folds, seed: as :func:`fold_assignment`.
+        method: the model's name in the result and its message.
+        n_targets: K when the measurements are target positions (position error: the RMS over
+            the row's targets), else 0.
+    """
+    joints, measured = np.asarray(joints, dtype=float), np.asarray(measured, dtype=float)
     n = joints.shape[0]
     fold_of_row = fold_assignment(n, folds, seed)
     fold_of_row.setflags(write=False)
-    n_targets = 0 if measurement is None else measurement.n_targets
-    residuals, failed, unconverged = _run_folds(robot, joints, measured, noise, fold_of_row, folds, method, prior,
-                                                fit_kwargs, measurement)
+    residuals, failed, unconverged = _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets)
     position, orientation = _row_errors(robot, residuals, n_targets)
     scheme = "leave-one-out" if folds == n else f"{folds}-fold"
     message = _message(method, scheme, folds, n, int(np.count_nonzero(np.isfinite(position))), seed, failed,
@@ -259,17 +289,15 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
         success=bool(np.all(np.isfinite(position))), message=message)
 
 
-def _run_folds(robot, joints, measured, noise, fold_of_row, folds, method, prior, fit_kwargs, measurement):
+def _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets):
     """Fit each fold's complement and predict the fold: ``(residuals (N, W) measured - predicted,
     NaN where none; failed {fold: why}; unconverged {fold: the fit's stop message})``."""
-    n_targets = 0 if measurement is None else measurement.n_targets
     residuals = np.full(measured.shape, np.nan)
     failed, unconverged = {}, {}
     for k in range(folds):
         test = fold_of_row == k
         try:
-            predict, ok, msg = _fold_model(robot, joints[~test], measured[~test], noise, method, prior,
-                                           fit_kwargs, measurement)
+            predict, ok, msg = fit_fold(~test)
         except FIT_FAILURES as exc:
             failed[k] = f"the fit failed: {exc}"
             continue

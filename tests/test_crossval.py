@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from calib.crossval import (DEFAULT_CHAINWISE_FOLDS, SUMMARY_STATISTICS, CrossValidation, crossvalidate,
-                            error_summary, fold_assignment)
+                            crossvalidate_model, error_summary, fold_assignment)
 from calib.engine import METHODS, identify, identify_chainwise, identify_forward
 from calib.measurement import MeasurementSettings, identify_measured, instrument_measurements
 from calib.metrics import pose_error_norms
@@ -224,6 +224,31 @@ def test_instrument_frame_folds_are_fitted_with_the_frame():
     np.testing.assert_allclose(cv.residuals[test], measured[test] - refit.predict(joints[test]), rtol=0,
                                atol=FORWARD_KINEMATICS_TOL_MM)
     assert cv.success and cv.orientation_error is None and cv.method == "forward"
+
+
+def test_any_model_can_be_crossvalidated():
+    """crossvalidate_model with a model that fits nothing (the nominal geometry): each row's
+    residual is its nominal prediction error, whatever the fold; a fold whose fit raises is named."""
+    robot, joints, measured = _small_problem("rus", 12)
+    nominal = robot.table.nominal
+    seen = []
+
+    def fit_fold(train):
+        seen.append(int(train.sum()))
+        if len(seen) == 2:
+            raise ValueError("too few rows for this fold")
+
+        def predict(q, m):
+            return robot.forward_kinematics(nominal, q, initial=m)
+
+        return predict, True, "nothing fitted"
+
+    cv = crossvalidate_model(robot, joints, measured, fit_fold, folds=3, seed=1, method="nominal")
+    assert seen == [8, 8, 8] and cv.failed_folds == (1,) and cv.method == "nominal"
+    ok = cv.fold_of_row != 1
+    expected = measured[ok] - robot.forward_kinematics(nominal, joints[ok], initial=measured[ok])
+    np.testing.assert_allclose(cv.residuals[ok], expected, rtol=0, atol=WRAP_ROUNDING_RAD)
+    assert "fold 2: the fit failed: too few rows for this fold" in cv.message
 
 
 def test_arguments_are_checked():
