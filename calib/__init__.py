@@ -30,5 +30,6 @@ lazily_exported, __getattr__, __dir__ = lazy_exports(__name__, {
     "observability": ("ObservabilityAnalysis", "PoseUncertainty", "analyze_observability", "fisher_information",
                       "identification_jacobian", "pose_uncertainty"),
     "prior": ("ParameterPrior",),
+    "crossval": ("CrossValidation", "crossvalidate", "crossvalidate_model"),
 })
 __all__ = ["paper", *lazily_exported]

@@ -153,9 +153,9 @@ def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, m
         if not isinstance(measurement, MeasurementSettings):
             raise TypeError(f"measurement must be a calib.measurement.MeasurementSettings or None, got "
                             f"{type(measurement).__name__}")
-        if method != "forward" or prior is not None:
-            raise ValueError("with an instrument frame or targets (measurement=) only the forward method "
-                             "without a prior is fitted (calib.measurement.identify_measured)")
+        if method != "forward":
+            raise ValueError("with an instrument frame or targets (measurement=) only the forward method is "
+                             "fitted (calib.measurement.identify_measured)")
     fit_kwargs = {} if fit_kwargs is None else dict(fit_kwargs)
     clash = sorted(set(fit_kwargs) & {"method", "prior", "frame", "targets", "initial_frame", "estimate_targets"})
     if clash:
@@ -182,7 +182,7 @@ def _fold_model(robot, joints, measured, noise, method, prior, fit_kwargs, measu
         return predict, fit.success, fit.message
     fit = identify_measured(robot, joints, measured, noise, frame=measurement.frame,
                             initial_frame=measurement.initial_frame, targets=measurement.targets,
-                            estimate_targets=measurement.estimate_targets, **fit_kwargs)
+                            estimate_targets=measurement.estimate_targets, prior=prior, **fit_kwargs)
 
     def predict_instrument(q, m):
         return fit.predict(q, initial=fit.to_base(m) if fit.n_targets == 0 else None)
@@ -232,7 +232,7 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
             ``solver``, ``weighted``, ``epsilon``, ...) or, with ``measurement``,
             :func:`calib.measurement.identify_measured` takes them.
         measurement: the recording's instrument settings when its fit estimates a frame or target
-            offsets (forward method, no prior); None: poses in the base frame.
+            offsets (forward method); None: poses in the base frame.
         seed: seed of the K-fold assignment.
 
     Returns:

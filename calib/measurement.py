@@ -508,7 +508,8 @@ def gauge_null_space(A: np.ndarray, groups, rtol: float = GAUGE_RTOL) -> tuple[n
         ``c`` such that ``c . (z - reference) = 0`` fixes it (each row within one group).
     """
     n = A.shape[1]
-    _, s, vt = np.linalg.svd(A, full_matrices=True)
+    # Every right singular vector (the null space's too) without the (M, M) left ones of a tall A.
+    _, s, vt = np.linalg.svd(A, full_matrices=A.shape[0] < n)
     s = np.r_[s, np.zeros(n - s.size)]
     null = vt[s <= rtol * s[0]].T
     rows, left = [], null

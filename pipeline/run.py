@@ -128,8 +128,18 @@ def _progress(enabled: bool):
 
 
 def print_heldout(s: dict) -> None:
-    """The held-out errors: mean, RMS and max, before and after."""
+    """The held-out errors: mean, RMS and max, before and after; without held-out poses the
+    cross-validated prediction error."""
     h, o = s.get("heldout_position_error_mm"), s.get("heldout_orientation_error_rad")
+    cv = s.get("crossvalidation")
+    if not h and cv:
+        print(f"  no held-out poses: cross-validated prediction error ({cv['scheme']}, {cv['fits']} fits), "
+              "measured minus the prediction of a fit without the row (includes sensor noise)")
+        for label, block, scale in (("position error, um", s["crossvalidated_position_error_mm"], 1e3),
+                                    ("orientation error, urad", s["crossvalidated_orientation_error_rad"], 1e6)):
+            if block and block["rms"] is not None:
+                print(f"  {label:<28}" + "  ".join(f"{fig} {scale * block[fig]:.3f}" for fig in ("rms", "mean", "max")))
+        return
     if not h:
         return
     print(f"  {'held-out (' + str(s['heldout_poses']) + ' poses)':<28}{'before':>12}{'after':>12}")

@@ -23,6 +23,7 @@ from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
 from calib.robust import GROSS_ALPHA, find_gross_rows
+from calib.crossval import crossvalidate
 from calib.design import augment_poses
 from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits
@@ -645,6 +646,33 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
     return summary
 
 
+#: Folds of the cross-validation of an instrument-frame fit (each fold refits geometry and frame).
+INSTRUMENT_FOLDS = 10
+
+
+def crossvalidation_block(inp: CalibrationInput, ident: Identification, settings: RunSettings) -> dict:
+    """Summary keys of the cross-validated prediction error of a recording without validation rows
+    (:func:`calib.crossval.crossvalidate` on the rows the fit used, fitted as the run fits them:
+    leave-one-out for the forward method, 10-fold for the chain-wise one and with an instrument
+    frame): ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS,
+    mean, max) and ``crossvalidation`` (scheme, folds, message)."""
+    rows = ident.used
+    if ident.instrument is not None:
+        ms = measurement_settings(inp.rec.meta.get("measurement"))
+        ms = replace(ms, frame="estimate" if ident.instrument.frame_estimated else "base",
+                     initial_frame=ident.instrument.frame if ident.instrument.frame_estimated else None)
+        cv = crossvalidate(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, method="forward",
+                           folds=min(INSTRUMENT_FOLDS, rows.size), prior=inp.prior, measurement=ms,
+                           seed=settings.seed)
+    else:
+        kw = {"solver": ident.solver}
+        if settings.method == "chainwise":
+            kw.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
+        cv = crossvalidate(inp.robot, inp.joints[rows], ident.measured[rows], inp.noise, method=settings.method,
+                           prior=inp.prior, fit_kwargs=kw, seed=settings.seed)
+    return cv.summary()
+
+
 def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
     """The recording as the run read it (see :class:`AsRead`).
 
@@ -809,6 +837,8 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     held, truth_in_gauge, *comparison = validate_step(inp, ident, settings, progress)
     split["simulate"] += time.perf_counter() - t2
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
+    if inp.rec is not None and held is None:
+        summary.update(crossvalidation_block(inp, ident, settings))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     if summary["left_to_prior"]:
