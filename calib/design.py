@@ -508,7 +508,8 @@ def augment_poses(robot: Robot, theta, measured_poses, n: int, noise: SensorNois
     if len(measured_poses):
         A0 = identification_jacobian(robot, theta, measured_poses, noise, free=free).reshape(-1, idx.size)
         info = info + A0.T @ A0
-    cands = sample_feasible_poses(robot, theta, workspace, n_candidates, seed)
+    # Feasible for the nominal machine (what its controller commands), linearised at ``theta``.
+    cands = sample_feasible_poses(robot, robot.table.nominal, workspace, n_candidates, seed)
     A = identification_jacobian(robot, theta, cands, noise, free=free).reshape(-1, d, idx.size)
     chosen: list[int] = []
     for _ in range(min(n, len(cands))):

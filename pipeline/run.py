@@ -174,6 +174,8 @@ def print_determination(s: dict) -> None:
 def print_summary(s: dict) -> None:
     """The summary in plain words, for the terminal."""
     print(f"Calibration of the {s['robot']} - {s['scenario']}")
+    if s.get("verdict"):
+        print(f"  {'SUCCESS' if s['success'] else 'NOT A SUCCESS'}: {s['verdict']['words']}")
     print(f"  method {s['method']} ({s['solver']}): {s['iterations']} iterations; {s['message']}")
     print(f"  max dQint per iteration: {', '.join(f'{v:.3g}' for v in s['max_dqint_history'])}")
     print_heldout(s)

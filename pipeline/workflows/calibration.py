@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.special import gammaincinv
 
 from calib import paper
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
@@ -26,7 +27,7 @@ from calib.robust import GROSS_ALPHA, find_gross_rows
 from calib.crossval import crossvalidate
 from calib.design import augment_poses
 from calib.prior import ParameterPrior
-from calib.robot import KinematicsError, Robot, check_joint_limits
+from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
 from pipeline.formats import NameReservation, Recording, command_columns, command_csv, output_folder
@@ -615,6 +616,7 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
             k: v for k, v in calibration_gain(robot, truth_in_gauge, result.start, result.theta,
                                               free).as_dict().items() if k != "per_parameter"},
         "iterations": result.iterations,
+        "converged": result.success,
         "success": result.success,
         "message": result.message,
         "chi2": result.chi2,
@@ -650,12 +652,12 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
 INSTRUMENT_FOLDS = 10
 
 
-def crossvalidation_block(inp: CalibrationInput, ident: Identification, settings: RunSettings) -> dict:
-    """Summary keys of the cross-validated prediction error of a recording without validation rows
+def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: RunSettings):
+    """The cross-validated prediction error of a recording without validation rows
     (:func:`calib.crossval.crossvalidate` on the rows the fit used, fitted as the run fits them:
     leave-one-out for the forward method, 10-fold for the chain-wise one and with an instrument
-    frame): ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS,
-    mean, max) and ``crossvalidation`` (scheme, folds, message)."""
+    frame); its ``summary()`` gives ``crossvalidated_position_error_mm`` /
+    ``crossvalidated_orientation_error_rad`` (RMS, mean, max) and ``crossvalidation``."""
     rows = ident.used
     if ident.instrument is not None:
         ms = measurement_settings(inp.rec.meta.get("measurement"))
@@ -670,7 +672,86 @@ def crossvalidation_block(inp: CalibrationInput, ident: Identification, settings
             kw.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
         cv = crossvalidate(inp.robot, inp.joints[rows], ident.measured[rows], inp.noise, method=settings.method,
                            prior=inp.prior, fit_kwargs=kw, seed=settings.seed)
-    return cv.summary()
+    return cv
+
+
+#: False-alarm probability of the verdict's chi-square tests (the fit, the predictions).
+VERDICT_ALPHA = 1e-3
+
+
+def chi2_limit(dof: int) -> float:
+    """The chi-square's ``1 - VERDICT_ALPHA`` quantile on ``dof`` degrees of freedom."""
+    return float(2.0 * gammaincinv(dof / 2.0, 1.0 - VERDICT_ALPHA))
+
+
+def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> dict | None:
+    """Whether the predictions of rows the fit did not use agree with what the fit says they can be:
+    each row's prediction residual (validation rows, or the cross-validation's) whitened by its
+    covariance, the declared noise plus the identified parameters' uncertainty carried to the pose
+    (``S + J Sigma J^T``), summed against the chi-square on their coordinates. None where there is
+    nothing to test (a simulated run's held-out errors are noise-free truths; target data)."""
+    if inp.rec is None or ident.instrument is not None and ident.instrument.targets is not None:
+        return None
+    robot, result = inp.robot, ident.result
+    if held is not None:
+        joints, poses, residuals, what = inp.val_joints, inp.val_meas, held[1], "validation rows"
+    elif cv is not None:
+        joints, poses = inp.joints[ident.used], ident.measured[ident.used]
+        residuals, what = cv.residuals, f"cross-validation ({cv.scheme})"
+    else:
+        return None
+    ok = np.all(np.isfinite(residuals), axis=1)
+    if not ok.any():
+        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
+    joints, poses, residuals = joints[ok], poses[ok], residuals[ok]
+    try:
+        jac = pose_jacobian_of_parameters(robot, result.theta, joints, poses)
+    except KinematicsError:
+        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
+    std = inp.noise.pose_std(robot.pose_units)
+    cov = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac) + np.diag(std ** 2)
+    w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
+    chi2, dof = float(np.sum(w ** 2)), int(w.size)
+    limit = chi2_limit(dof)
+    return {"what": what, "agrees": bool(chi2 <= limit), "ratio": float(np.sqrt(chi2 / dof)),
+            "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
+
+
+def verdict_block(inp: CalibrationInput, ident: Identification, held, cv) -> dict:
+    """``success`` and ``verdict``: success only where the fit converged, the calibration rows it
+    used (less the gross rows) fit within the declared noise and the predictions of rows it did not
+    use agree (:func:`prediction_check`); otherwise the likely cause with its evidence."""
+    result = ident.result
+    dof = max(int(result.dof), 1)
+    fit_ok = bool(np.isfinite(result.chi2) and result.chi2 <= chi2_limit(dof))
+    check = prediction_check(inp, ident, held, cv)
+    success = bool(result.success and fit_ok and (check is None or check["agrees"]))
+    evidence = {"converged": bool(result.success), "fit_ratio": float(np.sqrt(result.chi2 / dof)),
+                "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
+                "predictions": check}
+    if success:
+        words = "calibrated: the rows fit to the declared noise" + (
+            f" and the {check['what']} are predicted to it" if check else "")
+        return {"success": True, "verdict": {"words": words, "cause": None, "evidence": evidence}}
+    cause, words = likely_cause(inp, ident, evidence)
+    return {"success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
+
+
+def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -> tuple[str, str]:
+    """``(cause, words)`` of a calibration that is no success: a diagnosed mistake in the file, gross
+    rows, or physics the geometric model leaves out."""
+    where = inp.where
+    if not evidence["converged"]:
+        return "no_convergence", f"not calibrated: the fit did not converge ({ident.result.message})"
+    search = ident.gross
+    if search is not None and not search.success:
+        return "model_misfit", (f"not calibrated: {search.message}; the model misfits most rows: left-out physics "
+                                f"(run python -m pipeline.discover --real {where}) or a mistake in the file")
+    ratio = evidence["fit_ratio"] if not evidence["fit_at_noise"] else evidence["predictions"]["ratio"]
+    what = "the calibration rows" if not evidence["fit_at_noise"] else f"the {evidence['predictions']['what']}"
+    return "left_out_physics", (f"not calibrated: {what} are {ratio:.3g} times the declared noise off the model: "
+                                f"physics the geometric model leaves out (run python -m pipeline.discover --real "
+                                f"{where}), or noise declared too small")
 
 
 def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
@@ -837,12 +918,18 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     held, truth_in_gauge, *comparison = validate_step(inp, ident, settings, progress)
     split["simulate"] += time.perf_counter() - t2
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
+    cv = None
     if inp.rec is not None and held is None:
-        summary.update(crossvalidation_block(inp, ident, settings))
+        cv = crossvalidation_of(inp, ident, settings)
+        summary.update(cv.summary())
+    summary.update(verdict_block(inp, ident, held, cv))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     if summary["left_to_prior"]:
-        summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
+        try:
+            summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
+        except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
+            summary["suggested_poses"] = {"poses": 0, "what": f"none suggested: {exc}", "why": ""}
     if inp.rec is not None:
         try:
             summary["_as_read"] = as_read(inp, ident)
