@@ -50,7 +50,7 @@ from .outputs import ResultSet
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
            "sidecar_path", "finite_number", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
-           "check_session_name", "check_channel_name"]
+           "check_session_name", "check_channel_name", "read_text_file"]
 
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
@@ -251,7 +251,7 @@ READABLE_VERSIONS = (1, FORMAT_VERSION)
 MIN_ROBOT_SIZE_MM = 5.0
 
 
-def _read_text(path: Path, what: str) -> str:
+def read_text_file(path: Path, what: str) -> str:
     """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line RecordingError."""
     if path.is_dir():
         raise RecordingError(f"{path}: is a folder, not a {what}")
@@ -274,7 +274,7 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
     by :func:`_sidecar_layout`)."""
     if not json_path.exists() and not json_path.is_dir():
         raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
-    text = _read_text(json_path, "JSON sidecar")
+    text = read_text_file(json_path, "JSON sidecar")
     try:
         side = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -508,7 +508,7 @@ def read_recording(csv_path: str | Path) -> Recording:
         raise RecordingError(f"{csv_path}: is a folder, not a CSV recording")
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
-    text = _read_text(csv_path, "CSV recording")
+    text = read_text_file(csv_path, "CSV recording")
     json_path = sidecar_path(csv_path)
     robot, noise, meta, side = _read_sidecar(json_path)
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
