@@ -54,6 +54,7 @@ from calib.noise import SensorNoise
 from calib.robot import Robot
 from calib.robots import ROBOTS, default_robot, robot_from_description
 from calib.rotation import euler_from_matrix, euler_from_quaternion
+from mjcf.units import M_PER_MM
 
 from .recording import (DEFAULT_SESSION, MIN_ROBOT_SIZE_MM, SETS, Recording, check_channel_name, check_session_name,
                         columns, finite_number, read_text_file)
@@ -67,7 +68,7 @@ __all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "LENGTH_
            "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS", "MAP_SCHEMA"]
 
 #: mm per unit of length.
-LENGTH_UNITS = {"mm": 1.0, "m": 1000.0, "in": 25.4}
+LENGTH_UNITS = {"mm": 1.0, "m": 1.0 / M_PER_MM, "in": 25.4}
 #: rad per unit of angle.
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 #: Units of a time column: how many make one second.
