@@ -122,10 +122,6 @@ class LabMap:
     noise: SensorNoise
     tables: dict = field(default_factory=dict)
 
-    def get(self, table: str, key: str, default=None):
-        """The checked value of ``table.key`` (``default`` when not given)."""
-        return self.tables[table].get(key, default)
-
 
 # --------------------------------------------------------------------------- the map
 
