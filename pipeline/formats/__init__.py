@@ -4,14 +4,16 @@ together)."""
 
 from .command_file import command_columns, command_csv, read_command_file, write_command_file
 from .checks import REFUSED_CONDITION, ROTATION_CONVENTION, WARNED_CONDITION, plausibility
+from .lab_export import LabExportError, LabMap, convert_lab_files, read_map
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs, one_line, output_folder, publish,
                       remove_stale_temporaries, writing)
-from .recording import (FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SETS, SIDECAR_FIELDS,
-                        Recording, RecordingError, columns, read_recording, recording_texts, sidecar_path,
-                        write_recording)
+from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SESSION_KEYS,
+                        SESSION_TIMES, SETS, SIDECAR_FIELDS, Recording, RecordingError, columns, read_recording,
+                        recording_texts, session_measurement, sidecar_path, write_recording)
 
-__all__ = ["command_columns", "command_csv", "read_command_file", "write_command_file", "Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
+__all__ = ["LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv", "read_command_file", "write_command_file", "Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
            "sidecar_path", "plausibility", "check_outputs", "one_line", "FileLock", "LockHeld", "NameReservation", "remove_stale_temporaries",
            "OutputError", "ResultSet", "atomic_write", "output_folder", "publish",
            "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS", "SIDECAR_FIELDS",
-           "MIN_ROBOT_SIZE_MM", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]
+           "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
+           "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]

@@ -2,15 +2,27 @@
 
 CSV: one row per measurement in the order taken, columns
 
-    t_s, <joints>, <pose>[, set]
+    t_s, <joints>, <pose>[, <extra channels>][, set][, session]
 
 with the robot's joint columns (``l1_mm .. l6_mm`` for the hexapod, ``q1_rad .. q3_rad`` for
 the Delta: what was commanded, or read when joints are measured) and pose columns (``x_mm, y_mm,
 z_mm[, alpha_rad, beta_rad, gamma_rad]``: the measured pose, base frame, or the instrument's
 frame with ``meta.measurement``; position-only data have ``t1_x_mm, t1_y_mm, t1_z_mm, t2_x_mm ...``
 instead, one triple per target, see :mod:`calib.measurement`); the optional ``set``
-column is ``calibration`` or ``validation`` (default ``calibration``). The JSON sidecar names the
-robot, its nominal geometry and parameter table, the declared noise and the units.
+column is ``calibration`` or ``validation`` (default ``calibration``). Extra channels
+(``temperature_C``, ``load_N``, ...: any number the lab logged beside the pose, kept by name for
+discovery) are the columns the sidecar's ``columns`` lists beyond these. The optional ``session``
+column names each row's session (a short name; default one session ``"1"``): one machine, each
+session its own instrument frame and its own time origin (``t_s`` may restart at a new session; a
+session's rows are together, and its time does not go backwards). The sidecar's optional
+``sessions`` field declares, per session, its instrument frame (``measurement``: ``frame``,
+``initial_frame`` as in ``meta.measurement``, which they override for that session), its
+``source`` file, its ``time_origin`` and whether ``time`` was ``measured`` or is the ``row order``.
+The JSON sidecar names the robot, its nominal geometry and parameter table, the declared noise and
+the units.
+
+A recording without extra channels and with the one default session writes exactly as before
+these were added (no ``session`` column, no ``sessions`` field).
 
 Reading validates everything and names file, row and column on error; writing is atomic
 (temporary file + rename) and never overwrites an existing file unless asked to.
@@ -22,12 +34,13 @@ import csv
 import dataclasses
 import io
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from calib.measurement import measurement_settings, target_names
+from calib.measurement import FRAME_MODES, MeasurementSettings, frame_from_dict, measurement_settings, target_names
 from calib.noise import SensorNoise
 from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
@@ -36,7 +49,8 @@ from .outputs import ResultSet
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
            "sidecar_path", "finite_number", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
-           "MIN_ROBOT_SIZE_MM"]
+           "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
+           "check_session_name", "check_channel_name", "read_text_file"]
 
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
@@ -44,6 +58,18 @@ FORMAT = "parallel-calib recording"
 #: version 1 (hexapod only) is read too.
 FORMAT_VERSION = 2
 UNITS = {"length": "mm", "angle": "rad", "time": "s"}
+#: The session of every row of a recording without a ``session`` column.
+DEFAULT_SESSION = "1"
+#: What the sidecar's ``sessions`` field may declare of a session.
+SESSION_KEYS = ("measurement", "source", "time_origin", "time")
+#: A session's ``time``: ``t_s`` measured (s from its origin), or the rows' order (0, 1, 2...).
+SESSION_TIMES = ("measured", "row order")
+#: The keys of a session's ``measurement`` (the rest of ``meta.measurement`` is the recording's).
+SESSION_MEASUREMENT_KEYS = ("frame", "initial_frame")
+#: A session's name: short, no spaces or commas.
+SESSION_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,31}")
+#: An extra channel's name: a word with its unit after the last underscore (``temperature_C``).
+CHANNEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*")
 
 
 class RecordingError(ValueError):
@@ -72,6 +98,10 @@ class Recording:
             (N, 3K) target positions: ``meta["measurement"]``, see :mod:`calib.measurement`).
         sets: (N,) str, ``"calibration"`` or ``"validation"``.
         meta: free-form JSON-ready information (scenario, seed, simulation truth...).
+        sessions: (N,) str, each row's session (None: every row in :data:`DEFAULT_SESSION`).
+        session_info: session name -> what the sidecar declares of it (:data:`SESSION_KEYS`,
+            JSON-ready); sessions not named here have the recording's defaults.
+        extras: channel name (``temperature_C``) -> (N,) float, extra columns kept by name.
     """
 
     robot: Robot
@@ -81,6 +111,40 @@ class Recording:
     measured: np.ndarray
     sets: np.ndarray
     meta: dict = field(default_factory=dict)
+    sessions: np.ndarray | None = None
+    session_info: dict = field(default_factory=dict)
+    extras: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.t_s)
+        sessions = np.full(n, DEFAULT_SESSION) if self.sessions is None else np.asarray(self.sessions, dtype=str)
+        if sessions.shape != (n,):
+            raise ValueError(f"sessions must have shape ({n},), got {sessions.shape}")
+        object.__setattr__(self, "sessions", sessions)
+        extras = {}
+        for name, values in self.extras.items():
+            extras[name] = np.asarray(values, dtype=float)
+            if extras[name].shape != (n,):
+                raise ValueError(f"extra channel {name!r} must have shape ({n},), got {extras[name].shape}")
+        object.__setattr__(self, "extras", extras)
+        for name in np.unique(sessions):
+            check_session_name(str(name), ValueError, "session")
+        for name in extras:
+            check_channel_name(name, columns(self.robot, measurement_settings(self.meta.get("measurement")).n_targets),
+                               ValueError, "extra channel")
+        unused = [name for name in self.session_info if name not in sessions]
+        if unused:
+            raise ValueError(f"session_info names session(s) {', '.join(map(repr, unused))} without rows")
+
+    @property
+    def session_names(self) -> tuple[str, ...]:
+        """The sessions, in the order of their first row."""
+        names, first = np.unique(self.sessions, return_index=True)
+        return tuple(str(names[k]) for k in np.argsort(first))
+
+    def session_rows(self, name: str) -> np.ndarray:
+        """0-based indices of the rows of session ``name``."""
+        return np.flatnonzero(self.sessions == name)
 
     def subset(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(joints, measured)`` of the rows in set ``name``."""
@@ -97,16 +161,24 @@ def sidecar_path(csv_path: str | Path) -> Path:
     return Path(csv_path).with_suffix(".json")
 
 
+def _has_sessions(rec: Recording) -> bool:
+    """Whether ``rec`` writes a ``session`` column and a ``sessions`` field (not one default session)."""
+    return bool(rec.session_info) or bool(np.any(rec.sessions != DEFAULT_SESSION))
+
+
 def recording_texts(rec: Recording) -> tuple[str, str]:
     """The CSV text and the JSON sidecar text of ``rec``."""
     joint_cols, pose_cols = columns(rec.robot, measurement_settings(rec.meta.get("measurement")).n_targets)
-    header = ("t_s",) + joint_cols + pose_cols + ("set",)
+    sessions = _has_sessions(rec)
+    extras = tuple(rec.extras)
+    header = ("t_s",) + joint_cols + pose_cols + extras + ("set",) + (("session",) if sessions else ())
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
     for k in range(len(rec.t_s)):
         w.writerow([repr(float(rec.t_s[k]))] + [repr(float(v)) for v in rec.joints[k]]
-                   + [repr(float(v)) for v in rec.measured[k]] + [rec.sets[k]])
+                   + [repr(float(v)) for v in rec.measured[k]] + [repr(float(rec.extras[e][k])) for e in extras]
+                   + [rec.sets[k]] + ([rec.sessions[k]] if sessions else []))
     table = rec.robot.table
     sidecar = {
         "format": FORMAT,
@@ -114,6 +186,7 @@ def recording_texts(rec: Recording) -> tuple[str, str]:
         "robot": rec.robot.name,
         "units": UNITS,
         "columns": list(header),
+        **({"sessions": {name: rec.session_info.get(name, {}) for name in rec.session_names}} if sessions else {}),
         "nominal_geometry": rec.robot.description(),
         "parameter_table": [{"name": p.name, "unit": p.unit, "nominal": p.nominal, "chain": p.chain + 1}
                             for p in table],
@@ -121,6 +194,36 @@ def recording_texts(rec: Recording) -> tuple[str, str]:
         "meta": rec.meta,
     }
     return buf.getvalue(), json.dumps(sidecar, indent=1)
+
+
+def check_session_name(name, error: type[Exception] = ValueError, where: str = "session") -> str:
+    """``name`` if it is a session's name (:data:`SESSION_NAME`: up to 32 letters, digits, ``_.+-``),
+    else ``error`` naming ``where``."""
+    if not isinstance(name, str) or not SESSION_NAME.fullmatch(name):
+        raise error(f"{where}: {name!r} is not a session name (1 to 32 letters, digits or _.+-, not starting "
+                    "with a sign)")
+    return name
+
+
+def check_channel_name(name, recording_columns: tuple[tuple[str, ...], tuple[str, ...]],
+                       error: type[Exception] = ValueError, where: str = "extra channel") -> str:
+    """``name`` if it can name an extra channel (a word with its unit, ``temperature_C``; not a
+    column the recording has anyway: ``recording_columns`` is :func:`columns`' answer), else
+    ``error`` naming ``where``."""
+    taken = ("t_s",) + recording_columns[0] + recording_columns[1] + ("set", "session")
+    if not isinstance(name, str) or not CHANNEL_NAME.fullmatch(name):
+        raise error(f"{where}: {name!r} is not a channel name (a word and its unit, e.g. temperature_C)")
+    if name in taken:
+        raise error(f"{where}: {name!r} is one of the recording's own columns ({', '.join(taken)})")
+    return name
+
+
+def session_measurement(rec: Recording, name: str) -> MeasurementSettings:
+    """How session ``name`` was measured: ``meta.measurement`` with the session's own
+    ``measurement`` (its instrument frame: ``frame``, ``initial_frame``) in place of the recording's."""
+    merged = dict(rec.meta.get("measurement") or {})
+    merged.update(rec.session_info.get(name, {}).get("measurement", {}))
+    return measurement_settings(merged or None)
 
 
 def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:
@@ -140,15 +243,15 @@ def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = F
 
 
 #: The sidecar's fields; any other is refused (a misspelt key would otherwise be ignored silently).
-SIDECAR_FIELDS = ("format", "version", "robot", "units", "columns", "nominal_geometry", "parameter_table",
-                  "declared_noise", "meta")
+SIDECAR_FIELDS = ("format", "version", "robot", "units", "columns", "sessions", "nominal_geometry",
+                  "parameter_table", "declared_noise", "meta")
 #: Sidecar versions this reader understands.
 READABLE_VERSIONS = (1, FORMAT_VERSION)
 #: A parallel robot smaller than this (mm) is a geometry written in metres.
 MIN_ROBOT_SIZE_MM = 5.0
 
 
-def _read_text(path: Path, what: str) -> str:
+def read_text_file(path: Path, what: str) -> str:
     """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line RecordingError."""
     if path.is_dir():
         raise RecordingError(f"{path}: is a folder, not a {what}")
@@ -166,10 +269,12 @@ def _read_text(path: Path, what: str) -> str:
         raise RecordingError(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
 
 
-def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
+def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
+    """``(robot, noise, meta, sidecar)`` of a checked sidecar (its columns and sessions are checked
+    by :func:`_sidecar_layout`)."""
     if not json_path.exists() and not json_path.is_dir():
         raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
-    text = _read_text(json_path, "JSON sidecar")
+    text = read_text_file(json_path, "JSON sidecar")
     try:
         side = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -228,7 +333,58 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict]:
     sim = meta.get("simulation")
     if sim is not None and not isinstance(sim, dict):
         raise RecordingError(f"{json_path}: field 'meta.simulation' must be an object, got {type(sim).__name__}")
-    return robot, noise, meta
+    return robot, noise, meta, side
+
+
+def _sidecar_layout(json_path: Path, side: dict,
+                    recording_columns: tuple[tuple[str, ...], tuple[str, ...]]) -> tuple[tuple[str, ...], dict]:
+    """``(extra channels, session info)``: the columns a version-2 sidecar's ``columns`` lists
+    beyond the recording's own, and its ``sessions`` field, checked."""
+    listed = side.get("columns", []) if side["version"] == FORMAT_VERSION else []
+    if not isinstance(listed, list) or not all(isinstance(c, str) for c in listed):
+        raise RecordingError(f"{json_path}: field 'columns' must be a list of column names")
+    own = ("t_s",) + recording_columns[0] + recording_columns[1] + ("set", "session")
+    extras = tuple(dict.fromkeys(c for c in listed if c not in own))
+    for name in extras:
+        check_channel_name(name, recording_columns, RecordingError, f"{json_path}: field 'columns'")
+    value = side.get("sessions", {})
+    if not isinstance(value, dict):
+        raise RecordingError(f"{json_path}: field 'sessions' must be an object (session name -> what it "
+                             f"declares), got {type(value).__name__}")
+    return extras, {check_session_name(name, RecordingError, f"{json_path}: field 'sessions'"):
+                    _session_block(json_path, name, block) for name, block in value.items()}
+
+
+def _session_block(json_path: Path, name: str, block) -> dict:
+    """A session's entry of the sidecar's ``sessions`` field, checked (:data:`SESSION_KEYS`)."""
+    where = f"{json_path}: field sessions.{name}"
+    if not isinstance(block, dict):
+        raise RecordingError(f"{where} must be an object, got {type(block).__name__}")
+    unknown = [k for k in block if k not in SESSION_KEYS]
+    if unknown:
+        raise RecordingError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; the keys are "
+                             f"{', '.join(SESSION_KEYS)}")
+    for key in ("source", "time_origin"):
+        if key in block and not isinstance(block[key], str):
+            raise RecordingError(f"{where}.{key} must be a string, got {block[key]!r}")
+    if "time" in block and block["time"] not in SESSION_TIMES:
+        raise RecordingError(f"{where}.time must be one of {', '.join(map(repr, SESSION_TIMES))}, got {block['time']!r}")
+    m = block.get("measurement", {})
+    if not isinstance(m, dict):
+        raise RecordingError(f"{where}.measurement must be an object, got {type(m).__name__}")
+    extra = [k for k in m if k not in SESSION_MEASUREMENT_KEYS]
+    if extra:
+        raise RecordingError(f"{where}.measurement: unknown key(s) {', '.join(map(repr, extra))}: a session "
+                             f"declares its instrument frame ({', '.join(SESSION_MEASUREMENT_KEYS)}); the targets "
+                             "are the recording's (meta.measurement)")
+    if m.get("frame", "auto") not in FRAME_MODES:
+        raise RecordingError(f"{where}.measurement.frame must be one of {', '.join(FRAME_MODES)}, got {m['frame']!r}")
+    if "initial_frame" in m:
+        try:
+            frame_from_dict(m["initial_frame"], f"sessions.{name}.measurement.initial_frame")
+        except ValueError as exc:
+            raise RecordingError(f"{json_path}: field {exc}") from None
+    return block
 
 
 def _csv_rows(csv_path: Path, text: str, expected: tuple[str, ...]) -> list[list[str]]:
@@ -246,7 +402,7 @@ def _csv_rows(csv_path: Path, text: str, expected: tuple[str, ...]) -> list[list
 
 def _header(csv_path: Path, row: list[str], expected: tuple[str, ...], robot: Robot) -> list[str]:
     """The header row's column names, checked: comma-separated, each once, the ``expected``
-    columns all there (in any order), nothing else but ``set``."""
+    columns all there (in any order), nothing else but ``set`` and ``session``."""
     header = [h.strip() for h in row]
     if len(header) == 1 and ";" in header[0]:
         raise RecordingError(f"{csv_path}: line 1: the fields are separated by ';'; a recording is "
@@ -261,15 +417,16 @@ def _header(csv_path: Path, row: list[str], expected: tuple[str, ...], robot: Ro
     if missing:
         raise RecordingError(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} "
                              f"(a {robot.name} recording, per its sidecar); got {', '.join(header)}")
-    unknown = [h for h in header if h not in expected + ("set",)]
+    unknown = [h for h in header if h not in expected + ("set", "session")]
     if unknown:
         raise RecordingError(f"{csv_path}: line 1: unknown column(s) {', '.join(unknown)}")
     return header
 
 
-def _data_row(where: str, row: list[str], idx: dict[str, int], expected: tuple[str, ...]) -> tuple[list[float], str]:
-    """One data row's values (finite numbers, in the ``expected`` columns' order) and its set;
-    ``idx``: each column's place in the file; ``where``: how messages name the row."""
+def _data_row(where: str, row: list[str], idx: dict[str, int],
+              expected: tuple[str, ...]) -> tuple[list[float], str, str]:
+    """One data row's values (finite numbers, in the ``expected`` columns' order), its set and its
+    session; ``idx``: each column's place in the file; ``where``: how messages name the row."""
     if not any(c.strip() for c in row):
         raise RecordingError(f"{where}: blank line inside the data")
     if len(row) != len(idx):
@@ -279,7 +436,8 @@ def _data_row(where: str, row: list[str], idx: dict[str, int], expected: tuple[s
     s = row[idx["set"]].strip() if "set" in idx else "calibration"
     if s not in SETS:
         raise RecordingError(f"{where}, column 'set': {s!r} is not one of {', '.join(SETS)}")
-    return values, s
+    session = row[idx["session"]].strip() if "session" in idx else DEFAULT_SESSION
+    return values, s, check_session_name(session, RecordingError, f"{where}, column 'session'")
 
 
 def finite_number(cell: str, message: str, error: type[Exception] = ValueError) -> float:
@@ -295,26 +453,44 @@ def finite_number(cell: str, message: str, error: type[Exception] = ValueError) 
 
 
 def _data(csv_path: Path, data: list[list[str]], header: list[str],
-          expected: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """``(values, sets)``: (N, len(expected)) the data rows' values in the ``expected`` columns'
-    order (s, the joint unit, mm and rad) and (N,) str their sets; time must not go backwards
-    (a row that repeats an earlier one exactly is named as copied)."""
+          expected: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(values, sets, sessions)``: (N, len(expected)) the data rows' values in the ``expected``
+    columns' order (s, the joint unit, mm and rad), (N,) str their sets and (N,) str their
+    sessions; a session's rows are together and its time does not go backwards (a row that
+    repeats an earlier one exactly is named as copied)."""
     idx = {h: i for i, h in enumerate(header)}
     values = np.empty((len(data), len(expected)))
-    sets = np.empty(len(data), dtype=object)
+    labels = np.empty((len(data), 2), dtype=object)  # set, session
+    ended: dict[str, int] = {}  # session -> its last row, once another has begun
     for r, row in enumerate(data, start=1):
         where = f"{csv_path}: row {r} (line {r + 1})"
-        values[r - 1], s = _data_row(where, row, idx, expected)
-        sets[r - 1] = s
-        if r > 1 and values[r - 1, 0] < values[r - 2, 0]:
-            same = np.flatnonzero((values[:r - 1] == values[r - 1]).all(axis=1) & (sets[:r - 1] == s))
-            if same.size:
-                raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
-                                     "delete it")
-            raise RecordingError(f"{where}, column 't_s': time goes backwards "
-                                 f"({float(values[r - 1, 0])!r} after {float(values[r - 2, 0])!r}); rows must be in "
-                                 "the order taken")
-    return values, sets.astype(str)
+        values[r - 1], labels[r - 1, 0], labels[r - 1, 1] = _data_row(where, row, idx, expected)
+        if r > 1:
+            _check_order(where, values[:r], labels[:r], ended)
+    return values, labels[:, 0].astype(str), labels[:, 1].astype(str)
+
+
+def _check_order(where: str, values: np.ndarray, labels: np.ndarray, ended: dict[str, int]) -> None:
+    """The last of ``values`` / ``labels`` (the rows so far) against those before it: its session
+    continues the previous row's or begins (a session does not resume), its time is not earlier
+    than the previous row's of the same session."""
+    r = len(values)
+    session, previous = labels[-1, 1], labels[-2, 1]
+    if session != previous:
+        ended[previous] = r - 1
+        if session in ended:
+            raise RecordingError(f"{where}, column 'session': session {session!r} resumes after session "
+                                 f"{previous!r} (its rows ended at row {ended[session]}); a session's rows must "
+                                 "be together")
+        return
+    if values[-1, 0] < values[-2, 0]:
+        same = np.flatnonzero((values[:-1] == values[-1]).all(axis=1) & (labels[:-1] == labels[-1]).all(axis=1))
+        if same.size:
+            raise RecordingError(f"{where}: repeats row {same[0] + 1} exactly (time included): a copied row; "
+                                 "delete it")
+        raise RecordingError(f"{where}, column 't_s': time goes backwards "
+                             f"({float(values[-1, 0])!r} after {float(values[-2, 0])!r}); rows must be in "
+                             "the order taken")
 
 
 def read_recording(csv_path: str | Path) -> Recording:
@@ -332,15 +508,22 @@ def read_recording(csv_path: str | Path) -> Recording:
         raise RecordingError(f"{csv_path}: is a folder, not a CSV recording")
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
-    text = _read_text(csv_path, "CSV recording")
-    robot, noise, meta = _read_sidecar(sidecar_path(csv_path))
+    text = read_text_file(csv_path, "CSV recording")
+    json_path = sidecar_path(csv_path)
+    robot, noise, meta, side = _read_sidecar(json_path)
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
-    expected = ("t_s",) + joint_cols + pose_cols
+    extras, session_info = _sidecar_layout(json_path, side, (joint_cols, pose_cols))
+    expected = ("t_s",) + joint_cols + pose_cols + extras
     rows = _csv_rows(csv_path, text, expected)
     header = _header(csv_path, rows[0], expected, robot)
     if len(rows) == 1:
         raise RecordingError(f"{csv_path}: no data rows (the header alone)")
-    values, sets = _data(csv_path, rows[1:], header, expected)
-    c = len(joint_cols)
+    values, sets, sessions = _data(csv_path, rows[1:], header, expected)
+    idle = [name for name in session_info if name not in sessions]
+    if idle:
+        raise RecordingError(f"{json_path}: field 'sessions' declares session(s) {', '.join(map(repr, idle))} "
+                             f"that no row of {csv_path.name} is in")
+    c, d = len(joint_cols), len(pose_cols)
     return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
-                     measured=values[:, 1 + c:], sets=sets, meta=meta)
+                     measured=values[:, 1 + c:1 + c + d], sets=sets, meta=meta, sessions=sessions,
+                     session_info=session_info, extras={e: values[:, 1 + c + d + k] for k, e in enumerate(extras)})

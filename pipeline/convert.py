@@ -1,0 +1,56 @@
+"""``python -m pipeline.convert LAB.csv [LAB2.csv ...] --map MAP.toml --out NAME``: a lab's export
+as a recording (``NAME.csv`` + ``NAME.json``), one session per input file.
+
+A thin front end of :func:`pipeline.workflows.convert.run_convert`: the mapping file's keys are
+described in ``docs/importer.md`` (and :mod:`pipeline.formats.lab_export`). A bad map, lab file or
+output: exit 2 and one line naming the file and the key, or the row and column.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.cli import ArgumentParser, cli_main
+from pipeline.workflows.convert import ConvertResult, ConvertSettings, run_convert
+
+__all__ = ["build_parser", "settings_from_args", "run", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = ArgumentParser(prog="python -m pipeline.convert",
+                       description="Convert a lab's export (CSV files in its own units and conventions, "
+                                   "described by a TOML mapping file) into a recording: one session per file.")
+    p.add_argument("files", nargs="+", help="the lab's CSV files, one session each, in order")
+    p.add_argument("--map", required=True, help="mapping file (TOML, see docs/importer.md)")
+    p.add_argument("--out", required=True, help="recording to write: NAME (or NAME.csv) and its NAME.json")
+    p.add_argument("--overwrite", action="store_true", help="allow replacing an existing recording")
+    return p
+
+
+def settings_from_args(args: argparse.Namespace) -> ConvertSettings:
+    """The :class:`ConvertSettings` of parsed flags."""
+    return ConvertSettings(files=tuple(args.files), map=args.map, out=args.out, overwrite=args.overwrite)
+
+
+def run(argv: list[str] | None = None) -> ConvertResult:
+    """Parse ``argv``, convert, print what was written; raises on bad input (see :func:`main`)."""
+    result = run_convert(settings_from_args(build_parser().parse_args(argv)))
+    rec = result.recording
+    extras = f"; extra channels {', '.join(rec.extras)}" if rec.extras else ""
+    print(f"wrote {result.csv_path} and {result.json_path}: {rec.robot.name}, {len(rec.t_s)} rows in "
+          f"{len(result.sessions)} session(s){extras}")
+    for s in result.sessions:
+        frame = rec.session_info[s["session"]].get("measurement", rec.meta.get("measurement", {})).get("frame", "auto")
+        print(f"  session {s['session']}: {s['kept_rows']} of {s['data_rows']} rows of {s['file']} "
+              f"({int((rec.sets[rec.session_rows(s['session'])] == 'validation').sum())} validation), "
+              f"instrument frame: {frame}")
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run; a refused input, output or flag ends with one line on stderr and exit status 2."""
+    return cli_main(run, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

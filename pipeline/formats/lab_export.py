@@ -1,0 +1,630 @@
+"""A lab's own export (CSV files in its units and conventions) read through a mapping file (TOML)
+into a :class:`~pipeline.formats.recording.Recording`.
+
+The map says which lab column is which joint and pose coordinate and how to convert it:
+
+* ``[robot]`` ``name`` (a registered robot), ``description`` (optional: a ``Robot.description()``
+  JSON, or a recording's or command file's sidecar, whose ``nominal_geometry`` is taken; a path
+  relative to the map);
+* ``[noise]`` (optional) the declared noise, the keys of a recording's ``declared_noise``;
+* ``[csv]`` (optional) ``delimiter`` (one character), ``decimal`` (``"."`` or ``","``),
+  ``skip_lines`` (lines before the header line);
+* ``[time]`` ``format`` ``"seconds"`` | ``"iso"`` (ISO 8601 timestamps) | ``"none"`` (rows in
+  order: ``t_s`` = 0, 1, 2, ...), ``column``, ``unit`` (``"s"`` | ``"ms"``, seconds),
+  ``origin`` (iso: an ISO timestamp, default the session's first kept row; seconds: a number,
+  default 0): ``t_s`` is the time since the origin;
+* ``[position]`` ``columns`` (x, y, z), ``unit`` (``"m"`` | ``"mm"`` | ``"in"``);
+* ``[orientation]`` (robots whose pose has angles) ``kind`` ``"quaternion"`` (``scalar``
+  ``"first"`` | ``"last"``) | ``"matrix"`` (9 columns, ``order`` ``"row"`` (R11 R12 R13 R21 ...) |
+  ``"column"``) | ``"euler"`` (``sequence``: SciPy's, lowercase = fixed axes, uppercase = moving
+  axes; the project's own is ``"xyz"``; ``unit`` ``"rad"`` | ``"deg"``), ``columns``; the rotation
+  maps platform-frame vectors to the instrument's frame;
+* ``[joints]`` ``columns`` (one per chain), ``reading`` ``"value"`` | ``"counts"`` |
+  ``"revolutions"``, ``unit`` (of ``scale`` and ``zero``, or of the value: a length unit for
+  length joints, ``"rad"`` | ``"deg"`` for angle joints; default the robot's), ``scale`` (per count
+  or revolution) and ``zero`` (the joint's value at reading 0), one number or one per joint:
+  ``joint = zero + scale * reading``;
+* ``[rows]`` (optional: rows to keep, 1-based data rows of each file) ``first``, ``last``,
+  ``drop`` (a list), ``keep_column`` (a column whose cell is 1/true/yes to keep, 0/false/no to drop);
+* ``[set]`` (optional) ``column``, ``calibration`` and ``validation`` (the cell values);
+* ``[extra]`` (optional) ``name = "lab column"``: channels kept by name (``temperature_C``);
+* ``[sessions]`` (optional; one session per input file) ``names`` (default ``"1"``, ``"2"``, ...),
+  ``frame`` (``"auto"`` | ``"base"`` | ``"estimate"``, or one per file): the instrument frame of
+  each session (with one file: the recording's ``meta.measurement``).
+
+Every key is checked (an unknown one is named); every fault of a lab file names the file, the
+row (1-based data row and its line) and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import sys
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from calib.measurement import FRAME_MODES
+from calib.noise import SensorNoise
+from calib.robot import Robot
+from calib.robots import ROBOTS, default_robot, robot_from_description
+from calib.rotation import euler_from_matrix, euler_from_quaternion
+from mjcf.units import M_PER_MM
+
+from .recording import (DEFAULT_SESSION, MIN_ROBOT_SIZE_MM, SETS, Recording, check_channel_name, check_session_name,
+                        columns, finite_number, read_text_file)
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10 (pyproject installs tomli there)
+    import tomli as tomllib
+
+__all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "LENGTH_UNITS", "ANGLE_UNITS", "TIME_UNITS",
+           "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS", "MAP_SCHEMA"]
+
+#: mm per unit of length.
+LENGTH_UNITS = {"mm": 1.0, "m": 1.0 / M_PER_MM, "in": 25.4}
+#: rad per unit of angle.
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+#: Units of a time column: how many make one second.
+TIME_UNITS = {"s": 1.0, "ms": 1000.0}
+TIME_FORMATS = ("seconds", "iso", "none")
+#: Orientation kinds and their number of columns.
+ORIENTATION_COLUMNS = {"quaternion": 4, "matrix": 9, "euler": 3}
+JOINT_READINGS = ("value", "counts", "revolutions")
+#: A quaternion whose norm is further than this from 1, or a matrix further than this (largest
+#: entry of R R^T - I) from a rotation, is refused: the columns are not an orientation, or not in
+#: the declared order. Generous to a lab's rounding (4 decimals give ~1e-4).
+ORIENTATION_TOLERANCE = 0.01
+#: Cells of a ``rows.keep_column`` that keep or drop their row (lower case).
+KEEP_WORDS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False}
+#: table -> (whether the table is required, {key: whether required}).
+MAP_SCHEMA = {
+    "robot": (True, {"name": True, "description": False}),
+    "noise": (False, {"position_mm": False, "orientation_rad": False, "joint": False, "distribution": False}),
+    "csv": (False, {"delimiter": False, "decimal": False, "skip_lines": False}),
+    "time": (True, {"format": True, "column": False, "unit": False, "origin": False}),
+    "position": (True, {"columns": True, "unit": True}),
+    "orientation": (False, {"kind": True, "columns": True, "scalar": False, "order": False, "sequence": False,
+                            "unit": False}),
+    "joints": (True, {"columns": True, "reading": True, "unit": False, "scale": False, "zero": False}),
+    "rows": (False, {"first": False, "last": False, "drop": False, "keep_column": False}),
+    "set": (False, {"column": True, "calibration": True, "validation": True}),
+    "extra": (False, {}),
+    "sessions": (False, {"names": False, "frame": False}),
+}
+
+
+class LabExportError(ValueError):
+    """A mapping file or a lab file is refused; the message (one line) names the file and the key,
+    or the row and column."""
+
+
+@dataclass(frozen=True, eq=False)
+class LabMap:
+    """A checked mapping file (:func:`read_map`): each table as a dict of checked values.
+
+    Attributes:
+        path: the map file.
+        robot: the robot, with the nominal geometry of ``robot.description`` (or its default).
+        noise: the declared noise.
+        tables: table name -> {key: checked value} (every table of :data:`MAP_SCHEMA`, empty when
+            absent; numbers per joint as (C,) arrays).
+    """
+
+    path: Path
+    robot: Robot
+    noise: SensorNoise
+    tables: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- the map
+
+
+def _fail(path: Path, key: str, what: str) -> LabExportError:
+    return LabExportError(f"{path}: key {key}: {what}")
+
+
+def _choice(path: Path, key: str, value, choices) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise _fail(path, key, f"must be one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
+
+
+def _number(path: Path, key: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _fail(path, key, f"must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _positive_int(path: Path, key: str, value, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise _fail(path, key, f"must be an integer >= {minimum}, got {value!r}")
+    return value
+
+
+def _column_names(path: Path, key: str, value, n: int) -> tuple[str, ...]:
+    if not isinstance(value, list) or len(value) != n or not all(isinstance(v, str) and v.strip() for v in value):
+        raise _fail(path, key, f"must be a list of {n} column names, got {value!r}")
+    return tuple(v.strip() for v in value)
+
+
+def _per_joint(path: Path, key: str, value, n: int, nonzero: bool = False) -> np.ndarray:
+    """(n,) one number for every joint, or one each."""
+    values = value if isinstance(value, list) else [value] * n
+    if len(values) != n:
+        raise _fail(path, key, f"must be one number or a list of {n} (one per joint), got {len(values)}")
+    out = np.array([_number(path, key, v) for v in values])
+    if nonzero and np.any(out == 0):
+        raise _fail(path, key, "must not be 0")
+    return out
+
+
+def _tables(path: Path, doc: dict) -> dict:
+    """Every table of :data:`MAP_SCHEMA` (absent ones empty), its keys known and the required
+    ones there."""
+    unknown = [t for t in doc if t not in MAP_SCHEMA]
+    if unknown:
+        raise LabExportError(f"{path}: unknown table(s) {', '.join(f'[{t}]' for t in unknown)}; the tables are "
+                             f"{', '.join(f'[{t}]' for t in MAP_SCHEMA)}")
+    tables = {}
+    for name, (required, keys) in MAP_SCHEMA.items():
+        table = doc.get(name, {})
+        if not isinstance(table, dict):
+            raise _fail(path, name, f"must be a table [{name}], got {type(table).__name__}")
+        if required and name not in doc:
+            raise LabExportError(f"{path}: missing table [{name}]")
+        extra = [k for k in table if k not in keys] if keys else []
+        if extra:
+            raise _fail(path, f"{name}.{extra[0]}", f"unknown key; the keys of [{name}] are {', '.join(keys)}")
+        missing = [k for k, req in keys.items() if req and k not in table] if name in doc else []
+        if missing:
+            raise _fail(path, f"{name}.{missing[0]}", "missing")
+        tables[name] = dict(table)
+    return tables
+
+
+def _robot(path: Path, table: dict) -> Robot:
+    name = table["name"]
+    if not isinstance(name, str) or name not in ROBOTS:
+        raise _fail(path, "robot.name", f"must be one of {', '.join(sorted(ROBOTS))}, got {name!r}")
+    if "description" not in table:
+        return default_robot(name)
+    where = table["description"]
+    if not isinstance(where, str):
+        raise _fail(path, "robot.description", f"must be the path of a JSON file, got {where!r}")
+    file = path.parent / where
+    try:
+        text = read_text_file(file, "robot description (JSON)")
+    except ValueError as exc:  # missing, a folder, not text: the message names the file
+        raise _fail(path, "robot.description", str(exc)) from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise _fail(path, "robot.description", f"{file}: not valid JSON: {exc}") from None
+    doc = doc.get("nominal_geometry", doc) if isinstance(doc, dict) else doc
+    try:
+        robot = robot_from_description(name, doc)
+    except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
+        raise _fail(path, "robot.description", f"{file} is not a {name} description: {exc}") from None
+    if not robot.length_scale_mm >= MIN_ROBOT_SIZE_MM:
+        raise _fail(path, "robot.description", f"{file} describes a {name} {robot.length_scale_mm:.3g} mm in size: "
+                                               "it seems to be in metres; lengths must be in mm")
+    return robot
+
+
+def _noise(path: Path, table: dict) -> SensorNoise:
+    for key, value in table.items():
+        if key == "distribution":
+            _choice(path, "noise.distribution", value, ("uniform", "normal"))
+        elif _number(path, f"noise.{key}", value) < 0:
+            raise _fail(path, f"noise.{key}", f"must be >= 0, got {value!r}")
+    return SensorNoise(**table)
+
+
+def _check_csv(path: Path, t: dict) -> None:
+    delimiter = t.setdefault("delimiter", ",")
+    if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\"\r\n":
+        raise _fail(path, "csv.delimiter", f"must be one character (\",\", \";\", \"\\t\"), got {delimiter!r}")
+    _choice(path, "csv.decimal", t.setdefault("decimal", "."), (".", ","))
+    if t["decimal"] == delimiter:
+        raise _fail(path, "csv.decimal", f"{delimiter!r} is also the delimiter")
+    _positive_int(path, "csv.skip_lines", t.setdefault("skip_lines", 0), 0)
+
+
+def _check_time(path: Path, t: dict) -> None:
+    fmt = _choice(path, "time.format", t["format"], TIME_FORMATS)
+    if fmt == "none":
+        extra = [k for k in ("column", "unit", "origin") if k in t]
+        if extra:
+            raise _fail(path, f"time.{extra[0]}", "has no meaning with time.format = \"none\" (rows in order)")
+        return
+    if "column" not in t:
+        raise _fail(path, "time.column", f"missing (time.format = {fmt!r})")
+    t["column"] = _column_names(path, "time.column", [t["column"]], 1)[0]
+    if fmt == "iso":
+        if "unit" in t:
+            raise _fail(path, "time.unit", "has no meaning with ISO timestamps")
+        if "origin" in t:
+            t["origin"] = _timestamp(t["origin"], lambda what: _fail(path, "time.origin", what))
+        return
+    _choice(path, "time.unit", t.setdefault("unit", "s"), tuple(TIME_UNITS))
+    t["origin"] = _number(path, "time.origin", t.get("origin", 0.0))
+
+
+def _check_orientation(path: Path, robot: Robot, t: dict) -> None:
+    angles = bool(robot.angle_pose_mask.any())
+    if angles and not t:
+        raise LabExportError(f"{path}: missing table [orientation] (the {robot.name}'s pose has angles: "
+                             f"{', '.join(robot.pose_names)})")
+    if not t:
+        return
+    if not angles:
+        raise _fail(path, "orientation", f"the {robot.name}'s pose has no angles ({', '.join(robot.pose_names)}); "
+                                         "remove [orientation]")
+    kind = _choice(path, "orientation.kind", t["kind"], tuple(ORIENTATION_COLUMNS))
+    t["columns"] = _column_names(path, "orientation.columns", t["columns"], ORIENTATION_COLUMNS[kind])
+    allowed = {"quaternion": ("scalar",), "matrix": ("order",), "euler": ("sequence", "unit")}[kind]
+    extra = [k for k in ("scalar", "order", "sequence", "unit") if k in t and k not in allowed]
+    if extra:
+        raise _fail(path, f"orientation.{extra[0]}", f"has no meaning with orientation.kind = {kind!r}")
+    if kind == "quaternion":
+        _choice(path, "orientation.scalar", t.get("scalar"), ("first", "last"))
+    elif kind == "matrix":
+        _choice(path, "orientation.order", t.setdefault("order", "row"), ("row", "column"))
+    else:
+        _choice(path, "orientation.unit", t.get("unit"), tuple(ANGLE_UNITS))
+        seq = t.get("sequence")
+        if not (isinstance(seq, str) and len(seq) == 3 and (set(seq) <= set("xyz") or set(seq) <= set("XYZ"))
+                and seq[0] != seq[1] and seq[1] != seq[2]):
+            raise _fail(path, "orientation.sequence", "must be three axes, all lowercase (fixed axes) or all "
+                                                      f"uppercase (moving axes), e.g. \"xyz\" or \"ZYX\", got {seq!r}")
+
+
+def _check_joints(path: Path, robot: Robot, t: dict) -> None:
+    c = robot.n_chains
+    t["columns"] = _column_names(path, "joints.columns", t["columns"], c)
+    reading = _choice(path, "joints.reading", t["reading"], JOINT_READINGS)
+    units = LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS
+    _choice(path, "joints.unit", t.setdefault("unit", robot.joint_unit), tuple(units))
+    if reading == "value" and "scale" in t:
+        raise _fail(path, "joints.scale", "has no meaning with joints.reading = \"value\" (give zero for an offset)")
+    if reading != "value" and "scale" not in t:
+        raise _fail(path, "joints.scale", f"missing: the {t['unit']} per {reading[:-1]} of each joint")
+    t["scale"] = _per_joint(path, "joints.scale", t.get("scale", 1.0), c, nonzero=True)
+    t["zero"] = _per_joint(path, "joints.zero", t.get("zero", 0.0), c)
+
+
+def _check_rows(path: Path, t: dict) -> None:
+    for key in ("first", "last"):
+        if key in t:
+            _positive_int(path, f"rows.{key}", t[key])
+    if t.get("first", 1) > t.get("last", math.inf):
+        raise _fail(path, "rows.last", f"{t['last']} is before rows.first = {t['first']}")
+    drop = t.setdefault("drop", [])
+    if not isinstance(drop, list):
+        raise _fail(path, "rows.drop", f"must be a list of row numbers, got {drop!r}")
+    for v in drop:
+        _positive_int(path, "rows.drop", v)
+    if "keep_column" in t:
+        t["keep_column"] = _column_names(path, "rows.keep_column", [t["keep_column"]], 1)[0]
+
+
+def _check_set(path: Path, t: dict) -> None:
+    if not t:
+        return
+    t["column"] = _column_names(path, "set.column", [t["column"]], 1)[0]
+    for key in SETS:
+        if not isinstance(t[key], str):
+            raise _fail(path, f"set.{key}", f"must be the cell value of a {key} row, got {t[key]!r}")
+    if t["calibration"].strip() == t["validation"].strip():
+        raise _fail(path, "set.validation", "is the same as set.calibration")
+
+
+def _check_extra(path: Path, robot: Robot, t: dict) -> None:
+    for name, column in t.items():
+        check_channel_name(name, columns(robot), LabExportError, f"{path}: key extra.{name}")
+        t[name] = _column_names(path, f"extra.{name}", [column], 1)[0]
+
+
+def _check_sessions(path: Path, t: dict) -> None:
+    if "names" in t:
+        names = t["names"]
+        if not isinstance(names, list) or not names:
+            raise _fail(path, "sessions.names", f"must be a list of session names (one per file), got {names!r}")
+        for name in names:
+            check_session_name(name, LabExportError, f"{path}: key sessions.names")
+        if len(set(names)) != len(names):
+            raise _fail(path, "sessions.names", f"names a session twice: {names!r}")
+    frame = t.get("frame", "auto")
+    for f in frame if isinstance(frame, list) else [frame]:
+        _choice(path, "sessions.frame", f, FRAME_MODES)
+
+
+def read_map(path: str | Path) -> LabMap:
+    """Read and check a mapping file (see the module's description).
+
+    Raises:
+        LabExportError: naming the file and the key (or the TOML line) at fault.
+    """
+    path = Path(path)
+    try:
+        text = read_text_file(path, "mapping file (TOML)")
+    except ValueError as exc:
+        raise LabExportError(str(exc)) from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LabExportError(f"{path}: not valid TOML: {exc}") from None
+    tables = _tables(path, doc)
+    robot = _robot(path, tables["robot"])
+    noise = _noise(path, tables["noise"])
+    _check_csv(path, tables["csv"])
+    _check_time(path, tables["time"])
+    tables["position"]["columns"] = _column_names(path, "position.columns", tables["position"]["columns"], 3)
+    _choice(path, "position.unit", tables["position"]["unit"], tuple(LENGTH_UNITS))
+    _check_orientation(path, robot, tables["orientation"])
+    _check_joints(path, robot, tables["joints"])
+    _check_rows(path, tables["rows"])
+    _check_set(path, tables["set"])
+    _check_extra(path, robot, tables["extra"])
+    _check_sessions(path, tables["sessions"])
+    return LabMap(path=path, robot=robot, noise=noise, tables=tables)
+
+
+def _timestamp(value, fail) -> datetime:
+    """A datetime of an ISO 8601 timestamp (a TOML datetime is taken as it is), or ``fail(what)``."""
+    if isinstance(value, datetime):
+        return value
+    if not isinstance(value, str):
+        raise fail(f"must be an ISO 8601 timestamp, got {value!r}")
+    text = value.strip()
+    try:
+        return datetime.fromisoformat(text[:-1] + "+00:00" if text.endswith(("Z", "z")) else text)
+    except ValueError:
+        raise fail(f"{value!r} is not an ISO 8601 timestamp (e.g. 2024-03-01T09:30:00.250)") from None
+
+
+# --------------------------------------------------------------------------- the lab's files
+
+
+@dataclass(frozen=True, eq=False)
+class LabTable:
+    """A lab file's header and data rows (cells as text), each row's line in the file."""
+
+    path: Path
+    header: tuple[str, ...]
+    header_line: int
+    rows: list
+    lines: list
+    decimal: str
+
+    def where(self, i: int) -> str:
+        """How messages name 0-based data row ``i``: file, row (1-based) and line."""
+        return f"{self.path}: row {i + 1} (line {self.lines[i]})"
+
+    def index(self, name: str, key: str) -> int:
+        """The place of column ``name`` (given by map key ``key``) in the header."""
+        hits = [k for k, h in enumerate(self.header) if h == name]
+        if not hits:
+            shown = ", ".join(self.header[:16]) + (", ..." if len(self.header) > 16 else "")
+            raise LabExportError(f"{self.path}: line {self.header_line}: no column {name!r} (key {key}); the "
+                                 f"header has {shown}")
+        if len(hits) > 1:
+            raise LabExportError(f"{self.path}: line {self.header_line}: column {name!r} (key {key}) appears "
+                                 f"{len(hits)} times in the header")
+        return hits[0]
+
+    def numbers(self, kept: np.ndarray, names: tuple[str, ...], key: str) -> np.ndarray:
+        """(len(kept), len(names)) the cells of columns ``names`` in rows ``kept``, finite numbers."""
+        out = np.empty((len(kept), len(names)))
+        for j, name in enumerate(names):
+            col = self.index(name, key)
+            texts = [self.rows[i][col].strip() for i in kept]
+            if self.decimal == ",":
+                texts = [t.replace(",", ".") for t in texts]
+            try:
+                out[:, j] = np.array(texts, dtype=float)
+                if np.all(np.isfinite(out[:, j])):
+                    continue
+            except ValueError:
+                pass
+            for i, text in zip(kept, texts):  # the first bad cell, named
+                cell = self.rows[i][col].strip().replace("{", "{{").replace("}", "}}")
+                finite_number(text, f"{self.where(i)}, column {name!r}: {cell!r} is", LabExportError)
+        return out
+
+
+def read_lab_table(path: str | Path, lab_map: LabMap) -> LabTable:
+    """A lab file split by the map's ``[csv]`` dialect: header line after ``skip_lines``, data rows
+    (trailing blank lines dropped)."""
+    path = Path(path)
+    try:
+        text = read_text_file(path, "lab file (CSV)")
+    except ValueError as exc:
+        raise LabExportError(str(exc)) from None
+    dialect = lab_map.tables["csv"]
+    skip = dialect["skip_lines"]
+    lines = text.splitlines(keepends=True)
+    reader = csv.reader(io.StringIO("".join(lines[skip:]), newline=""), delimiter=dialect["delimiter"])
+    rows, ends = [], []
+    try:
+        for row in reader:
+            rows.append(row)
+            ends.append(reader.line_num + skip)
+    except csv.Error as exc:
+        raise LabExportError(f"{path}: line {reader.line_num + skip}: not readable as CSV: {exc}") from None
+    while rows and not any(c.strip() for c in rows[-1]):
+        rows.pop()
+        ends.pop()
+    if len(rows) < 2:
+        raise LabExportError(f"{path}: {'no header line' if not rows else 'no data rows'} after the "
+                             f"{skip} line(s) skipped (key csv.skip_lines)")
+    header = tuple(h.strip() for h in rows[0])
+    others = [d for d in ",;\t" if d != dialect["delimiter"] and len(header) == 1 and d in header[0]]
+    if others:
+        raise LabExportError(f"{path}: line {ends[0]}: the fields seem separated by {others[0]!r}, not "
+                             f"{dialect['delimiter']!r} (key csv.delimiter)")
+    return LabTable(path, header, ends[0], rows[1:], ends[1:], dialect["decimal"])
+
+
+def _kept_rows(table: LabTable, spec: dict) -> np.ndarray:
+    """0-based indices of the data rows ``[rows]`` keeps, each with a full set of fields."""
+    n = len(table.rows)
+    for key in ("first", "last"):
+        if spec.get(key, 1) > n:
+            raise LabExportError(f"{table.path}: key rows.{key} = {spec[key]}, but the file has {n} data rows")
+    beyond = [d for d in spec["drop"] if d > n]
+    if beyond:
+        raise LabExportError(f"{table.path}: key rows.drop names row {beyond[0]}, but the file has {n} data rows")
+    drop = set(spec["drop"])
+    rows = [i for i in range(spec.get("first", 1) - 1, spec.get("last", n)) if i + 1 not in drop]
+    for i in rows:
+        if not any(c.strip() for c in table.rows[i]):
+            raise LabExportError(f"{table.where(i)}: blank line inside the data (drop it with rows.drop)")
+        if len(table.rows[i]) != len(table.header):
+            raise LabExportError(f"{table.where(i)}: expected {len(table.header)} fields (as the header), got "
+                                 f"{len(table.rows[i])}")
+    if "keep_column" in spec:
+        name = spec["keep_column"]
+        col = table.index(name, "rows.keep_column")
+        words = [table.rows[i][col].strip().lower() for i in rows]
+        bad = [k for k, w in enumerate(words) if w not in KEEP_WORDS]
+        if bad:
+            raise LabExportError(f"{table.where(rows[bad[0]])}, column {name!r}: {table.rows[rows[bad[0]]][col]!r} is "
+                                 "not 1/true/yes (keep the row) or 0/false/no (drop it) (key rows.keep_column)")
+        rows = [i for i, w in zip(rows, words) if KEEP_WORDS[w]]
+    if not rows:
+        raise LabExportError(f"{table.path}: no data row kept (keys rows.first, rows.last, rows.drop, "
+                             "rows.keep_column)")
+    return np.array(rows, dtype=int)
+
+
+def _times(table: LabTable, kept: np.ndarray, spec: dict) -> tuple[np.ndarray, dict]:
+    """``(t_s, what the session declares of its time)``; time must not go backwards."""
+    if spec["format"] == "none":
+        return np.arange(len(kept), dtype=float), {"time": "row order"}
+    name = spec["column"]
+    info = {"time": "measured"}
+    if spec["format"] == "seconds":
+        t_s = (table.numbers(kept, (name,), "time.column")[:, 0] - spec["origin"]) / TIME_UNITS[spec["unit"]]
+    else:
+        col = table.index(name, "time.column")
+        stamps = [_timestamp(table.rows[i][col], lambda what, i=i: LabExportError(
+            f"{table.where(i)}, column {name!r}: {what}")) for i in kept]
+        origin = spec.get("origin", stamps[0])
+        for i, s in zip(kept, stamps):
+            if (s.tzinfo is None) != (origin.tzinfo is None):
+                raise LabExportError(f"{table.where(i)}, column {name!r}: {table.rows[i][col].strip()!r} has "
+                                     f"{'no' if s.tzinfo is None else 'a'} time zone and the origin "
+                                     f"({origin.isoformat()}) {'has' if s.tzinfo is None else 'has none'}")
+        t_s = np.array([(s - origin).total_seconds() for s in stamps])
+        info["time_origin"] = origin.isoformat()
+    back = np.flatnonzero(np.diff(t_s) < 0)
+    if back.size:
+        i = kept[back[0] + 1]
+        raise LabExportError(f"{table.where(i)}, column {name!r}: time goes backwards ({t_s[back[0] + 1]!r} s after "
+                             f"{t_s[back[0]]!r} s); rows must be in the order taken (or dropped: key rows.drop)")
+    return t_s, info
+
+
+def _orientation(table: LabTable, kept: np.ndarray, spec: dict) -> np.ndarray:
+    """(N, 3) the angles ``[alpha, beta, gamma]`` of the orientation columns, rad."""
+    names, kind = spec["columns"], spec["kind"]
+    raw = table.numbers(kept, names, "orientation.columns")
+    if kind == "euler":
+        from scipy.spatial.transform import Rotation
+
+        return euler_from_matrix(Rotation.from_euler(spec["sequence"], raw * ANGLE_UNITS[spec["unit"]]).as_matrix())
+    if kind == "quaternion":
+        q = raw if spec["scalar"] == "first" else raw[:, [3, 0, 1, 2]]
+        off = np.abs(np.linalg.norm(q, axis=1) - 1.0)
+        what = "a quaternion of norm {norm:.6g}"
+    else:
+        R = raw.reshape(-1, 3, 3) if spec["order"] == "row" else raw.reshape(-1, 3, 3).transpose(0, 2, 1)
+        gram = np.abs(R @ R.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+        off = np.where(np.linalg.det(R) > 0, gram, np.inf)
+        what = "not a rotation matrix (largest entry of R R^T - I: {gram:.3g}, determinant {det:.6g})"
+    bad = np.flatnonzero(~(off <= ORIENTATION_TOLERANCE))
+    if bad.size:
+        k = bad[0]
+        detail = what.format(norm=np.linalg.norm(raw[k]), gram=gram[k] if kind == "matrix" else 0.0,
+                             det=np.linalg.det(R[k]) if kind == "matrix" else 0.0)
+        raise LabExportError(f"{table.where(kept[k])}, columns {', '.join(names)}: {detail}; the columns must be "
+                             f"the orientation (key orientation.columns) in the declared order")
+    return euler_from_quaternion(q) if kind == "quaternion" else euler_from_matrix(R)
+
+
+def _convert_file(lab_map: LabMap, path: Path) -> dict:
+    """One lab file's kept rows in the recording's units: ``t_s``, ``joints``, ``measured``,
+    ``sets``, ``extras``, ``time`` (what its session declares of its time), ``data_rows``."""
+    robot, t = lab_map.robot, lab_map.tables
+    table = read_lab_table(path, lab_map)
+    kept = _kept_rows(table, t["rows"])
+    t_s, time_info = _times(table, kept, t["time"])
+    poses = np.empty((len(kept), robot.pose_dim))
+    angle = robot.angle_pose_mask
+    poses[:, ~angle] = table.numbers(kept, t["position"]["columns"], "position.columns") \
+        * LENGTH_UNITS[t["position"]["unit"]]
+    if angle.any():
+        poses[:, angle] = _orientation(table, kept, t["orientation"])
+    j = t["joints"]
+    factor = (LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS)[j["unit"]]
+    joints = (j["zero"] + j["scale"] * table.numbers(kept, j["columns"], "joints.columns")) * factor
+    sets = np.full(len(kept), SETS[0], dtype=object)
+    if t["set"]:
+        col = table.index(t["set"]["column"], "set.column")
+        labels = {t["set"][s].strip(): s for s in SETS}
+        for k, i in enumerate(kept):
+            cell = table.rows[i][col].strip()
+            if cell not in labels:
+                raise LabExportError(f"{table.where(i)}, column {t['set']['column']!r}: {cell!r} is neither "
+                                     f"{t['set']['calibration']!r} (key set.calibration) nor "
+                                     f"{t['set']['validation']!r} (key set.validation)")
+            sets[k] = labels[cell]
+    extras = {name: table.numbers(kept, (column,), f"extra.{name}")[:, 0] for name, column in t["extra"].items()}
+    return {"t_s": t_s, "joints": joints, "measured": poses, "sets": sets.astype(str), "extras": extras,
+            "time": time_info, "data_rows": len(table.rows)}
+
+
+def convert_lab_files(lab_map: LabMap, files) -> Recording:
+    """The recording of a lab's files, one session per file (see the module's description).
+
+    The sidecar's ``meta.imported`` names the map and, per file, its session, its data rows and
+    the rows kept.
+
+    Raises:
+        LabExportError: naming the file and the row and column, or the map's key, at fault.
+    """
+    files = [Path(f) for f in files]
+    if not files:
+        raise LabExportError("no lab file given")
+    twice = sorted({str(f) for f in files if files.count(f) > 1})
+    if twice:
+        raise LabExportError(f"{twice[0]}: given twice (one session per file)")
+    s = lab_map.tables["sessions"]
+    names = s.get("names", [DEFAULT_SESSION] if len(files) == 1 else [str(k + 1) for k in range(len(files))])
+    frames = s["frame"] if isinstance(s.get("frame"), list) else [s.get("frame")] * len(files)
+    for key, given in (("sessions.names", names), ("sessions.frame", frames)):
+        if len(given) != len(files):
+            raise _fail(lab_map.path, key, f"lists {len(given)} sessions for {len(files)} files")
+    parts = [_convert_file(lab_map, f) for f in files]
+    meta = {"imported": {"map": str(lab_map.path), "files": [
+        {"file": str(f), "session": n, "data_rows": p["data_rows"], "kept_rows": len(p["t_s"])}
+        for f, n, p in zip(files, names, parts)]}}
+    info = {n: {"source": str(f), **p["time"]} for f, n, p in zip(files, names, parts)}
+    if len(files) == 1 and frames[0] is not None:
+        meta["measurement"] = {"frame": frames[0]}
+    for n, frame in zip(names, frames):
+        if len(files) > 1 and frame is not None:
+            info[n]["measurement"] = {"frame": frame}
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in ("t_s", "joints", "measured", "sets")}
+    return Recording(robot=lab_map.robot, noise=lab_map.noise, meta=meta, **cat,
+                     sessions=np.concatenate([[n] * len(p["t_s"]) for n, p in zip(names, parts)]),
+                     session_info=info, extras={e: np.concatenate([p["extras"][e] for p in parts])
+                                                for e in lab_map.tables["extra"]})
