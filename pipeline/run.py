@@ -199,6 +199,8 @@ def print_summary(s: dict) -> None:
         print(f"  held-out position error after: {1e3 * wo['heldout_position_error_mm']['after']:.3f} um without the "
               f"flagged rows, {1e3 * w['heldout_position_error_mm']['after']:.3f} um with them")
     print_determination(s)
+    for item in s.get("implausible_parameters") or ():
+        print(f"  implausible: {item['words']}")
     for warning in s.get("warnings") or ():
         print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")

@@ -68,3 +68,32 @@ def test_thirty_percent_of_rows_off_by_fifty_times_the_noise(clean):
     named = set(s["gross_rows"]["rows"]) | set(s["flagged_poses"])
     assert len(named & set(rows + 1)) >= 0.9 * rows.size
     assert heldout_after(s) <= 1.5 * heldout_after(summary)
+
+
+def test_a_geometry_absorbing_physics_is_said_implausible_and_discovery_brings_it_back(tmp_path):
+    """A hexapod whose leg 3 moves 2% more than commanded (an actuator scale), calibrated without
+    the effect: the leg's offset comes out far beyond its tolerance and the run says so; discovery
+    names the scale and, fitted with it, the offset is back within tolerance."""
+    from calib.robots import default_robot
+    from calib.workspace import reachable_poses
+    from mjcf.machine import MachineOptions
+    from pipeline.formats import Recording
+    from pipeline.simulation import DISCOVERY_NOISE, Testbed
+    from pipeline.workflows import DiscoverySettings, run_discovery
+
+    robot = default_robot("hexapod")
+    joints = robot.inverse_kinematics(robot.table.nominal, reachable_poses(robot, 80, np.random.default_rng(5)))
+    bed = Testbed(robot, robot.table.nominal, options=MachineOptions(transmission_scale=(0, 0, 0.02, 0, 0, 0)),
+                  noise=DISCOVERY_NOISE, seed=2)
+    m = bed.measure(joints)
+    rec = Recording(robot=robot, noise=DISCOVERY_NOISE, t_s=m.t_s, joints=m.encoders, measured=m.measured,
+                    sets=np.array(["calibration"] * len(m.t_s)), meta={"parameter_tolerance": {"mm": 0.5}})
+    write_recording(tmp_path / "scale.csv", rec)
+    s = run(["--real", str(tmp_path / "scale.csv"), "--out", str(tmp_path), "--quiet"]).summary
+    implausible = {d["name"]: d for d in s["implausible_parameters"]}
+    assert "dl3" in implausible and abs(implausible["dl3"]["error"]) > 3 * 0.5
+    assert "tolerance 0.5 mm" in implausible["dl3"]["words"] and not s["success"]
+    d = run_discovery(DiscoverySettings(real=tmp_path / "scale.csv", resim=False, out=tmp_path)).summary
+    assert d["effects"] == ["actuator_scale"]
+    assert "dl3" in d["implausible_parameters"]["back_within_tolerance"]
+    assert d["implausible_parameters"]["with_effects"] == []

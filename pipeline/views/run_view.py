@@ -115,30 +115,52 @@ def _flagged_state(summary: dict) -> str:
     return " (data rows; left out)" if left_out else " (data rows; kept)"
 
 
+def error_table(summary: dict) -> list[str]:
+    """Markdown rows of the held-out errors (before and after: RMS, mean, max), or of the
+    cross-validated prediction error where there are no held-out poses."""
+    h, o = summary.get("heldout_position_error_mm"), summary.get("heldout_orientation_error_rad")
+    if h and "after_figures" in h:
+        rows = ["", "| held-out | RMS before | RMS after | mean after | max after |", "|---|---|---|---|---|"]
+        for label, block, scale in (("position, um", h, 1e3), ("orientation, urad", o, 1e6)):
+            if block:
+                b, a = block["before_figures"], block["after_figures"]
+                rows.append(f"| {label} | {scale * b['rms']:.3f} | {scale * a['rms']:.3f} | {scale * a['mean']:.3f} | "
+                            f"{scale * a['max']:.3f} |")
+        return rows
+    cv = summary.get("crossvalidated_position_error_mm")
+    if cv and cv.get("rms") is not None:
+        rows = ["", f"| cross-validated ({summary['crossvalidation']['scheme']}) | RMS | mean | max |",
+                "|---|---|---|---|", f"| position, um | {1e3 * cv['rms']:.3f} | {1e3 * cv['mean']:.3f} | "
+                                    f"{1e3 * cv['max']:.3f} |"]
+        co = summary.get("crossvalidated_orientation_error_rad")
+        if co and co.get("rms") is not None:
+            rows.append(f"| orientation, urad | {1e6 * co['rms']:.3f} | {1e6 * co['mean']:.3f} | {1e6 * co['max']:.3f} |")
+        return rows
+    return []
+
+
 def summary_markdown(summary: dict) -> str:
     """The run summary as a markdown panel: short lines and tables."""
     h = summary.get("heldout_position_error_mm")
-    o = summary.get("heldout_orientation_error_rad")
     n = summary["declared_noise"]
+    verdict = summary.get("verdict")
     lines = [
         f"## {summary['robot']}: calibration",
         f"{summary['scenario']}",
         "",
+        *([f"**{'Success' if summary.get('success') else 'Not a success'}**: {verdict['words']}", ""]
+          if verdict else []),
         "| run | |", "|---|---|",
         f"| method | {summary['method']} ({summary['solver']}) |",
         f"| poses | {summary['calibration_poses']} calibration, {summary['heldout_poses']} held-out |",
         f"| noise | {n.get('position_mm', 0):g} mm, {n.get('orientation_rad', 0):g} rad, "
         f"joints {n.get('joint', 0):g} ({n.get('distribution', '')}) |",
-        f"| iterations | {summary['iterations']} ({'converged' if summary.get('success') else 'not converged'}) |",
+        f"| iterations | {summary['iterations']} "
+        f"({'converged' if summary.get('converged', summary.get('success')) else 'not converged'}) |",
         f"| flagged rows | {', '.join(str(i) for i in summary['flagged_poses']) or 'none'}"
         f"{_flagged_state(summary) if summary['flagged_poses'] else ''} |",
     ]
-    if h:
-        lines += ["", "| held-out | before | after | max after |", "|---|---|---|---|",
-                  f"| position, um | {1e3 * h['before']:.2f} | {1e3 * h['after']:.3f} | {1e3 * h['max_after']:.3f} |"]
-        if o:
-            lines.append(f"| orientation, urad | {1e6 * o['before']:.1f} | {1e6 * o['after']:.2f} | "
-                         f"{1e6 * o['max_after']:.2f} |")
+    lines += error_table(summary)
     pe = summary.get("parameter_error")
     g = summary.get("gain_G_percent")
     if pe and pe.get("rms_mm") is not None:
@@ -148,6 +170,10 @@ def summary_markdown(summary: dict) -> str:
             lines.append(f"| error RMS, angles | {1e6 * pe['rms_rad']:.2f} urad |")
         if g:
             lines.append(f"| gain G (norm) | {g['norm']:.2f} % |")
+    by = summary.get("determined_by")
+    if by and (summary.get("prior") or {}).get("used"):
+        lines += ["", f"Determined by the data: {len(by['data'])} parameters; left to the prior: {len(by['prior'])}"
+                  + (f" ({', '.join(by['prior'][:10])}{', ...' if len(by['prior']) > 10 else ''})" if by['prior'] else "")]
     cn = summary["condition_numbers"]
     lines += ["", f"Condition number{'s' if len(cn) > 1 else ''}: " + ", ".join(f"{c:.0f}" for c in cn)]
     if h:

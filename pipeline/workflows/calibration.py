@@ -32,7 +32,8 @@ from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
 from pipeline.formats import NameReservation, Recording, command_columns, command_csv, output_folder
 
-__all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
+__all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
+           "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "default_name", "OUTPUT_EXTENSIONS"]
 
 #: Calibration poses of a robot whose reference experiment names none.
@@ -369,8 +370,20 @@ def parameter_prior(robot: Robot, settings: RunSettings, meta: dict | None, wher
     Raises:
         ValueError: a tolerance naming no parameter or unit, or not a number > 0 (file and key named).
     """
+    tolerance, source = machine_tolerance(robot, meta, where)
     if not settings.prior:
         return None, "none (--no-prior: plain least squares)"
+    return tolerance, source
+
+
+def machine_tolerance(robot: Robot, meta: dict | None, where: str) -> tuple[ParameterPrior, str]:
+    """``(tolerance, source in words)``: each parameter's manufacturing tolerance (one standard
+    deviation about its nominal value) from the sidecar's ``meta.parameter_tolerance``, or the
+    robot class's documented default (:attr:`calib.robot.Robot.default_parameter_tolerance`).
+
+    Raises:
+        ValueError: a tolerance naming no parameter or unit, or not a number > 0 (file and key named).
+    """
     tolerance = (meta or {}).get("parameter_tolerance")
     if tolerance is None:
         default = ", ".join(f"{v:g} {u}" for u, v in robot.default_parameter_tolerance.items())
@@ -380,6 +393,24 @@ def parameter_prior(robot: Robot, settings: RunSettings, meta: dict | None, wher
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: field 'meta.parameter_tolerance': {exc}") from None
     return prior, f"the sidecar's parameter_tolerance ({where})"
+
+
+#: An identified error beyond this many tolerances is physically implausible.
+IMPLAUSIBLE_TOLERANCES = 3.0
+
+
+def implausible_parameters(robot: Robot, errors: np.ndarray, tolerance: ParameterPrior, names) -> list[dict]:
+    """The identified errors (P,) beyond :data:`IMPLAUSIBLE_TOLERANCES` times their tolerance, of the
+    parameters ``names``: ``{"name", "error", "tolerance", "unit", "words"}`` each, largest first."""
+    out = []
+    for name in names:
+        k = robot.table.index(name)
+        tol, err, unit = float(tolerance.std[k]), float(errors[k]), robot.table.units[k]
+        if abs(err) > IMPLAUSIBLE_TOLERANCES * tol:
+            out.append({"name": name, "error": err, "tolerance": tol, "unit": unit,
+                        "words": f"{name} = {err:+.4g} {unit}, tolerance {tol:.4g} {unit}: the geometry may be "
+                                 "absorbing unmodelled physics; run pipeline.discover"})
+    return sorted(out, key=lambda d: -abs(d["error"]) / d["tolerance"])
 
 
 def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
@@ -643,6 +674,8 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
     if instrument is not None:
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
     summary.update(prior_block(inp, result))
+    tolerance, _ = machine_tolerance(robot, None if inp.rec is None else inp.rec.meta, inp.where)
+    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, tolerance, result.free_names)
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
@@ -745,8 +778,11 @@ def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -
         return "no_convergence", f"not calibrated: the fit did not converge ({ident.result.message})"
     search = ident.gross
     if search is not None and not search.success:
-        return "model_misfit", (f"not calibrated: {search.message}; the model misfits most rows: left-out physics "
-                                f"(run python -m pipeline.discover --real {where}) or a mistake in the file")
+        beyond = int(np.sum(search.statistic > search.cutoff))
+        return "model_misfit", (f"not calibrated: the model misfits most rows ({beyond} of {search.statistic.size} "
+                                f"beyond the declared noise even after the trimmed fits), so no row can be called "
+                                f"gross: physics the geometric model leaves out (run python -m pipeline.discover "
+                                f"--real {where}) or a mistake in the file")
     ratio = evidence["fit_ratio"] if not evidence["fit_at_noise"] else evidence["predictions"]["ratio"]
     what = "the calibration rows" if not evidence["fit_at_noise"] else f"the {evidence['predictions']['what']}"
     return "left_out_physics", (f"not calibrated: {what} are {ratio:.3g} times the declared noise off the model: "

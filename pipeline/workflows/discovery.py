@@ -30,7 +30,7 @@ from pipeline.formats import Recording, atomic_write, check_outputs, output_fold
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.views import verdict_words, write_discovery_rrd
 
-from .calibration import read_as_a_run_does
+from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
 __all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
            "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT"]
@@ -240,6 +240,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "located": disc.located,
         "rows": int(rec.joints.shape[0]),
     }
+    summary["implausible_parameters"] = implausibility(rec, disc)
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resim:
@@ -284,6 +285,25 @@ class DiscoverySettings:
     name: str | None = None
     overwrite: bool = False
     summary_json: Path | None = None
+
+
+def implausibility(rec: Recording, disc: Discovery) -> dict:
+    """The identified errors beyond three tolerances (the sidecar's ``meta.parameter_tolerance`` or
+    the robot's default) with the geometry alone and with the effects found, and those the effects
+    bring back within tolerance: a geometry that had absorbed physics."""
+    robot = rec.robot
+    tolerance, source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
+    names = robot.free_default
+    alone = implausible_parameters(robot, disc.geometry.errors, tolerance, names)
+    with_effects = implausible_parameters(robot, disc.chosen.errors, tolerance, names)
+    still = {d["name"] for d in with_effects}
+    back = [d for d in alone if d["name"] not in still]
+    k = {n: robot.table.index(n) for n in names}
+    words = [f"{d['name']}: {d['error']:+.4g} {d['unit']} with the geometry alone, "
+             f"{disc.chosen.errors[k[d['name']]]:+.4g} {d['unit']} with {', '.join(disc.effects) or 'no effect'}: back "
+             f"within {IMPLAUSIBLE_TOLERANCES:g} tolerances ({d['tolerance']:.4g} {d['unit']})" for d in back]
+    return {"tolerance_source": source, "geometry_alone": alone, "with_effects": with_effects,
+            "back_within_tolerance": [d["name"] for d in back], "words": words}
 
 
 def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) -> DiscoveryReport:
