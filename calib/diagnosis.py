@@ -101,6 +101,8 @@ class Conversion:
         fix: what the conversion does to the file, in words.
         kind: ``"positions"``, ``"angles"`` or ``"joints"``: the columns it changes.
         apply: ``apply(joints, measured) -> (joints, measured)``, new arrays.
+        axes: which of the kind's columns it changes (0-based: x, y, z; the angles; the joints);
+            empty: every one.
     """
 
     name: str
@@ -108,6 +110,7 @@ class Conversion:
     fix: str
     kind: str
     apply: Callable = field(repr=False, compare=False)
+    axes: tuple = ()
 
 
 def _positions(measured: np.ndarray, n_targets: int, robot: Robot) -> np.ndarray:
@@ -125,24 +128,25 @@ def _with_positions(measured: np.ndarray, pos: np.ndarray, n_targets: int, robot
     return out
 
 
-def _position_conversion(robot, k, name, finding, fix, change) -> Conversion:
+def _position_conversion(robot, k, name, finding, fix, change, axes=()) -> Conversion:
     def apply(joints, measured):
         return joints.copy(), _with_positions(measured, change(_positions(measured, k, robot)), k, robot)
-    return Conversion(name, finding, fix, "positions", apply)
+    return Conversion(name, finding, fix, "positions", apply, axes)
 
 
-def _angle_conversion(robot, name, finding, fix, change) -> Conversion:
+def _angle_conversion(robot, name, finding, fix, change, axes=()) -> Conversion:
     mask = robot.angle_pose_mask
 
     def apply(joints, measured):
         out = measured.copy()
         out[:, mask] = change(measured[:, mask])
         return joints.copy(), out
-    return Conversion(name, finding, fix, "angles", apply)
+    return Conversion(name, finding, fix, "angles", apply, axes)
 
 
-def _joint_conversion(name, finding, fix, change) -> Conversion:
-    return Conversion(name, finding, fix, "joints", lambda joints, measured: (change(joints.copy()), measured.copy()))
+def _joint_conversion(name, finding, fix, change, axes=()) -> Conversion:
+    return Conversion(name, finding, fix, "joints", lambda joints, measured: (change(joints.copy()), measured.copy()),
+                      axes)
 
 
 def _swap(a: int, b: int):
@@ -166,11 +170,11 @@ def _position_conversions(robot: Robot, k: int) -> list[Conversion]:
     for a, b in ((0, 1), (0, 2), (1, 2)):
         out.append(_position_conversion(robot, k, f"{axes[a]} and {axes[b]} swapped",
                                         f"the columns {axes[a]} and {axes[b]} seem to be swapped",
-                                        f"{axes[a]} and {axes[b]} exchanged", _swap(a, b)))
+                                        f"{axes[a]} and {axes[b]} exchanged", _swap(a, b), (a, b)))
     for a in range(3):
         out.append(_position_conversion(robot, k, f"{axes[a]} sign flipped",
                                         f"the positions' {axes[a]} seems to have its sign flipped",
-                                        f"{axes[a]} negated", _negate(a)))
+                                        f"{axes[a]} negated", _negate(a), (a,)))
     return out
 
 
@@ -186,7 +190,7 @@ def _angle_conversions(robot: Robot) -> list[Conversion]:
                              np.deg2rad)]
     for a, n in enumerate(names):
         out.append(_angle_conversion(robot, f"{n} sign flipped", f"the angle {n} seems to have its sign flipped",
-                                     f"{n} negated", _negate(a)))
+                                     f"{n} negated", _negate(a), (a,)))
     out += [
         _angle_conversion(robot, "R = Rx(alpha) Ry(beta) Rz(gamma)", "the angles seem to follow R = Rx(alpha) "
                           "Ry(beta) Rz(gamma)", "angles re-read in the convention Rx Ry Rz", _xyz_convention),
@@ -219,7 +223,7 @@ def _joint_conversions(robot: Robot) -> list[Conversion]:
         how = (f"{sym}{c + 1} -> {limits[c].sum():.6g} - {sym}{c + 1} (about the middle of its range)" if unit == "mm"
                else f"{sym}{c + 1} -> -{sym}{c + 1} (about its zero)")
         out.append(_joint_conversion(f"joint {c + 1} reversed", f"{word} {c + 1}'s joint reading ({sym}{c + 1}) "
-                                     "seems to count the other way", how, change))
+                                     "seems to count the other way", how, change, (c,)))
     return out
 
 
