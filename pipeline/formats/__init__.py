@@ -1,19 +1,22 @@
 """File formats: the recording (CSV + JSON sidecar), the checks a recording passes before
-anything is fitted to it, and safe writing of every output (atomic files, sets published
-together)."""
+anything is fitted to it, lab exports turned into recordings, command files, and safe writing of
+every output (atomic files, sets published together, locks on names)."""
 
+from .checks import (JOINT_LIMIT_TOLERANCE, REFUSED_CONDITION, ROTATION_CONVENTION, WARNED_CONDITION,
+                     RecordingChecks, plausibility, recording_checks)
 from .command_file import command_columns, command_csv, read_command_file, write_command_file
-from .checks import REFUSED_CONDITION, ROTATION_CONVENTION, WARNED_CONDITION, plausibility
 from .lab_export import LabExportError, LabMap, convert_lab_files, read_map
-from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs, one_line, output_folder, publish,
-                      remove_stale_temporaries, writing)
+from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
+                      one_line, output_folder, publish, remove_stale_temporaries, writing)
 from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SESSION_KEYS,
                         SESSION_TIMES, SETS, SIDECAR_FIELDS, Recording, RecordingError, columns, read_recording,
                         recording_texts, session_measurement, sidecar_path, write_recording)
 
-__all__ = ["LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv", "read_command_file", "write_command_file", "Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
-           "sidecar_path", "plausibility", "check_outputs", "one_line", "FileLock", "LockHeld", "NameReservation", "remove_stale_temporaries",
-           "OutputError", "ResultSet", "atomic_write", "output_folder", "publish",
-           "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS", "SIDECAR_FIELDS",
-           "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
-           "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]
+__all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
+           "sidecar_path", "session_measurement", "plausibility", "recording_checks", "RecordingChecks",
+           "LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv",
+           "read_command_file", "write_command_file", "check_outputs", "one_line", "FileLock", "LockHeld",
+           "NameReservation", "remove_stale_temporaries", "OutputError", "ResultSet", "atomic_write",
+           "output_folder", "publish", "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS",
+           "SIDECAR_FIELDS", "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES",
+           "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]

@@ -1,6 +1,15 @@
-"""Checks that a machine can have produced a recording, before anything is fitted to it: units,
-reach, rotation convention, repeated rows, excitation. Each refusal names the file, row and
-column and what the file seems to hold."""
+"""Checks that a machine can have produced a recording, before anything is fitted to it: reach,
+magnitudes, repeated rows, excitation, and units and conventions. Each refusal names the file, row
+and column and what the file seems to hold.
+
+Certain refusals (no machine can have produced the file): joint readings beyond the nominal
+range by more than the tolerance (:data:`JOINT_LIMIT_TOLERANCE` of the range, or the sidecar's
+``meta.joint_limit_tolerance``), values beyond any workspace, copied rows, poses too alike to
+identify the parameters. Units and conventions are refused only on evidence
+(:func:`calib.diagnosis.diagnose`): the converted file fits the machine to the declared noise and
+the file as written does not, even with an instrument frame. Otherwise a suspicion (positions
+that look like metres, angles that look like degrees against the nominal model) is a warning with
+its figures, and the file is read as written."""
 
 from __future__ import annotations
 
@@ -10,11 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from calib.measurement import measurement_settings, target_names
-from calib.rotation import rotation_matrix
 
-from .recording import Recording, RecordingError, columns
+from .recording import Recording, RecordingError, columns, sidecar_path
 
-__all__ = ["plausibility", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]
+__all__ = ["plausibility", "recording_checks", "RecordingChecks", "REFUSED_CONDITION", "WARNED_CONDITION",
+           "ROTATION_CONVENTION", "JOINT_LIMIT_TOLERANCE"]
 
 
 #: Column-scaled condition number of the identification Jacobian above which the calibration
@@ -25,10 +34,26 @@ REFUSED_CONDITION = 1e8
 
 WARNED_CONDITION = 1e6
 
+#: Joint readings past the nominal range by at most this fraction of the range (a leg's whole
+#: stroke, a motor's whole range) are accepted with a warning: a real encoder reads a little past
+#: the declared stroke. The sidecar's ``meta.joint_limit_tolerance`` replaces it: a number in the
+#: joint unit, or ``{"fraction": f}`` of the range.
+JOINT_LIMIT_TOLERANCE = 0.01
+
+#: Rows a warning names before it says "and N more".
+LISTED_ROWS = 10
+
 
 def _row(path: Path, r: int) -> str:
     """How messages name the 0-based data row ``r``: its spreadsheet row number and file line."""
     return f"{path}: row {r + 1} (line {r + 2})"
+
+
+def _rows_in_words(rows) -> str:
+    """``3 (line 4), 17 (line 18)`` of 0-based rows, at most :data:`LISTED_ROWS` of them."""
+    rows = [int(r) for r in rows]
+    words = ", ".join(f"{r + 1} (line {r + 2})" for r in rows[:LISTED_ROWS])
+    return words + (f" and {len(rows) - LISTED_ROWS} more" if len(rows) > LISTED_ROWS else "")
 
 
 def _condition_in_words(cond: float) -> str:
@@ -41,46 +66,6 @@ def _condition_in_words(cond: float) -> str:
 
 #: The rotation convention of recordings (the project's).
 ROTATION_CONVENTION = "R = Rz(gamma) Ry(beta) Rx(alpha) (platform to base, angles in the columns alpha, beta, gamma)"
-
-
-def _other_rotation_convention(rec: Recording) -> str | None:
-    """The convention the recording's angles seem to follow when it is not the project's: the
-    geometry identified (forward method) with the angles read in another convention explains the
-    calibration rows at least ten times better (chi-square) than with the project's, which
-    misfits (chi-square above 4 per degree of freedom); None otherwise. Only then: for small
-    angles the conventions differ at second order, like a geometric error, so only a fit tells
-    them apart."""
-    from scipy.spatial.transform import Rotation
-
-    from calib.engine import identify_forward
-    from calib.rotation import euler_from_matrix
-
-    joints, measured = rec.subset("calibration")
-    robot = rec.robot
-    angle = robot.angle_pose_mask
-    angles = measured[:, angle]
-
-    def chi2(converted_angles) -> float:
-        poses = measured.copy()
-        poses[:, angle] = converted_angles
-        try:
-            fit = identify_forward(robot, joints, poses, rec.noise)
-        except (ValueError, ArithmeticError):  # KinematicsError is a ValueError
-            return float("inf")
-        value = fit.chi2 / max(fit.dof, 1)
-        return value if np.isfinite(value) else float("inf")
-
-    declared = chi2(angles)
-    if not declared > 4.0:
-        return None
-    candidates = {
-        "R = Rx(alpha) Ry(beta) Rz(gamma)": lambda: euler_from_matrix(Rotation.from_euler("XYZ", angles).as_matrix()),
-        "the inverse rotation (base to platform)": lambda: euler_from_matrix(np.swapaxes(rotation_matrix(angles), 1, 2)),
-        "the columns in the order gamma, beta, alpha": lambda: angles[:, ::-1],
-    }
-    misfit = {name: chi2(convert()) for name, convert in candidates.items()}
-    best = min(misfit, key=misfit.get)
-    return best if misfit[best] < 0.1 * declared else None
 
 
 @dataclass(frozen=True)
@@ -101,27 +86,59 @@ class _PoseColumns:
     n_targets: int
 
 
-def _check_joint_range(rec: Recording, path: Path) -> None:
-    """Refuse joint values outside the nominal geometry's range (the stroke of a leg), saying so
-    when the whole file seems to hold metres for mm or degrees for rad."""
+def _joint_tolerance(rec: Recording, path: Path, span: np.ndarray) -> np.ndarray:
+    """(C,) how far past its range each joint may read (joint unit): :data:`JOINT_LIMIT_TOLERANCE`
+    of the range, or the sidecar's ``meta.joint_limit_tolerance`` (a number in the joint unit, or
+    ``{"fraction": f}``)."""
+    value = rec.meta.get("joint_limit_tolerance")
+    if value is None:
+        return JOINT_LIMIT_TOLERANCE * span
+    where = f"{sidecar_path(path)}: field 'meta.joint_limit_tolerance'"
+    if isinstance(value, dict):
+        if set(value) != {"fraction"}:
+            raise RecordingError(f"{where} must be a number ({rec.robot.joint_unit}) or {{\"fraction\": f}}, got "
+                                 f"keys {', '.join(sorted(value)) or 'none'}")
+        fraction = value["fraction"]
+        if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 <= fraction < 1:
+            raise RecordingError(f"{where}: fraction must be a number in [0, 1), got {fraction!r}")
+        return float(fraction) * span
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+        raise RecordingError(f"{where} must be a finite number >= 0 ({rec.robot.joint_unit}) or "
+                             f"{{\"fraction\": f}}, got {value!r}")
+    return np.full(span.shape, float(value))
+
+
+def _check_joint_range(rec: Recording, path: Path) -> str | None:
+    """Refuse joint values outside the nominal geometry's range (the stroke of a leg) by more than
+    the tolerance (:func:`_joint_tolerance`), saying so when the whole file seems to hold metres for
+    mm or degrees for rad; a warning naming the rows read past the range within the tolerance."""
     robot = rec.robot
     joint_cols, _ = columns(robot)
     limits = robot.joint_limits()
     q = rec.joints
     out = (q < limits[:, 0]) | (q > limits[:, 1])
     if not out.any():
-        return
+        return None
     unit = robot.joint_unit
-    factor = 1000.0 if unit == "mm" else 180.0 / np.pi
-    other = "metres" if unit == "mm" else "degrees"
-    scaled = q * factor if unit == "mm" else np.deg2rad(q)
-    if out.all(axis=1).any() and not ((scaled < limits[:, 0]) | (scaled > limits[:, 1])).any():
-        raise RecordingError(f"{path}: columns {', '.join(joint_cols)}: the joint values seem to be in "
-                             f"{other} (e.g. {q[0, 0]:.6g}), a recording holds {unit}")
-    r, c = np.argwhere(out)[0]
-    raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
-                         f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} of the nominal geometry: "
-                         "the machine cannot reach it")
+    tol = _joint_tolerance(rec, path, limits[:, 1] - limits[:, 0])
+    far = (q < limits[:, 0] - tol) | (q > limits[:, 1] + tol)
+    if far.any():
+        other = "metres" if unit == "mm" else "degrees"
+        scaled = q * 1000.0 if unit == "mm" else np.deg2rad(q)
+        if out.all(axis=1).any() and not ((scaled < limits[:, 0]) | (scaled > limits[:, 1])).any():
+            raise RecordingError(f"{path}: columns {', '.join(joint_cols)}: the joint values seem to be in "
+                                 f"{other} (e.g. {q[0, 0]:.6g}), a recording holds {unit}")
+        r, c = np.argwhere(far)[0]
+        raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
+                             f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} of the nominal geometry by "
+                             f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it")
+    past = np.maximum(limits[:, 0] - q, q - limits[:, 1])
+    r, c = np.unravel_index(np.argmax(np.where(out, past, -np.inf)), q.shape)
+    cols = [joint_cols[j] for j in np.flatnonzero(out.any(axis=0))]
+    return (f"{path}: rows {_rows_in_words(np.flatnonzero(out.any(axis=1)))}, column(s) {', '.join(cols)}: joint "
+            f"readings past the range of the nominal geometry by up to {past[r, c]:.3g} {unit} (row {r + 1}, "
+            f"{joint_cols[c]} = {q[r, c]:.6g} {unit}, range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit}), within "
+            f"the tolerance {tol[c]:.3g} {unit}: accepted as read")
 
 
 def _pose_columns(rec: Recording) -> _PoseColumns:
@@ -141,46 +158,45 @@ def _pose_columns(rec: Recording) -> _PoseColumns:
     return _PoseColumns(names=columns(robot)[1], angle=robot.angle_pose_mask, fk=fk, n_targets=0)
 
 
-def _check_position_units(rec: Recording, poses: _PoseColumns, path: Path) -> float:
-    """Refuse positions in metres: read as metres they match the nominal forward kinematics
-    (``poses.fk``, not None) ten times better than read as mm. Returns the median
-    |measured - fk| of the position columns (mm)."""
+def _position_suspicion(rec: Recording, poses: _PoseColumns, path: Path) -> tuple[float, str | None]:
+    """``(median |measured - fk| of the positions (mm), a warning or None)``: positions that
+    match the nominal forward kinematics (``poses.fk``, not None) ten times better once read as
+    metres."""
     m, fk, pos = rec.measured, poses.fk, ~poses.angle
-    e1 = np.median(np.abs(m[:, pos] - fk[:, pos]))
-    e1000 = np.median(np.abs(1000.0 * m[:, pos] - fk[:, pos]))
+    e1 = float(np.median(np.abs(m[:, pos] - fk[:, pos])))
+    e1000 = float(np.median(np.abs(1000.0 * m[:, pos] - fk[:, pos])))
     if e1 > 1.0 and e1000 < 0.1 * e1:
         cols = [c for c, a in zip(poses.names, poses.angle) if not a]
-        raise RecordingError(f"{path}: columns {', '.join(cols)}: the positions seem to be in metres "
-                             f"(e.g. {m[0, pos][-1]:.6g} where the joints put the platform near "
-                             f"{fk[0, pos][-1]:.6g} mm); a recording holds mm")
-    return e1
+        return e1, (f"{path}: columns {', '.join(cols)}: the positions look like metres: they differ from where "
+                    f"the joints put the platform by a median {e1:.4g} mm as written and {e1000:.4g} mm read as "
+                    f"metres (e.g. {m[0, pos][-1]:.6g} where the joints put the platform near {fk[0, pos][-1]:.6g} mm)")
+    return e1, None
 
 
-def _check_angle_units(rec: Recording, poses: _PoseColumns, path: Path, in_base_frame: bool) -> None:
-    """Refuse angles in degrees: converted from degrees they match the nominal forward kinematics
-    closely. Only where the positions say the poses are in the base frame (an instrument's frame
-    turns the angles too)."""
+def _angle_suspicion(rec: Recording, poses: _PoseColumns, path: Path, in_base_frame: bool) -> str | None:
+    """A warning when the angles, converted from degrees, match the nominal forward kinematics
+    closely (in the base frame only: an instrument's frame turns the angles too); None otherwise.
+    A capture body mounted a few degrees off on a level platform looks just so."""
     m, fk, angle = rec.measured, poses.fk, poses.angle
-    e = np.median(np.abs(m[:, angle] - fk[:, angle]))
-    edeg = np.median(np.abs(np.deg2rad(m[:, angle]) - fk[:, angle]))
+    e = float(np.median(np.abs(m[:, angle] - fk[:, angle])))
+    edeg = float(np.median(np.abs(np.deg2rad(m[:, angle]) - fk[:, angle])))
     if in_base_frame and e > 0.01 and edeg < 0.1 * e and edeg < 0.01:
         cols = [c for c, a in zip(poses.names, angle) if a]
-        raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to be in degrees "
-                             "(they match the joints once converted from degrees); a recording holds rad")
+        return (f"{path}: columns {', '.join(cols)}: the angles look like degrees: they differ from the nominal "
+                f"model's by a median {e:.3g} rad as written and {edeg:.3g} rad read as degrees")
+    return None
 
 
-def _check_pose_units(rec: Recording, poses: _PoseColumns, path: Path) -> bool:
-    """Refuse positions in metres and angles in degrees (against the nominal forward kinematics,
-    when there is one). Returns whether the rotation convention can be checked: the poses in the
-    base frame, three angles, at least two calibration rows."""
+def _suspicions(rec: Recording, poses: _PoseColumns, path: Path) -> list[str]:
+    """What the nominal forward kinematics (when there is one) suggests of the pose units, in words."""
     if poses.fk is None:
-        return False
-    e1 = _check_position_units(rec, poses, path)
-    if not poses.angle.any():
-        return False
-    in_base_frame = e1 < 0.05 * rec.robot.length_scale_mm
-    _check_angle_units(rec, poses, path, in_base_frame)
-    return in_base_frame and int(poses.angle.sum()) == 3 and int((rec.sets == "calibration").sum()) >= 2
+        return []
+    e1, found = _position_suspicion(rec, poses, path)
+    out = [] if found is None else [found]
+    if poses.angle.any():
+        angles = _angle_suspicion(rec, poses, path, e1 < 0.05 * rec.robot.length_scale_mm)
+        out += [] if angles is None else [angles]
+    return out
 
 
 def _check_magnitudes(rec: Recording, poses: _PoseColumns, path: Path) -> None:
@@ -192,15 +208,6 @@ def _check_magnitudes(rec: Recording, poses: _PoseColumns, path: Path) -> None:
         r, c = np.argwhere(far)[0]
         what = "not an angle in rad" if angle[c] else f"far beyond the {robot.name}'s reach"
         raise RecordingError(f"{_row(path, r)}, column {poses.names[c]!r}: {m[r, c]:.6g} is {what}")
-
-
-def _check_rotation_convention(rec: Recording, poses: _PoseColumns, path: Path) -> None:
-    """Refuse angles that follow another rotation convention (:func:`_other_rotation_convention`)."""
-    other = _other_rotation_convention(rec)
-    if other is not None:
-        cols = [c for c, a in zip(poses.names, poses.angle) if a]
-        raise RecordingError(f"{path}: columns {', '.join(cols)}: the angles seem to follow {other}; "
-                             f"a recording holds {ROTATION_CONVENTION}")
 
 
 def _check_copied_rows(rec: Recording, path: Path) -> None:
@@ -273,28 +280,100 @@ def _excitation(rec: Recording, poses: _PoseColumns, path: Path) -> str | None:
     return None
 
 
-def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
+def _diagnosis(rec: Recording):
+    """:func:`calib.diagnosis.diagnose` of every row of ``rec``, as its ``meta.measurement`` says
+    (instrument frame mode, target offsets)."""
+    from calib.diagnosis import diagnose
+
+    settings = measurement_settings(rec.meta.get("measurement"))
+    return diagnose(rec.robot, rec.joints, rec.measured, rec.noise, frame=settings.frame, targets=settings.targets,
+                    estimate_targets=settings.estimate_targets if settings.targets is not None else None)
+
+
+def _conversion_columns(rec: Recording, poses: _PoseColumns, conversion) -> list[str]:
+    """The columns a :class:`calib.diagnosis.Conversion` changes."""
+    if conversion.kind == "joints":
+        names = list(columns(rec.robot)[0])
+    else:
+        pick = poses.angle if conversion.kind == "angles" else ~poses.angle
+        names = [c for c, p in zip(poses.names, pick) if p]
+        if poses.n_targets and conversion.axes:  # every target's coordinate of those axes
+            return [c for c in names if "xyz".index(c.split("_")[1]) in conversion.axes]
+    return [names[i] for i in conversion.axes] if conversion.axes else names
+
+
+def _holds(rec: Recording, kind: str) -> str:
+    """What a recording holds in columns of ``kind``, in words."""
+    if kind == "angles":
+        return f"rad, {ROTATION_CONVENTION}"
+    if kind == "joints":
+        return f"{rec.robot.joint_unit}, counted as the nominal geometry counts them"
+    return "mm, in the base frame or one instrument frame (a rotation and translation of it)"
+
+
+def _units_and_conventions(rec: Recording, poses: _PoseColumns, path: Path, diagnosis) -> list[str]:
+    """Refuse a unit, axis, sign, convention or joint-direction mistake the diagnosis confirms, or
+    a column not measured; warnings with their figures for what the nominal model only suggests."""
+    suspicions = _suspicions(rec, poses, path)
+    if diagnosis.cause == "conversion":
+        conv = diagnosis.conversion
+        cols = _conversion_columns(rec, poses, conv)
+        raise RecordingError(f"{path}: column{'s' if len(cols) > 1 else ''} {', '.join(cols)}: {conv.finding}: "
+                             f"converted ({conv.fix}) the file fits the {rec.robot.name} at the declared noise "
+                             f"({diagnosis.converted.words()}) and as written it does not ({diagnosis.written.words()}); "
+                             f"a recording holds {_holds(rec, conv.kind)}")
+    if diagnosis.cause == "unmeasured column":
+        name = diagnosis.column
+        col = poses.names[list(rec.robot.pose_names).index(name)]
+        raise RecordingError(f"{path}: column {col!r}: {diagnosis.message}")
+    verdict = ("yet the file as written fits the machine" if diagnosis.success else
+               "yet no conversion of the file fits the machine better")
+    return [f"{w}; {verdict} ({diagnosis.written.words()}): read as written" for w in suspicions]
+
+
+@dataclass(frozen=True, eq=False)
+class RecordingChecks:
+    """What :func:`recording_checks` found.
+
+    Attributes:
+        warnings: in words, each naming the file (and rows, columns).
+        diagnosis: :func:`calib.diagnosis.diagnose` of every row (the verdict whether the file fits
+            its machine, and if not the likely cause), or None for fewer than two rows.
+    """
+
+    warnings: list
+    diagnosis: object
+
+
+def recording_checks(rec: Recording, csv_path: str | Path) -> RecordingChecks:
     """Check that the machine can have produced ``rec`` before anything is fitted.
 
-    Refuses: joint values outside the nominal geometry's range (the stroke of a leg), with a
-    guess when the whole file seems to hold metres for mm or degrees for rad; poses whose
-    positions or angles seem to be in metres or degrees; values beyond any workspace; angles in
-    another rotation convention; rows copied exactly (time included); calibration poses too
-    alike to identify the parameters (condition number in words). The checks run in that order.
+    Refuses, in this order: joint values outside the nominal geometry's range by more than the
+    tolerance (:data:`JOINT_LIMIT_TOLERANCE`; the whole file in metres or degrees says so);
+    values beyond any workspace; rows copied exactly (time included); calibration poses too alike
+    to identify the parameters (condition number in words); then, on the diagnosis' evidence
+    only, a unit, axis, sign, rotation-convention or joint-direction mistake (the converted file
+    fits the machine to the declared noise, as written it does not) and a pose column not measured.
 
     Returns:
-        Warnings in words: repeated measurements (same joints and pose at another time), poorly
-        excited calibration poses.
+        Warnings (joint readings past the range within the tolerance, repeated measurements,
+        poorly excited poses, units the nominal model only suggests) and the diagnosis.
 
     Raises:
         RecordingError: naming the file, row and column, and what the file seems to hold.
     """
     path = Path(csv_path)
-    _check_joint_range(rec, path)
+    warnings = [_check_joint_range(rec, path)]
     poses = _pose_columns(rec)
-    check_convention = _check_pose_units(rec, poses, path)
     _check_magnitudes(rec, poses, path)
-    if check_convention:  # after the magnitudes: a fit needs sane values
-        _check_rotation_convention(rec, poses, path)
     _check_copied_rows(rec, path)
-    return [w for w in (_repeated_measurements(rec, path), _excitation(rec, poses, path)) if w is not None]
+    warnings += [_repeated_measurements(rec, path), _excitation(rec, poses, path)]
+    diagnosis = _diagnosis(rec) if len(rec.joints) >= 2 else None
+    if diagnosis is not None:
+        warnings += _units_and_conventions(rec, poses, path, diagnosis)
+    return RecordingChecks([w for w in warnings if w is not None], diagnosis)
+
+
+def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
+    """:func:`recording_checks`' warnings (it raises what it refuses)."""
+    return recording_checks(rec, csv_path).warnings

@@ -1,0 +1,535 @@
+"""Why a recording does not fit its machine: a units, axis, sign or joint-direction mistake, gross
+rows, a column never measured, or physics the model leaves out.
+
+:func:`diagnose` judges the data as written first: the geometry (with an instrument frame where the
+data need one, :func:`calib.measurement.identify_measured`, frame ``"auto"``) fitted to them,
+chi-square of the whitened residuals against the declared noise. The data **fit** when the
+chi-square is at most the chi-square(dof) quantile ``1 - FIT_ALPHA`` (:data:`FIT_ALPHA` = 0.001:
+one honest file in a thousand is called a misfit; for 300 degrees of freedom the limit is 1.27
+per degree of freedom). A fit is **plausible** when no free parameter moved more than
+:data:`PLAUSIBLE_TOLERANCES` times its manufacturing tolerance (the robot's
+``default_parameter_tolerance``, :class:`calib.prior.ParameterPrior`); a 6-RUS motor read backwards
+is fitted to the noise by turning its axis by pi (600 tolerances), a capture body mounted 2
+degrees off by turning the platform joints (50 tolerances on the hexapod, 20 on the 6-RUS).
+
+A plausible fit is the verdict **nothing wrong** (``success``). Otherwise each conversion of
+:func:`conversion_registry` (metres for mm, degrees for rad, two position axes swapped, a position
+axis or an angle with its sign flipped, the angles in reversed order, another rotation convention,
+the joints in metres or degrees, one joint read backwards) is applied to the file, and a
+conversion is **named** only on evidence: the converted data fit plausibly, and the data as written
+either do not fit (a chi-square per degree of freedom at least :data:`MIN_IMPROVEMENT` times the
+converted one's) or fit only implausibly. Cost: a screen (every conversion fitted on a subset of
+the rows, :data:`SCREEN_ROWS_FACTOR` times the fewest rows that identify the unknowns,
+:data:`SCREEN_ITERATIONS` Gauss-Newton iterations from the nominal geometry), then the full fit
+(Levenberg-Marquardt, :data:`FULL_ITERATIONS`) for the best :data:`SCREEN_KEEP` of those within
+:data:`MIN_IMPROVEMENT` times the best screened chi-square per degree of freedom. Where several conversions fit (with a frame estimated every mirror image of a
+translating platform's positions is another: x flipped, y flipped, x and y swapped), the one that
+needs no instrument frame is named, then the smallest chi-square; the others are listed.
+
+No conversion: a column holding one value on every row while the nominal model moves the
+platform along it by more than :data:`CONSTANT_COLUMN_STDS` noise standard deviations is a column
+**not measured**; then :func:`calib.robust.find_gross_rows` names **gross rows** when the others
+fit; otherwise the model **does not fit**: an effect it leaves out (or noise declared too small).
+A data set that fits as written but only implausibly, with no conversion that fits plausibly, is
+still **nothing wrong**, with a note: the calibration then carries the offset in the geometry
+(a capture body tilted on the platform is absorbed by the platform joints' coordinates, which then
+describe the capture body's frame: predictions are right, the identified platform joints are
+turned by the tilt).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from .measurement import identify_measured
+from .noise import SensorNoise
+from .prior import ParameterPrior
+from .robot import KinematicsError, Robot
+from .rotation import euler_from_matrix, rotation_matrix
+
+__all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
+           "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
+           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit"]
+
+#: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
+#: ``1 - FIT_ALPHA`` quantile.
+FIT_ALPHA = 1e-3
+#: A conversion is named against data that do not fit only when it lowers the chi-square per
+#: degree of freedom at least this many times.
+MIN_IMPROVEMENT = 10.0
+#: A fit is plausible when no free parameter moved more than this many tolerances.
+PLAUSIBLE_TOLERANCES = 10.0
+#: Conversions given the full fit after the screen.
+SCREEN_KEEP = 3
+#: The screen fits this many times the fewest rows that identify the unknowns (all rows if fewer).
+SCREEN_ROWS_FACTOR = 3
+#: Gauss-Newton iterations of a screening fit (from the nominal geometry, one gauge pass): enough
+#: to bring data that fit to near their minimum, never enough to drag wrong data there.
+SCREEN_ITERATIONS = 2
+#: Levenberg-Marquardt budget of a full fit, in Jacobians per unknown (``max_iter`` of
+#: :func:`calib.engine.minimise`: ``max_iter * (unknowns + 1)`` evaluations; a clean file
+#: converges within a tenth of it).
+FULL_ITERATIONS = 2
+#: A constant column is "not measured" when the nominal model spreads the platform along it by
+#: more than this many noise standard deviations.
+CONSTANT_COLUMN_STDS = 100.0
+
+#: The verdicts: nothing wrong, a conversion, a column not measured, gross rows, the model misfits.
+CAUSES = ("none", "conversion", "unmeasured column", "gross rows", "left-out physics")
+
+
+def chi2_limit(dof: int, alpha: float = FIT_ALPHA) -> float:
+    """The chi-square(dof) ``1 - alpha`` quantile (inf for dof <= 0: nothing can be judged)."""
+    return float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha)) if dof > 0 else float("inf")
+
+
+# --------------------------------------------------------------------------- conversions
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """One mistake a file can hold, and its undoing.
+
+    Attributes:
+        name: short name (``"positions in metres"``, ``"x and y swapped"``, ``"joint 3 reversed"``).
+        finding: what the file then seems to hold, in words (a message's clause).
+        fix: what the conversion does to the file, in words.
+        kind: ``"positions"``, ``"angles"`` or ``"joints"``: the columns it changes.
+        apply: ``apply(joints, measured) -> (joints, measured)``, new arrays.
+        axes: which of the kind's columns it changes (0-based: x, y, z; the angles; the joints);
+            empty: every one.
+    """
+
+    name: str
+    finding: str
+    fix: str
+    kind: str
+    apply: Callable = field(repr=False, compare=False)
+    axes: tuple = ()
+
+
+def _positions(measured: np.ndarray, n_targets: int, robot: Robot) -> np.ndarray:
+    """(N, K, 3) view-copy of the position columns (K targets, or the pose's x, y, z)."""
+    if n_targets:
+        return measured.reshape(len(measured), n_targets, 3).copy()
+    return measured[:, ~robot.angle_pose_mask][:, None, :].copy()
+
+
+def _with_positions(measured: np.ndarray, pos: np.ndarray, n_targets: int, robot: Robot) -> np.ndarray:
+    out = measured.copy()
+    if n_targets:
+        return pos.reshape(len(measured), -1)
+    out[:, ~robot.angle_pose_mask] = pos[:, 0, :]
+    return out
+
+
+def _position_conversion(robot, k, name, finding, fix, change, axes=()) -> Conversion:
+    def apply(joints, measured):
+        return joints.copy(), _with_positions(measured, change(_positions(measured, k, robot)), k, robot)
+    return Conversion(name, finding, fix, "positions", apply, axes)
+
+
+def _angle_conversion(robot, name, finding, fix, change, axes=()) -> Conversion:
+    mask = robot.angle_pose_mask
+
+    def apply(joints, measured):
+        out = measured.copy()
+        out[:, mask] = change(measured[:, mask])
+        return joints.copy(), out
+    return Conversion(name, finding, fix, "angles", apply, axes)
+
+
+def _joint_conversion(name, finding, fix, change, axes=()) -> Conversion:
+    return Conversion(name, finding, fix, "joints", lambda joints, measured: (change(joints.copy()), measured.copy()),
+                      axes)
+
+
+def _swap(a: int, b: int):
+    def change(p):
+        p[..., [a, b]] = p[..., [b, a]]
+        return p
+    return change
+
+
+def _negate(a: int):
+    def change(p):
+        p[..., a] = -p[..., a]
+        return p
+    return change
+
+
+def _position_conversions(robot: Robot, k: int) -> list[Conversion]:
+    axes = "xyz"
+    out = [_position_conversion(robot, k, "positions in metres", "the positions seem to be in metres",
+                                "positions times 1000", lambda p: p * 1000.0)]
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        out.append(_position_conversion(robot, k, f"{axes[a]} and {axes[b]} swapped",
+                                        f"the columns {axes[a]} and {axes[b]} seem to be swapped",
+                                        f"{axes[a]} and {axes[b]} exchanged", _swap(a, b), (a, b)))
+    for a in range(3):
+        out.append(_position_conversion(robot, k, f"{axes[a]} sign flipped",
+                                        f"the positions' {axes[a]} seems to have its sign flipped",
+                                        f"{axes[a]} negated", _negate(a), (a,)))
+    return out
+
+
+def _xyz_convention(angles: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return euler_from_matrix(Rotation.from_euler("XYZ", angles).as_matrix())
+
+
+def _angle_conversions(robot: Robot) -> list[Conversion]:
+    names = [robot.pose_names[i] for i in np.flatnonzero(robot.angle_pose_mask)]
+    out = [_angle_conversion(robot, "angles in degrees", "the angles seem to be in degrees", "angles times pi / 180",
+                             np.deg2rad)]
+    for a, n in enumerate(names):
+        out.append(_angle_conversion(robot, f"{n} sign flipped", f"the angle {n} seems to have its sign flipped",
+                                     f"{n} negated", _negate(a), (a,)))
+    out += [
+        _angle_conversion(robot, "R = Rx(alpha) Ry(beta) Rz(gamma)", "the angles seem to follow R = Rx(alpha) "
+                          "Ry(beta) Rz(gamma)", "angles re-read in the convention Rx Ry Rz", _xyz_convention),
+        _angle_conversion(robot, "inverse rotation", "the angles seem to follow the inverse rotation (base to "
+                          "platform)", "rotation inverted",
+                          lambda a: euler_from_matrix(np.swapaxes(rotation_matrix(a), 1, 2))),
+        _angle_conversion(robot, "angles in reversed order", "the angles seem to follow the columns in the order "
+                          f"{', '.join(reversed(names))}", "angle columns reversed", lambda a: a[:, ::-1].copy()),
+    ]
+    return out
+
+
+def _joint_conversions(robot: Robot) -> list[Conversion]:
+    """Joint units, and each joint read backwards: a motor (rad) counting the other way reads
+    ``-q`` about its zero (its zero is the reference the geometry's offset ``q0`` refers to); a leg
+    (mm) whose encoder counts the other way reads ``l_min + l_max - l`` (mirrored about the middle
+    of its stroke, the home length)."""
+    unit, sym, word = robot.joint_unit, robot.joint_symbol, robot.chain_word
+    limits = robot.joint_limits()
+    if unit == "mm":
+        out = [_joint_conversion("joints in metres", "the joint values seem to be in metres", "joints times 1000",
+                                 lambda q: q * 1000.0)]
+    else:
+        out = [_joint_conversion("joints in degrees", "the joint values seem to be in degrees",
+                                 "joints times pi / 180", np.deg2rad)]
+    for c in range(robot.n_chains):
+        def change(q, c=c):
+            q[:, c] = (limits[c].sum() - q[:, c]) if unit == "mm" else -q[:, c]
+            return q
+        how = (f"{sym}{c + 1} -> {limits[c].sum():.6g} - {sym}{c + 1} (about the middle of its range)" if unit == "mm"
+               else f"{sym}{c + 1} -> -{sym}{c + 1} (about its zero)")
+        out.append(_joint_conversion(f"joint {c + 1} reversed", f"{word} {c + 1}'s joint reading ({sym}{c + 1}) "
+                                     "seems to count the other way", how, change, (c,)))
+    return out
+
+
+def conversion_registry(robot: Robot, n_targets: int = 0) -> tuple[Conversion, ...]:
+    """Every conversion :func:`diagnose` tries on ``robot``'s data, in order: positions (metres,
+    swapped axes, flipped signs), angles (degrees, flipped signs, other conventions; full poses
+    with three angles only), joints (units, each joint reversed)."""
+    out = _position_conversions(robot, n_targets)
+    if n_targets == 0 and int(robot.angle_pose_mask.sum()) == 3:
+        out += _angle_conversions(robot)
+    return tuple(out + _joint_conversions(robot))
+
+
+# --------------------------------------------------------------------------- fits
+
+
+@dataclass(frozen=True, eq=False)
+class FitFigures:
+    """One fit's evidence.
+
+    Attributes:
+        chi2, dof: chi-square of the whitened residuals and its degrees of freedom (inf, 0 when
+            the fit could not run).
+        limit: the chi-square(dof) ``1 - FIT_ALPHA`` quantile.
+        frame_estimated: whether an instrument frame was estimated.
+        worst_parameter: the free parameter that moved most, in tolerances ('' when no fit).
+        worst_tolerances: how many tolerances it moved.
+        error: why the fit could not run ('' when it ran).
+        fit: the :class:`calib.measurement.MeasuredFit` (None when it could not run).
+    """
+
+    chi2: float
+    dof: int
+    limit: float
+    frame_estimated: bool = False
+    worst_parameter: str = ""
+    worst_tolerances: float = float("inf")
+    error: str = ""
+    fit: object = field(default=None, repr=False)
+
+    @property
+    def chi2_dof(self) -> float:
+        """Chi-square per degree of freedom (inf when nothing can be judged)."""
+        return self.chi2 / self.dof if self.dof > 0 else float("inf")
+
+    @property
+    def fits(self) -> bool:
+        """At the declared noise: chi-square within :attr:`limit`."""
+        return bool(np.isfinite(self.chi2) and self.chi2 <= self.limit)
+
+    @property
+    def plausible(self) -> bool:
+        """No free parameter beyond :data:`PLAUSIBLE_TOLERANCES` tolerances."""
+        return bool(self.worst_tolerances <= PLAUSIBLE_TOLERANCES)
+
+    def words(self) -> str:
+        """``chi-square 0.98 per degree of freedom (limit 1.27)``, with the frame and the worst parameter."""
+        if self.error:
+            return f"no fit ({self.error})"
+        s = f"chi-square {self.chi2_dof:.3g} per degree of freedom (limit {self.limit / max(self.dof, 1):.3g})"
+        if self.frame_estimated:
+            s += ", instrument frame estimated"
+        if not self.plausible:
+            s += f", {self.worst_parameter} moved {self.worst_tolerances:.3g} tolerances"
+        return s
+
+    def summary(self) -> dict:
+        """JSON-ready figures."""
+        finite = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
+        return {"chi2": finite(self.chi2), "dof": self.dof, "chi2_per_dof": finite(self.chi2_dof),
+                "limit_per_dof": finite(self.limit / self.dof) if self.dof > 0 else None, "fits": self.fits,
+                "plausible": self.plausible, "frame_estimated": self.frame_estimated,
+                "worst_parameter": self.worst_parameter or None, "worst_tolerances": finite(self.worst_tolerances),
+                "error": self.error or None}
+
+
+@dataclass(frozen=True)
+class _Problem:
+    robot: Robot
+    noise: SensorNoise
+    frame: str
+    targets: np.ndarray | None
+    estimate_targets: bool | None
+    tolerance: np.ndarray
+    free: np.ndarray
+
+
+def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFigures:
+    """Fit the geometry (and frame) to ``(joints, measured)`` (``screen``: the cheap fit of
+    :data:`SCREEN_ITERATIONS`); its figures, also on failure."""
+    robot = problem.robot
+    how = ({"solver": "gn", "max_iter": SCREEN_ITERATIONS, "gauge_passes": 1} if screen else
+           {"max_iter": FULL_ITERATIONS})
+    try:
+        fit = identify_measured(robot, joints, measured, problem.noise, frame=problem.frame, targets=problem.targets,
+                                estimate_targets=problem.estimate_targets, **how)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # KinematicsError is a ValueError
+        return FitFigures(float("inf"), 0, float("inf"), error=str(exc).split("\n")[0])
+    r = fit.result
+    chi2 = float(r.chi2) if np.isfinite(r.chi2) and np.all(np.isfinite(r.residuals)) else float("inf")
+    moved = np.abs(r.theta - robot.table.nominal)[problem.free] / problem.tolerance[problem.free]
+    worst = int(np.argmax(moved)) if moved.size else 0
+    return FitFigures(chi2, int(r.dof), chi2_limit(int(r.dof)), bool(fit.frame_estimated),
+                      robot.table.names[problem.free[worst]] if moved.size else "",
+                      float(moved[worst]) if moved.size and np.isfinite(moved[worst]) else float("inf"), fit=fit)
+
+
+def _screen_rows(problem: _Problem, n: int, m: int) -> np.ndarray:
+    """Evenly spaced rows for the screen: :data:`SCREEN_ROWS_FACTOR` times the fewest rows that
+    identify the unknowns (free parameters, frame, target offsets), or every row."""
+    k = 0 if problem.targets is None else len(problem.targets)
+    unknowns = problem.free.size + 6 + (3 * k if problem.estimate_targets is not False else 0)
+    want = SCREEN_ROWS_FACTOR * -(-unknowns // m)
+    return np.arange(n) if want >= n else np.unique(np.linspace(0, n - 1, want).round().astype(int))
+
+
+# --------------------------------------------------------------------------- the verdict
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Whether a data set fits its machine and, if not, the likely cause with its evidence.
+
+    Attributes:
+        cause: one of :data:`CAUSES`.
+        success: the data as written fit the machine plausibly (``cause == "none"``).
+        message: the verdict in words, with its figures (no row numbers: :attr:`gross_rows` are
+            0-based, the caller numbers rows for the user).
+        written: the fit of the data as written.
+        conversion: the conversion named (``cause == "conversion"``), else None.
+        converted: the fit of the data so converted (None without a conversion).
+        alternatives: other conversions that fit as well (with an instrument frame), by name.
+        column: the column not measured (``cause == "unmeasured column"``), else None.
+        gross_rows: 0-based rows named gross (``cause == "gross rows"``).
+        screened: ``(name, chi-square per degree of freedom)`` of every conversion screened,
+            best first (empty when the data fit as written).
+        fits: fits run in all; seconds: wall time.
+    """
+
+    cause: str
+    message: str
+    written: FitFigures
+    conversion: Conversion | None = None
+    converted: FitFigures | None = None
+    alternatives: tuple = ()
+    column: str | None = None
+    gross_rows: tuple = ()
+    screened: tuple = ()
+    fits: int = 0
+    seconds: float = 0.0
+
+    @property
+    def success(self) -> bool:
+        return self.cause == "none"
+
+    def summary(self) -> dict:
+        """JSON-ready verdict (rows 0-based under ``gross_rows``)."""
+        c = self.conversion
+        return {"cause": self.cause, "success": self.success, "message": self.message,
+                "written": self.written.summary(), "conversion": None if c is None else c.name,
+                "conversion_fix": None if c is None else c.fix,
+                "converted": None if self.converted is None else self.converted.summary(),
+                "alternatives": list(self.alternatives), "column": self.column,
+                "gross_rows": [int(r) for r in self.gross_rows], "fits": self.fits, "seconds": self.seconds}
+
+
+def _named(written: FitFigures, converted: FitFigures) -> bool:
+    """The evidence that names a conversion: the converted data fit plausibly, and as written
+    they misfit by at least :data:`MIN_IMPROVEMENT` times the converted chi-square per degree of
+    freedom, or fit only implausibly."""
+    if not (converted.fits and converted.plausible):
+        return False
+    if not written.fits:
+        return written.chi2_dof >= MIN_IMPROVEMENT * converted.chi2_dof
+    return not written.plausible
+
+
+def _conversions(problem: _Problem, joints, measured, written: FitFigures, counter: list) -> dict:
+    """Screen every conversion on a subset of rows; fit on all rows the best :data:`SCREEN_KEEP`
+    of those within :data:`MIN_IMPROVEMENT` times the smaller of the best screened chi-square per
+    degree of freedom and the data's as written (at least 1: a conversion must beat both);
+    ``{"screened": ((name, chi2/dof), ...), "named": [(Conversion, FitFigures), ...]}`` best first."""
+    k = 0 if problem.targets is None else len(problem.targets)
+    rows = _screen_rows(problem, *measured.shape)
+    screened = []
+    for conv in conversion_registry(problem.robot, k):
+        q, m = conv.apply(joints, measured)
+        screened.append((conv, _figures(problem, q[rows], m[rows], screen=True)))
+        counter[0] += 1
+    screened.sort(key=lambda cf: cf[1].chi2_dof)
+    best = screened[0][1].chi2_dof if screened else float("inf")
+    window = MIN_IMPROVEMENT * max(1.0, min(written.chi2_dof, best))
+    named = []
+    for conv, _ in [cf for cf in screened if cf[1].chi2_dof <= window][:SCREEN_KEEP]:
+        q, m = conv.apply(joints, measured)
+        figures = _figures(problem, q, m)
+        counter[0] += 1
+        if _named(written, figures):
+            named.append((conv, figures))
+    named.sort(key=lambda cf: (cf[1].frame_estimated, cf[1].chi2_dof))
+    return {"screened": tuple((c.name, f.chi2_dof) for c, f in screened), "named": named}
+
+
+def _constant_column(problem: _Problem, joints, measured) -> tuple[str, str] | None:
+    """``(column, words)`` for a pose column holding one value on every row while the nominal
+    model moves the platform along it by more than :data:`CONSTANT_COLUMN_STDS` noise standard
+    deviations; None otherwise (and for target positions)."""
+    robot = problem.robot
+    if problem.targets is not None or len(measured) < 2:
+        return None
+    try:
+        fk = robot.forward_kinematics(robot.table.nominal, joints)
+    except KinematicsError:
+        return None
+    std = problem.noise.pose_std(robot.pose_units)
+    for j, name in enumerate(robot.pose_names):
+        spread = float(np.ptp(fk[:, j]))
+        if np.ptp(measured[:, j]) == 0 and spread > CONSTANT_COLUMN_STDS * std[j]:
+            unit = robot.pose_units[j]
+            return name, (f"the column {name} holds one value ({measured[0, j]:.6g} {unit}) on every row while the "
+                          f"joints move the platform over {spread:.4g} {unit} along it: the column was not measured")
+    return None
+
+
+def _unexplained(problem: _Problem, joints, measured, written: FitFigures, screened: tuple, counter: list,
+                 gross: bool) -> dict:
+    """The verdict when no conversion explains the data: a column not measured, gross rows
+    (:func:`calib.robust.find_gross_rows`), or the model misfits. Keyword arguments of :class:`Diagnosis`."""
+    robot = problem.robot
+    column = _constant_column(problem, joints, measured)
+    if column is not None:
+        return {"cause": "unmeasured column", "column": column[0], "message": column[1]}
+    best = f"; the best conversion screened, {screened[0][0]}, gives {screened[0][1]:.3g}" if screened else ""
+    tried = (f"as written ({written.words()}), nor after any of the {len(screened)} conversions tried"
+             f"{best}")
+    if gross:
+        from .robust import find_gross_rows
+
+        try:
+            found = find_gross_rows(robot, joints, measured, problem.noise, frame=problem.frame,
+                                    targets=problem.targets, estimate_targets=problem.estimate_targets)
+        except ValueError:
+            found = None
+        counter[0] += 0 if found is None else found.fits
+        if found is not None and found.success and found.gross:
+            return {"cause": "gross rows", "gross_rows": tuple(int(r) for r in found.gross),
+                    "message": (f"{len(found.gross)} of {len(joints)} rows disagree grossly with the others, which "
+                                f"fit the {robot.name} at the declared noise; the data do not fit {tried}")}
+        if found is not None and found.success:  # every row consistent: the capped fit stopped early
+            return {"cause": "none", "message": f"the data fit the {robot.name} at the declared noise "
+                                                f"(the robust fit judged every row consistent; {found.message})"}
+    return {"cause": "left-out physics",
+            "message": (f"the data do not fit the {robot.name} at the declared noise {tried}"
+                        f"{', nor without gross rows' if gross else ''}: an effect the geometric model leaves "
+                        "out, or noise declared too small")}
+
+
+def _fit_words(robot: Robot, written: FitFigures) -> str:
+    if written.plausible:
+        return f"the data fit the {robot.name} at the declared noise ({written.words()}): nothing wrong"
+    return (f"the data fit the {robot.name} at the declared noise, but only with {written.worst_parameter} "
+            f"{written.worst_tolerances:.3g} times its tolerance from nominal ({written.words()}) and no conversion "
+            "of the file fits better: an offset the geometry absorbs (a capture body mounted turned on the "
+            "platform turns the platform joints' coordinates) or a machine far from its nominal geometry")
+
+
+def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto", targets=None,
+             estimate_targets: bool | None = None, tolerance=None, gross: bool = True) -> Diagnosis:
+    """Judge whether ``(joints, measured)`` fit ``robot`` at the declared ``noise``; if not, name
+    the likely cause with its evidence (module doc).
+
+    Args:
+        robot: the robot (its nominal geometry starts every fit).
+        joints: (N, C) joints as recorded, the robot's joint unit.
+        measured: (N, D) full poses, or (N, 3K) target positions with ``targets``, as recorded.
+        noise: declared noise.
+        frame: instrument frame mode (:data:`calib.measurement.FRAME_MODES`), for the data as
+            written and every conversion.
+        targets, estimate_targets: target offsets, as :func:`calib.measurement.identify_measured`.
+        tolerance: ``parameter_tolerance`` mapping (:meth:`calib.prior.ParameterPrior.from_tolerance`);
+            default the robot's.
+        gross: look for gross rows (:func:`calib.robust.find_gross_rows`) when no conversion fits.
+
+    Returns:
+        A :class:`Diagnosis`; never raises on data that cannot be fitted (their fit says why).
+    """
+    t0 = time.perf_counter()
+    joints, measured = np.array(joints, dtype=float), np.array(measured, dtype=float)
+    problem = _Problem(robot, noise, frame, None if targets is None else np.asarray(targets, dtype=float),
+                       estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
+                       np.sort(robot.table.indices(robot.free_default)))
+    counter = [1]
+    written = _figures(problem, joints, measured)
+    if written.fits and written.plausible:
+        return Diagnosis("none", _fit_words(robot, written), written, fits=1, seconds=time.perf_counter() - t0)
+    found = _conversions(problem, joints, measured, written, counter)
+    if found["named"]:
+        conv, figures = found["named"][0]
+        how = ("do not" if not written.fits else "fit only implausibly") + f" ({written.words()})"
+        message = (f"{conv.finding}: converted ({conv.fix}) the data fit the {robot.name} at the declared noise "
+                   f"({figures.words()}); as written they {how}")
+        return Diagnosis("conversion", message, written, conv, figures, tuple(c.name for c, _ in found["named"][1:]),
+                         screened=found["screened"], fits=counter[0], seconds=time.perf_counter() - t0)
+    if written.fits:
+        return Diagnosis("none", _fit_words(robot, written), written, screened=found["screened"], fits=counter[0],
+                         seconds=time.perf_counter() - t0)
+    verdict = _unexplained(problem, joints, measured, written, found["screened"], counter, gross)
+    return Diagnosis(written=written, screened=found["screened"], fits=counter[0],
+                     seconds=time.perf_counter() - t0, **verdict)
