@@ -258,14 +258,19 @@ def _scaled_condition(rec: Recording, poses: _PoseColumns, cal: np.ndarray) -> f
     return float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
 
 
-def _excitation(rec: Recording, poses: _PoseColumns, path: Path) -> str | None:
-    """Refuse calibration poses too alike to identify the parameters (condition number above
-    :data:`REFUSED_CONDITION`); a warning above :data:`WARNED_CONDITION`, else None. Not for
-    target positions or fewer than two calibration rows."""
+def _excitation(rec: Recording, poses: _PoseColumns, path: Path, prior: bool) -> str | None:
+    """Calibration poses too alike to identify the parameters (condition number above
+    :data:`REFUSED_CONDITION`): refused for plain least squares (``prior`` False), a warning with
+    the tolerances as a prior (they hold what the poses leave; the run names it); a warning above
+    :data:`WARNED_CONDITION`, else None. Not for target positions or fewer than two calibration rows."""
     cal = rec.sets == "calibration"
     if cal.sum() < 2 or poses.n_targets:
         return None
     cond = _scaled_condition(rec, poses, cal)
+    if cond > REFUSED_CONDITION and prior:
+        return (f"{path}: the calibration poses leave parameter combinations undetermined (the identification "
+                f"alone is {_condition_in_words(cond)}, condition number {cond:.2g}): the tolerances hold them "
+                "(the summary's left_to_prior names them and suggests poses to measure)")
     if cond > REFUSED_CONDITION:
         free = rec.robot.table.indices(rec.robot.free_default)
         distinct = len({b.tobytes() for b in np.column_stack([rec.joints, rec.measured])[cal]})
@@ -345,13 +350,14 @@ class RecordingChecks:
     diagnosis: object
 
 
-def recording_checks(rec: Recording, csv_path: str | Path) -> RecordingChecks:
+def recording_checks(rec: Recording, csv_path: str | Path, *, prior: bool = True) -> RecordingChecks:
     """Check that the machine can have produced ``rec`` before anything is fitted.
 
     Refuses, in this order: joint values outside the nominal geometry's range by more than the
     tolerance (:data:`JOINT_LIMIT_TOLERANCE`; the whole file in metres or degrees says so);
     values beyond any workspace; rows copied exactly (time included); calibration poses too alike
-    to identify the parameters (condition number in words); then, on the diagnosis' evidence
+    to identify the parameters (condition number in words; only for plain least squares, ``prior``
+    False: with the tolerances as a prior a warning); then, on the diagnosis' evidence
     only, a unit, axis, sign, rotation-convention or joint-direction mistake (the converted file
     fits the machine to the declared noise, as written it does not) and a pose column not measured.
 
@@ -367,13 +373,13 @@ def recording_checks(rec: Recording, csv_path: str | Path) -> RecordingChecks:
     poses = _pose_columns(rec)
     _check_magnitudes(rec, poses, path)
     _check_copied_rows(rec, path)
-    warnings += [_repeated_measurements(rec, path), _excitation(rec, poses, path)]
+    warnings += [_repeated_measurements(rec, path), _excitation(rec, poses, path, prior)]
     diagnosis = _diagnosis(rec) if len(rec.joints) >= 2 else None
     if diagnosis is not None:
         warnings += _units_and_conventions(rec, poses, path, diagnosis)
     return RecordingChecks([w for w in warnings if w is not None], diagnosis)
 
 
-def plausibility(rec: Recording, csv_path: str | Path) -> list[str]:
+def plausibility(rec: Recording, csv_path: str | Path, *, prior: bool = True) -> list[str]:
     """:func:`recording_checks`' warnings (it raises what it refuses)."""
-    return recording_checks(rec, csv_path).warnings
+    return recording_checks(rec, csv_path, prior=prior).warnings

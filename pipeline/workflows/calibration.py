@@ -272,18 +272,20 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.formats import ResultSet, plausibility, read_recording, recording_texts
+    from pipeline.formats import ResultSet, read_recording, recording_checks, recording_texts
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}
     warnings: list[str] = []
-    rec = None
+    rec = diagnosis = None
     if settings.real is not None:
         rec = read_recording(settings.real)
         if settings.robot is not None and settings.robot != rec.robot.name:
             raise ValueError(f"--robot {settings.robot}: the recording {settings.real} is of a {rec.robot.name} "
                              "(its sidecar's 'robot'); leave --robot out with --real")
-        warnings += plausibility(rec, settings.real)
+        checks = recording_checks(rec, settings.real, prior=settings.prior)  # refuses a mistake it can prove
+        warnings += checks.warnings
+        diagnosis = checks.diagnosis
     # Every output is checked before any work, and the files are published together at the end.
     out = Path(settings.out)
     output_folder(out)
@@ -300,7 +302,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             targets_out["summary_json"] = Path(settings.summary_json)
         flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
-            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs)
+            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis)
             suggestion = summary.pop("_suggested_poses", None)
             if suggestion is None:
                 for key in ("suggested_poses", "suggested_poses_json"):
@@ -750,10 +752,13 @@ def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> 
             "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
 
 
-def verdict_block(inp: CalibrationInput, ident: Identification, held, cv) -> dict:
+def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagnosis=None) -> dict:
     """``success`` and ``verdict``: success only where the fit converged, the calibration rows it
     used (less the gross rows) fit within the declared noise and the predictions of rows it did not
-    use agree (:func:`prediction_check`); otherwise the likely cause with its evidence."""
+    use agree (:func:`prediction_check`); otherwise the likely cause with its evidence: the
+    recording's diagnosis (:func:`calib.diagnosis.diagnose`, made by the checks before any fit)
+    where it names one, else :func:`likely_cause`. ``diagnosis``: the diagnosis' summary, rows
+    1-based."""
     result = ident.result
     dof = max(int(result.dof), 1)
     fit_ok = bool(np.isfinite(result.chi2) and result.chi2 <= chi2_limit(dof))
@@ -762,12 +767,24 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv) -> dic
     evidence = {"converged": bool(result.success), "fit_ratio": float(np.sqrt(result.chi2 / dof)),
                 "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
                 "predictions": check}
+    block = {} if diagnosis is None else {"diagnosis": diagnosis_summary(diagnosis, inp)}
     if success:
         words = "calibrated: the rows fit to the declared noise" + (
             f" and the {check['what']} are predicted to it" if check else "")
-        return {"success": True, "verdict": {"words": words, "cause": None, "evidence": evidence}}
-    cause, words = likely_cause(inp, ident, evidence)
-    return {"success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
+        return {**block, "success": True, "verdict": {"words": words, "cause": None, "evidence": evidence}}
+    if diagnosis is not None and diagnosis.cause in ("conversion", "unmeasured column"):
+        cause, words = diagnosis.cause, f"not calibrated: {diagnosis.message}"
+    else:
+        cause, words = likely_cause(inp, ident, evidence)
+    return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
+
+
+def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
+    """The diagnosis' summary with its gross rows as 1-based data rows of the recording."""
+    out = diagnosis.summary()
+    if "gross_rows" in out:
+        out["gross_rows"] = [int(r) + 1 for r in out["gross_rows"]]
+    return out
 
 
 def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -> tuple[str, str]:
@@ -942,7 +959,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
 
 
-def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs):
+def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None):
     """The analysis of :func:`run_calibration`, in its named steps: simulate or read, identify,
     validate, summarise, log (the ``.rrd`` to its temporary file); the caller publishes."""
     inp = read_input(settings, rec) if rec is not None else simulate_input(settings, progress)
@@ -958,7 +975,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     if inp.rec is not None and held is None:
         cv = crossvalidation_of(inp, ident, settings)
         summary.update(cv.summary())
-    summary.update(verdict_block(inp, ident, held, cv))
+    summary.update(verdict_block(inp, ident, held, cv, diagnosis))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     if summary["left_to_prior"]:

@@ -26,7 +26,7 @@ from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, 
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
 from mjcf.simulator import SettleError
-from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, plausibility, read_recording
+from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.views import verdict_words, write_discovery_rrd
 
@@ -342,7 +342,7 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if settings.real is not None:
         rec = read_recording(settings.real)
         stem = Path(settings.real).stem
-        warnings = plausibility(rec, settings.real)  # the checks every command that reads a recording makes
+        warnings = recording_checks(rec, settings.real).warnings  # the checks every command reading a recording makes
     else:
         robot_name = settings.robot or DEFAULT_SCENARIO_ROBOT
         stem = f"{robot_name}_{'+'.join(settings.scenario)}_{settings.scenario_seed}"
