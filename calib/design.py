@@ -281,8 +281,10 @@ def sample_feasible_poses(robot: Robot, theta, workspace: Workspace, n: int, see
     out, drawn, got = [np.zeros((0, d))], 0, 0
     while got < n:
         if drawn >= max_draws:
-            raise ValueError(f"only {got} of {n} feasible poses found in {drawn} draws: the workspace "
-                             f"{workspace.name!r} is (nearly) empty")
+            why = (f"the workspace {workspace.name!r} is (nearly) empty" if got < 0.01 * n else
+                   f"{got / drawn:.3g} of the draws are feasible in the workspace {workspace.name!r}: ask for at "
+                   f"most about {got} poses")
+            raise ValueError(f"only {got} of {n} feasible poses found in {drawn} draws: {why}")
         m = int(min(max(4 * (n - got), 1024), max_draws - drawn))
         p = b[:, 0] + rng.uniform(size=(m, d)) * (b[:, 1] - b[:, 0])
         drawn += m

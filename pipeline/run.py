@@ -94,6 +94,8 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
             raise ValueError(f"--poses must be a positive integer, got {n}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if args.name is not None and (Path(args.name).name != args.name or args.name in ("", ".", "..")):
+        raise ValueError(f"--name {args.name}: a file name, not a path (the files go into --out {args.out})")
     for flag in ("noise_mm", "noise_rad", "noise_joint", "payload_kg", "friction"):
         v = getattr(args, flag)
         if not (v >= 0 and math.isfinite(v)):

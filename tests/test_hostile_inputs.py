@@ -474,6 +474,9 @@ def test_flagged_rows_are_named_by_their_data_row_whatever_the_order_of_sets(wor
     ("pipeline.discover", ["--real", "MISSING"], "file not found"),
     ("pipeline.discover", ["--real", "FOLDER"], "is a folder"),
     ("pipeline.discover", ["--real", "REC", "--candidates", "moon_phase"], "unknown effect 'moon_phase'"),
+    # Each message names its own cause (before: "--out recordings: cannot write in this folder" and
+    # "the workspace 'full' is (nearly) empty").
+    ("pipeline.run", ["--name", "../x", "--out", "FOLDER"], "--name ../x: a file name, not a path"),
 ])
 def test_other_command_lines_refuse_bad_input(module, argv, needle, work, capsys):
     """Exit 2, one line, no traceback, before any work (the blind suite would otherwise run)."""
@@ -522,3 +525,29 @@ def test_a_killed_run_blocks_no_rerun_and_its_temporary_files_go(work, capsys):
     assert main(["--real", str(csv_path), "--out", str(out), "--name", "x", "--overwrite", "--quiet"]) == 0
     assert (out / "x.rrd").exists()
     assert not list(out.glob(".x*"))  # the lock released, the killed run's temporary file removed
+
+
+def test_a_sidecar_naming_another_robot_says_so(work, capsys):
+    """A hexapod's geometry under 'robot': 'delta': the message names both (before: a bare
+    KeyError: 'parameters')."""
+    csv_path, out = work
+    side_path = csv_path.with_suffix(".json")
+    side = json.loads(side_path.read_text())
+    side["robot"] = "delta"
+    side_path.write_text(json.dumps(side))
+    refused(["--real", str(csv_path)], out, capsys, "rec.json", "field 'nominal_geometry' is not a delta description",
+            "it is a description of a hexapod")
+
+
+def test_too_many_design_candidates_names_the_flag(work, capsys):
+    """More candidates than the workspace gives at the draw limit: found during the search (after
+    the announcement and its progress), the error line names --candidates and how many it can give
+    (before: "the workspace 'full' is (nearly) empty")."""
+    from pipeline.design import main as design_main
+
+    _, out = work
+    assert design_main(["--poses", "10", "--candidates", "60000", "--out", str(out / "d.csv")]) == 2
+    err = capsys.readouterr().err
+    last = err.strip().splitlines()[-1]
+    assert "Traceback" not in err and last.startswith("error: --candidates 60000: only") and "ask for at most" in last
+    assert not (out / "d.csv").exists()

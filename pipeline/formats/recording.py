@@ -269,6 +269,15 @@ def read_text_file(path: Path, what: str) -> str:
         raise RecordingError(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
 
 
+def _describes(robot_name: str, description: dict) -> bool:
+    """Whether ``description`` reads as a ``robot_name`` geometry."""
+    try:
+        robot_from_description(robot_name, description)
+    except (KeyError, ValueError, TypeError, IndexError):
+        return False
+    return True
+
+
 def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
     """``(robot, noise, meta, sidecar)`` of a checked sidecar (its columns and sessions are checked
     by :func:`_sidecar_layout`)."""
@@ -305,7 +314,13 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
             raise RecordingError(f"{json_path}: field {key!r} must be an object, got {type(side[key]).__name__}")
     try:
         robot = robot_from_description(name, side["nominal_geometry"])
-    except (KeyError, ValueError, TypeError, IndexError) as exc:
+    except KeyError as exc:  # a key the robot's description needs is missing: another robot's geometry?
+        missing = exc.args[0] if exc.args else exc
+        others = [r for r in ROBOTS if r != name and _describes(r, side["nominal_geometry"])]
+        also = f": it is a description of a {others[0]}; field 'robot' says {name!r}" if others else ""
+        raise RecordingError(f"{json_path}: field 'nominal_geometry' is not a {name} description (no key "
+                             f"{missing!r}){also}") from None
+    except (ValueError, TypeError, IndexError) as exc:
         raise RecordingError(f"{json_path}: field 'nominal_geometry': {exc}") from None
     scale = robot.length_scale_mm
     if not (np.isfinite(scale) and scale >= MIN_ROBOT_SIZE_MM):

@@ -935,7 +935,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
 
     robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
     nominal = robot.table.nominal
-    analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise)
+    analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise, joints=joints[ident.used])
     summary["observability"] = {"condition_number": float(analysis.condition_number),
                                 "crb_std": robot.table.to_dict(analysis.crb_std)}
     targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)

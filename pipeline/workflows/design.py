@@ -328,9 +328,14 @@ def run_design(settings: DesignSettings, display=None, announce=None) -> DesignO
     ws = robot_workspace(robot, settings.workspace)
     if announce is not None:
         announce(robot, ws)
-    search = design_search(robot, theta, settings.poses, ws, settings.noise, criterion=settings.criterion,
-                           seed=settings.seed, n_candidates=settings.candidates, starts=settings.starts,
-                           workers=settings.workers, scheduler=settings.scheduler, display=display)
+    try:
+        search = design_search(robot, theta, settings.poses, ws, settings.noise, criterion=settings.criterion,
+                               seed=settings.seed, n_candidates=settings.candidates, starts=settings.starts,
+                               workers=settings.workers, scheduler=settings.scheduler, display=display)
+    except ValueError as exc:
+        if "feasible poses found" in str(exc):
+            raise ValueError(f"--candidates {settings.candidates}: {exc}") from None
+        raise
     poses = search.design.poses
     joints = robot.inverse_kinematics(theta, poses)
     check_joint_limits(robot, joints, "designed pose")
