@@ -210,3 +210,29 @@ def test_progress_display_on_a_terminal_and_in_a_log():
     for k in (0, 1, 1, 2):
         d.update(k, 1000)
     assert len(log.getvalue().splitlines()) == 3
+
+
+def test_ctrl_c_at_the_terminal_stops_a_cluster_job_with_one_line(tmp_path):
+    """Ctrl-C reaches the terminal's whole process group, the local cluster's workers included:
+    they ignore it (started with SIGINT ignored), the job stops in the main process with exit 130
+    and one error line, and no worker prints a traceback."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    env = {**os.environ, "HOME": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline.blind", "--robot", "hexapod", "--seeds", "3",
+                             "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=env)
+    started = time.monotonic()
+    while time.monotonic() - started < 60:  # until the cluster runs tasks (its first progress report)
+        line = proc.stderr.readline()
+        if "recordings" in line and "0/" not in line.split("recordings")[0][-6:]:
+            break
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert err.strip().splitlines()[-1] == "error: interrupted; nothing was written"

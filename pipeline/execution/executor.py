@@ -43,7 +43,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "default_workers", "worker_count",
-           "runs_here", "ProgressDisplay", "available_cores"]
+           "runs_here", "ProgressDisplay", "available_cores", "interrupts_ignored"]
 
 logger = logging.getLogger(__name__)
 
@@ -103,7 +103,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
     saved = dict(os.environ)
     try:
         environ = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()}
-        with dask.config.set(environ):
+        with dask.config.set(environ), interrupts_ignored():
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
         with cluster, Client(cluster) as client:
@@ -112,6 +112,25 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         for k in set(os.environ) - set(saved):
             os.environ.pop(k, None)
         os.environ.update(saved)
+
+
+@contextlib.contextmanager
+def interrupts_ignored():
+    """SIGINT ignored while the local cluster's processes start: they inherit it (an ignored signal
+    stays ignored across exec, and Python and asyncio leave it so), so a Ctrl-C at the terminal,
+    which reaches the whole process group, stops the job in this process alone (one line, exit
+    130) instead of printing a traceback from every worker; the cluster is closed with the job."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def runs_here(workers: int | None = None, scheduler: str | None = None, client=None) -> bool:
