@@ -100,6 +100,9 @@ class Compliance(Effect):
     physics = ("each actuator gives way by its load over its stiffness; the loads come from the static "
                "equilibrium of the platform under the weight of platform and payload")
     follows = "load"
+    # One stiffness per chain divides every load term of that chain.
+    per_chain_capable = ("weight_over_stiffness", "weight_x_com_height_over_stiffness", "chain_weight_over_stiffness",
+                         "chain_weight_over_stiffness1", "chain_weight_over_stiffness2")
 
     def applies_to(self, robot):
         angles = [u == "rad" for u in robot.pose_units]
