@@ -54,7 +54,7 @@ from .base import Effect, EffectData, closure_regressors
 from .granularity import PerChainForm, form_key, per_chain_form
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
-           "MIN_NESTED_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
+           "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
            "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation", "candidate_forms"]
@@ -71,6 +71,12 @@ MAX_EFFECTS = 3
 #: in its place: BIC lower by at least this, on top of the BIC's own charge for the extra
 #: parameters (as much as an effect needs to enter at all: :data:`MIN_DELTA_BIC`).
 MIN_NESTED_DELTA_BIC = MIN_DELTA_BIC
+#: Evidence a per-chain form needs over its own shared form (:mod:`calib.effects.granularity`)
+#: on top of the BIC's charge of ``ln(n)`` for each of its ``C - 1`` extra coefficients: none more.
+#: That charge alone keeps a shared machine shared (a chance gain of ``(C - 1) ln n``, 31 for
+#: six chains and 500 residuals, has probability 1e-5 under chi-square(5)), while a per-joint
+#: spread the shared form cannot fit leaves structure the remainder tests would call unexplained.
+MIN_GRANULARITY_DELTA_BIC = 0.0
 #: Largest canonical correlation of two effects' whitened regressors (geometry projected out)
 #: above which this recording cannot tell them apart.
 ALIAS_CORRELATION = 0.95
@@ -545,31 +551,34 @@ def candidate_forms(candidates, per_chain: bool = True) -> dict:
 def _relations(models: dict) -> tuple[dict, dict]:
     """``(family, nested)`` over the candidate forms ``models`` (key -> effect): ``family[k]``
     the keys of every form of every effect nested with ``k``'s (one of them in a model at
-    most); ``nested[k]`` the keys ``k`` generalises: the other forms of its own effect or of an
-    effect it generalises (:attr:`Effect.generalises`) whose granularity is no finer (a
-    per-chain form contains its shared form; a shared warm-up a shared drift, not a per-chain
-    one)."""
+    most); ``nested[k]`` ``{key: margin}`` of the keys ``k`` generalises: the other forms of its
+    own effect (margin :data:`MIN_GRANULARITY_DELTA_BIC`) or of an effect it generalises
+    (:attr:`Effect.generalises`; margin :data:`MIN_NESTED_DELTA_BIC`) whose granularity is no
+    finer (a per-chain form contains its shared form; a shared warm-up a shared drift, not a
+    per-chain one)."""
     family, nested = {}, {}
     for k, m in models.items():
         fam = set(effect_family(_base(m)))
         inner = set(nested_in(_base(m))) | {m.name}
         fine = isinstance(m, PerChainForm)
         family[k] = {k2 for k2, m2 in models.items() if m2.name in fam}
-        nested[k] = {k2 for k2 in family[k] if k2 != k and models[k2].name in inner
+        nested[k] = {k2: MIN_GRANULARITY_DELTA_BIC if models[k2].name == m.name else MIN_NESTED_DELTA_BIC
+                     for k2 in family[k] if k2 != k and models[k2].name in inner
                      and (fine or not isinstance(models[k2], PerChainForm))}
     return family, nested
 
 
 def _simplest(trials: dict, names, nested: dict) -> str:
     """Among ``names`` (one family of nested effects, each with its ``delta_bic`` in ``trials``;
-    ``nested[name]``: the effects it generalises), the one selection names: the best by BIC,
-    then, as long as an effect it generalises is within :data:`MIN_NESTED_DELTA_BIC` of it, that
-    simpler one (the extra parameters must pay)."""
+    ``nested[name]``: ``{effect it generalises: margin}``), the one selection names: the best by
+    BIC, then, as long as an effect it generalises is within the margin of it
+    (:data:`MIN_NESTED_DELTA_BIC`, :data:`MIN_GRANULARITY_DELTA_BIC`), that simpler one (the
+    extra parameters must pay)."""
     names = [n for n in names if n in trials]
     best = max(names, key=lambda n: trials[n]["delta_bic"])
     while True:
         simpler = [n for n in nested[best] if n in names
-                   and trials[best]["delta_bic"] - trials[n]["delta_bic"] < MIN_NESTED_DELTA_BIC]
+                   and trials[best]["delta_bic"] - trials[n]["delta_bic"] < nested[best][n]]
         if not simpler:
             return best
         best = max(simpler, key=lambda n: trials[n]["delta_bic"])
@@ -1148,7 +1157,7 @@ def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, s
         extra = fits[better].extras[-1]
         for g in fam:
             gap = trials[g]["delta_bic"] - trials[better]["delta_bic"]
-            if better in nested[g] and 0 < gap < MIN_NESTED_DELTA_BIC:
+            if better in nested[g] and 0 < gap < nested[g][better]:
                 corr = _canonical_correlation(lin.columns(models[better], extra),
                                               lin.columns(models[g], fits[g].extras[-1]))
                 sel["rivals"].append((better, g, float(gap), corr, True))
