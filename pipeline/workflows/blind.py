@@ -187,12 +187,12 @@ def criteria(r: dict) -> dict:
     """
     c = {"consistent": r["consistent"]}
     kind = r["kind"]
-    if kind in ("single", "shared"):
-        c["named"] = r["named"] == r["effects"] and r["explained"]
     if kind in ("single", "shared", "pair") and r["effects"]:
         said = r.get("granularity", {})
         c["granularity"] = all(said.get(e) == g for e, g in r.get("true_granularity", {}).items() if e in said) \
             and any(e in said for e in r["effects"])
+    if kind in ("single", "shared"):
+        c["named"] = r["named"] == r["effects"] and r["explained"]
     elif kind == "pair":
         c["named"] = set(r["effects"]) <= set(r["named"]) and r["heldout_after_mm"] <= 1.5 * r["noise_floor_mm"]
     elif kind == "leave_one_out":
