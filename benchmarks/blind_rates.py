@@ -4,7 +4,9 @@ Hexapod: every single effect and none (``--seeds`` recordings each), each also a
 effect left out of the candidates, with three gross rows, with the noise 10 and 100 times the
 declared, with 30% gross rows and with the nominal geometry 10% off; every pair of effects but
 nested ones (``--pair-seeds`` recordings each). Leave-one-out removes the effect's family
-(:func:`calib.effects.effect_family`). Delta and rus: the single-effect suite (``--other-seeds``).
+(:func:`calib.effects.effect_family`). The recordings carry per-joint spreads (each joint its own
+dead band, growth rate, stiffness, screw phase); ``shared`` draws one value for every joint.
+Delta and rus: single, shared, pair and leave-one-out (``--other-seeds``).
 Prints one Markdown table per robot and the failures; ``--json FILE`` keeps every result.
 """
 
@@ -33,7 +35,8 @@ def main(argv=None) -> int:
             res = run_blind_suite(None, range(a.seeds), robot=robot, kinds=[k for k in KINDS if k != "pair"])
             res += run_blind_suite(None, range(a.pair_seeds), robot=robot, kinds=("pair",))
         else:
-            res = run_blind_suite(None, range(a.other_seeds), robot=robot, kinds=("single",))
+            res = run_blind_suite(None, range(a.other_seeds), robot=robot,
+                                  kinds=("single", "shared", "pair", "leave_one_out"))
         print(f"\n## {robot} ({time.perf_counter() - t0:.0f} s)\n")
         print(rates_table(res))
         for line in failure_lines(res):

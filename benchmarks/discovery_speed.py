@@ -1,9 +1,11 @@
-"""Speed of discovery (docs/discovery.md): 120 poses, the full library, subsets up to three
-effects, no re-simulation, one core:
-``OPENBLAS_NUM_THREADS=1 PYTHONPATH=. python benchmarks/discovery_speed.py``.
+"""Speed of discovery (docs/discovery.md): 120 poses, the full library with the per-chain forms,
+subsets up to three effects, no re-simulation, one core:
+``OPENBLAS_NUM_THREADS=1 PYTHONPATH=. taskset -c 0 python benchmarks/discovery_speed.py``.
 
-The recordings are simulated first (not timed); then :func:`calib.effects.discover_effects`
-(selection, joint fit, remainder tests, outlier rounds) and the whole
+The recordings (per-joint spreads: ``granularity="per_chain"``) are simulated first (not timed);
+then :func:`calib.effects.discover_effects` (selection, joint fit, remainder tests, outlier
+rounds) with the per-chain forms and with the shared forms only (``per_chain=False``, the search
+before per-chain forms: the ratio of the two in the same run), and the whole
 :func:`pipeline.workflows.discovery.discover` without re-simulation (adds the held-out fits and the
 summary) are timed, best of ``--repeat``.
 """
@@ -31,21 +33,27 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {a.poses} poses, full library, "
           f"up to three effects")
-    print("| robot | truth | named | explained | discover_effects (s) | pipeline discover, no resim (s) |")
-    print("|---|---|---|---|---|---|")
+    print("| robot | truth (per joint) | named | granularity | explained | discover_effects (s) | shared forms only (s) "
+          "| ratio | pipeline discover, no resim (s) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for robot, effects in CASES:
-        rec = effect_recording(effects or "none", 5, robot=robot, n_poses=a.poses)
+        rec = effect_recording(effects or "none", 5, robot=robot, n_poses=a.poses, granularity="per_chain")
         data = EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
-        t_core, t_all = [], []
+        t_core, t_shared, t_all = [], [], []
         for _ in range(a.repeat):
             t0 = time.perf_counter()
             d = discover_effects(data)
             t_core.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
+            discover_effects(data, per_chain=False)
+            t_shared.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
             discover(rec, resim=False)
             t_all.append(time.perf_counter() - t0)
-        print(f"| {robot} | {' + '.join(effects) or 'none'} | {' + '.join(d.effects) or 'none'} | {d.explained} | "
-              f"{np.min(t_core):.2f} | {np.min(t_all):.2f} |")
+        forms = ", ".join(f"{k}: {v}" for k, v in d.evidence["granularity"].items()) or "-"
+        print(f"| {robot} | {' + '.join(effects) or 'none'} | {' + '.join(d.effects) or 'none'} | {forms} | "
+              f"{d.explained} | {np.min(t_core):.2f} | {np.min(t_shared):.2f} | "
+              f"{np.min(t_core) / np.min(t_shared):.2f} | {np.min(t_all):.2f} |")
     return 0
 
 

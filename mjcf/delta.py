@@ -33,7 +33,7 @@ import numpy as np
 
 from calib.robots.delta import Delta
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, new_spec
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, chain_values, new_spec
 from .units import mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "ARM_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD",
@@ -80,8 +80,10 @@ def _quat(r: np.ndarray) -> np.ndarray:
     return q
 
 
-def _stiffness(options: MachineOptions) -> float:
-    return DEFAULT_STIFFNESS_NM_PER_RAD if options.actuator_stiffness is None else options.actuator_stiffness
+def _stiffness(options: MachineOptions) -> np.ndarray:
+    """(3,) each arm's servo stiffness, N m/rad."""
+    k = DEFAULT_STIFFNESS_NM_PER_RAD if options.actuator_stiffness is None else options.actuator_stiffness
+    return chain_values(k, 3, "actuator_stiffness")
 
 
 def integration_step(options: MachineOptions, arm_m: float) -> float:
@@ -89,7 +91,7 @@ def integration_step(options: MachineOptions, arm_m: float) -> float:
     ``omega dt > 1``, ``omega = sqrt(stiffness / arm inertia about its hinge)`` (the servo's
     stiffness is integrated explicitly). ``arm_m``: arm length, m."""
     inertia = ARM_INERTIA + ARM_MASS_KG * (arm_m / 2) ** 2
-    omega = np.sqrt(_stiffness(options) / inertia)
+    omega = np.sqrt(_stiffness(options).max() / inertia)
     return float(options.timestep if omega * options.timestep <= 1.0 else 0.3 / omega)
 
 
@@ -160,8 +162,9 @@ def _add_chain(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOpti
     r_arm = _rz(geo.p.theta[i]) @ _ry(geo.p.alpha[i])  # arm frame at q = 0
     elbow = geo.arms[i]
     arm = spec.worldbody.add_body(name=f"arm{k}", pos=geo.shoulders[i], quat=_quat(r_arm))
+    friction = chain_values(options.joint_friction, 3, "joint_friction")
     arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
-                  damping=ARM_DAMPING, frictionloss=options.joint_friction)
+                  damping=ARM_DAMPING, frictionloss=float(friction[i]))
     arm.explicitinertial = True
     arm.ipos, arm.mass, arm.inertia = elbow / 2, ARM_MASS_KG, [ARM_INERTIA] * 3
     arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.r_[np.zeros(3), elbow], size=[0.012, 0, 0],
@@ -182,7 +185,7 @@ def _add_chain(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOpti
     kv = DEFAULT_DAMPING_NMS_PER_RAD if options.actuator_damping is None else options.actuator_damping
     act = spec.add_actuator(name=f"motor{k}", target=ARM_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT,
                             gear=[gear, 0, 0, 0, 0, 0])
-    act.set_to_position(kp=_stiffness(options) / gear**2, kv=kv / gear**2)
+    act.set_to_position(kp=float(_stiffness(options)[i]) / gear**2, kv=kv / gear**2)
 
 
 def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = MachineOptions(),

@@ -14,7 +14,7 @@ lengths, ``joint_scale`` = 1e-3 m/mm) and the leg is ``l_i + dl_i`` long, as in 
 :mod:`calib.robots.hexapod`. The bodies are placed assembled at the pose the home lengths reach
 (the forward kinematics of ``theta``), which is the keyframe ``home`` (every joint at 0).
 
-Physics (SI): each leg's servo has stiffness ``actuator_stiffness`` (default
+Physics (SI): each leg's servo has stiffness ``actuator_stiffness`` (one per leg or shared; default
 :data:`DEFAULT_STIFFNESS_N_PER_M`) and near-critical damping; explicit stiffness is stable for
 ``omega dt < 2`` with ``omega = sqrt(k / m_leg)``, so beyond ``omega dt = 1`` the step drops to
 ``0.3 / omega`` (:func:`integration_step`), and the closures' time constant follows the step so
@@ -38,7 +38,7 @@ import numpy as np
 from calib.robots.hexapod import Hexapod
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, new_spec
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, chain_values, new_spec
 from .units import M_PER_MM, mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "servo_damping", "DEFAULT_XML",
@@ -58,8 +58,10 @@ UNIVERSAL_DAMPING = 0.5
 CLOSURE_SOLIMP = (0.99, 0.999, 0.0001, 0.5, 2.0)
 
 
-def _stiffness(options: MachineOptions) -> float:
-    return DEFAULT_STIFFNESS_N_PER_M if options.actuator_stiffness is None else options.actuator_stiffness
+def _stiffness(options: MachineOptions) -> np.ndarray:
+    """(6,) each leg's servo stiffness, N/m."""
+    k = DEFAULT_STIFFNESS_N_PER_M if options.actuator_stiffness is None else options.actuator_stiffness
+    return chain_values(k, 6, "actuator_stiffness")
 
 
 def _platform_mass(options: MachineOptions) -> float:
@@ -70,17 +72,17 @@ def integration_step(options: MachineOptions) -> float:
     """The integration step used, s: ``options.timestep`` capped at ``0.3 / omega`` when
     ``omega dt > 1``, ``omega = sqrt(stiffness / leg mass)`` (the servo's stiffness is
     integrated explicitly; 0.3 / omega also settled fastest in our trials)."""
-    omega = np.sqrt(_stiffness(options) / LEG_MASS_KG)
+    omega = np.sqrt(_stiffness(options).max() / LEG_MASS_KG)
     return float(options.timestep if omega * options.timestep <= 1.0 else 0.3 / omega)
 
 
-def servo_damping(options: MachineOptions) -> float:
-    """Servo damping of each leg, N s/m: ``options.actuator_damping``, or critical damping of a
-    leg carrying its share of platform and payload."""
+def servo_damping(options: MachineOptions) -> np.ndarray:
+    """(6,) servo damping of each leg, N s/m: ``options.actuator_damping``, or critical damping
+    of a leg (its own stiffness) carrying its share of platform and payload."""
     if options.actuator_damping is not None:
-        return options.actuator_damping
+        return np.full(6, float(options.actuator_damping))
     m = LEG_MASS_KG + (_platform_mass(options) + options.payload_kg) / 6.0
-    return float(2.0 * np.sqrt(_stiffness(options) * m))
+    return 2.0 * np.sqrt(_stiffness(options) * m)
 
 
 def _quat_z_to(d: np.ndarray) -> np.ndarray:
@@ -126,6 +128,7 @@ def build_spec(robot: Hexapod, theta: np.ndarray, options: MachineOptions = Mach
     radius = float(np.linalg.norm(P, axis=1).mean())
     step = integration_step(options)
     kp, kv = _stiffness(options), servo_damping(options)
+    friction = chain_values(options.joint_friction, 6, "joint_friction")
 
     spec = new_spec(name, step, options.gravity)
     spec.visual.global_.offwidth = 1280
@@ -146,7 +149,7 @@ def build_spec(robot: Hexapod, theta: np.ndarray, options: MachineOptions = Mach
                        mass=LEG_MASS_KG, rgba=[0.35, 0.4, 0.5, 1.0])
         upper = lower.add_body(name=f"leg{k}_upper")
         upper.add_joint(name=f"leg{k}_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0.0, 0.0, 1.0],
-                        frictionloss=options.joint_friction)
+                        frictionloss=float(friction[i]))
         upper.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, half, 0, 0, rest[i]], size=[0.008, 0, 0],
                        mass=LEG_MASS_KG, rgba=[0.8, 0.55, 0.2, 1.0])
         upper.add_site(name=f"leg{k}_tip", pos=[0.0, 0.0, rest[i]], size=[0.005, 0, 0])
@@ -172,7 +175,7 @@ def build_spec(robot: Hexapod, theta: np.ndarray, options: MachineOptions = Mach
         g = 1.0 / (1.0 + s_scale[i])
         act = spec.add_actuator(name=f"leg{k}", target=f"leg{k}_slide", trntype=mujoco.mjtTrn.mjTRN_JOINT,
                                 gear=[g, 0, 0, 0, 0, 0])
-        act.set_to_position(kp=kp / g**2, kv=kv / g**2)
+        act.set_to_position(kp=float(kp[i]) / g**2, kv=float(kv[i]) / g**2)
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)
     spec.add_sensor(name=SENSOR_QUAT, type=mujoco.mjtSensor.mjSENS_FRAMEQUAT, objtype=mujoco.mjtObj.mjOBJ_SITE,

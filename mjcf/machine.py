@@ -29,7 +29,7 @@ from calib.rotation import euler_from_quaternion
 
 from .units import m_to_mm
 
-__all__ = ["MachineOptions", "MachineEffects", "Machine", "new_spec", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
+__all__ = ["MachineOptions", "MachineEffects", "Machine", "new_spec", "chain_values", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
 
 #: Name of the platform site whose frame is the pose.
 PLATFORM_SITE = "platform"
@@ -41,6 +41,30 @@ SENSOR_QUAT = "platform_quat"
 HOME_KEY = "home"
 #: Standard gravity, m/s^2 (the one place it is named).
 GRAVITY_M_S2 = 9.81
+
+
+def _scalar_or_tuple(value, name: str, low: float | None = None, strict: bool = False):
+    """``value`` as a float or a tuple of floats (one per chain), each checked ``>= low`` (``>`` with
+    ``strict``)."""
+    many = isinstance(value, (tuple, list, np.ndarray))
+    vals = tuple(float(v) for v in np.ravel(value)) if many else (float(value),)
+    if low is not None and not all((v > low) if strict else (v >= low) for v in vals):
+        raise ValueError(f"{name} must be {'>' if strict else '>='} {low:g}, got {value!r}")
+    return vals if many else vals[0]
+
+
+def chain_values(value, n_chains: int, name: str = "value") -> np.ndarray:
+    """(C,) a per-joint option: a number (every chain alike) broadcast, or one value per chain.
+
+    Raises:
+        ValueError: a sequence of another length than ``n_chains``.
+    """
+    v = np.asarray(value, dtype=float)
+    if v.ndim == 0:
+        return np.full(n_chains, float(v))
+    if v.shape != (n_chains,):
+        raise ValueError(f"{name} must be one number or {n_chains} values (one per chain), got {v.size}")
+    return v.copy()
 
 
 def new_spec(name: str, timestep_s: float, gravity: bool) -> mujoco.MjSpec:
@@ -67,11 +91,14 @@ class MachineOptions:
         gravity: gravity on (-9.81 m/s^2 along base z) or off.
         payload_kg: extra mass carried by the platform, kg, ``payload_height_m`` above it.
         payload_height_m: height of the payload's centre of mass over the platform frame, m.
-        actuator_stiffness: position-servo stiffness of each actuator (N/m for a prismatic
-            joint, N m/rad for a revolute one); None: the builder's default.
+        actuator_stiffness: position-servo stiffness of the actuators (N/m for a prismatic
+            joint, N m/rad for a revolute one): one number for every chain, or a (C,) tuple,
+            one per chain (each joint its own; applied through each actuator's gain in the
+            ``MjSpec``); None: the builder's default.
         actuator_damping: servo damping; None: the builder's choice (near-critical).
-        joint_friction: Coulomb friction of each actuated joint (N or N m), applied by the testbed
-            in its quasi-static limit.
+        joint_friction: Coulomb friction of the actuated joints (N or N m): one number for every
+            joint, or a (C,) tuple, one per joint (written as each joint's ``frictionloss`` in the
+            ``MjSpec``); applied by the testbed in its quasi-static limit.
         transmission_scale: per-chain stroke scale error ``s_i`` (the joint moves ``1 + s_i`` times
             the command), or None.
         platform_mass_kg: mass of the moving platform, kg; None: the builder's default.
@@ -81,18 +108,22 @@ class MachineOptions:
     gravity: bool = False
     payload_kg: float = 0.0
     payload_height_m: float = 0.05
-    actuator_stiffness: float | None = None
+    actuator_stiffness: float | tuple | None = None
     actuator_damping: float | None = None
-    joint_friction: float = 0.0
+    joint_friction: float | tuple = 0.0
     transmission_scale: tuple | None = None
     platform_mass_kg: float | None = None
     timestep: float = 1e-3
 
     def __post_init__(self) -> None:
-        for name in ("payload_kg", "joint_friction", "payload_height_m"):
+        for name in ("payload_kg", "payload_height_m"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        for name in ("actuator_stiffness", "actuator_damping", "platform_mass_kg"):
+        object.__setattr__(self, "joint_friction", _scalar_or_tuple(self.joint_friction, "joint_friction", 0.0))
+        if self.actuator_stiffness is not None:
+            object.__setattr__(self, "actuator_stiffness",
+                               _scalar_or_tuple(self.actuator_stiffness, "actuator_stiffness", 0.0, strict=True))
+        for name in ("actuator_damping", "platform_mass_kg"):
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise ValueError(f"{name} must be > 0, got {v!r}")
@@ -111,8 +142,8 @@ class MachineEffects:
 
     Attributes:
         joint_drift_per_s: every actuated chain's effective length drifts at this rate with
-            time (thermal growth of a leg; joint unit per s); it enters the servo reference at the
-            start of each move.
+            time (thermal growth of a leg; joint unit per s): one number for every chain or a
+            (C,) tuple, one per chain; it enters the servo reference at the start of each move.
         screw_amplitude: (C,) amplitude of each chain's periodic transmission error (lead screw),
             joint unit: the joint sits ``A_i sin(2 pi stroke / pitch + phase_i)`` from where
             its encoder says, ``stroke`` the command minus the home joint value.
@@ -126,21 +157,24 @@ class MachineEffects:
             none.
         joint_offset_step_time_s: the time of that step, s.
         joint_warmup_per_s: initial growth rate of every actuated chain warming up, joint unit
-            per s: the servo reference gets ``g tau (1 - exp(-t / tau))``.
+            per s (one number, or a (C,) tuple one per chain): the servo reference gets
+            ``g tau (1 - exp(-t / tau))``.
         joint_warmup_tau_s: the warm-up's time constant ``tau``, s.
     """
 
-    joint_drift_per_s: float = 0.0
+    joint_drift_per_s: float | tuple = 0.0
     screw_amplitude: tuple = ()
     screw_phase_rad: tuple = ()
     screw_pitch: float = 5.0
     instrument_drift_mm_per_s: tuple = ()
     joint_offset_step: tuple = ()
     joint_offset_step_time_s: float = 0.0
-    joint_warmup_per_s: float = 0.0
+    joint_warmup_per_s: float | tuple = 0.0
     joint_warmup_tau_s: float = 60.0
 
     def __post_init__(self) -> None:
+        for name in ("joint_drift_per_s", "joint_warmup_per_s"):
+            object.__setattr__(self, name, _scalar_or_tuple(getattr(self, name), name))
         for name in ("screw_amplitude", "screw_phase_rad", "instrument_drift_mm_per_s", "joint_offset_step"):
             object.__setattr__(self, name, tuple(float(x) for x in getattr(self, name)))
         if len(self.screw_amplitude) != len(self.screw_phase_rad):
@@ -154,12 +188,15 @@ class MachineEffects:
             raise ValueError(f"joint_warmup_tau_s must be > 0, got {self.joint_warmup_tau_s!r}")
 
     def to_dict(self) -> dict:
-        return {"joint_drift_per_s": self.joint_drift_per_s, "screw_amplitude": list(self.screw_amplitude),
+        def plain(v):
+            return list(v) if isinstance(v, tuple) else v
+
+        return {"joint_drift_per_s": plain(self.joint_drift_per_s), "screw_amplitude": list(self.screw_amplitude),
                 "screw_phase_rad": list(self.screw_phase_rad), "screw_pitch": self.screw_pitch,
                 "instrument_drift_mm_per_s": list(self.instrument_drift_mm_per_s),
                 "joint_offset_step": list(self.joint_offset_step),
                 "joint_offset_step_time_s": self.joint_offset_step_time_s,
-                "joint_warmup_per_s": self.joint_warmup_per_s, "joint_warmup_tau_s": self.joint_warmup_tau_s}
+                "joint_warmup_per_s": plain(self.joint_warmup_per_s), "joint_warmup_tau_s": self.joint_warmup_tau_s}
 
 
 class Machine:

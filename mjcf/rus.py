@@ -19,7 +19,7 @@ import numpy as np
 from calib.robots.rus import RotaryHexapod, crank_frames
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, new_spec
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, chain_values, new_spec
 from .units import mm_to_m
 
 __all__ = ["build_machine", "DEFAULT_STIFFNESS_NM_PER_RAD", "MOTOR_ARMATURE_KG_M2", "DEFAULT_PLATFORM_MASS_KG"]
@@ -58,16 +58,17 @@ def _rz(t: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _servo(o: MachineOptions, r: np.ndarray) -> tuple[float, np.ndarray, float]:
-    """``(kp, kv (6,), step)``: the motors' servo stiffness and damping (near-critical for a motor
+def _servo(o: MachineOptions, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(kp (6,), kv (6,), step)``: the motors' servo stiffness and damping (near-critical for a motor
     carrying its crank, its rod and a sixth of the platform, unless given) and the integration
     step (lowered so that the explicit stiffness stays stable)."""
     platform_mass = DEFAULT_PLATFORM_MASS_KG if o.platform_mass_kg is None else o.platform_mass_kg
-    kp = DEFAULT_STIFFNESS_NM_PER_RAD if o.actuator_stiffness is None else o.actuator_stiffness
+    kp = chain_values(DEFAULT_STIFFNESS_NM_PER_RAD if o.actuator_stiffness is None else o.actuator_stiffness, 6,
+                      "actuator_stiffness")
     crank_inertia = MOTOR_ARMATURE_KG_M2 + CRANK_MASS_KG * r ** 2 / 3.0
     loaded = crank_inertia + (ROD_MASS_KG + (platform_mass + o.payload_kg) / 6.0) * r ** 2
     kv = 2.0 * np.sqrt(kp * loaded) if o.actuator_damping is None else np.full(6, o.actuator_damping)
-    omega = float(np.sqrt(kp / crank_inertia.min()))
+    omega = float(np.sqrt(kp.max() / crank_inertia.min()))
     step = o.timestep if omega * o.timestep <= 1.0 else 0.3 / omega
     return kp, kv, step
 
@@ -83,12 +84,13 @@ def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: Mac
     world.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[float(np.linalg.norm(M, axis=1).max()) + 0.03, 0.005, 0],
                    pos=[0, 0, float(M[:, 2].min()) - 0.03], contype=0, conaffinity=0, rgba=[0.25, 0.25, 0.3, 1])
     platform_joints = R_home @ P.T + t_home[:, None]  # (3, 6) base frame, m
+    friction = chain_values(o.joint_friction, 6, "joint_friction")
     for i in range(6):
         c, sn = np.cos(p["q0"][i]), np.sin(p["q0"][i])
         R_motor = np.column_stack([c * u[i] + sn * v[i], -sn * u[i] + c * v[i], a[i]])
         motor = world.add_body(name=f"motor{i + 1}", pos=M[i], quat=_quat(R_motor))
         motor.add_joint(name=f"motor{i + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
-                        armature=MOTOR_ARMATURE_KG_M2, frictionloss=o.joint_friction)
+                        armature=MOTOR_ARMATURE_KG_M2, frictionloss=float(friction[i]))
         motor.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, r[i], 0, 0], size=[0.006, 0, 0],
                        mass=CRANK_MASS_KG, contype=0, conaffinity=0, rgba=[0.35, 0.4, 0.5, 1])
         # The rod's frame points its z axis at the platform joint when the motor is at q_home.
@@ -120,7 +122,7 @@ def _add_platform(world, robot: RotaryHexapod, p: dict, o: MachineOptions) -> No
                       mass=o.payload_kg, contype=0, conaffinity=0, rgba=[0.6, 0.2, 0.2, 1])
 
 
-def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: float, kv: np.ndarray, step: float) -> None:
+def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: np.ndarray, kv: np.ndarray, step: float) -> None:
     """Each chain's closure (rod end onto platform joint), its position servo and the pose sensors."""
     for i in range(6):
         # The closure's time constant follows the step (two steps, MuJoCo's stable minimum).
@@ -131,7 +133,7 @@ def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: float, kv: np.ndarr
         g = 1.0 / (1.0 + scale[i])
         act = spec.add_actuator(name=f"motor{i + 1}", target=f"motor{i + 1}", trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.gear[0] = g
-        act.set_to_position(kp=kp / g ** 2, kv=float(kv[i]) / g ** 2)
+        act.set_to_position(kp=float(kp[i]) / g ** 2, kv=float(kv[i]) / g ** 2)
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)
     spec.add_sensor(name=SENSOR_QUAT, type=mujoco.mjtSensor.mjSENS_FRAMEQUAT, objtype=mujoco.mjtObj.mjOBJ_SITE,

@@ -90,7 +90,7 @@ class MachineSimulator:
             f"{np.array2string(np.asarray(joints), precision=4)} {self.robot.joint_unit}: max joint speed "
             f"{speed:.3g} > {self.settle_velocity:g}")
 
-    def settle(self, reference: np.ndarray, friction: float = 0.0, commanded=None) -> tuple[np.ndarray, int]:
+    def settle(self, reference: np.ndarray, friction=0.0, commanded=None) -> tuple[np.ndarray, int]:
         """Send the servos ``reference`` ((C,), robot joint unit) and step until at rest, from
         where the machine is. Coulomb ``friction`` (N or N m) opposes each chain's last motion (a
         joint force on the actuated dof): a chain approached monotonically comes to rest short of
@@ -98,7 +98,7 @@ class MachineSimulator:
 
         Args:
             reference: (C,) the servo references.
-            friction: the actuated joints' Coulomb friction.
+            friction: the actuated joints' Coulomb friction: one number, or (C,) one per joint.
             commanded: (C,) the commanded joints, for the message of a :class:`SettleError`
                 (default ``reference``).
 

@@ -21,7 +21,7 @@ def seen(monkeypatch):
     """The candidates of every analysis blind_case asks for (the recording is a stand-in)."""
     calls = []
 
-    def fake_recording(effects, seed, robot=None):
+    def fake_recording(effects, seed, robot=None, granularity="shared"):
         names = () if effects == "none" else tuple(effects)
         return SimpleNamespace(noise=SensorNoise(0.001, 1e-6, "normal"), measured=np.zeros((60, 6)),
                                meta={"simulation": {"contributions_mm": {e: 0.005 for e in names}}})
@@ -88,3 +88,27 @@ def test_no_worker_is_refused_not_taken_for_the_default(workers):
 def test_a_suite_of_no_recordings_is_empty_not_an_error():
     """No case (an empty list of effects): the default worker count stays at least one."""
     assert blind.blind_cases([], range(3)) == [] and blind.run_blind_suite([], range(3)) == []
+
+
+def test_criteria_judge_naming_and_granularity_of_single_shared_and_pair_results():
+    base = {"named": ["joint_friction"], "effects": ["joint_friction"], "explained": True, "consistent": True,
+            "flagged": [], "rows": 60, "heldout_after_mm": 0.0011, "noise_floor_mm": 0.001,
+            "granularity": {"joint_friction": "per_chain"}, "true_granularity": {"joint_friction": "per_chain"}}
+    assert blind.criteria(dict(base, kind="single")) == {"consistent": True, "granularity": True, "named": True,
+                                                         "rows": True}
+    shared = blind.criteria(dict(base, kind="shared", true_granularity={"joint_friction": "shared"}))
+    assert shared["named"] and not shared["granularity"]
+    pair = dict(base, kind="pair", effects=["joint_friction", "thermal_drift"], named=["joint_friction"])
+    assert not blind.criteria(pair)["named"]
+    pair = dict(pair, named=["joint_friction", "thermal_drift"],
+                granularity={"joint_friction": "per_chain", "thermal_drift": "shared"},
+                true_granularity={"joint_friction": "per_chain", "thermal_drift": "per_chain"})
+    c = blind.criteria(pair)
+    assert c["named"] and not c["granularity"]
+    assert not blind.criteria(dict(pair, heldout_after_mm=0.0016))["named"]  # more than 1.5 x the floor
+
+
+def test_the_shared_kind_is_asked_only_of_effects_with_a_per_chain_form():
+    cases = blind.blind_cases(seeds=range(1), robot="hexapod", kinds=("shared",))
+    assert {c[1] for c in cases} == {("compliance",), ("joint_friction",), ("thermal_drift",),
+                                     ("periodic_screw_error",), ("thermal_warmup",)}

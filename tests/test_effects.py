@@ -8,6 +8,7 @@ from calib import paper
 from calib.effects.base import unabsorbed
 from calib.effects.discovery import MIN_NESTED_DELTA_BIC
 from calib.effects.compliance import interior_points
+from calib.effects.granularity import per_chain_form
 from calib.effects import (EFFECT_MODULES, EFFECTS, FOLLOWED_QUANTITIES, Effect, EffectData, MachineContext,
                            discover_effect, discover_effects, effect_family, effects_for, fit_effect, fit_effects,
                            nested_in,
@@ -45,7 +46,7 @@ def synthetic(name, effect, coef, seed=0, n=80, extra=None, noise=None):
     targets = workspace[:, 0] + rng.uniform(size=(n, robot.pose_dim)) * np.ptp(workspace, axis=1)
     joints = robot.inverse_kinematics(robot.table.nominal, targets)
     t = np.cumsum(rng.uniform(0.5, 1.5, n))
-    eff = EFFECTS[effect]
+    eff = EFFECTS[effect] if isinstance(effect, str) else effect
     reached = targets
     for _ in range(6):  # fixed point: the load regressor depends on the pose reached
         Xq = eff.joint_regressors(robot, theta, EffectData(robot, robot.table.nominal, joints, reached, t, NOISE), extra)
@@ -203,8 +204,8 @@ def test_machine_settings_map_coefficients_to_physical_parameters():
     assert s["joint_friction"] == pytest.approx(0.004e-3 * 2e5)  # dead band x stiffness
     s = EFFECTS["joint_friction"].machine_settings(np.array([2e-5]), delta, CONTEXT)["options"]
     assert s["joint_friction"] == pytest.approx(2e-5 * 2e5)  # rad x N m/rad
-    s = EFFECTS["periodic_screw_error"].machine_settings(np.array([3.0, 4.0] * 6), hexapod, CONTEXT, 4.3)["effects"]
-    assert s["screw_amplitude"][0] == pytest.approx(5.0) and s["screw_pitch"] == 4.3
+    s = EFFECTS["periodic_screw_error"].machine_settings(np.array([3.0, 4.0]), hexapod, CONTEXT, 4.3)["effects"]
+    assert s["screw_amplitude"] == pytest.approx((5.0,) * 6) and s["screw_pitch"] == 4.3
     assert 3.0 * np.sin(0.7) + 4.0 * np.cos(0.7) == pytest.approx(5.0 * np.sin(0.7 + s["screw_phase_rad"][0]))
     assert EFFECTS["thermal_drift"].machine_settings(np.array([5e-5]), hexapod, CONTEXT)["effects"] == \
         {"joint_drift_per_s": 5e-5}
@@ -255,11 +256,12 @@ def test_joint_fit_recovers_injected_effect_and_geometry_noise_free(robot_name, 
 
 def test_pitch_search_finds_the_screw_pitch_through_noise():
     coef = np.array([0.004, -0.002, 0.001, 0.003, -0.003, 0.002, 0.0, 0.004, 0.002, 0.002, -0.001, -0.004])
-    data = synthetic("hexapod", "periodic_screw_error", coef, extra=4.3, noise=NOISE)
-    fit = fit_effect(data, "periodic_screw_error")
+    screws = per_chain_form(EFFECTS["periodic_screw_error"])  # each screw its own amplitude and phase
+    data = synthetic("hexapod", screws, coef[np.r_[0:12:2, 1:12:2]], extra=4.3, noise=NOISE)
+    fit = fit_effect(data, screws)
     assert fit.extra == pytest.approx(4.3, rel=2e-3)
     assert fit.named_coefficients()["pitch"]["value"] == fit.extra
-    np.testing.assert_allclose(fit.coefficients, coef, atol=5 * fit.coefficient_std.max())
+    np.testing.assert_allclose(fit.coefficients, coef[np.r_[0:12:2, 1:12:2]], atol=5 * fit.coefficient_std.max())
 
 
 # -------------------------------------------------------------------------- discovery

@@ -4,7 +4,9 @@ over :class:`calib.robot.Robot`.
 
 Adding an effect: write its module (a subclass of :class:`Effect` in an instance named
 ``EFFECT``, see :mod:`calib.effects.base`) and append the module's name to
-:data:`EFFECT_MODULES`.
+:data:`EFFECT_MODULES`. Coefficients that may differ from chain to chain are named in
+:attr:`Effect.per_chain_capable`: the effect then also has a per-chain form
+(:mod:`calib.effects.granularity`), which discovery weighs against the shared one.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "effect_family"
            "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "FOLLOWED_QUANTITIES",
            "MIN_DELTA_BIC", "MAX_EFFECTS", "EffectFit", "Discovery", "fit_effect", "fit_effects", "discover_effects",
            "discover_effect", "remainder_tests", "outlier_scan", "regressor_correlation", "locate_mismatch",
-           "closure_noise_std"]
+           "closure_noise_std", "candidate_forms", "PerChainForm", "per_chain_form", "SHARED", "PER_CHAIN"]
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
 EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error",
@@ -77,6 +79,7 @@ def effect_family(name: str | Effect) -> tuple[str, ...]:
     return tuple(([] if first.name in EFFECTS else [first.name]) + [n for n in EFFECTS if n in family])
 
 
-from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, closure_noise_std,  # noqa: E402
-                        discover_effect, discover_effects, fit_effect, fit_effects, locate_mismatch, outlier_scan,
-                        regressor_correlation, remainder_tests)
+from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, candidate_forms,  # noqa: E402
+                        closure_noise_std, discover_effect, discover_effects, fit_effect, fit_effects, locate_mismatch,
+                        outlier_scan, regressor_correlation, remainder_tests)
+from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form  # noqa: E402

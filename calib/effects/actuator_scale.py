@@ -25,6 +25,7 @@ class ActuatorScale(Effect):
 
     name = "actuator_scale"
     physics = "each actuator's stroke is scaled by 1 + s_i (transmission error)"
+    granularity = "per_chain"  # already one coefficient per chain (no shared form)
     follows = "stroke"
 
     def coefficients(self, robot):

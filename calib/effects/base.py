@@ -30,7 +30,7 @@ from ..validation import as_array
 from ..noise import SensorNoise
 from ..robot import Robot
 
-__all__ = ["FOLLOWED_QUANTITIES", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
+__all__ = ["FOLLOWED_QUANTITIES", "SPREAD_RANGE", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
            "EffectData", "Effect", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
 #: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
@@ -38,6 +38,9 @@ __all__ = ["FOLLOWED_QUANTITIES", "Coefficient", "SearchedParameter", "PhysicalP
 #: of travel, the load each chain carries (statics of the platform's weight), and the position in
 #: the workspace (``"position <coordinate>"``).
 FOLLOWED_QUANTITIES = ("time", "direction of the last move", "size of the last move", "stroke", "load", "position")
+#: A per-chain scenario (:meth:`Effect.per_chain_draw`) draws each chain's coefficient as this
+#: fraction of the largest (real joints differ, none by orders of magnitude).
+SPREAD_RANGE = (0.3, 1.0)
 
 
 @dataclass(frozen=True)
@@ -94,8 +97,9 @@ class MachineContext:
         payload_height_m: height of a payload's centre of mass over the platform frame, m.
         gravity_m_s2: standard gravity, m/s^2.
         m_per_mm: metres per millimetre.
-        servo_stiffness: stiffness of each actuator's position servo, SI (N/m for a prismatic
-            joint, N m/rad for a revolute one): it turns a dead band into a friction force.
+        servo_stiffness: stiffness of the actuators' position servos, SI (N/m for a prismatic
+            joint, N m/rad for a revolute one): one number, or a (C,) tuple, one per chain; it
+            turns a dead band into a friction force.
         chain_point_masses_kg: each chain's own mass lumped at its points after the base joint
             (those of ``Robot.chain_points``; the last at the platform joint), kg; empty when
             the machine does not say (the chains' weight is then left out).
@@ -106,7 +110,7 @@ class MachineContext:
     payload_height_m: float
     gravity_m_s2: float
     m_per_mm: float
-    servo_stiffness: float
+    servo_stiffness: float | tuple
     chain_point_masses_kg: tuple = ()
 
     def si_per_joint_unit(self, robot: Robot) -> float:
@@ -284,6 +288,15 @@ class Effect:
             ``thermal_drift``). Selection names the simpler one unless the general one earns a
             clear margin of evidence over it, never both; a recording analysed with an effect
             left out has its whole family left out (:func:`calib.effects.effect_family`).
+        granularity: ``"shared"`` (one value of each coefficient for every chain) or
+            ``"per_chain"`` (an effect whose coefficients already are one per chain, e.g. the
+            actuator scale, or a per-chain form: :mod:`calib.effects.granularity`).
+        per_chain_capable: names of the coefficients whose physics may differ from chain to
+            chain (a dead band, a growth rate, a stiffness): the effect then has a per-chain
+            form (:func:`calib.effects.granularity.per_chain_form`), and discovery chooses
+            between the two by the evidence.
+        per_chain_signed: whether a per-chain scenario may flip a chain's sign (physical for a
+            phase, not for a dead band or a stiffness).
     """
 
     name: ClassVar[str]
@@ -293,6 +306,9 @@ class Effect:
     follows: ClassVar[str] = ""
     refine_search: ClassVar[bool] = True
     generalises: ClassVar[tuple[str, ...]] = ()
+    granularity: ClassVar[str] = "shared"
+    per_chain_capable: ClassVar[tuple[str, ...]] = ()
+    per_chain_signed: ClassVar[bool] = False
 
     def applies_to(self, robot: Robot) -> bool:
         """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""
@@ -365,6 +381,19 @@ class Effect:
             context: the machine before the effect.
         """
         raise NotImplementedError
+
+    def per_chain_draw(self, robot: Robot, shared: np.ndarray, capable: np.ndarray,
+                       rng: np.random.Generator) -> np.ndarray:
+        """(C, k) each chain's values of the ``k`` capable coefficients (mask ``capable`` over
+        the shared draw ``shared`` (p,)) for a per-chain scenario: chain i's values are the
+        shared ones times ``u_i`` in :data:`SPREAD_RANGE` (the same factor for every capable
+        coefficient: one joint's own stiffness or friction), with a random sign when
+        :attr:`per_chain_signed`."""
+        c = robot.n_chains
+        u = rng.uniform(*SPREAD_RANGE, c)
+        if self.per_chain_signed:
+            u = u * rng.choice([-1.0, 1.0], c)
+        return u[:, None] * np.asarray(shared, dtype=float)[capable][None, :]
 
     def __repr__(self) -> str:
         return f"<effect {self.name!r}>"

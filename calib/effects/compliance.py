@@ -100,6 +100,12 @@ class Compliance(Effect):
     physics = ("each actuator gives way by its load over its stiffness; the loads come from the static "
                "equilibrium of the platform under the weight of platform and payload")
     follows = "load"
+    # One stiffness per chain divides every load term of that chain; the per-chain form gives
+    # each chain its own weight terms and keeps the centre-of-mass height term shared (a lever
+    # arm's correction: a chain of its own there would cost C - 1 parameters for a second-order
+    # term, and the evidence would not pay for them).
+    per_chain_capable = ("weight_over_stiffness", "chain_weight_over_stiffness", "chain_weight_over_stiffness1",
+                         "chain_weight_over_stiffness2")
 
     def applies_to(self, robot):
         angles = [u == "rad" for u in robot.pose_units]

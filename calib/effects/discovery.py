@@ -51,12 +51,13 @@ from scipy.stats import chi2 as chi2_dist, norm
 from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors
+from .granularity import PerChainForm, form_key, per_chain_form
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
-           "MIN_NESTED_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
+           "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
-           "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation"]
+           "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation", "candidate_forms"]
 
 #: Evidence an effect needs to enter the model: BIC lower by at least this ("very strong" on
 #: the Kass-Raftery scale; a chance reduction of a one-parameter effect's chi-square by 16 has
@@ -70,6 +71,12 @@ MAX_EFFECTS = 3
 #: in its place: BIC lower by at least this, on top of the BIC's own charge for the extra
 #: parameters (as much as an effect needs to enter at all: :data:`MIN_DELTA_BIC`).
 MIN_NESTED_DELTA_BIC = MIN_DELTA_BIC
+#: Evidence a per-chain form needs over its own shared form (:mod:`calib.effects.granularity`)
+#: on top of the BIC's charge of ``ln(n)`` for each of its ``C - 1`` extra coefficients: none more.
+#: That charge alone keeps a shared machine shared (a chance gain of ``(C - 1) ln n``, 31 for
+#: six chains and 500 residuals, has probability 1e-5 under chi-square(5)), while a per-joint
+#: spread the shared form cannot fit leaves structure the remainder tests would call unexplained.
+MIN_GRANULARITY_DELTA_BIC = 0.0
 #: Largest canonical correlation of two effects' whitened regressors (geometry projected out)
 #: above which this recording cannot tell them apart.
 ALIAS_CORRELATION = 0.95
@@ -281,7 +288,9 @@ class EffectFit:
 
     def parameters(self) -> dict:
         """``{effect: {coefficient: {"value", "std", "unit"}}}``, with the searched parameter
-        where there is one, and each effect's significance under ``"significance"``."""
+        where there is one, each effect's significance under ``"significance"`` and its form
+        under ``"granularity"`` (``"shared"`` or ``"per_chain"``: a per-chain form's
+        coefficients are named by chain, ``dead_band[leg 3]``)."""
         out = {}
         for m, extra in zip(self.models, self.extras):
             s = self.slices()[m.name]
@@ -290,6 +299,7 @@ class EffectFit:
             if extra is not None:
                 d.update({k: {"value": v, "std": float("nan"), "unit": u} for k, (v, u) in m.searched_values(extra).items()})
             d["significance"] = self.significance(m.name)
+            d["granularity"] = m.granularity
             out[m.name] = d
         return out
 
@@ -298,7 +308,7 @@ class EffectFit:
         parameters), flat."""
         out = {}
         for d in self.parameters().values():
-            out.update({k: v for k, v in d.items() if k != "significance"})
+            out.update({k: v for k, v in d.items() if k not in ("significance", "granularity")})
         return out
 
     def joint_displacement(self, data: EffectData) -> np.ndarray:
@@ -521,16 +531,54 @@ def regressor_correlation(data: EffectData, candidates=None, extras=None) -> dic
     return {(a, b): _canonical_correlation(cols[a], cols[b]) for i, a in enumerate(names) for b in names[i + 1:]}
 
 
+def _base(eff: Effect) -> Effect:
+    return eff.base if isinstance(eff, PerChainForm) else eff
+
+
+def candidate_forms(candidates, per_chain: bool = True) -> dict:
+    """``{key: effect}``: every candidate effect (its shared form, under its name) and, with
+    ``per_chain``, the per-chain form of each that has one (under ``name[per_chain]``,
+    :func:`calib.effects.granularity.form_key`); ``none`` dropped."""
+    out = {}
+    for m in _as_models(candidates):
+        out[form_key(m)] = m
+        pc = per_chain_form(m) if per_chain else None
+        if pc is not None:
+            out[form_key(pc)] = pc
+    return out
+
+
+def _relations(models: dict) -> tuple[dict, dict]:
+    """``(family, nested)`` over the candidate forms ``models`` (key -> effect): ``family[k]``
+    the keys of every form of every effect nested with ``k``'s (one of them in a model at
+    most); ``nested[k]`` ``{key: margin}`` of the keys ``k`` generalises: the other forms of its
+    own effect (margin :data:`MIN_GRANULARITY_DELTA_BIC`) or of an effect it generalises
+    (:attr:`Effect.generalises`; margin :data:`MIN_NESTED_DELTA_BIC`) whose granularity is no
+    finer (a per-chain form contains its shared form; a shared warm-up a shared drift, not a
+    per-chain one)."""
+    family, nested = {}, {}
+    for k, m in models.items():
+        fam = set(effect_family(_base(m)))
+        inner = set(nested_in(_base(m))) | {m.name}
+        fine = isinstance(m, PerChainForm)
+        family[k] = {k2 for k2, m2 in models.items() if m2.name in fam}
+        nested[k] = {k2: MIN_GRANULARITY_DELTA_BIC if models[k2].name == m.name else MIN_NESTED_DELTA_BIC
+                     for k2 in family[k] if k2 != k and models[k2].name in inner
+                     and (fine or not isinstance(models[k2], PerChainForm))}
+    return family, nested
+
+
 def _simplest(trials: dict, names, nested: dict) -> str:
     """Among ``names`` (one family of nested effects, each with its ``delta_bic`` in ``trials``;
-    ``nested[name]``: the effects it generalises), the one selection names: the best by BIC,
-    then, as long as an effect it generalises is within :data:`MIN_NESTED_DELTA_BIC` of it, that
-    simpler one (the extra parameters must pay)."""
+    ``nested[name]``: ``{effect it generalises: margin}``), the one selection names: the best by
+    BIC, then, as long as an effect it generalises is within the margin of it
+    (:data:`MIN_NESTED_DELTA_BIC`, :data:`MIN_GRANULARITY_DELTA_BIC`), that simpler one (the
+    extra parameters must pay)."""
     names = [n for n in names if n in trials]
     best = max(names, key=lambda n: trials[n]["delta_bic"])
     while True:
         simpler = [n for n in nested[best] if n in names
-                   and trials[best]["delta_bic"] - trials[n]["delta_bic"] < MIN_NESTED_DELTA_BIC]
+                   and trials[best]["delta_bic"] - trials[n]["delta_bic"] < nested[best][n]]
         if not simpler:
             return best
         best = max(simpler, key=lambda n: trials[n]["delta_bic"])
@@ -556,8 +604,7 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
     (:func:`_simplest`), and after each step the family's member in the model is reviewed with
     the other effects fitted (a warm-up's curvature can show only once another effect is in)."""
     log_n = np.log(lin.n)
-    family = {n: set(effect_family(m)) & set(models) for n, m in models.items()}
-    nested = {n: set(nested_in(m)) & set(models) for n, m in models.items()}
+    family, nested = _relations(models)
     chosen: dict = {}  # name -> {"extra", "X", "k"}
     excluded: set = set()
     chi2_cur, p_cur = lin.chi2([]), 0
@@ -1096,21 +1143,21 @@ def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, s
     Updates ``sel["chosen"]`` and appends nested aliases to ``sel["rivals"]``."""
     chosen = dict(sel["chosen"])
     log_n = np.log(lin.n)
+    family, nested = _relations(models)
     for name in list(chosen):
-        fam = [f for f in effect_family(models[name]) if f in models]
+        fam = [f for f in models if f in family[name]]
         if len(fam) < 2:
             continue
-        nested = {f: set(nested_in(models[f])) & set(fam) for f in fam}
         others = {n: e for n, e in chosen.items() if n != name}
-        fits = {f: fit_effects(sub, [models[n] for n in others] + [models[f]], extras=others, start=geo.theta)
-                for f in fam}
+        fits = {f: fit_effects(sub, [models[n] for n in others] + [models[f]], start=geo.theta,
+                               extras={models[n].name: e for n, e in others.items()}) for f in fam}
         s2 = max(1.0, min(f.chi2 / max(f.dof, 1) for f in fits.values()))
         trials = {f: {"delta_bic": -(fit.chi2 / s2 + fit.n_params * log_n)} for f, fit in fits.items()}
         better = _simplest(trials, fam, nested)
         extra = fits[better].extras[-1]
         for g in fam:
             gap = trials[g]["delta_bic"] - trials[better]["delta_bic"]
-            if better in nested[g] and 0 < gap < MIN_NESTED_DELTA_BIC:
+            if better in nested[g] and 0 < gap < nested[g][better]:
                 corr = _canonical_correlation(lin.columns(models[better], extra),
                                               lin.columns(models[g], fits[g].extras[-1]))
                 sel["rivals"].append((better, g, float(gap), corr, True))
@@ -1128,11 +1175,13 @@ def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: floa
     names = list(sel["chosen"])
     fit = geo
     while names:
-        fit = fit_effects(sub, [models[n] for n in names], extras=sel["chosen"], start=geo.theta)
-        weak = [n for n in names if fit.significance(n)["p_value"] > SIGNIFICANCE_ALPHA]
+        fit = fit_effects(sub, [models[n] for n in names], start=geo.theta,
+                          extras={models[n].name: sel["chosen"][n] for n in names})
+        p_value = {n: fit.significance(models[n].name)["p_value"] for n in names}
+        weak = [n for n in names if p_value[n] > SIGNIFICANCE_ALPHA]
         if not weak:
             break
-        names.remove(max(weak, key=lambda n: fit.significance(n)["p_value"]))
+        names.remove(max(weak, key=lambda n: p_value[n]))
         sel.setdefault("insignificant", []).append(weak)
         fit = geo
     return geo, fit, sel
@@ -1140,7 +1189,7 @@ def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: floa
 
 def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
                      outlier_alpha: float = OUTLIER_ALPHA, folds: int = 5, seed: int = 0, max_rounds: int = 3,
-                     min_delta_bic: float = MIN_DELTA_BIC) -> Discovery:
+                     min_delta_bic: float = MIN_DELTA_BIC, per_chain: bool = True) -> Discovery:
     """Name the left-out physics (up to ``max_effects`` effects together), fit it, test what
     remains, and isolate gross rows (see the module docstring).
 
@@ -1153,6 +1202,9 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         outlier_alpha: family-wise significance of the outlier test.
         folds, seed: cross-validation.
         max_rounds: outlier rounds (each removes the isolated gross rows and redoes the choice).
+        per_chain: also consider each candidate's per-chain form
+            (:mod:`calib.effects.granularity`), chosen against its shared form by the nested
+            rule (False: the shared forms only).
 
     Raises:
         ValueError: too few rows, an unknown candidate or one that does not apply to the robot.
@@ -1160,7 +1212,7 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     robot = data.robot
     if candidates is None:
         candidates = effects_for(robot)
-    models = {m.name: m for m in _as_models(candidates)}
+    models = candidate_forms(candidates, per_chain)
     for m in models.values():
         _check_applies(m, robot)
     if data.n < MIN_ROWS:
@@ -1185,8 +1237,25 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
     tests = remainder_tests(sub, fit, alpha=alpha)
     explained = tests["explained"]
-    aliases = [{"named": a, "rival": b, "delta_bic": gap, "correlation": corr, "nested": nested}
-               for a, b, gap, corr, nested in sel["rivals"] if a in fit.effects and b not in fit.effects]
+    aliases = [{"named": models[a].name, "rival": b, "delta_bic": gap, "correlation": corr, "nested": nested}
+               for a, b, gap, corr, nested in sel["rivals"]
+               if models[a] in fit.models and (nested or models[b].name not in fit.effects)]
+    evidence = _evidence(geo, sel, models, fit, alpha)
+    remaining = tests["remaining"]
+    if scan["model_wrong"]:
+        remaining = dict(remaining, bad_rows=len(scan["bad"]),
+                         summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
+                         f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
+    return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
+                     partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
+                     tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
+                     located=locate_mismatch(sub, geo))
+
+
+def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:
+    """The discovery's ``evidence``: per candidate form alone (keys as in
+    :func:`candidate_forms`), the selection's steps, the chosen model's cross-validated residual
+    and each named effect's granularity."""
     evidence = {"geometry_chi2_test": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "alpha": alpha},
                 "none": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "n_params": geo.n_params,
                          "bic": geo.bic(), "delta_bic_vs_none": 0.0, "cv_whitened_rms": sel["cv_geometry"]}}
@@ -1200,22 +1269,18 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         new = replaced.get(step["added"])
         if new in evidence and new in step["trials"]:  # named in its family member's place
             evidence[new]["delta_bic_when_added"] = step["trials"][new]["delta_bic"]
+    for key, m in models.items():  # a per-chain form named: its evidence under the effect's name too
+        if m in fit.models and key != m.name and "delta_bic_when_added" in evidence.get(key, {}):
+            evidence.setdefault(m.name, {})["delta_bic_when_added"] = evidence[key]["delta_bic_when_added"]
     evidence["steps"] = [{"added": s["added"], "dropped": s["dropped"],
                           "delta_bic": {k: v["delta_bic"] for k, v in s["trials"].items()}} for s in sel["steps"]]
     evidence["cv_whitened_rms_chosen"] = sel["cv_chosen"]
+    evidence["granularity"] = {m.name: m.granularity for m in fit.models}
     if replaced:
         evidence["nested_replaced"] = [list(p) for p in replaced.items()]
     if sel.get("insignificant"):
         evidence["dropped_not_significant"] = sel["insignificant"]
-    remaining = tests["remaining"]
-    if scan["model_wrong"]:
-        remaining = dict(remaining, bad_rows=len(scan["bad"]),
-                         summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
-                         f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
-    return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
-                     partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
-                     tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
-                     located=locate_mismatch(sub, geo))
+    return evidence
 
 
 #: The former name (one effect at a time); the same function.

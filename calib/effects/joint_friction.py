@@ -22,6 +22,7 @@ class JointFriction(Effect):
     physics = "a dead band: each actuator stops short of its target against the direction it last moved"
     history_dependent = True
     follows = "direction of the last move"
+    per_chain_capable = ("dead_band",)
 
     def coefficients(self, robot):
         return (Coefficient("dead_band", robot.joint_unit),)
@@ -31,11 +32,12 @@ class JointFriction(Effect):
 
     def machine_settings(self, coefficients, robot, context, extra=None):
         # Friction force = dead band x servo stiffness (SI: N for a prismatic joint, N m for a
-        # revolute one); the stiffness is set too, so that the mapping holds on any machine.
+        # revolute one); the stiffness is set too, so that the mapping holds on any machine. A
+        # stiffness per chain gives a friction force per chain.
         dead_band_si = max(float(coefficients[0]), 0.0) * context.si_per_joint_unit(robot)
-        return {"options": {"joint_friction": dead_band_si * context.servo_stiffness,
-                            "actuator_stiffness": context.servo_stiffness},
-                "effects": {}}
+        k = context.servo_stiffness
+        friction = dead_band_si * k if np.isscalar(k) else tuple(dead_band_si * float(v) for v in k)
+        return {"options": {"joint_friction": friction, "actuator_stiffness": k}, "effects": {}}
 
     def physical_parameter(self, robot):
         return PhysicalParameter("options", "joint_friction", "N" if robot.joint_unit == "mm" else "N m")

@@ -47,6 +47,7 @@ class LostCount(Effect):
     physics = "one joint's zero offset steps once partway through the recording (lost encoder counts)"
     searched = SearchedParameter("step_time", "s")
     refine_search = False
+    granularity = "per_chain"  # already one coefficient per chain (no shared form)
     follows = "time"
 
     def coefficients(self, robot):

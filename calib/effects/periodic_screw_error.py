@@ -1,11 +1,12 @@
 """``periodic_screw_error``: an error periodic in each leg's stroke, the same unknown pitch on
-every lead screw (prismatic legs only)."""
+every lead screw (prismatic legs only); amplitude and phase shared, or each screw its own (the
+per-chain form)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .base import Coefficient, Effect, EffectScenario, SearchedParameter
+from .base import SPREAD_RANGE, Coefficient, Effect, EffectScenario, SearchedParameter
 
 __all__ = ["EFFECT", "PeriodicScrewError", "PITCH_RANGE_MM"]
 
@@ -16,8 +17,11 @@ GRID_POINTS_PER_SPAN = 6.0
 
 
 class PeriodicScrewError(Effect):
-    """``dq_i = a_i sin(2 pi s_i / p) + b_i cos(2 pi s_i / p)``, ``s_i`` the stroke from the
-    centre of travel, ``p`` the screw pitch (searched in :data:`PITCH_RANGE_MM`).
+    """``dq_i = a sin(2 pi s_i / p) + b cos(2 pi s_i / p)``, ``s_i`` the stroke from the
+    centre of travel, ``p`` the screw pitch (searched in :data:`PITCH_RANGE_MM`): shared, the
+    same amplitude and phase on every screw; its per-chain form
+    (:func:`calib.effects.granularity.per_chain_form`) gives each screw its own ``a_i, b_i``
+    (amplitude and phase), the pitch still shared (one screw model).
 
     Applies to robots whose actuators are lead screws, i.e. actuated lengths
     (``joint_unit == "mm"``). A revolute actuator's periodic transmission error (gear
@@ -29,23 +33,19 @@ class PeriodicScrewError(Effect):
     physics = "an error periodic in each leg's stroke, the same (unknown) pitch on every screw"
     searched = SearchedParameter("pitch", "mm")
     follows = "stroke"
+    per_chain_capable = ("sin", "cos")
 
     def applies_to(self, robot):
         return robot.joint_unit == "mm"
 
     def coefficients(self, robot):
-        return tuple(Coefficient(f"{ab}{i + 1}", robot.joint_unit)
-                     for i in range(robot.n_chains) for ab in ("sin", "cos"))
+        return (Coefficient("sin", robot.joint_unit), Coefficient("cos", robot.joint_unit))
 
     def joint_regressors(self, robot, theta, data, extra=None):
         if extra is None:
             raise ValueError("periodic_screw_error needs the pitch (extra)")
-        c = robot.n_chains
         phase = 2 * np.pi * data.stroke / extra
-        X = np.zeros((data.n, c, 2 * c))
-        X[:, np.arange(c), 2 * np.arange(c)] = np.sin(phase)
-        X[:, np.arange(c), 2 * np.arange(c) + 1] = np.cos(phase)
-        return X
+        return np.stack([np.sin(phase), np.cos(phase)], axis=-1)
 
     def search_grid(self, data):
         """Frequencies ``1 / pitch`` over :data:`PITCH_RANGE_MM`, fine enough for the stroke span."""
@@ -57,21 +57,27 @@ class PeriodicScrewError(Effect):
 
     def machine_settings(self, coefficients, robot, context, extra=None):
         # a sin + b cos = A sin(. + phase), A = hypot(a, b), phase = atan2(b, a).
-        a, b = np.asarray(coefficients[0::2], dtype=float), np.asarray(coefficients[1::2], dtype=float)
+        a, b = float(coefficients[0]), float(coefficients[1])
+        c = robot.n_chains
         return {"options": {},
-                "effects": {"screw_amplitude": tuple(np.hypot(a, b)), "screw_phase_rad": tuple(np.arctan2(b, a)),
-                            "screw_pitch": float(extra)}}
+                "effects": {"screw_amplitude": (float(np.hypot(a, b)),) * c,
+                            "screw_phase_rad": (float(np.arctan2(b, a)),) * c, "screw_pitch": float(extra)}}
+
+    def per_chain_draw(self, robot, shared, capable, rng):
+        """Each screw its own amplitude (the shared one times :data:`~calib.effects.base.SPREAD_RANGE`)
+        and its own phase (uniform)."""
+        c = robot.n_chains
+        amplitude = np.hypot(*shared[:2]) * rng.uniform(*SPREAD_RANGE, c)
+        phase = rng.uniform(0, 2 * np.pi, c)
+        return np.column_stack([amplitude * np.cos(phase), amplitude * np.sin(phase)])
 
     def scenario(self, robot, theta, data, magnitude_mm, rng, context):
-        c = robot.n_chains
         pitch = float(rng.uniform(2.0, 10.0))
-        amplitude = rng.uniform(0.5, 1.0, c)
-        phase = rng.uniform(0, 2 * np.pi, c)
-        # The largest possible contribution of chain i is |dF/dq_i| A_i.
+        phase = rng.uniform(0, 2 * np.pi)
+        # The largest possible contribution of chain i is |dF/dq_i| A.
         dF_dq = np.abs(np.diagonal(robot.closure_jacobians(theta, data.joints, data.measured).joints, axis1=1, axis2=2))
-        amplitude *= magnitude_mm / np.max(amplitude * dF_dq.max(axis=0))
-        coefficients = np.ravel(np.column_stack([amplitude * np.cos(phase), amplitude * np.sin(phase)]))
-        return EffectScenario(coefficients, pitch, context)
+        amplitude = magnitude_mm / np.max(dF_dq)
+        return EffectScenario(np.array([amplitude * np.cos(phase), amplitude * np.sin(phase)]), pitch, context)
 
 
 EFFECT = PeriodicScrewError()

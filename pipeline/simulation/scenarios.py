@@ -22,6 +22,7 @@ import numpy as np
 
 from calib import paper
 from calib.effects import EffectData, MachineContext, effect as registered_effect
+from calib.effects.granularity import GRANULARITIES, PER_CHAIN, per_chain_form
 from calib.noise import SensorNoise
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot
@@ -192,14 +193,15 @@ def effects_settings(robot: Robot, context: MachineContext, drawn: list) -> dict
     own = [eff.machine_settings(coef, robot, context, extra).get("options", {}).get("actuator_stiffness")
            for eff, coef, extra in drawn]
     own = [k for k in own if k is not None and k != context.servo_stiffness]
-    if own:
-        context = replace(context, servo_stiffness=float(own[0]))
+    if own:  # one stiffness, or one per chain (a per-chain compliance)
+        context = replace(context, servo_stiffness=own[0] if isinstance(own[0], tuple) else float(own[0]))
     return merged_settings(context, merged(context))
 
 
 def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta: np.ndarray | None = None,
                      n_poses: int | None = None, magnitude_noise: float | None = None,
-                     noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None) -> Recording:
+                     noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None,
+                     granularity: str = "shared") -> Recording:
     """Simulate a blind recording of ``robot``'s MuJoCo machine with one effect or several.
 
     Args:
@@ -214,6 +216,10 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
             noise (default drawn in 3..10 for each effect).
         noise: sensor noise.
         workspace: (D, 2) low/high of the poses; default the scenario machine's.
+        granularity: ``"shared"`` (every joint the same value: one dead band, one growth rate,
+            one stiffness) or ``"per_chain"``: each effect that has a per-chain form
+            (:mod:`calib.effects.granularity`) drawn with a per-joint spread (each joint 0.3 to
+            1.0 times the largest, random signs where physical) and simulated so, joint by joint.
 
     Returns:
         The recording; its ``meta["simulation"]`` holds the truth (errors, each effect's
@@ -227,6 +233,10 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
     for eff in effs:
         if not eff.applies_to(robot):
             raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}")
+    if granularity not in GRANULARITIES:
+        raise ValueError(f"granularity must be one of {', '.join(GRANULARITIES)}, got {granularity!r}")
+    if granularity == PER_CHAIN:
+        effs = [per_chain_form(e) or e for e in effs]
     machine = scenario_machine(robot)
     nominal = robot.table.nominal
     theta = nominal + machine.errors(robot) if theta is None else np.asarray(theta, dtype=float)
@@ -256,6 +266,7 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
              "largest_contribution_mm": max(magnitudes) if real else magnitudes[0],
              "contributions_mm": {e.name: mag for e, mag in zip(effs, magnitudes) if e.name != "none"},
              "coefficients": {c.name: float(v) for eff, coef, _ in drawn for c, v in zip(eff.coefficients(robot), coef)},
+             "granularity": {e.name: e.granularity for e in real},
              "machine": settings}
     for eff, _, extra in drawn:
         if eff.searched is not None:

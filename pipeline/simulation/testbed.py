@@ -18,7 +18,7 @@ import numpy as np
 from calib.noise import SensorNoise
 from calib.robot import Robot
 from mjcf import build_machine
-from mjcf.machine import MachineEffects, MachineOptions
+from mjcf.machine import MachineEffects, MachineOptions, chain_values
 from mjcf.simulator import MachineSimulator, SettleError
 from pipeline.execution import available_cores
 
@@ -76,6 +76,9 @@ class Testbed:
 
     Each measurement commands the servo references ``machine.ctrl(joints + effects)`` and steps
     until at rest. The effects, per actuated chain, in the robot's joint unit:
+
+    Every per-joint value (friction, stiffness, drift and warm-up rates) is one number for every
+    joint or one per joint.
 
     * thermal drift: ``effects.joint_drift_per_s * t`` with ``t`` the time of the measurement
       (``times_s``, default the simulated time) at the start of the move; drift is slow next to
@@ -150,9 +153,13 @@ class Testbed:
         self._rng = np.random.default_rng(seed)
         self._screw_amplitude = np.asarray(effects.screw_amplitude) if effects.screw_amplitude else np.zeros(c)
         self._screw_phase = np.asarray(effects.screw_phase_rad) if effects.screw_phase_rad else np.zeros(c)
-        self.history_free = (options.joint_friction == 0 and effects.joint_drift_per_s == 0
+        #: (C,) each joint's Coulomb friction, thermal drift rate and warm-up rate.
+        self.friction = chain_values(options.joint_friction, c, "options.joint_friction")
+        self._drift = chain_values(effects.joint_drift_per_s, c, "effects.joint_drift_per_s")
+        self._warmup = chain_values(effects.joint_warmup_per_s, c, "effects.joint_warmup_per_s")
+        self.history_free = (not np.any(self.friction) and not np.any(self._drift)
                              and not np.any(self._screw_amplitude) and not np.any(effects.instrument_drift_mm_per_s)
-                             and not np.any(effects.joint_offset_step) and effects.joint_warmup_per_s == 0)
+                             and not np.any(effects.joint_offset_step) and not np.any(self._warmup))
         if settle == "rollout" and not self.history_free:
             raise ValueError("settle='rollout' needs physics without history (no joint friction, drift, "
                              "instrument drift, screw error, lost count or warm-up): use 'sequential' or 'auto'")
@@ -164,11 +171,11 @@ class Testbed:
         fx = self.effects
         screw = self._screw_amplitude * np.sin(2 * np.pi * (joints - self.home_joints) / fx.screw_pitch
                                                + self._screw_phase)
-        ref = joints + screw + fx.joint_drift_per_s * time_s
-        if fx.joint_warmup_per_s:
+        ref = joints + screw + self._drift * time_s
+        if np.any(self._warmup):
             from calib.effects.thermal_warmup import warmup_growth  # imported where a warm-up is simulated
 
-            ref = ref + fx.joint_warmup_per_s * warmup_growth(time_s, fx.joint_warmup_tau_s)
+            ref = ref + self._warmup * warmup_growth(time_s, fx.joint_warmup_tau_s)
         if fx.joint_offset_step and time_s >= fx.joint_offset_step_time_s:
             ref = ref + np.asarray(fx.joint_offset_step)
         return ref
@@ -189,7 +196,7 @@ class Testbed:
         """
         joints = np.asarray(joints, dtype=float)
         t = self.simulator.time if at_time_s is None else at_time_s
-        return self.simulator.settle(self.servo_reference(joints, t), self.options.joint_friction, commanded=joints)
+        return self.simulator.settle(self.servo_reference(joints, t), self.friction, commanded=joints)
 
     def measure(self, joints: np.ndarray, *, times_s: np.ndarray | None = None, progress=None) -> Measurements:
         """Command each row of joint values in turn, settle, read the sensors, add noise.

@@ -74,10 +74,11 @@ def report_lines(s: dict) -> list[str]:
             params = s["effect_parameters"][name]
             sig = params["significance"]
             e = s["evidence"].get(name, {})
-            lines.append(f"  {name}: BIC lower by {e.get('delta_bic_when_added', float('nan')):.0f} when it entered; "
+            form = params.get("granularity", "shared").replace("_", " ")
+            lines.append(f"  {name} ({form}): BIC lower by {e.get('delta_bic_when_added', float('nan')):.0f} when it entered; "
                          f"non-zero at p = {sig['p_value']:.2g} (Wald chi-square {sig['wald_chi2']:.0f} on {sig['dof']})")
             for k, v in params.items():
-                if k == "significance":
+                if k in ("significance", "granularity"):
                     continue
                 unc = f" +- {v['std']:.2g}" if np.isfinite(v["std"]) else ""
                 lines.append(f"    {k} = {v['value']:.6g}{unc} {v['unit']}")
@@ -178,7 +179,7 @@ def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
         lines += ["", "| effect | coefficient | value | +- | unit |", "|---|---|---|---|---|"]
         for e in s["effects"]:
             for k, v in s["effect_parameters"][e].items():
-                if k != "significance":
+                if k not in ("significance", "granularity"):
                     unc = f"{v['std']:.2g}" if np.isfinite(v["std"]) else ""
                     lines.append(f"| {e} | {k} | {v['value']:.4g} | {unc} | {v['unit']} |")
     ev = s["evidence"]

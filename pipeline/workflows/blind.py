@@ -6,7 +6,12 @@ scenario machine's geometric errors, 1 um noise, each effect's largest contribut
 the noise) and runs :func:`pipeline.workflows.discovery.discover` on each without telling it the truth.
 Kinds of recording (``--kinds``):
 
-- ``single``: one effect, or none;
+- ``single``: one effect, or none; every effect with a per-chain form
+  (:mod:`calib.effects.granularity`) drawn with a per-joint spread (each joint 0.3 to 1.0 times
+  the largest, random signs where physical: real joints differ), so is every kind below but
+  ``shared``;
+- ``shared``: one effect that has a per-chain form, drawn with one value for every joint (the
+  discovery must name it alone and call it ``shared``);
 - ``pair``: two effects at once (``--pairs``; default every pair that applies, but two nested
   effects: selection names one member of a family, the pair is inseparable by construction);
 - ``leave_one_out``: a single effect's recording analysed with that effect's whole family
@@ -37,6 +42,7 @@ import numpy as np
 
 from calib.effects import EFFECTS, effect_family, effects_for
 from calib.effects.discovery import SIGNIFICANCE_ALPHA
+from calib.effects.granularity import PER_CHAIN, SHARED, per_chain_form
 from calib.robots import default_robot
 
 from pipeline.execution import default_workers, run_tasks
@@ -45,7 +51,7 @@ __all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_case
            "failure_lines", "rates_table"]
 
 #: The kinds of recording (see the module docstring).
-KINDS = ("single", "pair", "leave_one_out", "gross3", "noise10", "noise100", "gross30", "geometry_off")
+KINDS = ("single", "shared", "pair", "leave_one_out", "gross3", "noise10", "noise100", "gross30", "geometry_off")
 #: Kinds where only the verdict's consistency is asked for.
 STRESS_KINDS = ("noise10", "noise100", "gross30", "geometry_off")
 #: A gross row's position error, mm (like the paper's row A2: tens of micrometres).
@@ -68,6 +74,7 @@ def _analyse(rec, candidates, seed: int) -> dict:
     tests_pass = s["tests"]["noise"]["consistent"] and not s["remaining"]["follows"]
     insignificant = [e for e, p in s["effect_parameters"].items() if p["significance"]["p_value"] > SIGNIFICANCE_ALPHA]
     return {"named": s["effects"], "explained": s["explained"], "follows": s["remaining"]["follows"],
+            "granularity": {e: p["granularity"] for e, p in s["effect_parameters"].items()},
             "flagged": s["flagged_poses"], "rows": s["rows"], "model_wrong": s["outliers"]["model_wrong"],
             "heldout_before_mm": s["heldout_rms_before_mm"], "heldout_after_mm": s["heldout_rms_after_mm"],
             "noise_floor_mm": s["noise_floor_mm"], "verdict": s["verdict"],
@@ -114,13 +121,17 @@ def blind_case(args: tuple) -> list[dict]:
     from pipeline.simulation import effect_recording
 
     robot = default_robot(robot_name)
-    rec = effect_recording(tuple(effects) or "none", seed, robot=robot)
     everything = effects_for(robot)
-    sim = rec.meta["simulation"]
-    base = {"robot": robot_name, "effects": list(effects), "seed": seed,
-            "magnitude_noise": {e: v / rec.noise.pose_std(("mm",))[0] for e, v in sim["contributions_mm"].items()}}
-    rng = np.random.default_rng(seed + 10_000)
     out = []
+    if "shared" in kinds:  # its own recording: every joint the same value
+        rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=SHARED)
+        out.append(dict(_truth(rec, robot_name, effects, seed), kind="shared", **_analyse(rec, everything, seed)))
+        kinds = tuple(k for k in kinds if k != "shared")
+        if not kinds:
+            return _with_criteria(out)
+    rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=PER_CHAIN)
+    base = _truth(rec, robot_name, effects, seed)
+    rng = np.random.default_rng(seed + 10_000)
     for kind in kinds:
         if kind in ("single", "pair"):
             out.append(dict(base, kind=kind, **_analyse(rec, everything, seed)))
@@ -144,6 +155,18 @@ def blind_case(args: tuple) -> list[dict]:
             out.append(dict(base, kind=kind, **_analyse(_geometry_off(rec), everything, seed)))
         else:
             raise ValueError(f"unknown kind {kind!r}: expected one of {', '.join(KINDS)}")
+    return _with_criteria(out)
+
+
+def _truth(rec, robot_name: str, effects, seed: int) -> dict:
+    """What a result says of the recording's truth: effects, seed, sizes, each effect's granularity."""
+    sim = rec.meta["simulation"]
+    return {"robot": robot_name, "effects": list(effects), "seed": seed,
+            "magnitude_noise": {e: v / rec.noise.pose_std(("mm",))[0] for e, v in sim["contributions_mm"].items()},
+            "true_granularity": dict(sim.get("granularity", {}))}
+
+
+def _with_criteria(out: list[dict]) -> list[dict]:
     for r in out:
         r["criteria"] = criteria(r)
     return out
@@ -152,8 +175,10 @@ def blind_case(args: tuple) -> list[dict]:
 def criteria(r: dict) -> dict:
     """The acceptance criteria a result meets (``True``/``False`` per criterion that applies).
 
-    - ``named``: single: the effect named alone (none: nothing) and ``explained``; pair: both
-      named and the held-out residual within 1.5 x the noise floor;
+    - ``named``: single and shared: the effect named alone (none: nothing) and ``explained``;
+      pair: both named and the held-out residual within 1.5 x the noise floor;
+    - ``granularity``: single, shared and pair: every true effect named is given its true
+      granularity (``shared`` or ``per_chain``);
     - ``unknown``: leave-one-out (the effect's family left out): ``explained`` false;
       ``points``: the remainder's strongest quantity is the one the left-out effect follows;
     - ``rows``: at most 2% of the rows flagged; gross3: exactly the three gross rows flagged;
@@ -162,7 +187,11 @@ def criteria(r: dict) -> dict:
     """
     c = {"consistent": r["consistent"]}
     kind = r["kind"]
-    if kind == "single":
+    if kind in ("single", "shared", "pair") and r["effects"]:
+        said = r.get("granularity", {})
+        c["granularity"] = all(said.get(e) == g for e, g in r.get("true_granularity", {}).items() if e in said) \
+            and any(e in said for e in r["effects"])
+    if kind in ("single", "shared"):
         c["named"] = r["named"] == r["effects"] and r["explained"]
     elif kind == "pair":
         c["named"] = set(r["effects"]) <= set(r["named"]) and r["heldout_after_mm"] <= 1.5 * r["noise_floor_mm"]
@@ -187,6 +216,8 @@ def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=
     if single_kinds:
         for e in names:
             ks = [k for k in single_kinds if e != "none" or k in ("single",) + STRESS_KINDS]
+            if e == "none" or per_chain_form(EFFECTS[e]) is None:  # no shared form to tell from a per-chain one
+                ks = [k for k in ks if k != "shared"]
             if ks:
                 cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) for s in seeds]
     if "pair" in kinds:
@@ -247,7 +278,7 @@ def failure_lines(results: list[dict]) -> list[str]:
 
 def rates_table(results: list[dict]) -> str:
     """Markdown table: per kind and truth, the rate of each criterion met."""
-    names = ("named", "unknown", "points", "points_top3", "rows", "consistent")
+    names = ("named", "granularity", "unknown", "points", "points_top3", "rows", "consistent")
     rows = ["| recordings | n | " + " | ".join(names) + " | held-out after / floor (worst) |",
             "|---|---|" + "---|" * len(names) + "---|"]
     for g in dict.fromkeys(_group(r) for r in results):
