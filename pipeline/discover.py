@@ -43,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the robot of --scenario (default hexapod); with --real, the robot the file must be of "
                         "(default: the one its sidecar names)")
     p.add_argument("--scenario-seed", type=nonnegative_int, default=0, help="seed of the --scenario recording")
+    p.add_argument("--scenario-granularity", choices=("shared", "per_chain"), default="shared",
+                   help="the --scenario's effects: one value for every joint, or each joint its own (0.3 to 1.0 "
+                        "times the largest)")
     p.add_argument("--candidates", type=_names, default=None, metavar="EFFECT[,EFFECT...]",
                    help="narrow the library to these effects (comma-separated; default every effect that applies to "
                         "the robot)")
@@ -59,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
 def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
     """The :class:`DiscoverySettings` of parsed flags."""
     return DiscoverySettings(real=args.real, scenario=args.scenario, robot=args.robot,
-                             scenario_seed=args.scenario_seed, candidates=args.candidates, seed=args.seed,
+                             scenario_seed=args.scenario_seed, scenario_granularity=args.scenario_granularity,
+                             candidates=args.candidates, seed=args.seed,
                              resim=not args.no_resim, sysid=not args.no_sysid, out=args.out, name=args.name,
                              overwrite=args.overwrite, summary_json=args.summary_json)
 

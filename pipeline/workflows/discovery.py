@@ -149,12 +149,18 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
     sub = rows if hist or rows.size <= sysid_rows else np.sort(
         np.random.default_rng(seed).choice(rows, sysid_rows, replace=False))
     meas_sub = rec.measured[sub]
-    x0 = float(settings[param.section][name])
+    start = settings[param.section][name]
+    per_joint = np.ndim(start) > 0  # one value per joint: one common scale of them is re-fitted
+
+    def value_of(x: float):
+        return tuple(float(v) * x for v in start) if per_joint else x
+
+    x0 = 1.0 if per_joint else float(start)
     low, high = (x0 / 10, x0 * 10) if x0 > 0 else (-10 * abs(x0) - 1e-9, 10 * abs(x0) + 1e-9)
     params = sysid_mod.ParameterDict({name: sysid_mod.Parameter(name, x0, low, high)})
 
     def residual_fn(x, _params):
-        sim = replay(rec, theta, _with(settings, param.section, name, float(x[0])), sub, history=hist)
+        sim = replay(rec, theta, _with(settings, param.section, name, value_of(float(x[0]))), sub, history=hist)
         return [((meas_sub - sim) / std).ravel()], None, None
 
     with contextlib.redirect_stdout(io.StringIO()):  # the scipy backend prints its iterations
@@ -163,8 +169,10 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
     xs = float(np.ravel(opt[name].value)[0])
     r_star = residual_fn(np.array([xs]), opt)[0]
     _, intervals = sysid_mod.calculate_intervals(r_star, res.jac)
-    report = {"parameter": name, "unit": param.unit, "start": x0, "value": xs,
+    report = {"parameter": name + (" (a common scale of the per-joint values)" if per_joint else ""),
+              "unit": "1" if per_joint else param.unit, "start": x0, "value": xs,
               "interval_95": float(np.ravel(intervals)[0]), "evaluations": int(res.nfev), "rows": int(sub.size)}
+    xs = value_of(xs)
     return _with(settings, param.section, name, xs), report
 
 
@@ -265,6 +273,8 @@ class DiscoverySettings:
         robot: the scenario's robot (default :data:`DEFAULT_SCENARIO_ROBOT`); with ``real``, the
             robot the file must be of (None: the one its sidecar names).
         scenario_seed: seed of the scenario recording.
+        scenario_granularity: ``shared`` (one value of each effect for every joint) or ``per_chain``
+            (each joint its own, 0.3 to 1.0 times the largest).
         candidates: effect names narrowing the library (None: every effect that applies).
         seed: seed of the held-out split and cross-validation folds.
         resim, sysid: re-simulate on the MuJoCo machine; re-fit there with ``mujoco.sysid``.
@@ -277,6 +287,7 @@ class DiscoverySettings:
     scenario: tuple[str, ...] | None = None
     robot: str | None = None
     scenario_seed: int = 0
+    scenario_granularity: str = "shared"
     candidates: tuple[str, ...] | None = None
     seed: int = 0
     resim: bool = True
@@ -352,7 +363,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     output_folder(out)
     check_outputs({"--out": rrd_path, "--summary-json": settings.summary_json}, overwrite=settings.overwrite)
     if rec is None:
-        rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name)
+        rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name,
+                               granularity=settings.scenario_granularity)
     robot = rec.robot
     if settings.robot is not None and robot.name != settings.robot:
         raise ValueError(f"{settings.real} is a recording of the {robot.name}, not of the {settings.robot} (--robot)")
