@@ -288,12 +288,8 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
         side = json.loads(text)
     except json.JSONDecodeError as exc:
         raise RecordingError(f"{json_path}: not valid JSON: {exc}") from None
-    if not isinstance(side, dict):
-        raise RecordingError(f"{json_path}: top level must be an object, got {type(side).__name__}")
-    unknown = [k for k in side if k not in SIDECAR_FIELDS]
-    if unknown:
-        raise RecordingError(f"{json_path}: unknown field(s) {', '.join(map(repr, unknown))}; "
-                             f"the fields are {', '.join(SIDECAR_FIELDS)}")
+    _object_of_known_keys(side, SIDECAR_FIELDS, f"{json_path}: top level", f"{json_path}: unknown field(s)",
+                          "the fields are")
     for key in ("format", "version", "robot", "units", "nominal_geometry", "declared_noise"):
         if key not in side:
             raise RecordingError(f"{json_path}: missing field {key!r}")
@@ -370,15 +366,20 @@ def _sidecar_layout(json_path: Path, side: dict,
                     _session_block(json_path, name, block) for name, block in value.items()}
 
 
+def _object_of_known_keys(value, allowed, what: str, unknown_words: str, allowed_words: str) -> None:
+    """RecordingError unless ``value`` is a JSON object whose keys are all in ``allowed`` (a misspelt
+    key would otherwise be ignored silently)."""
+    if not isinstance(value, dict):
+        raise RecordingError(f"{what} must be an object, got {type(value).__name__}")
+    unknown = [k for k in value if k not in allowed]
+    if unknown:
+        raise RecordingError(f"{unknown_words} {', '.join(map(repr, unknown))}; {allowed_words} {', '.join(allowed)}")
+
+
 def _session_block(json_path: Path, name: str, block) -> dict:
     """A session's entry of the sidecar's ``sessions`` field, checked (:data:`SESSION_KEYS`)."""
     where = f"{json_path}: field sessions.{name}"
-    if not isinstance(block, dict):
-        raise RecordingError(f"{where} must be an object, got {type(block).__name__}")
-    unknown = [k for k in block if k not in SESSION_KEYS]
-    if unknown:
-        raise RecordingError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; the keys are "
-                             f"{', '.join(SESSION_KEYS)}")
+    _object_of_known_keys(block, SESSION_KEYS, where, f"{where}: unknown key(s)", "the keys are")
     for key in ("source", "time_origin"):
         if key in block and not isinstance(block[key], str):
             raise RecordingError(f"{where}.{key} must be a string, got {block[key]!r}")
