@@ -847,6 +847,13 @@ def _invert(frame: np.ndarray) -> np.ndarray:
     return np.concatenate([-R.T @ frame[:3], euler_from_matrix(R.T)])
 
 
+def _read_only(value, dtype) -> np.ndarray:
+    """A read-only copy of ``value`` as ``dtype`` (flags and indices; floats take ``frozen_array``)."""
+    a = np.array(value, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
 def _compose_frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(6,) the frame ``a o b`` (``b`` applied first)."""
     Ra = rotation_matrix(a[3:])
@@ -1103,8 +1110,8 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
                        targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
                        registration=begin["registration"], notes=tuple(notes), frames=frozen_array(fit["frames"]),
-                       frames_std=frozen_array(frames_std), frames_estimated=frozen_array(est_frames),
-                       session_of_row=frozen_array(data["sessions"]), unknown_names=tuple(all_names),
+                       frames_std=frozen_array(frames_std), frames_estimated=_read_only(est_frames, bool),
+                       session_of_row=_read_only(data["sessions"], int), unknown_names=tuple(all_names),
                        unknowns_covariance=frozen_array(fit["cov"]))
 
 
