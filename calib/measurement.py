@@ -957,10 +957,9 @@ def _session_modes(frame, initial_frame, n_sessions: int) -> tuple[list, list]:
             raise ValueError(f"frame must be one of {FRAME_MODES}, got {mode!r}")
     if initial_frame is None:
         return modes, [None] * n_sessions
-    if isinstance(initial_frame, np.ndarray) and initial_frame.ndim == 1 or \
-            not isinstance(initial_frame, np.ndarray) and np.ndim(initial_frame[0]) == 0:
-        return modes, [as_array(initial_frame, "initial_frame", (6,))] * n_sessions
     initials = list(initial_frame)
+    if all(f is not None and np.ndim(f) == 0 for f in initials):  # six numbers: one frame for every session
+        return modes, [as_array(initial_frame, "initial_frame", (6,))] * n_sessions
     if len(initials) != n_sessions:
         raise ValueError(f"initial_frame must be one (6,) frame or {n_sessions}, got {len(initials)}")
     return modes, [None if f is None else as_array(f, f"initial_frame[{s}]", (6,)) for s, f in enumerate(initials)]
@@ -1050,7 +1049,8 @@ def _sessions_start(robot, joints, measured, modes, initials, targets, est_targe
     return {"detection": parts[0]["detection"], "registration": parts[0]["registration"],
             "est_frame": bool(est_frames.any()), "est_frames": est_frames,
             "frames0": np.array([part["frame0"] for part in parts]), "targets0": parts[0]["targets0"],
-            "poses0": poses0, "notes": [f"session {s}: {note}" for s, part in enumerate(parts) for note in part["notes"]]}
+            "poses0": poses0,
+            "notes": [f"session {s}: {note}" for s, part in enumerate(parts) for note in part["notes"]]}
 
 
 def _unknown_names(robot, fit: dict, data: dict) -> list:
@@ -1095,7 +1095,7 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
     if fit["success"] and dof > 0 and np.isfinite(fit["chi2"]):
         msg = f"{msg}; {noise_verdict(fit['chi2'], dof)}"
     if est_frame and data["n_sessions"] > 1:
-        msg = f"{msg}; the instrument frames of sessions {', '.join(map(str, np.flatnonzero(est_frames)))} are " \
+        msg = f"{msg}; the instrument frame(s) of session(s) {', '.join(map(str, np.flatnonzero(est_frames)))} " \
               "estimated with the geometry"
     elif est_frame:
         msg = f"{msg}; " + (detection.message if detection is not None else

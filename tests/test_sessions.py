@@ -162,3 +162,17 @@ def test_a_fit_of_several_sessions_does_not_guess_the_session():
         fit.to_base(m, sessions=np.full(len(m), 2))
     with pytest.raises(ValueError, match="session 1 has no rows"):
         identify_measured(robot, q, m, NOISE, prior=prior, sessions=np.where(sessions == 1, 2, 0))
+
+
+def test_each_session_has_its_own_frame_mode():
+    """Session 0 in the base frame ("base"), session 1 seen from ``F1`` ("auto" detects it): the
+    base session anchors the base, so no gauge is left and ``F1`` itself is identifiable."""
+    robot, prior, theta, data = _two_sessions("hexapod", seed=2)
+    (q0, m0), _ = data[0]
+    poses0 = robot.forward_kinematics(theta, q0)
+    m0 = instrument_measurements(robot, poses0, None) + NOISE.sample(len(q0), 7, robot.pose_units)
+    q, m, sessions = _stacked([(q0, m0), data[1][0]])
+    fit = identify_measured(robot, q, m, NOISE, frame=["base", "auto"], initial_frame=[None, None], sessions=sessions)
+    assert fit.frames_estimated.tolist() == [False, True] and fit.gauge == ()
+    np.testing.assert_array_equal(fit.frames[0], np.zeros(6))
+    assert np.all(np.abs(fit.frames[1] - F1) <= SIGMAS * fit.frames_std[1]), (fit.frames[1] - F1, fit.frames_std[1])
