@@ -720,6 +720,8 @@ class MeasuredFit:
             the targets are estimated, then the estimated frames (``frame.x ...`` for one session,
             ``frame.x@s ...`` for several).
         unknowns_covariance: (n, n) their covariance, in the gauge (or under the prior).
+        registrations: (S,) each session's closed-form start (:class:`Registration`, None where
+            its frame was not estimated): the "before" of a session's held-out rows.
     """
 
     result: IdentificationResult
@@ -739,6 +741,7 @@ class MeasuredFit:
     session_of_row: np.ndarray
     unknown_names: tuple
     unknowns_covariance: np.ndarray
+    registrations: tuple
 
     @property
     def n_targets(self) -> int:
@@ -1034,11 +1037,13 @@ def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_
 def _sessions_start(robot, joints, measured, modes, initials, targets, est_targets, theta0, rows) -> dict:
     """:func:`_measured_start` session by session (one session: exactly it), combined:
     ``frames0`` (S, 6), ``est_frames`` (S,), ``est_frame`` (any), ``poses0`` (N, D), ``targets0``
-    (session 0's start), ``detection`` and ``registration`` (session 0's), ``notes`` (each
+    (session 0's start), ``detection`` and ``registration`` (session 0's), ``registrations`` (each
+    session's, None where its frame is not estimated), ``notes`` (each
     session's, named)."""
     if len(rows) == 1:
         begin = _measured_start(robot, joints, measured, modes[0], initials[0], targets, est_targets, theta0)
-        begin.update(frames0=begin["frame0"][None], est_frames=np.array([begin["est_frame"]]))
+        begin.update(frames0=begin["frame0"][None], est_frames=np.array([begin["est_frame"]]),
+                     registrations=(begin["registration"],))
         return begin
     parts = [_measured_start(robot, joints[r], measured[r], modes[s], initials[s], targets, est_targets, theta0)
              for s, r in enumerate(rows)]
@@ -1047,7 +1052,7 @@ def _sessions_start(robot, joints, measured, modes, initials, targets, est_targe
         poses0[r] = part["poses0"]
     est_frames = np.array([part["est_frame"] for part in parts])
     return {"detection": parts[0]["detection"], "registration": parts[0]["registration"],
-            "est_frame": bool(est_frames.any()), "est_frames": est_frames,
+            "registrations": tuple(part["registration"] for part in parts), "est_frame": bool(est_frames.any()), "est_frames": est_frames,
             "frames0": np.array([part["frame0"] for part in parts]), "targets0": parts[0]["targets0"],
             "poses0": poses0,
             "notes": [f"session {s}: {note}" for s, part in enumerate(parts) for note in part["notes"]]}
@@ -1112,7 +1117,7 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
                        registration=begin["registration"], notes=tuple(notes), frames=frozen_array(fit["frames"]),
                        frames_std=frozen_array(frames_std), frames_estimated=_read_only(est_frames, bool),
                        session_of_row=_read_only(data["sessions"], int), unknown_names=tuple(all_names),
-                       unknowns_covariance=frozen_array(fit["cov"]))
+                       unknowns_covariance=frozen_array(fit["cov"]), registrations=begin["registrations"])
 
 
 def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,

@@ -174,5 +174,6 @@ def test_each_session_has_its_own_frame_mode():
     q, m, sessions = _stacked([(q0, m0), data[1][0]])
     fit = identify_measured(robot, q, m, NOISE, frame=["base", "auto"], initial_frame=[None, None], sessions=sessions)
     assert fit.frames_estimated.tolist() == [False, True] and fit.gauge == ()
+    assert fit.registrations[0] is None and fit.registrations[1] is not None
     np.testing.assert_array_equal(fit.frames[0], np.zeros(6))
     assert np.all(np.abs(fit.frames[1] - F1) <= SIGMAS * fit.frames_std[1]), (fit.frames[1] - F1, fit.frames_std[1])
