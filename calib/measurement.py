@@ -68,6 +68,8 @@ FRAME_DETECTION_FRACTION = 0.1
 FRAME_DETECTION_RAD = 0.1
 #: Singular values of the scaled Jacobian below this times the largest span the gauge.
 GAUGE_RTOL = 1e-9
+#: Step (mm, rad) of the central differences of :meth:`MeasuredFit.session_motion`.
+FRAME_STEP = 1e-6
 #: Most targets a position-only recording may name.
 MAX_TARGETS = 3
 
@@ -381,8 +383,8 @@ def register_frame(robot: Robot, joints, measured, *, targets=None, estimate_tar
     frame = np.concatenate([tF, euler_from_matrix(RF)])
     fitted_targets = None if k == 0 else np.array(targets, dtype=float)
     if k and estimate_targets:
-        fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int), frame,
-                   fitted_targets, True, True, poses, "lm", 100, 1e-15, 1e-15, gauge_passes=1)
+        fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int), frame[None],
+                   fitted_targets, [True], True, poses, "lm", 100, 1e-15, 1e-15, gauge_passes=1)
         frame, fitted_targets = fit["frame"], fit["targets"]
     pred = instrument_measurements(robot, poses, frame, fitted_targets)
     mm, rad = _disagreement(robot, measured, pred, k)
@@ -411,8 +413,9 @@ class FrameDetection:
 
 def _fit_targets(robot, joints, measured, theta, poses, frame, targets) -> np.ndarray:
     """(K, 3) target offsets fitted with the geometry ``theta`` and the frame held (rigid fit)."""
-    fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int), frame,
-               np.asarray(targets, dtype=float), False, True, poses, "lm", 100, 1e-15, 1e-15, gauge_passes=1)
+    fit = _fit(robot, joints, measured, SensorNoise(1.0, 1.0), theta, np.zeros(0, int),
+               np.asarray(frame, dtype=float)[None], np.asarray(targets, dtype=float), [False], True, poses,
+               "lm", 100, 1e-15, 1e-15, gauge_passes=1)
     return fit["targets"]
 
 
@@ -537,109 +540,188 @@ def _complement(constraints: np.ndarray, n: int) -> np.ndarray:
     return vt[constraints.shape[0]:].T
 
 
-def _fit(robot, joints, measured, noise, theta0, idx, frame0, targets0, est_frame, est_targets, poses0,
-         solver, max_iter, xtol, ftol, gauge_passes=2, reference=None, prior=None):
-    """The joint fit of geometry ``idx``, frame and targets; see :func:`identify_measured`. With a
-    ``prior``, its whitened rows ``(theta[idx] - mean) / std`` follow the measurements' rows."""
-    n = joints.shape[0]
-    k = 0 if targets0 is None else targets0.shape[0]
-    nt, nf = (3 * k if est_targets else 0), (6 if est_frame else 0)
-    scale_theta = np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0)
-    scale = np.concatenate([scale_theta, np.ones(nt), np.r_[np.ones(3), np.full(3, robot.length_scale_mm)][:nf]])
-    groups = [np.arange(idx.size), idx.size + np.arange(nt), idx.size + nt + np.arange(nf)]
-    tg_start = np.zeros(0) if targets0 is None else np.asarray(targets0, dtype=float).ravel()[:nt]
-    z_ref = np.concatenate([theta0[idx] if reference is None else reference[idx], tg_start, frame0[:nf]])
-    state = {"poses": poses0}
+def _session_rows(sessions, n_sessions: int) -> list:
+    """Each session's rows: ``[slice(None)]`` (every row, as before sessions) for one session,
+    else the (N_s,) row indices of sessions 0..S-1."""
+    if n_sessions == 1:
+        return [slice(None)]
+    return [np.flatnonzero(sessions == s) for s in range(n_sessions)]
 
-    def unpack(z):
-        th = theta0.copy()
-        th[idx] = z[:idx.size]
-        tg = targets0 if not est_targets else z[idx.size:idx.size + nt].reshape(k, 3)
-        fr = frame0 if not est_frame else z[idx.size + nt:]
-        return th, tg, fr
 
-    def poses_of(th):
-        if idx.size:
-            state["poses"] = robot.forward_kinematics(th, joints, initial=state["poses"])
-        return state["poses"]
+def _session_measurements(robot, poses, frames, targets, rows) -> np.ndarray:
+    """(N, M) :func:`instrument_measurements`, each row in its session's frame (``frames`` (S, 6))."""
+    if len(rows) == 1:
+        return instrument_measurements(robot, poses, frames[0], targets)
+    out = np.empty((len(poses), robot.pose_dim if targets is None else 3 * len(targets)))
+    for s, r in enumerate(rows):
+        out[r] = instrument_measurements(robot, poses[r], frames[s], targets)
+    return out
 
-    z = np.concatenate([theta0[idx], tg_start, frame0[:nf]])
-    th0, tg0, fr0 = unpack(z)
-    Hp0, _, _ = measurement_jacobians(robot, poses0, fr0, tg0)
-    winv = _whitening(robot, th0, joints, poses0, noise, Hp0, k)
 
-    prior_rows = None if prior is None else np.zeros((idx.size, z_ref.size))
-    if prior_rows is not None:
-        prior_rows[:, :idx.size] = np.diag(1.0 / prior.std[idx])
+def _session_jacobians(robot, poses, frames, targets, rows, estimated) -> tuple:
+    """``(H_pose, H_frames, H_targets)`` of :func:`measurement_jacobians`, each row in its session's
+    frame; ``H_frames`` (N, M, 6E): the E sessions flagged in ``estimated`` (S,), six columns each,
+    a row's block in its own session's columns (zero elsewhere)."""
+    if len(rows) == 1:
+        Hp, HF, Ho = measurement_jacobians(robot, poses, frames[0], targets)
+        return Hp, (HF if estimated[0] else HF[:, :, :0]), Ho
+    m = robot.pose_dim if targets is None else 3 * len(targets)
+    k3 = 0 if targets is None else 3 * len(targets)
+    n, column = len(poses), np.cumsum(estimated) - 1
+    Hp, HF, Ho = np.empty((n, m, robot.pose_dim)), np.zeros((n, m, 6 * int(np.sum(estimated)))), np.empty((n, m, k3))
+    for s, r in enumerate(rows):
+        Hp[r], HFs, Ho[r] = measurement_jacobians(robot, poses[r], frames[s], targets)
+        if estimated[s]:
+            HF[r, :, 6 * column[s]:6 * column[s] + 6] = HFs
+    return Hp, HF, Ho
 
-    def residual(z):
-        th, tg, fr = unpack(z)
-        pred = instrument_measurements(robot, poses_of(th), fr, tg)
-        r = np.einsum("nij,nj->ni", winv, measurement_residuals(robot, measured, pred, k)).ravel()
+
+class _JointProblem:
+    """The joint fit's unknowns ``z = [geometry idx | targets (when estimated) | the estimated
+    sessions' frames, six each]``, its whitened residuals and their Jacobian (the prior's rows after
+    the measurements'). The whitening is taken once, at the start."""
+
+    def __init__(self, robot, joints, measured, noise, theta0, idx, frames0, targets0, est_frames, est_targets,
+                 poses0, rows, prior):
+        self.robot, self.joints, self.measured, self.theta0, self.idx = robot, joints, measured, theta0, idx
+        self.frames0, self.targets0, self.rows, self.prior = np.asarray(frames0, dtype=float), targets0, rows, prior
+        self.est_frames, self.est_targets = np.asarray(est_frames, bool), est_targets
+        self.k = 0 if targets0 is None else targets0.shape[0]
+        self.nt, self.nf = (3 * self.k if est_targets else 0), 6 * int(np.sum(self.est_frames))
+        frame_scale = np.tile(np.r_[np.ones(3), np.full(3, robot.length_scale_mm)], self.nf // 6)
+        self.scale = np.concatenate([np.where(robot.table.angle_mask()[idx], robot.length_scale_mm, 1.0),
+                                     np.ones(self.nt), frame_scale])
+        self.groups = [np.arange(idx.size), idx.size + np.arange(self.nt), idx.size + self.nt + np.arange(self.nf)]
+        tg_start = np.zeros(0) if targets0 is None else np.asarray(targets0, dtype=float).ravel()[:self.nt]
+        self.start = np.concatenate([theta0[idx], tg_start, self.frames0[self.est_frames].ravel()])
+        self.poses0, self.state = poses0, {"poses": poses0}
+        Hp0, _, _ = _session_jacobians(robot, poses0, self.frames0, targets0, rows, self.est_frames)
+        self.winv = _whitening(robot, theta0, joints, poses0, noise, Hp0, self.k)
+        self.prior_rows = None if prior is None else np.zeros((idx.size, self.start.size))
+        if prior is not None:
+            self.prior_rows[:, :idx.size] = np.diag(1.0 / prior.std[idx])
+
+    def unpack(self, z) -> tuple:
+        """``(theta (P,), targets (K, 3) or None, frames (S, 6))`` of ``z``."""
+        ni, nt = self.idx.size, self.nt
+        th = self.theta0.copy()
+        th[self.idx] = z[:ni]
+        tg = self.targets0 if not self.est_targets else z[ni:ni + nt].reshape(self.k, 3)
+        frames = self.frames0.copy()
+        frames[self.est_frames] = z[ni + nt:].reshape(-1, 6)
+        return th, tg, frames
+
+    def poses_of(self, th) -> np.ndarray:
+        if self.idx.size:
+            self.state["poses"] = self.robot.forward_kinematics(th, self.joints, initial=self.state["poses"])
+        return self.state["poses"]
+
+    def residual(self, z) -> np.ndarray:
+        th, tg, frames = self.unpack(z)
+        pred = _session_measurements(self.robot, self.poses_of(th), frames, tg, self.rows)
+        r = np.einsum("nij,nj->ni", self.winv, measurement_residuals(self.robot, self.measured, pred, self.k)).ravel()
+        prior, idx = self.prior, self.idx
         return r if prior is None else np.concatenate([r, (th[idx] - prior.mean[idx]) / prior.std[idx]])
 
-    def jacobian(z):
-        th, tg, fr = unpack(z)
-        p = poses_of(th)
-        Hp, HF, Ho = measurement_jacobians(robot, p, fr, tg)
+    def jacobian(self, z) -> np.ndarray:
+        th, tg, frames = self.unpack(z)
+        p = self.poses_of(th)
+        Hp, HF, Ho = _session_jacobians(self.robot, p, frames, tg, self.rows, self.est_frames)
         blocks = []
-        if idx.size:
-            blocks.append(Hp @ pose_jacobian_of_parameters(robot, th, joints, p)[:, :, idx])
-        if nt:
+        if self.idx.size:
+            blocks.append(Hp @ pose_jacobian_of_parameters(self.robot, th, self.joints, p)[:, :, self.idx])
+        if self.nt:
             blocks.append(Ho)
-        if nf:
+        if self.nf:
             blocks.append(HF)
         J = np.concatenate(blocks, axis=2)
-        J = -np.einsum("nij,njk->nik", winv, J).reshape(n * J.shape[1], -1)
-        return J if prior_rows is None else np.concatenate([J, prior_rows])
+        J = -np.einsum("nij,njk->nik", self.winv, J).reshape(len(p) * J.shape[1], -1)
+        return J if self.prior_rows is None else np.concatenate([J, self.prior_rows])
 
+
+def _fit(robot, joints, measured, noise, theta0, idx, frames0, targets0, est_frames, est_targets, poses0,
+         solver, max_iter, xtol, ftol, gauge_passes=2, reference=None, prior=None, rows=None):
+    """The joint fit of geometry ``idx``, the sessions' frames ``frames0`` (S, 6) (those flagged in
+    ``est_frames`` (S,) estimated) and the targets; see :func:`identify_measured`. ``rows``: each
+    session's rows (:func:`_session_rows`; default one session). With a ``prior``, its whitened rows
+    ``(theta[idx] - mean) / std`` follow the measurements' rows."""
+    rows = [slice(None)] if rows is None else rows
+    pb = _JointProblem(robot, joints, measured, noise, theta0, idx, frames0, targets0, est_frames, est_targets,
+                       poses0, rows, prior)
+    scale, z = pb.scale, pb.start.copy()
+    z_ref = pb.start.copy()
+    if reference is not None:
+        z_ref[:idx.size] = reference[idx]
     history: list[float] = []
     iters, ok, msg = 0, False, "not run"
     null = np.zeros((z.size, 0))
     for _ in range(max(1, gauge_passes)):
-        null, C = gauge_null_space(jacobian(z) / scale, groups)
+        null, C = gauge_null_space(pb.jacobian(z) / scale, pb.groups)
         Q = _complement(C, z.size)
         G = Q / scale[:, None]  # y (scaled) -> z
         base = z_ref + G @ (Q.T @ ((z - z_ref) * scale))  # the start, projected onto the gauge plane
-        state["poses"] = poses0
-        y, it, ok, msg = minimise(lambda y: residual(base + G @ y), lambda y: jacobian(base + G @ y) @ G,
+        pb.state["poses"] = poses0
+        y, it, ok, msg = minimise(lambda y: pb.residual(base + G @ y), lambda y: pb.jacobian(base + G @ y) @ G,
                                   np.zeros(Q.shape[1]), solver=solver, max_iter=max_iter, xtol=xtol,
                                   ftol=ftol, history=history)
         iters += it
         z = base + G @ y
         if null.shape[1] == 0:
             break
-    r = residual(z)
-    Jy = jacobian(z) @ G
+    out = _fit_outputs(pb, z, G, Q.shape[1])
+    out.update({"iterations": iters, "history": tuple(history), "success": ok, "message": msg,
+                "null": null / scale[:, None]})
+    return out
+
+
+def _fit_outputs(pb: _JointProblem, z, G, n_free: int) -> dict:
+    """The joint fit's solution ``z`` in words of its parts: geometry, targets, ``frames`` (S, 6)
+    (``frame`` session 0's), the covariance of ``z`` (gauge plane ``G``), chi-square and degrees of
+    freedom (``n_free`` unknowns in the plane, or every measured row with a prior)."""
+    r = pb.residual(z)
+    Jy = pb.jacobian(z) @ G
     cov = G @ np.linalg.pinv(Jy.T @ Jy, hermitian=True) @ G.T
-    th, tg, fr = unpack(z)
+    th, tg, frames = pb.unpack(z)
     norms = np.linalg.norm(Jy, axis=0)
     cond = float(np.linalg.cond(Jy / norms)) if np.all(norms > 0) and Jy.size else float("inf")
-    n_measured = r.size - (0 if prior is None else idx.size)
-    return {"theta": th, "targets": None if k == 0 else np.array(tg, dtype=float), "frame": np.array(fr, dtype=float),
-            "poses": state["poses"], "chi2": float(r @ r), "dof": int(n_measured - Q.shape[1]) if prior is None
-            else int(n_measured), "cov": cov,
-            "iterations": iters, "history": tuple(history), "success": ok, "message": msg,
-            "null": null / scale[:, None], "cond": cond, "n_theta": idx.size, "nt": nt, "nf": nf}
+    n_measured = r.size - (0 if pb.prior is None else pb.idx.size)
+    return {"theta": th, "targets": None if pb.k == 0 else np.array(tg, dtype=float),
+            "frames": np.array(frames, dtype=float), "frame": np.array(frames[0], dtype=float),
+            "est_frames": pb.est_frames.copy(), "poses": pb.state["poses"], "chi2": float(r @ r),
+            "dof": int(n_measured - n_free) if pb.prior is None else int(n_measured), "cov": cov, "cond": cond,
+            "n_theta": pb.idx.size, "nt": pb.nt, "nf": pb.nf}
 
 
 @dataclass(frozen=True, eq=False)
 class MeasuredFit:
-    """The geometry, instrument frame and target offsets identified together.
+    """The geometry, instrument frame(s) and target offsets identified together.
+
+    One machine may be measured in several sessions (:func:`identify_measured`'s ``sessions``),
+    each in its own instrument frame; ``frames`` holds them, ``frame`` is session 0's.
 
     Attributes:
         result: the geometry as an :class:`~calib.engine.IdentificationResult` (method
             ``"forward"``; ``residuals``/``pose_residuals`` in the instrument's coordinates, (N, M);
             ``covariance`` the geometry's, in the gauge).
-        frame: (6,) the instrument frame (zeros when the data are in the base frame).
+        frame: (6,) session 0's instrument frame (zeros when the data are in the base frame).
         frame_std: (6,) its standard uncertainty (zeros when not estimated).
         targets: (K, 3) the target offsets (None for full-pose data).
         targets_std: (K, 3) their standard uncertainty (zeros when given).
-        frame_estimated, targets_estimated: what was estimated.
+        frame_estimated, targets_estimated: what was estimated (``frame_estimated``: any session's frame).
         gauge: the redundant directions the gauge fixes, in words (parameter units).
-        detection: the frame detection (None when the mode was not ``"auto"``).
-        registration: the closed-form start (None when the frame was not estimated).
+        detection: session 0's frame detection (None when the mode was not ``"auto"``).
+        registration: session 0's closed-form start (None when its frame was not estimated).
         notes: what was found and done, in words.
+        frames: (S, 6) each session's instrument frame.
+        frames_std: (S, 6) their standard uncertainties (zeros where not estimated).
+        frames_estimated: (S,) which sessions' frames were estimated.
+        session_of_row: (N,) the session of each of the fit's rows (zeros for one session).
+        unknown_names: the joint fit's unknowns: free parameters (table order), ``T1.x ...`` when
+            the targets are estimated, then the estimated frames (``frame.x ...`` for one session,
+            ``frame.x@s ...`` for several).
+        unknowns_covariance: (n, n) their covariance, in the gauge (or under the prior).
+        registrations: (S,) each session's closed-form start (:class:`Registration`, None where
+            its frame was not estimated): the "before" of a session's held-out rows.
     """
 
     result: IdentificationResult
@@ -653,33 +735,114 @@ class MeasuredFit:
     detection: FrameDetection | None
     registration: Registration | None
     notes: tuple
+    frames: np.ndarray
+    frames_std: np.ndarray
+    frames_estimated: np.ndarray
+    session_of_row: np.ndarray
+    unknown_names: tuple
+    unknowns_covariance: np.ndarray
+    registrations: tuple
 
     @property
     def n_targets(self) -> int:
         return 0 if self.targets is None else int(self.targets.shape[0])
 
+    @property
+    def n_sessions(self) -> int:
+        """S, the number of sessions (instrument frames)."""
+        return int(self.frames.shape[0])
+
     def frame_dict(self) -> dict:
-        """The summary's ``measurement_frame``: ``{"translation_mm": [...], "rotation_rad": [...]}``."""
+        """The summary's ``measurement_frame`` (session 0's): ``{"translation_mm": [...], "rotation_rad": [...]}``."""
         return frame_to_dict(self.frame)
 
-    def predict(self, joints, *, initial=None) -> np.ndarray:
-        """(N, M) what the instrument would report at ``joints`` by the identified model."""
-        robot = self.result.robot
-        poses = robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float), initial=initial)
-        return instrument_measurements(robot, poses, self.frame, self.targets)
+    def frames_dict(self) -> dict:
+        """``{session index: frame_to_dict(frame)}``, every session."""
+        return {s: frame_to_dict(f) for s, f in enumerate(self.frames)}
 
-    def base_poses(self, joints, measured) -> np.ndarray:
-        """(N, D) the data as poses in the (gauge) base frame: full poses taken out of the
-        instrument frame; for position-only data the poses the identified model predicts."""
+    def row_sessions(self, n: int, sessions=None) -> np.ndarray:
+        """(n,) session indices of ``n`` rows: ``sessions`` (n,) ints, or one int for every row;
+        None: session 0, only for a one-session fit (a several-session fit does not guess).
+
+        Raises:
+            ValueError: sessions missing for a several-session fit, of the wrong shape or out of range.
+        """
+        if sessions is None:
+            if self.n_sessions > 1:
+                raise ValueError(f"this fit has {self.n_sessions} sessions (instrument frames): pass sessions=, "
+                                 "each row's session index")
+            return np.zeros(n, int)
+        s = np.broadcast_to(np.asarray(sessions), (n,)) if np.ndim(sessions) == 0 else np.asarray(sessions)
+        return _checked_sessions(s, n, self.n_sessions)
+
+    def predict(self, joints, *, initial=None, sessions=None) -> np.ndarray:
+        """(N, M) what the instrument would report at ``joints`` by the identified model, each row in
+        its session's frame (``sessions``: see :meth:`row_sessions`)."""
+        robot = self.result.robot
+        joints = np.asarray(joints, dtype=float)
+        s = self.row_sessions(len(joints), sessions)
+        poses = robot.forward_kinematics(self.result.theta, joints, initial=initial)
+        return _session_measurements(robot, poses, self.frames, self.targets, _session_rows(s, self.n_sessions))
+
+    def base_poses(self, joints, measured, sessions=None) -> np.ndarray:
+        """(N, D) the data as poses in the (gauge) base frame: full poses taken out of their
+        session's instrument frame; for position-only data the poses the identified model predicts."""
         if self.targets is None:
-            return self.to_base(measured)
+            return self.to_base(measured, sessions)
         return self.result.robot.forward_kinematics(self.result.theta, np.asarray(joints, dtype=float))
 
-    def to_base(self, measured) -> np.ndarray:
-        """(N, D) full poses measured in the instrument frame, expressed in the (gauge) base frame."""
+    def to_base(self, measured, sessions=None) -> np.ndarray:
+        """(N, D) full poses measured in their session's instrument frame, expressed in the (gauge)
+        base frame (``sessions``: see :meth:`row_sessions`)."""
         robot = self.result.robot
-        inv = _invert(self.frame)
-        return instrument_measurements(robot, as_array(measured, "measured", (-1, robot.pose_dim)), inv)
+        measured = as_array(measured, "measured", (-1, robot.pose_dim))
+        s = self.row_sessions(len(measured), sessions)
+        inverse = np.array([_invert(f) for f in self.frames])
+        return _session_measurements(robot, measured, inverse, None, _session_rows(s, self.n_sessions))
+
+    def frame_columns(self, session: int) -> np.ndarray:
+        """The six indices of ``session``'s frame in :attr:`unknown_names` (empty when not estimated)."""
+        if not self.frames_estimated[session]:
+            return np.zeros(0, int)
+        first = len(self.unknown_names) - 6 * int(np.sum(self.frames_estimated))
+        return first + 6 * (int(np.sum(self.frames_estimated[:session]))) + np.arange(6)
+
+    def session_motion(self, session: int, reference: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """How the instrument moved between sessions: ``(D (6,), std (6,))`` with ``D = F_session o
+        F_reference^-1`` (a point seen at ``x`` in the reference session's frame is seen at ``D x`` in
+        the other's). ``D`` does not depend on the gauge (a common rigid motion of the base cancels),
+        so its uncertainty is the data's whatever holds the gauge; ``std`` from the joint covariance
+        of the two frames (linearised, central differences)."""
+        pair = np.r_[self.frames[session], self.frames[reference]]
+        motion = lambda v: _compose_frames(v[:6], _invert(v[6:]))  # noqa: E731
+        J = np.zeros((6, 12))
+        for j in range(12):
+            step = np.zeros(12)
+            step[j] = FRAME_STEP
+            J[:, j] = (motion(pair + step) - motion(pair - step)) / (2 * FRAME_STEP)
+        cols = [self.frame_columns(session), self.frame_columns(reference)]
+        C = np.zeros((12, 12))
+        for a, ca in enumerate(cols):
+            for b, cb in enumerate(cols):
+                if ca.size and cb.size:
+                    C[6 * a:6 * a + 6, 6 * b:6 * b + 6] = self.unknowns_covariance[np.ix_(ca, cb)]
+        return motion(pair), np.sqrt(np.clip(np.diag(J @ C @ J.T), 0.0, None))
+
+    def prediction_covariance(self, joints, sessions=None) -> np.ndarray:
+        """(N, M, M) the covariance of :meth:`predict` at ``joints`` from the fit's uncertainty
+        (geometry, targets and frames together: their correlations through the gauge or the prior
+        cancel here). Add the instrument's noise to whiten a held-out row's residual."""
+        robot, theta = self.result.robot, self.result.theta
+        joints = np.asarray(joints, dtype=float)
+        s = self.row_sessions(len(joints), sessions)
+        idx = np.sort(robot.table.indices(self.result.free_names))
+        poses = robot.forward_kinematics(theta, joints)
+        Hp, HF, Ho = _session_jacobians(robot, poses, self.frames, self.targets, _session_rows(s, self.n_sessions),
+                                        self.frames_estimated)
+        blocks = [Hp @ pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]]
+        blocks += [Ho] if self.targets_estimated else []
+        J = np.concatenate(blocks + [HF], axis=2)
+        return np.einsum("nij,jk,nlk->nil", J, self.unknowns_covariance, J)
 
 
 def _invert(frame: np.ndarray) -> np.ndarray:
@@ -687,24 +850,67 @@ def _invert(frame: np.ndarray) -> np.ndarray:
     return np.concatenate([-R.T @ frame[:3], euler_from_matrix(R.T)])
 
 
-def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto",
+def _read_only(value, dtype) -> np.ndarray:
+    """A read-only copy of ``value`` as ``dtype`` (flags and indices; floats take ``frozen_array``)."""
+    a = np.array(value, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+def _compose_frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(6,) the frame ``a o b`` (``b`` applied first)."""
+    Ra = rotation_matrix(a[3:])
+    return np.concatenate([Ra @ b[:3] + a[:3], euler_from_matrix(Ra @ rotation_matrix(b[3:]))])
+
+
+def _checked_sessions(sessions, n: int, n_sessions: int | None = None) -> np.ndarray:
+    """(n,) int session indices 0..S-1 (every one with a row when ``n_sessions`` is None: S is then
+    their largest plus one).
+
+    Raises:
+        ValueError: not integers, the wrong shape, out of range, or a session without rows.
+    """
+    s = np.asarray(sessions)
+    if s.shape != (n,) or (s.size and not np.issubdtype(s.dtype, np.integer)):
+        raise ValueError(f"sessions must be ({n},) integer session indices, got shape {s.shape}, dtype {s.dtype}")
+    s = s.astype(int)
+    top = (int(s.max()) + 1 if s.size else 1) if n_sessions is None else n_sessions
+    if s.size and (s.min() < 0 or s.max() >= top):
+        raise ValueError(f"sessions must lie in 0..{top - 1}, got {s.min()}..{s.max()}")
+    missing = np.setdiff1d(np.arange(top), s)
+    if n_sessions is None and missing.size:
+        raise ValueError(f"sessions: session {int(missing[0])} has no rows (number them 0..S-1)")
+    return s
+
+
+def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, frame="auto",
                       initial_frame=None, targets=None, estimate_targets: bool | None = None, free=None,
                       start=None, solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
-                      ftol: float = 1e-15, gauge_passes: int = 2, prior: ParameterPrior | None = None) -> MeasuredFit:
-    """Identify the geometry jointly with the instrument frame and the target offsets.
+                      ftol: float = 1e-15, gauge_passes: int = 2, prior: ParameterPrior | None = None,
+                      sessions=None) -> MeasuredFit:
+    """Identify the geometry jointly with the instrument frame(s) and the target offsets.
 
-    Three steps: the arguments checked (:func:`checked_measured_inputs`), the start of the frame and
-    target offsets (:func:`_measured_start`: detection, closed-form registration), the joint fit
-    (:func:`_fit`) and its result (:func:`_measured_fit_result`).
+    Three steps: the arguments checked (:func:`checked_measured_inputs`), the start of the frames and
+    target offsets (:func:`_sessions_start`: detection, closed-form registration, session by
+    session), the joint fit (:func:`_fit`) and its result (:func:`_measured_fit_result`).
+
+    Sessions. With ``sessions`` (N,) (indices 0..S-1, every one with rows), each session has its own
+    instrument frame and one geometry (and one set of targets) serves every session. The S frames
+    and the base are redundant by one common rigid motion (the base moved, every frame moved back):
+    with a ``prior`` the prior on the geometry holds it (the frames' standard deviations then include
+    it); without one the gauge fixes it as for one frame (the geometry's errors have no component
+    along it). Either way :meth:`MeasuredFit.session_motion` (one frame relative to another) does not
+    depend on it. None: one session, bit for bit the fit without sessions.
 
     Args:
         robot: the robot.
         joints: (N, C) commanded (or read) joints.
-        measured: (N, D) full poses or (N, 3K) target positions, the instrument's frame.
+        measured: (N, D) full poses or (N, 3K) target positions, each row in its session's frame.
         noise: declared noise (positions of targets take ``position_mm``).
         frame: ``"auto"`` (estimate when :func:`detect_frame` finds the data in another frame),
-            ``"base"`` (the data are in the base frame) or ``"estimate"``.
-        initial_frame: (6,) start of the frame estimate; default the closed-form registration.
+            ``"base"`` (the data are in the base frame) or ``"estimate"``; or S of them, one a session.
+        initial_frame: (6,) start of the frame estimate (every session's); or S of them (each (6,)
+            or None); default the closed-form registration of each session's rows.
         targets: (K, 3) target offsets (given, or start values), None for full poses.
         estimate_targets: estimate the offsets; default True when ``targets`` are given.
         free, start, solver, max_iter, xtol, ftol: as :func:`calib.engine.identify_forward`.
@@ -714,31 +920,60 @@ def identify_measured(robot: Robot, joints, measured, noise: SensorNoise, *, fra
             its rows beside the measurements' (as :func:`calib.engine.identify_forward`). The
             directions the poses cannot separate between geometry, frame and targets are then held
             by the prior, no longer by the gauge; fewer rows than unknowns are accepted.
+        sessions: (N,) int, each row's session; None: one session.
 
     Raises:
         ValueError: bad arguments, a row the start model cannot reach, too few rows (without a prior).
     """
-    data = checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start)
+    data = checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start,
+                                   sessions=sessions)
     joints, measured = data["joints"], data["measured"]
     k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
-    begin = _measured_start(robot, joints, measured, frame, initial_frame, data["targets"], est_targets, theta0)
-    est_frame = begin["est_frame"]
-    unknowns = idx.size + (3 * k if est_targets else 0) + (6 if est_frame else 0)
+    modes, initials = _session_modes(frame, initial_frame, data["n_sessions"])
+    begin = _sessions_start(robot, joints, measured, modes, initials, data["targets"], est_targets, theta0,
+                            data["rows"])
+    unknowns = idx.size + (3 * k if est_targets else 0) + 6 * int(np.sum(begin["est_frames"]))
     m = robot.pose_dim if k == 0 else 3 * k
     if joints.shape[0] * m < unknowns and prior is None:
         raise ValueError(f"measured must have at least {-(-unknowns // m)} rows to identify {unknowns} "
                          f"unknowns, got {joints.shape[0]}")
     if prior is not None:
         prior.check(robot)
-    fit = _fit(robot, joints, measured, noise, theta0, idx, begin["frame0"], begin["targets0"], est_frame,
-               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes, prior=prior)
+    fit = _fit(robot, joints, measured, noise, theta0, idx, begin["frames0"], begin["targets0"], begin["est_frames"],
+               est_targets, begin["poses0"], solver, max_iter, xtol, ftol, gauge_passes=gauge_passes, prior=prior,
+               rows=data["rows"])
     return _measured_fit_result(robot, joints, measured, noise, fit, data, begin, prior)
 
 
-def checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start) -> dict:
+def _session_modes(frame, initial_frame, n_sessions: int) -> tuple[list, list]:
+    """Each session's frame mode and start frame (or None) from :func:`identify_measured`'s
+    ``frame`` and ``initial_frame`` (one for all, or one a session).
+
+    Raises:
+        ValueError: a mode not in :data:`FRAME_MODES`, or not one per session.
+    """
+    modes = [frame] * n_sessions if isinstance(frame, str) else list(frame)
+    if len(modes) != n_sessions:
+        raise ValueError(f"frame must be one of {FRAME_MODES} or {n_sessions} of them, got {frame!r}")
+    for mode in modes:
+        if mode not in FRAME_MODES:
+            raise ValueError(f"frame must be one of {FRAME_MODES}, got {mode!r}")
+    if initial_frame is None:
+        return modes, [None] * n_sessions
+    initials = list(initial_frame)
+    if all(f is not None and np.ndim(f) == 0 for f in initials):  # six numbers: one frame for every session
+        return modes, [as_array(initial_frame, "initial_frame", (6,))] * n_sessions
+    if len(initials) != n_sessions:
+        raise ValueError(f"initial_frame must be one (6,) frame or {n_sessions}, got {len(initials)}")
+    return modes, [None if f is None else as_array(f, f"initial_frame[{s}]", (6,)) for s, f in enumerate(initials)]
+
+
+def checked_measured_inputs(robot, joints, measured, noise, frame, targets, estimate_targets, free, start, *,
+                            sessions=None) -> dict:
     """The checked arguments of :func:`identify_measured`: ``joints`` (N, C), ``measured``
     (N, M), ``targets`` (K, 3) or None, ``k`` = K, ``est_targets``, the free ``names`` and their
-    sorted indices ``idx``, the start vector ``theta0`` (P,).
+    sorted indices ``idx``, the start vector ``theta0`` (P,), ``sessions`` (N,) int (zeros for one
+    session), ``n_sessions`` S and each session's ``rows`` (:func:`_session_rows`).
 
     Raises:
         TypeError, ValueError: naming the argument that is wrong.
@@ -747,7 +982,7 @@ def checked_measured_inputs(robot, joints, measured, noise, frame, targets, esti
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
     if not isinstance(noise, SensorNoise):
         raise TypeError(f"noise must be a SensorNoise, got {type(noise).__name__}")
-    if frame not in FRAME_MODES:
+    if isinstance(frame, str) and frame not in FRAME_MODES:
         raise ValueError(f"frame must be one of {FRAME_MODES}, got {frame!r}")
     targets = None if targets is None else as_array(targets, "targets", (-1, 3))
     k = 0 if targets is None else targets.shape[0]
@@ -761,8 +996,12 @@ def checked_measured_inputs(robot, joints, measured, noise, frame, targets, esti
         raise ValueError(f"free must be a non-empty list of distinct parameter names, got {names}")
     idx = np.sort(robot.table.indices(names))
     theta0 = robot.table.nominal.copy() if start is None else as_array(start, "start", (robot.n_parameters,)).copy()
+    n = joints.shape[0]
+    sessions = np.zeros(n, int) if sessions is None else _checked_sessions(sessions, n)
+    n_sessions = int(sessions.max()) + 1 if n else 1
     return {"joints": joints, "measured": measured, "targets": targets, "k": k, "est_targets": est_targets,
-            "names": names, "idx": idx, "theta0": theta0}
+            "names": names, "idx": idx, "theta0": theta0, "sessions": sessions, "n_sessions": n_sessions,
+            "rows": _session_rows(sessions, n_sessions)}
 
 
 def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_targets, theta0) -> dict:
@@ -795,28 +1034,62 @@ def _measured_start(robot, joints, measured, frame, initial_frame, targets, est_
             "targets0": targets0, "poses0": poses0, "notes": notes}
 
 
+def _sessions_start(robot, joints, measured, modes, initials, targets, est_targets, theta0, rows) -> dict:
+    """:func:`_measured_start` session by session (one session: exactly it), combined:
+    ``frames0`` (S, 6), ``est_frames`` (S,), ``est_frame`` (any), ``poses0`` (N, D), ``targets0``
+    (session 0's start), ``detection`` and ``registration`` (session 0's), ``registrations`` (each
+    session's, None where its frame is not estimated), ``notes`` (each
+    session's, named)."""
+    if len(rows) == 1:
+        begin = _measured_start(robot, joints, measured, modes[0], initials[0], targets, est_targets, theta0)
+        begin.update(frames0=begin["frame0"][None], est_frames=np.array([begin["est_frame"]]),
+                     registrations=(begin["registration"],))
+        return begin
+    parts = [_measured_start(robot, joints[r], measured[r], modes[s], initials[s], targets, est_targets, theta0)
+             for s, r in enumerate(rows)]
+    poses0 = np.empty((joints.shape[0], robot.pose_dim))
+    for r, part in zip(rows, parts):
+        poses0[r] = part["poses0"]
+    est_frames = np.array([part["est_frame"] for part in parts])
+    return {"detection": parts[0]["detection"], "registration": parts[0]["registration"],
+            "registrations": tuple(part["registration"] for part in parts), "est_frame": bool(est_frames.any()), "est_frames": est_frames,
+            "frames0": np.array([part["frame0"] for part in parts]), "targets0": parts[0]["targets0"],
+            "poses0": poses0,
+            "notes": [f"session {s}: {note}" for s, part in enumerate(parts) for note in part["notes"]]}
+
+
+def _unknown_names(robot, fit: dict, data: dict) -> list:
+    """The joint fit's unknowns (see :attr:`MeasuredFit.unknown_names`)."""
+    k, s = data["k"], data["n_sessions"]
+    frames = list(FRAME_NAMES) if s == 1 else [f"{name}@{i}" for i in range(s) for name in FRAME_NAMES]
+    frames = np.array(frames).reshape(s, 6)[fit["est_frames"]].ravel()
+    return list(np.array(robot.table.names)[data["idx"]]) + \
+        [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"][:fit["nt"]] + list(frames)
+
+
 def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, begin: dict,
                          prior: ParameterPrior | None = None) -> MeasuredFit:
     """The :class:`MeasuredFit` of a joint fit (``fit`` from :func:`_fit`; ``data`` from
-    :func:`checked_measured_inputs`, ``begin`` from :func:`_measured_start`): residuals (N, M) at the
-    solution, the geometry's covariance (P, P), the frame's and targets' uncertainties, the gauge
+    :func:`checked_measured_inputs`, ``begin`` from :func:`_sessions_start`): residuals (N, M) at the
+    solution, the geometry's covariance (P, P), the frames' and targets' uncertainties, the gauge
     in words, the stop message with the chi-square verdict."""
     k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
     est_frame, detection, notes = begin["est_frame"], begin["detection"], begin["notes"]
-    theta = fit["theta"]
+    theta, est_frames = fit["theta"], fit["est_frames"]
     try:
         poses = robot.forward_kinematics(theta, joints, initial=fit["poses"])
-        res = measurement_residuals(robot, measured, instrument_measurements(robot, poses, fit["frame"], fit["targets"]), k)
+        res = measurement_residuals(robot, measured, _session_measurements(robot, poses, fit["frames"], fit["targets"],
+                                                                           data["rows"]), k)
     except KinematicsError:
         res = np.full(measured.shape, np.nan)
     cov = np.zeros((robot.n_parameters,) * 2)
     ni, nt = fit["n_theta"], fit["nt"]
     cov[np.ix_(idx, idx)] = fit["cov"][:ni, :ni]
     std = np.sqrt(np.clip(np.diag(fit["cov"]), 0.0, None))
-    frame_std = std[ni + nt:] if est_frame else np.zeros(6)
+    frames_std = np.zeros(fit["frames"].shape)
+    frames_std[est_frames] = std[ni + nt:].reshape(-1, 6)
     targets_std = None if k == 0 else (std[ni:ni + nt].reshape(k, 3) if est_targets else np.zeros((k, 3)))
-    all_names = list(np.array(robot.table.names)[idx]) + \
-        [f"T{j + 1}.{c}" for j in range(k) for c in "xyz"][:fit["nt"]] + list(FRAME_NAMES[:fit["nf"]])
+    all_names = _unknown_names(robot, fit, data)
     gauge = tuple(describe_combination(v / np.max(np.abs(v)), all_names, n_terms=6, number_format=".3g")
                   for v in fit["null"].T)
     if gauge:
@@ -826,7 +1099,10 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
     dof = fit["dof"]
     if fit["success"] and dof > 0 and np.isfinite(fit["chi2"]):
         msg = f"{msg}; {noise_verdict(fit['chi2'], dof)}"
-    if est_frame:
+    if est_frame and data["n_sessions"] > 1:
+        msg = f"{msg}; the instrument frame(s) of session(s) {', '.join(map(str, np.flatnonzero(est_frames)))} " \
+              "estimated with the geometry"
+    elif est_frame:
         msg = f"{msg}; " + (detection.message if detection is not None else
                             "the instrument frame is estimated with the geometry")
     result = IdentificationResult(
@@ -834,11 +1110,14 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
         pose_residuals=res, covariance=cov, chi2=fit["chi2"], dof=dof, iterations=fit["iterations"],
         history=fit["history"], success=fit["success"], message=msg, condition_numbers=np.array([fit["cond"]]),
         prior=prior)
-    return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frame_std),
+    return MeasuredFit(result=result, frame=frozen_array(fit["frame"]), frame_std=frozen_array(frames_std[0]),
                        targets=None if k == 0 else frozen_array(fit["targets"]),
                        targets_std=None if k == 0 else frozen_array(targets_std), frame_estimated=bool(est_frame),
                        targets_estimated=bool(est_targets), gauge=gauge, detection=detection,
-                       registration=begin["registration"], notes=tuple(notes))
+                       registration=begin["registration"], notes=tuple(notes), frames=frozen_array(fit["frames"]),
+                       frames_std=frozen_array(frames_std), frames_estimated=_read_only(est_frames, bool),
+                       session_of_row=_read_only(data["sessions"], int), unknown_names=tuple(all_names),
+                       unknowns_covariance=frozen_array(fit["cov"]), registrations=begin["registrations"])
 
 
 def identify_as_measured(robot: Robot, joints, measured, noise: SensorNoise, settings: MeasurementSettings,
