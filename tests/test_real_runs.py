@@ -97,3 +97,44 @@ def test_a_geometry_absorbing_physics_is_said_implausible_and_discovery_brings_i
     assert d["effects"] == ["actuator_scale"]
     assert "dl3" in d["implausible_parameters"]["back_within_tolerance"]
     assert d["implausible_parameters"]["with_effects"] == []
+
+
+@pytest.mark.parametrize("robot_name", sorted(ROBOTS))
+def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machine(robot_name, tmp_path):
+    """pipeline.run --real on a recording of two sessions (the importer makes one per input file),
+    the instrument moved 50 mm and 0.6 degree between them: one geometry, each session its own
+    frame; the motion between the frames recovered within 4 of its standard deviations, the
+    validation rows of each session predicted to the noise in their own frame (success)."""
+    from calib.measurement import instrument_measurements
+    from calib.noise import SensorNoise
+    from calib.prior import ParameterPrior
+    from calib.robots import default_robot
+    from calib.workspace import reachable_poses
+    from pipeline.formats import Recording
+    from tests.test_sessions import F0, F1, MOTION
+
+    robot = default_robot(robot_name)
+    rng = np.random.default_rng(7)
+    prior = ParameterPrior.default(robot)
+    theta = robot.table.nominal.copy()
+    free = robot.table.indices(robot.free_default)
+    theta[free] += rng.normal(size=free.size) * prior.std[free]
+    noise = SensorNoise(0.001, 1e-6, "normal")
+    rows, sets, names = [], [], []
+    for s, frame in enumerate((F0, F1)):
+        poses = reachable_poses(robot, 50, rng, theta=theta)
+        joints = robot.inverse_kinematics(theta, poses)
+        seen = instrument_measurements(robot, poses, frame) + noise.sample(len(poses), rng, robot.pose_units)
+        rows.append((joints, seen))
+        sets += ["calibration"] * 38 + ["validation"] * 12
+        names += [str(s + 1)] * 50
+    rec = Recording(robot=robot, noise=noise, t_s=np.tile(np.arange(50.0), 2),
+                    joints=np.vstack([r[0] for r in rows]), measured=np.vstack([r[1] for r in rows]),
+                    sets=np.array(sets), meta={"measurement": {"frame": "estimate"}}, sessions=np.array(names))
+    write_recording(tmp_path / "two.csv", rec)
+    s = run(["--real", str(tmp_path / "two.csv"), "--out", str(tmp_path), "--quiet"]).summary
+    assert set(s["measurement_frames"]) == {"1", "2"} and s["success"], s["verdict"]
+    motion, std = s["session_motion"]["2"]["motion"], s["session_motion"]["2"]["std"]
+    got = np.r_[motion["translation_mm"], motion["rotation_rad"]]
+    sd = np.r_[std["translation_mm"], std["rotation_rad"]]
+    assert np.all(np.abs(got - MOTION) <= 4 * sd + 1e-12), (got - MOTION) / sd

@@ -30,7 +30,8 @@ from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import NameReservation, Recording, command_columns, command_csv, output_folder
+from pipeline.formats import (NameReservation, Recording, command_columns, command_csv, output_folder,
+                              session_measurement)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
@@ -192,16 +193,23 @@ def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, fre
             "max_abs_rad": float(np.abs(err[angle]).max()) if angle.any() else None}
 
 
-def _instrument_heldout(robot: Robot, fit, val_joints, val_meas):
+def _instrument_heldout(robot: Robot, fit, val_joints, val_meas, sessions=None):
     """Held-out errors of a recording in an instrument frame or of targets: measured minus the
-    prediction, before (nominal geometry, the registered frame, the start offsets) and after."""
+    prediction, before (nominal geometry, the registered frame, the start offsets) and after;
+    ``sessions``: (M,) each validation row's session (None: one session)."""
     k = fit.n_targets
-    start_frame = fit.registration.frame if (fit.frame_estimated and fit.registration is not None) else np.zeros(6)
-    start_targets = None if k == 0 else (fit.registration.targets if fit.registration is not None and fit.frame_estimated
-                                         else fit.targets)
     nominal = robot.forward_kinematics(robot.table.nominal, val_joints)
-    before = measurement_residuals(robot, val_meas, instrument_measurements(robot, nominal, start_frame, start_targets), k)
-    after = measurement_residuals(robot, val_meas, fit.predict(val_joints), k)
+    rows = np.zeros(len(val_joints), dtype=int) if sessions is None else np.asarray(sessions)
+    before = np.empty_like(np.asarray(val_meas, dtype=float))
+    for s in np.unique(rows):
+        reg = fit.registrations[s] if sessions is not None else fit.registration
+        estimated = fit.frames_estimated[s] if sessions is not None else fit.frame_estimated
+        frame = reg.frame if estimated and reg is not None else (fit.frames[s] if sessions is not None else np.zeros(6))
+        targets = None if k == 0 else (reg.targets if reg is not None and estimated else fit.targets)
+        at = rows == s
+        before[at] = measurement_residuals(robot, val_meas[at], instrument_measurements(robot, nominal[at], frame,
+                                                                                          targets), k)
+    after = measurement_residuals(robot, val_meas, fit.predict(val_joints, sessions=sessions), k)
     return before, after
 
 
@@ -361,6 +369,13 @@ class CalibrationInput:
     sim: dict | None = None
     prior: ParameterPrior | None = None
     prior_source: str = "none (--no-prior: plain least squares)"
+    sessions: np.ndarray | None = None
+    val_sessions: np.ndarray | None = None
+
+    @property
+    def n_sessions(self) -> int:
+        """Measurement sessions of the recording (1 for a simulated run)."""
+        return 1 if self.rec is None else len(self.rec.session_names)
 
 
 def parameter_prior(robot: Robot, settings: RunSettings, meta: dict | None, where: str):
@@ -429,10 +444,23 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
     prior, prior_source = parameter_prior(robot, settings, rec.meta, sidecar_name(settings.real))
+    index = session_index(rec)
+    cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
+    lost = sorted(set(rec.sessions[val_rows]) - set(rec.sessions[cal_rows]))
+    if len(rec.session_names) > 1 and lost:
+        raise ValueError(f"{where}, column 'session': session {lost[0]!r} has validation rows but no calibration "
+                         "rows: its instrument frame cannot be estimated")
     return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
-                            rows=rec.rows("calibration"), where=where, scenario=f"recording {settings.real}",
+                            rows=cal_rows, where=where, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
-                            val_joints=val_joints, val_meas=val_meas, rec=rec, prior=prior, prior_source=prior_source)
+                            val_joints=val_joints, val_meas=val_meas, rec=rec, prior=prior, prior_source=prior_source,
+                            sessions=index[cal_rows], val_sessions=index[val_rows])
+
+
+def session_index(rec: Recording) -> np.ndarray:
+    """(N,) int, each row's session as its place in ``rec.session_names``."""
+    place = {name: i for i, name in enumerate(rec.session_names)}
+    return np.array([place[name] for name in rec.sessions], dtype=int)
 
 
 def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
@@ -481,13 +509,46 @@ def gross_row_stage(inp: CalibrationInput, settings: RunSettings):
     n = len(inp.measured)
     if inp.rec is None:
         return None, np.arange(n)
-    ms = measurement_settings(inp.rec.meta.get("measurement"))
-    search = find_gross_rows(inp.robot, inp.joints, inp.measured, inp.noise, frame=ms.frame, targets=ms.targets,
-                             estimate_targets=ms.estimate_targets if ms.targets is not None else None,
-                             seed=settings.seed)
+    if inp.n_sessions > 1:
+        search = SessionSearch([session_search(inp, settings, s) for s in range(inp.n_sessions)], inp.sessions)
+    else:
+        ms = measurement_settings(inp.rec.meta.get("measurement"))
+        search = find_gross_rows(inp.robot, inp.joints, inp.measured, inp.noise, frame=ms.frame, targets=ms.targets,
+                                 estimate_targets=ms.estimate_targets if ms.targets is not None else None,
+                                 seed=settings.seed)
     if not search.success or settings.keep_outliers:
         return search, np.arange(n)
     return search, np.flatnonzero(search.kept)
+
+
+def session_search(inp: CalibrationInput, settings: RunSettings, s: int):
+    """The gross-row search of session ``s``'s calibration rows, in its own instrument frame."""
+    ms = session_measurement(inp.rec, inp.rec.session_names[s])
+    rows = np.flatnonzero(inp.sessions == s)
+    return find_gross_rows(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, frame=ms.frame,
+                           targets=ms.targets, estimate_targets=ms.estimate_targets if ms.targets is not None else None,
+                           seed=settings.seed)
+
+
+class SessionSearch:
+    """The gross-row searches of a recording's sessions (one instrument frame each) read as one:
+    ``gross``, ``kept``, ``statistic`` over the calibration rows; ``success`` where every session's
+    search judged its rows; ``frame_estimated`` where any estimated a frame; ``searches`` each."""
+
+    def __init__(self, searches: list, sessions: np.ndarray):
+        self.searches, self.sessions = searches, sessions
+        n = sessions.size
+        self.kept, self.statistic = np.ones(n, dtype=bool), np.full(n, np.nan)
+        for s, search in enumerate(searches):
+            rows = np.flatnonzero(sessions == s)
+            self.kept[rows] = search.kept
+            self.statistic[rows] = search.statistic
+        self.gross = tuple(int(i) for i in np.flatnonzero(~self.kept))
+        self.success = all(search.success for search in searches)
+        self.frame_estimated = any(search.frame_estimated for search in searches)
+        self.cutoff = searches[0].cutoff
+        self.fit = None
+        self.message = "; ".join(f"session {s + 1}: {search.message}" for s, search in enumerate(searches))
 
 
 def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
@@ -495,6 +556,8 @@ def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
     the gross-row stage kept, where the recording needs them (None: plain poses in the base frame)."""
     if inp.rec is None:
         return None
+    if inp.n_sessions > 1:
+        return sessions_fit(inp, search, kept)
     ms = measurement_settings(inp.rec.meta.get("measurement"))
     joints, measured = inp.joints[kept], inp.measured[kept]
     if search is None or not search.success:  # the search could not judge: the frame test on every row
@@ -509,6 +572,26 @@ def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
                              prior=inp.prior)
 
 
+def sessions_fit(inp: CalibrationInput, search, kept: np.ndarray):
+    """One geometry, an instrument frame for each session (estimated where its own search found one
+    or its settings ask for it), fitted together on the rows kept (:func:`calib.measurement.identify_measured`
+    with ``sessions``)."""
+    names = inp.rec.session_names
+    per = [session_measurement(inp.rec, name) for name in names]
+    searches = search.searches if isinstance(search, SessionSearch) else [None] * len(names)
+    frames, starts = [], []
+    for ms, found in zip(per, searches):
+        estimated = (found.frame_estimated if found is not None and found.success else ms.frame == "estimate")
+        frames.append("auto" if estimated and ms.frame != "estimate" else ("estimate" if estimated else "base"))
+        starts.append(found.fit.frame if estimated and found is not None and found.fit is not None
+                      else ms.initial_frame)
+    ms0 = per[0]
+    return identify_measured(inp.robot, inp.joints[kept], inp.measured[kept], inp.noise, frame=frames,
+                             initial_frame=starts, targets=ms0.targets,
+                             estimate_targets=ms0.estimate_targets if ms0.n_targets else None, prior=inp.prior,
+                             sessions=inp.sessions[kept])
+
+
 def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) -> Identification:
     """Gross rows first (:func:`gross_row_stage`), then, on the rows kept, the instrument frame
     where the recording needs one (:func:`instrument_fit`), the outlier test (closed-form
@@ -518,7 +601,8 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
     search, kept = gross_row_stage(inp, settings)
     gross_idx = [] if search is None or not search.success else [int(i) for i in search.gross]
     instrument = instrument_fit(inp, search, kept)
-    measured = inp.measured if instrument is None else instrument.base_poses(joints, inp.measured)
+    measured = inp.measured if instrument is None else instrument.base_poses(
+        joints, inp.measured, sessions=inp.sessions if inp.n_sessions > 1 else None)
     try:
         report = find_outliers(robot, joints[kept], measured[kept], noise)
     except (ValueError, KinematicsError) as exc:
@@ -567,7 +651,8 @@ def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress
             "measuring held-out poses (compensated commands)", d, t))
         return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
     if instrument is not None and len(inp.val_joints):
-        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas)
+        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas,
+                                   inp.val_sessions if inp.n_sessions > 1 else None)
     if sim is None and len(inp.val_joints):
         # A recording holds the validation poses measured under nominal commands only: the
         # identified model's prediction error there stands for the compensated error (equal to
@@ -675,6 +760,8 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         summary.update(_heldout_block(robot, *held))
     if instrument is not None:
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
+        if inp.n_sessions > 1:
+            summary.update(sessions_block(inp, instrument))
     summary.update(prior_block(inp, result))
     tolerance, _ = machine_tolerance(robot, None if inp.rec is None else inp.rec.meta, inp.where)
     summary["implausible_parameters"] = implausible_parameters(robot, result.errors, tolerance, result.free_names)
@@ -739,12 +826,16 @@ def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> 
     if not ok.any():
         return {"what": what, "agrees": False, "ratio": None, "rows": 0}
     joints, poses, residuals = joints[ok], poses[ok], residuals[ok]
+    std = inp.noise.pose_std(robot.pose_units)
     try:
-        jac = pose_jacobian_of_parameters(robot, result.theta, joints, poses)
+        if ident.instrument is not None and held is not None:  # geometry and frames' uncertainty together
+            sessions = inp.val_sessions[ok] if inp.n_sessions > 1 else None
+            cov = ident.instrument.prediction_covariance(joints, sessions=sessions) + np.diag(std ** 2)
+        else:
+            jac = pose_jacobian_of_parameters(robot, result.theta, joints, poses)
+            cov = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac) + np.diag(std ** 2)
     except KinematicsError:
         return {"what": what, "agrees": False, "ratio": None, "rows": 0}
-    std = inp.noise.pose_std(robot.pose_units)
-    cov = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac) + np.diag(std ** 2)
     w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
     chi2, dof = float(np.sum(w ** 2)), int(w.size)
     limit = chi2_limit(dof)
@@ -820,11 +911,27 @@ def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
         if instrument.targets is not None:
             raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
                              "needs full poses")
-        measured = instrument.to_base(rec.measured)
+        several = inp.n_sessions > 1
+        measured = instrument.to_base(rec.measured, sessions=session_index(rec) if several else None)
         block["measurement_frame"] = instrument.frame_dict()
         block["measurement_frame_std"] = frame_to_dict(instrument.frame_std)
+        if several:
+            block.update(sessions_block(inp, instrument))
     gross = [int(inp.rows[i]) for i in ident.gross_idx]
     return AsRead(recording=replace(rec, measured=measured), gross_rows=gross, block=block)
+
+
+def sessions_block(inp: CalibrationInput, fit) -> dict:
+    """Summary keys of a recording with several sessions: each session's instrument frame and its
+    standard uncertainty, and how each moved from the first (the gauge-free figure)."""
+    names = inp.rec.session_names
+    motion = {}
+    for s in range(1, len(names)):
+        m, sd = fit.session_motion(s, 0)
+        motion[names[s]] = {"motion": frame_to_dict(m), "std": frame_to_dict(sd)}
+    return {"measurement_frames": {names[s]: d for s, d in fit.frames_dict().items()},
+            "measurement_frames_std": {names[s]: frame_to_dict(fit.frames_std[s]) for s in range(len(names))},
+            "session_motion": motion}
 
 
 def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
@@ -972,9 +1079,12 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     split["simulate"] += time.perf_counter() - t2
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
     cv = None
-    if inp.rec is not None and held is None:
+    if inp.rec is not None and held is None and inp.n_sessions == 1:
         cv = crossvalidation_of(inp, ident, settings)
         summary.update(cv.summary())
+    elif inp.rec is not None and held is None:
+        warnings.append("no cross-validated figure: the cross-validation of several sessions (an instrument frame "
+                        "each) is not done yet; add validation rows to each session")
     summary.update(verdict_block(inp, ident, held, cv, diagnosis))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)

@@ -176,6 +176,21 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
     return _with(settings, param.section, name, xs), report
 
 
+def heldout_split(rec: Recording, kept: np.ndarray, val: np.ndarray, heldout_fraction: float, seed: int,
+                  analysed_all: bool) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(held-out rows, training rows, what they are in words)``: the recording's validation rows,
+    or ``heldout_fraction`` of the rows kept, drawn with ``seed``."""
+    if val.size:
+        return val, kept, "recorded validation rows"
+    order = np.random.default_rng(seed).permutation(kept.size)
+    n_held = max(1, int(round(heldout_fraction * kept.size)))
+    basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
+    if analysed_all:
+        basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
+                  f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
+    return np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]]), basis
+
+
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
              sysid: bool = True, candidates=None, exclude=()) -> DiscoveryReport:
     """Run the whole discovery on a recording (see the module docstring).
@@ -210,17 +225,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
-    if val.size:
-        held, train = val, kept
-        basis = "recorded validation rows"
-    else:
-        order = np.random.default_rng(seed).permutation(kept.size)
-        n_held = max(1, int(round(heldout_fraction * kept.size)))
-        held, train = np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]])
-        basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
-        if analysed_all:
-            basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
-                      f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
+    held, train, basis = heldout_split(rec, kept, val, heldout_fraction, seed, analysed_all)
     h = _heldout(data, disc.chosen, held, train)
     scan = disc.outliers
     summary = {
