@@ -97,3 +97,19 @@ def test_missing_files(tmp_path):
     (tmp_path / "a.csv").write_text("t_s,l1_mm\n")
     with pytest.raises(RecordingError, match="sidecar not found"):
         read_recording(tmp_path / "a.csv")
+
+
+@pytest.mark.parametrize("calib_words, said", [
+    ("forward kinematics met a singular configuration at row 1", "forward kinematics met a singular configuration"),
+    ("forward kinematics did not converge for row 1 in 50 iterations", "forward kinematics did not converge in 50 iterations"),
+    ("row 1 is unreachable: the rod of chain 2 cannot reach", "unreachable: the rod of chain 2 cannot reach"),
+    ("configuration 1: position [8.0, 1.0, 2.0] is outside the workspace", "position [8.0, 1.0, 2.0] is outside the workspace"),
+])
+def test_a_kinematics_failure_is_said_in_the_recordings_row_numbering(calib_words, said):
+    """One row numbering: calib names row 1 of the arrays it was given (0-based, a subset); the
+    message names the file's data row and line of that row, and not calib's number."""
+    from calib.robot import KinematicsError
+    from pipeline.formats import row_message
+
+    subset_rows = np.array([4, 10, 20])  # the subset's 0-based rows in the recording
+    assert row_message(KinematicsError(calib_words, 1), "rec.csv", subset_rows) == f"rec.csv: row 11 (line 12): {said}"

@@ -48,7 +48,7 @@ from calib.robots import ROBOTS, robot_from_description
 from .outputs import ResultSet
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
-           "sidecar_path", "finite_number", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
+           "sidecar_path", "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
            "check_session_name", "check_channel_name", "read_text_file"]
 
@@ -224,6 +224,27 @@ def session_measurement(rec: Recording, name: str) -> MeasurementSettings:
     merged = dict(rec.meta.get("measurement") or {})
     merged.update(rec.session_info.get(name, {}).get("measurement", {}))
     return measurement_settings(merged or None)
+
+
+#: The row a calib message names (its own numbering, 0-based, of the arrays it was given).
+CALIB_ROW = re.compile(r"\s*(?:(?:at|for) row \d+|^row \d+(?: is)?|^configuration \d+:)")
+
+
+def row_words(path, r: int) -> str:
+    """How every message names the 0-based data row ``r`` of a recording: ``FILE: row r+1 (line r+2)``
+    (the row as a spreadsheet shows it below the header)."""
+    return f"{path}: row {r + 1} (line {r + 2})"
+
+
+def row_message(exc, path, rows) -> str:
+    """A :class:`calib.robot.KinematicsError` said in the recording's numbering: its row (``exc.index``,
+    0-based in the arrays it was given) mapped through ``rows`` (those arrays' 0-based data rows in the
+    recording) and named as :func:`row_words` does, the calib message's own row number taken out."""
+    text = CALIB_ROW.sub("", str(exc)).strip(" :")
+    index = getattr(exc, "index", None)
+    if index is None or not 0 <= index < len(rows):
+        return f"{path}: {text}"
+    return f"{row_words(path, int(rows[index]))}: {text}"
 
 
 def write_recording(csv_path: str | Path, rec: Recording, *, overwrite: bool = False) -> tuple[Path, Path]:

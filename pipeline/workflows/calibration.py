@@ -30,7 +30,7 @@ from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import (NameReservation, Recording, command_columns, command_csv, output_folder,
+from pipeline.formats import (NameReservation, Recording, command_columns, command_csv, output_folder, row_message,
                               session_measurement)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
@@ -239,7 +239,10 @@ def _instrument_block(fit, before, after) -> dict:
     return block
 
 
-def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str, prior=None):
+def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str, prior=None,
+              rows=None):
+    """The run's identification of ``joints``/``measured`` (data rows ``rows`` of the recording,
+    for the messages; default 0..N-1); a failure said with the file and its 1-based row."""
     solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
     options = {"solver": solver}
     if settings.method == "chainwise":
@@ -247,7 +250,8 @@ def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunS
     try:
         return identify(robot, joints, measured, noise, method=settings.method, prior=prior, **options), solver
     except KinematicsError as exc:
-        raise ValueError(f"{where}: the nominal {robot.name} cannot reach the recorded joints: {exc}") from None
+        rows = np.arange(len(joints)) if rows is None else rows
+        raise ValueError(f"{row_message(exc, where, rows)} (the {robot.name} cannot reach the recorded joints)") from None
     except ValueError as exc:
         raise ValueError(f"{where}: {len(measured)} calibration rows are too few or unusable: {exc}") from None
 
@@ -614,7 +618,8 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
     if instrument is not None:
         result_all, solver = instrument.result, "lm"
     else:
-        result_all, solver = _identify(robot, joints[kept], measured[kept], noise, settings, inp.where, inp.prior)
+        result_all, solver = _identify(robot, joints[kept], measured[kept], noise, settings, inp.where, inp.prior,
+                                       inp.rows[kept])
     keep = np.setdiff1d(kept, loo_idx)
     left_out = bool(loo_idx) and not settings.keep_outliers and instrument is None
     if loo_idx and instrument is not None:
@@ -623,7 +628,8 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
     result_kept = None
     if loo_idx and instrument is None:
         try:
-            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where, inp.prior)
+            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where, inp.prior,
+                                       inp.rows[keep])
         except ValueError as exc:
             warnings.append(f"the flagged rows are kept: without them {exc}")
             left_out = False
@@ -662,8 +668,8 @@ def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress
             before = inp.val_meas - robot.forward_kinematics(nominal, inp.val_joints, initial=inp.val_meas)
             after = inp.val_meas - robot.forward_kinematics(theta, inp.val_joints, initial=inp.val_meas)
         except KinematicsError as exc:
-            raise ValueError(f"{inp.where}: validation row {int(inp.rec.rows('validation')[exc.index]) + 1}: "
-                             f"the model cannot reach its joints: {exc}") from None
+            raise ValueError(f"{row_message(exc, inp.where, inp.rec.rows('validation'))} (a validation row the model "
+                             "cannot reach)") from None
         return before, after
     return None
 
