@@ -864,7 +864,7 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
     evidence = {"converged": bool(result.success), "fit_ratio": float(np.sqrt(result.chi2 / dof)),
                 "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
                 "predictions": check}
-    block = {} if diagnosis is None else {"diagnosis": diagnosis_summary(diagnosis, inp)}
+    block = {"diagnosis": None if diagnosis is None else diagnosis_summary(diagnosis, inp)}
     if success:
         words = "calibrated: the rows fit to the declared noise" + (
             f" and the {check['what']} are predicted to it" if check else "")
