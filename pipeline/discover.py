@@ -73,6 +73,13 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     report = run_discovery(settings_from_args(build_parser().parse_args(argv)))
     for line in report_lines(report.summary):
         print(line)
+    implausible = report.summary.get("implausible_parameters") or {}
+    for words in implausible.get("words", [])[:5]:
+        print(f"Implausible with the geometry alone, back within tolerance with the effects: {words}")
+    if len(implausible.get("words", [])) > 5:
+        print(f"... and {len(implausible['words']) - 5} more parameters (summary JSON: implausible_parameters)")
+    for item in implausible.get("with_effects", []):
+        print(f"Still implausible with the effects: {item['words']}")
     print(f"wrote {report.summary['rrd']}")
     return report
 
