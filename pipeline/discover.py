@@ -73,6 +73,11 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     report = run_discovery(settings_from_args(build_parser().parse_args(argv)))
     for line in report_lines(report.summary):
         print(line)
+    cv = report.summary.get("crossvalidated_position_error_mm")
+    if cv and cv.get("rms") is not None:
+        info = report.summary["crossvalidation"]
+        print(f"Cross-validated prediction error ({info['scheme']}, {info['model']}): position RMS "
+              f"{1e3 * cv['rms']:.3f} um, mean {1e3 * cv['mean']:.3f} um, max {1e3 * cv['max']:.3f} um")
     implausible = report.summary.get("implausible_parameters") or {}
     for words in implausible.get("words", [])[:5]:
         print(f"Implausible with the geometry alone, back within tolerance with the effects: {words}")

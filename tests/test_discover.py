@@ -242,6 +242,8 @@ def test_discovery_reads_a_recording_in_an_instrument_frame_as_the_run_does(robo
         write_recording(tmp_path / f"{name}.csv", r)
         s = run_discovery(DiscoverySettings(real=tmp_path / f"{name}.csv", resim=False, out=tmp_path)).summary
         answers[name] = (s["explained"], s["effects"])
+        # No validation rows: a cross-validated figure, as pipeline.run --real gives (at the noise here).
+        assert s["crossvalidation"]["scheme"] == "leave-one-out" and s["crossvalidated_position_error_mm"]["rms"] > 0
         if name == "far":
             assert "measurement_frame" in s
         else:

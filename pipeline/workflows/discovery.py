@@ -25,6 +25,8 @@ import numpy as np
 from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
+from calib.crossval import crossvalidate
+from calib.prior import ParameterPrior
 from mjcf.simulator import SettleError
 from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
@@ -322,6 +324,19 @@ def implausibility(rec: Recording, disc: Discovery) -> dict:
             "back_within_tolerance": [d["name"] for d in back], "words": words}
 
 
+def geometry_crossvalidation(rec: Recording, read, seed: int) -> dict:
+    """The cross-validated prediction error of a recording without validation rows, as
+    ``pipeline.run --real`` reports it for its forward fit (leave-one-out, the default prior): the
+    geometry alone, on the rows the run would use (the gross rows left out), base frame."""
+    rows = np.setdiff1d(np.arange(len(rec.sets)), read.gross_rows)
+    cv = crossvalidate(rec.robot, rec.joints[rows], rec.measured[rows], rec.noise, method="forward",
+                       prior=ParameterPrior.default(rec.robot) if "parameter_tolerance" not in rec.meta else
+                       ParameterPrior.from_tolerance(rec.robot, rec.meta["parameter_tolerance"]), seed=seed)
+    out = cv.summary()
+    out["crossvalidation"]["model"] = "the geometry alone (forward fit with the tolerances as prior)"
+    return out
+
+
 def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) -> DiscoveryReport:
     """:func:`discover` with its numerical failures said as causes, naming the file: a singular
     fit (the rows do not determine geometry and effects together), a re-simulation that does not
@@ -380,6 +395,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if read is not None:
         report.summary.update(read.block)
         report.summary["warnings"] = warnings
+        if not np.any(rec.sets == "validation"):
+            report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
     if settings.summary_json is not None:
