@@ -23,8 +23,13 @@ from .execution.executor import BLAS_ENV
 # NumPy): the workbench's matrices are small (a few hundred rows, tens of columns), where BLAS
 # threads cost more than they give; on a busy 2-core machine a threaded SVD of a 360 x 48 Jacobian
 # took 0.15 s instead of 1 ms, and a --real run 23 s instead of 1.5 s. Dask workers get the same.
-for variable, value in BLAS_ENV.items():
-    os.environ.setdefault(variable, value)
+def one_blas_thread() -> None:
+    """Set every BLAS thread count of :data:`pipeline.execution.BLAS_ENV` not already set."""
+    for variable, value in BLAS_ENV.items():
+        os.environ.setdefault(variable, value)
+
+
+one_blas_thread()
 
 from calib.lazy import lazy_exports  # noqa: E402
 
