@@ -526,6 +526,7 @@ class ProposedLaw:
                 "constants": {c.name: values[:, j].tolist() for j, c in enumerate(coefs)},
                 "constants_std": {c.name: std[:, j].tolist() for j, c in enumerate(coefs)},
                 "units": {c.name: c.unit for c in coefs},
+                "constant_granularity": {c: gran[t.name] for t in terms for c in t.column_names()},
                 "cv_rms_before_mm": self.search.cv_before_mm, "cv_rms_after_mm": self.cv_after_mm,
                 "cv_whitened_rms_before": self.search.cv_before, "cv_whitened_rms_after": self.cv_after,
                 "noise_floor_mm": self.noise_floor_mm,
