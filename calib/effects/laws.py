@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import EFFECTS
 from .base import Coefficient, Effect, EffectData
+from .compliance import EFFECT as COMPLIANCE
 from .granularity import PER_CHAIN, SHARED, PerChainForm, chain_coefficient_name
 from .periodic_screw_error import EFFECT as SCREW
 from .thermal_warmup import TAU_RANGE_SPANS
@@ -71,9 +71,8 @@ def joint_quantities(data: EffectData, channels: dict | None = None) -> dict:
     n, c = data.n, robot.n_chains
     q = {"stroke": data.stroke, "last move": data.last_move, "|last move|": np.abs(data.last_move),
          "sign(last move)": data.direction, "t": np.broadcast_to(data.t_s[:, None], (n, c))}
-    load = EFFECTS.get("compliance")
-    if load is not None and load.applies_to(robot):
-        q["load"] = load.joint_regressors(robot, data.theta, data)[..., 0]
+    if COMPLIANCE.applies_to(robot):
+        q["load"] = COMPLIANCE.joint_regressors(robot, data.theta, data)[..., 0]
     for name, v in (channels or {}).items():
         v = np.asarray(v, dtype=float)
         q[name] = np.broadcast_to(v[:, None] if v.ndim == 1 else v, (n, c))
