@@ -21,7 +21,8 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "effect_family"
            "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario", "FOLLOWED_QUANTITIES",
            "MIN_DELTA_BIC", "MAX_EFFECTS", "EffectFit", "Discovery", "fit_effect", "fit_effects", "discover_effects",
            "discover_effect", "remainder_tests", "outlier_scan", "regressor_correlation", "locate_mismatch",
-           "closure_noise_std", "candidate_forms", "PerChainForm", "per_chain_form", "SHARED", "PER_CHAIN"]
+           "closure_noise_std", "candidate_forms", "PerChainForm", "per_chain_form", "SHARED", "PER_CHAIN",
+           "propose_law", "ProposedLaw", "Law", "law_effect", "search_law", "LAW_WORDS", "law_to_dict", "law_from_dict"]
 
 #: The effect modules of this package, in the order of the registry (``none`` first).
 EFFECT_MODULES = ("none", "compliance", "joint_friction", "thermal_drift", "actuator_scale", "periodic_screw_error",
@@ -81,5 +82,6 @@ def effect_family(name: str | Effect) -> tuple[str, ...]:
 
 from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, candidate_forms,  # noqa: E402
                         closure_noise_std, discover_effect, discover_effects, fit_effect, fit_effects, locate_mismatch,
-                        outlier_scan, regressor_correlation, remainder_tests)
+                        outlier_scan, propose_law, regressor_correlation, remainder_tests)
+from .laws import LAW_WORDS, Law, ProposedLaw, law_effect, law_from_dict, law_to_dict, search_law  # noqa: E402
 from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form  # noqa: E402

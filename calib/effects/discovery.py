@@ -52,12 +52,14 @@ from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors
 from .granularity import PerChainForm, form_key, per_chain_form
+from .laws import LawSpace, ProposedLaw, law_effect, search_law
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
            "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
-           "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation", "candidate_forms"]
+           "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation", "candidate_forms",
+           "propose_law"]
 
 #: Evidence an effect needs to enter the model: BIC lower by at least this ("very strong" on
 #: the Kass-Raftery scale; a chance reduction of a one-parameter effect's chi-square by 16 has
@@ -1105,6 +1107,8 @@ class Discovery:
         flagged: indices of rows removed as outliers (gross and isolated).
         kept: indices of the rows used.
         located: where the geometry-only residuals concentrate (:func:`locate_mismatch`).
+        proposed_law: where the library leaves a remainder, the law over joint-space terms that
+            explains it (:func:`propose_law`), or None (explained, none found, or not searched).
     """
 
     effects: tuple
@@ -1120,6 +1124,7 @@ class Discovery:
     flagged: tuple
     kept: np.ndarray
     located: dict
+    proposed_law: ProposedLaw | None = None
 
     @property
     def effect(self) -> str:
@@ -1189,7 +1194,8 @@ def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: floa
 
 def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
                      outlier_alpha: float = OUTLIER_ALPHA, folds: int = 5, seed: int = 0, max_rounds: int = 3,
-                     min_delta_bic: float = MIN_DELTA_BIC, per_chain: bool = True) -> Discovery:
+                     min_delta_bic: float = MIN_DELTA_BIC, per_chain: bool = True, laws: bool = True,
+                     channels: dict | None = None) -> Discovery:
     """Name the left-out physics (up to ``max_effects`` effects together), fit it, test what
     remains, and isolate gross rows (see the module docstring).
 
@@ -1205,6 +1211,10 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         per_chain: also consider each candidate's per-chain form
             (:mod:`calib.effects.granularity`), chosen against its shared form by the nested
             rule (False: the shared forms only).
+        laws: where the library leaves a remainder (not explained), search a law over joint-space
+            terms (:func:`propose_law`, :mod:`calib.effects.laws`).
+        channels: extra recorded channels ``{name: (N,) or (N, C)}`` (a temperature) the law's
+            terms may use.
 
     Raises:
         ValueError: too few rows, an unknown candidate or one that does not apply to the robot.
@@ -1246,10 +1256,35 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         remaining = dict(remaining, bad_rows=len(scan["bad"]),
                          summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
                          f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
+    law = None
+    if laws and not explained:
+        law = propose_law(sub, fit, channels=None if channels is None else
+                          {k: np.asarray(v)[kept] for k, v in channels.items()}, folds=folds, seed=seed)
     return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
                      partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
                      tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
-                     located=locate_mismatch(sub, geo))
+                     located=locate_mismatch(sub, geo), proposed_law=law)
+
+
+def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = None, folds: int = 5,
+                seed: int = 0) -> ProposedLaw | None:
+    """The law over joint-space terms that explains what ``fit`` (geometry and the library's
+    effects) leaves, searched on the fit linearised at its solution (:func:`calib.effects.laws.search_law`)
+    and then fitted exactly with it; None when no term earns its place."""
+    def space(f: EffectFit) -> LawSpace:
+        jac = data.robot.closure_jacobians(f.theta, data.joints + f.joint_displacement(data), data.measured)
+        winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(data.robot, jac, data)))
+        return LawSpace(data, winv, jac.joints, f.design, f.whitened, dict(channels or {}))
+
+    found = search_law(space(fit), folds=folds, seed=seed)
+    if not found.terms:
+        return None
+    eff = law_effect(found.terms, found.granularity, channels)
+    extras = {m.name: e for m, e in zip(fit.models, fit.extras) if e is not None}
+    exact = fit_effects(data, fit.models + (eff,), extras=extras, start=fit.theta)
+    floor = float(_rms(closure_noise_std(data.robot, exact.theta, data)))
+    cv_w, cv_mm = space(exact).cv([], folds, seed)
+    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm)
 
 
 def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:

@@ -22,7 +22,7 @@ from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, c
 #: Size of each residual chart, chart units (about pixels at 1600x900).
 CHART_W, CHART_H = 600.0, 160.0
 
-__all__ = ["model_words", "verdict_words", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
+__all__ = ["model_words", "verdict_words", "law_lines", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
            "verdict_quantity", "discovery_markdown", "write_discovery_rrd"]
 
 
@@ -39,6 +39,24 @@ def verdict_words(explained: bool, effects: list, remaining: dict) -> str:
     partial = (f" Named but partial: {', '.join(effects)} (structure remains)." if effects and remaining.get("follows")
                else "")
     return f"NOT explained: {model} leaves {remaining['summary']}.{partial}"
+
+
+def law_lines(law: dict | None) -> list[str]:
+    """A proposed law (the summary's ``proposed_law``) in words: the formula, its constants joint
+    by joint with their standard deviations, the cross-validated residual before and after."""
+    if not law:
+        return []
+    after = "explained" if law["explained_with_law"] else "still NOT explained: " + law["remaining_with_law"]
+    lines = [f"Proposed law, not in the library: {law['formula']}",
+             f"  cross-validated residual RMS {1e3 * law['cv_rms_before_mm']:.2f} um -> "
+             f"{1e3 * law['cv_rms_after_mm']:.2f} um (noise floor {1e3 * law['noise_floor_mm']:.2f} um); with it: {after}"]
+    for name, values in law["constants"].items():
+        std = law["constants_std"][name]
+        form = law["constant_granularity"][name]
+        each = ", ".join(f"{v:.4g} +- {sd:.2g}" for v, sd in zip(values, std))
+        lines.append(f"  [{name}] ({form.replace('_', ' ')}): {each if form == 'per_chain' else f'{values[0]:.4g} +- {std[0]:.2g}'} "
+                     f"{law['units'][name]}")
+    return lines
 
 
 def report_lines(s: dict) -> list[str]:
@@ -90,6 +108,7 @@ def report_lines(s: dict) -> list[str]:
             continue
         lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']} (evidence within "
                      f"{a['delta_bic']:.1f} BIC, regressor correlation {a['correlation']:.2f}); {a['named']} fitted.")
+    lines += law_lines(s.get("proposed_law"))
     lines.append(f"Held-out residual RMS: {1e3 * s['heldout_rms_before_mm']:.3f} um -> {1e3 * s['heldout_rms_after_mm']:.3f} um "
                  f"(noise floor {1e3 * s['noise_floor_mm']:.3f} um; {s['heldout_basis']}).")
     r = s.get("mujoco_resimulation")
@@ -182,6 +201,12 @@ def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
                 if k not in ("significance", "granularity"):
                     unc = f"{v['std']:.2g}" if np.isfinite(v["std"]) else ""
                     lines.append(f"| {e} | {k} | {v['value']:.4g} | {unc} | {v['unit']} |")
+    law = s.get("proposed_law")
+    if law:
+        lines += ["", f"**Proposed law, not in the library**: `{law['formula']}`; cross-validated residual "
+                      f"{_um(law['cv_rms_before_mm'])} -> {_um(law['cv_rms_after_mm'])} um.", "",
+                  "| term | constant per " + chain_word + " | unit |", "|---|---|---|"]
+        lines += [f"| {k} | {', '.join(f'{x:.4g}' for x in v)} | {law['units'][k]} |" for k, v in law["constants"].items()]
     ev = s["evidence"]
     lines += ["", "| candidate | BIC drop alone | CV RMS | named |", "|---|---|---|---|",
               f"| (geometry) | 0 | {ev['none']['cv_whitened_rms']:.2f} | |"]

@@ -254,6 +254,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "located": disc.located,
         "rows": int(rec.joints.shape[0]),
+        "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
     }
     summary["implausible_parameters"] = implausibility(rec, disc)
     if rec.meta.get("simulation", {}).get("effect") is not None:

@@ -1,0 +1,86 @@
+"""Speed of the law search (docs/discovery.md, "Proposed laws"): 120 poses of the hexapod with a
+law outside the library injected (kinematic recordings: the exact forward kinematics of the legs
+moved by the law, 1 um noise), one core:
+``OPENBLAS_NUM_THREADS=1 PYTHONPATH=. taskset -c 0 python benchmarks/law_speed.py``.
+
+Timed, best of ``--repeat``: the library's search (:func:`calib.effects.discover_effects` with
+``laws=False``: selection, joint fit, remainder tests, outlier rounds) and the law search on what it
+leaves (:func:`calib.effects.propose_law`: the dictionary, the greedy selection with its
+cross-validation, the exact refit and the remainder tests), their ratio in the same run, and what
+the law search found against the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+from calib import paper
+from calib.effects import EffectData, discover_effects, propose_law
+from calib.effects.laws import joint_quantities
+from calib.robots import default_robot
+from pipeline.simulation.scenarios import DISCOVERY_NOISE
+
+#: The workspace of the recordings about the hexapod's home (mm, rad), as the laws' tests draw it.
+WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
+#: name: (the law dq(q, c), each leg's constant).
+LAWS = {"settle lag (last move)": (lambda q, c: c * q["last move"], -1.3e-4 * np.linspace(0.9, 1.1, 6)),
+        "dead band growing with time": (lambda q, c: c * q["sign(last move)"] * q["t"], -4e-5 * np.linspace(0.3, 1, 6)),
+        "scale quadratic in stroke": (lambda q, c: c * q["stroke"] ** 2, 2e-5 * np.linspace(0.3, 1, 6))}
+
+
+def law_recording(law, n: int, seed: int) -> EffectData:
+    robot = default_robot("hexapod")
+    theta = robot.table.nominal + paper.TABLE3_ERRORS.ravel()
+    rng = np.random.default_rng(seed)
+    targets = WORKSPACE[:, 0] + rng.uniform(size=(n, 6)) * np.ptp(WORKSPACE, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n))
+    reached = targets
+    for _ in range(4):
+        q = joint_quantities(EffectData(robot, robot.table.nominal, joints, reached, t, DISCOVERY_NOISE))
+        reached = robot.forward_kinematics(theta, joints + law(q), initial=reached)
+    reached = reached + DISCOVERY_NOISE.sample(n, seed + 1, robot.pose_units)
+    return EffectData(robot, robot.table.nominal, joints, reached, t, DISCOVERY_NOISE)
+
+
+def best_of(repeat: int, f):
+    times, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = f()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--poses", type=int, default=120)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {a.poses} poses, hexapod, seed {a.seed}")
+    print("| law (truth) | library named | law found | granularity | constants found / truth (min-max) "
+          "| CV residual before -> after (um) | floor (um) | library search (s) | law search (s) | ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name, (law, c) in LAWS.items():
+        data = law_recording(lambda q: law(q, c), a.poses, a.seed)
+        t_lib, disc = best_of(a.repeat, lambda: discover_effects(data, laws=False))
+        sub = data.subset(disc.kept)
+        t_law, found = best_of(a.repeat, lambda: propose_law(sub, disc.chosen))
+        if found is None:
+            print(f"| {name} | {disc.effect} | none | | | | | {t_lib:.2f} | {t_law:.2f} | {t_law / t_lib:.2f} |")
+            continue
+        s = found.summary()
+        ratio = np.array(next(iter(s["constants"].values()))) / c
+        print(f"| {name} | {disc.effect} | {' + '.join(s['terms'])} | {s['granularity']} | "
+              f"{ratio.min():.3f}-{ratio.max():.3f} | {1e3 * s['cv_rms_before_mm']:.2f} -> {1e3 * s['cv_rms_after_mm']:.2f} | "
+              f"{1e3 * s['noise_floor_mm']:.2f} | {t_lib:.2f} | {t_law:.2f} | {t_law / t_lib:.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
