@@ -18,14 +18,10 @@ import time
 
 import numpy as np
 
-from calib import paper
 from calib.effects import EffectData, discover_effects, propose_law
 from calib.effects.laws import joint_quantities
-from calib.robots import default_robot
-from pipeline.simulation.scenarios import DISCOVERY_NOISE
+from tests.joint_space_truth import moved_legs
 
-#: The workspace of the recordings about the hexapod's home (mm, rad), as the laws' tests draw it.
-WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 #: name: (the law dq(q, c), each leg's constant).
 LAWS = {"settle lag (last move)": (lambda q, c: c * q["last move"], -1.3e-4 * np.linspace(0.9, 1.1, 6)),
         "dead band growing with time": (lambda q, c: c * q["sign(last move)"] * q["t"], -4e-5 * np.linspace(0.3, 1, 6)),
@@ -33,18 +29,8 @@ LAWS = {"settle lag (last move)": (lambda q, c: c * q["last move"], -1.3e-4 * np
 
 
 def law_recording(law, n: int, seed: int) -> EffectData:
-    robot = default_robot("hexapod")
-    theta = robot.table.nominal + paper.TABLE3_ERRORS.ravel()
-    rng = np.random.default_rng(seed)
-    targets = WORKSPACE[:, 0] + rng.uniform(size=(n, 6)) * np.ptp(WORKSPACE, axis=1)
-    joints = robot.inverse_kinematics(robot.table.nominal, targets)
-    t = np.cumsum(rng.uniform(0.5, 1.5, n))
-    reached = targets
-    for _ in range(4):
-        q = joint_quantities(EffectData(robot, robot.table.nominal, joints, reached, t, DISCOVERY_NOISE))
-        reached = robot.forward_kinematics(theta, joints + law(q), initial=reached)
-    reached = reached + DISCOVERY_NOISE.sample(n, seed + 1, robot.pose_units)
-    return EffectData(robot, robot.table.nominal, joints, reached, t, DISCOVERY_NOISE)
+    """The hexapod with Table 3's errors, its legs moved by ``law`` (tests/joint_space_truth.py)."""
+    return moved_legs(lambda data: law(joint_quantities(data)), n, seed)
 
 
 def best_of(repeat: int, f):

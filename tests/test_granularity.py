@@ -4,39 +4,23 @@ the machine settings joint by joint, the scenarios' per-joint spread, and discov
 import numpy as np
 import pytest
 
-from calib import paper
-from calib.effects import EFFECTS, EffectData, MachineContext, discover_effects, effects_for
+from calib.effects import EFFECTS, MachineContext, discover_effects, effects_for
 from calib.effects.base import SPREAD_RANGE
 from calib.effects.discovery import candidate_forms
 from calib.effects.granularity import PER_CHAIN, SHARED, merge_chain_settings, per_chain_form
-from calib.noise import SensorNoise
-from calib.robots import default_robot
+from tests.joint_space_truth import HEXAPOD, THETA, moved_legs
 
-NOISE = SensorNoise(0.001, 1e-6, "normal")
-HEXAPOD = default_robot("hexapod")
-THETA = HEXAPOD.table.nominal + paper.TABLE3_ERRORS.ravel()
-WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
 CONTEXT = MachineContext(moving_mass_kg=3.0, platform_mass_kg=2.0, payload_height_m=0.05, gravity_m_s2=9.81,
                          m_per_mm=1e-3, servo_stiffness=2e5)
 CAPABLE = [n for n, e in EFFECTS.items() if e.per_chain_capable]
 
 
 def measurements(eff, coef, n=100, seed=0, extra=None, noise=True):
-    """Exact truth on the calib machine: the poses the forward kinematics reaches with the joints
-    moved by ``eff``'s regressors times ``coef`` (a fixed point for pose-dependent regressors),
-    plus seeded 1 um noise."""
-    rng = np.random.default_rng(seed)
-    targets = WORKSPACE[:, 0] + rng.uniform(size=(n, 6)) * np.ptp(WORKSPACE, axis=1)
-    joints = HEXAPOD.inverse_kinematics(HEXAPOD.table.nominal, targets)
-    t = np.cumsum(rng.uniform(0.5, 1.5, n))
-    reached = targets
-    for _ in range(6):
-        Xq = eff.joint_regressors(HEXAPOD, THETA, EffectData(HEXAPOD, HEXAPOD.table.nominal, joints, reached, t, NOISE),
-                                  extra)
-        reached = HEXAPOD.forward_kinematics(THETA, joints + Xq @ np.asarray(coef, dtype=float), initial=reached)
-    if noise:
-        reached = reached + NOISE.sample(n, seed + 1, HEXAPOD.pose_units)
-    return EffectData(HEXAPOD, HEXAPOD.table.nominal, joints, reached, t, NOISE)
+    """Exact truth on the calib machine: the joints moved by ``eff``'s regressors times ``coef``
+    (see :mod:`tests.joint_space_truth`)."""
+    coef = np.asarray(coef, dtype=float)
+    return moved_legs(lambda data: eff.joint_regressors(HEXAPOD, THETA, data, extra) @ coef, n, seed, iterations=6,
+                      noise=noise)
 
 
 @pytest.mark.parametrize("name", CAPABLE)

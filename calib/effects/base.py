@@ -30,7 +30,7 @@ from ..validation import as_array
 from ..noise import SensorNoise
 from ..robot import Robot
 
-__all__ = ["FOLLOWED_QUANTITIES", "SPREAD_RANGE", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
+__all__ = ["FOLLOWED_QUANTITIES", "SPREAD_RANGE", "orthonormal_columns", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
            "EffectData", "Effect", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
 #: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
@@ -397,3 +397,16 @@ class Effect:
 
     def __repr__(self) -> str:
         return f"<effect {self.name!r}>"
+
+
+def orthonormal_columns(A: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+    """Orthonormal basis of the column space of ``A`` (columns scaled to unit norm first; rank
+    decided at ``rtol`` of the largest singular value)."""
+    if A.shape[1] == 0:
+        return A
+    scale = np.linalg.norm(A, axis=0)
+    keep = scale > 0
+    if not keep.any():
+        return A[:, :0]
+    U, s, _ = np.linalg.svd(A[:, keep] / scale[keep], full_matrices=False)
+    return U[:, s > rtol * s[0]]

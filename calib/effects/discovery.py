@@ -50,7 +50,7 @@ from scipy.stats import chi2 as chi2_dist, norm
 
 from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
-from .base import Effect, EffectData, closure_regressors
+from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
 
@@ -149,19 +149,6 @@ def _whiten(winv: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def _free_indices(robot: Robot) -> np.ndarray:
     return np.sort(robot.table.indices(robot.free_default))
-
-
-def _orth(A: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
-    """Orthonormal basis of the column space of ``A`` (columns scaled to unit norm first; rank
-    decided at ``rtol`` of the largest singular value)."""
-    if A.shape[1] == 0:
-        return A
-    scale = np.linalg.norm(A, axis=0)
-    keep = scale > 0
-    if not keep.any():
-        return A[:, :0]
-    U, s, _ = np.linalg.svd(A[:, keep] / scale[keep], full_matrices=False)
-    return U[:, s > rtol * s[0]]
 
 
 def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -427,7 +414,7 @@ class _Linear:
         self.dF_dq = jac.joints
         free = _free_indices(robot)
         G = _whiten(self.winv, jac.parameters[:, :, free]).reshape(-1, free.size)
-        self.Qg = _orth(G)
+        self.Qg = orthonormal_columns(G)
         self.b = self.perp(-_whiten(self.winv, robot.closure(self.theta, data.joints, data.measured)).ravel())
         self.n = self.b.size
         self.dof0 = self.n - self.Qg.shape[1]
@@ -458,7 +445,7 @@ class _Linear:
         effect's grid of the search coordinate, refined by golden-section search between the
         best grid point's neighbours (unless the effect says its fit is constant between grid
         points: :attr:`Effect.refine_search`)."""
-        Q = _orth(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
+        Q = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         b = self.b - Q @ (Q.T @ self.b)
         robot = self.data.robot
 
@@ -494,7 +481,7 @@ class _Linear:
     def cv_rms(self, blocks: list, folds: int, seed: int) -> float:
         """Whitened RMS of the deleted residuals of ``folds``-fold cross-validation (whole
         measurements left out), closed form through the hat matrix."""
-        Q = self.Qg if not blocks else np.hstack([self.Qg, _orth(np.hstack(blocks))])
+        Q = self.Qg if not blocks else np.hstack([self.Qg, orthonormal_columns(np.hstack(blocks))])
         e = self.b - Q @ (Q.T @ self.b)
         m = self.n // self.C
         order = np.random.default_rng(seed).permutation(m)
@@ -509,7 +496,7 @@ class _Linear:
 
 
 def _canonical_correlation(A: np.ndarray, B: np.ndarray) -> float:
-    Qa, Qb = _orth(A), _orth(B)
+    Qa, Qb = orthonormal_columns(A), orthonormal_columns(B)
     if Qa.shape[1] == 0 or Qb.shape[1] == 0:
         return 0.0
     return float(np.clip(np.linalg.svd(Qa.T @ Qb, compute_uv=False)[0], 0.0, 1.0))
@@ -918,7 +905,7 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     # The generic effects' columns in the fitted model's whitened space.
     jac = robot.closure_jacobians(fit.theta, data.joints + fit.joint_displacement(data), data.measured)
     winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
-    rem = _Remainder(fit, jac, winv, _orth(fit.design), fit.whitened.ravel())
+    rem = _Remainder(fit, jac, winv, orthonormal_columns(fit.design), fit.whitened.ravel())
     structure, t_pose, pose_best = _structure(data, rem, z, alpha)
     remaining = _remaining(robot, fit, std, z, noise, structure, t_pose, pose_best, alpha)
     return {"explained": not remaining["present"], "noise": noise, "structure": structure, "remaining": remaining}
@@ -1034,7 +1021,7 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
         ``model_wrong`` (bool).
     """
     n, C = data.n, data.robot.n_chains
-    Q = _orth(fit.design)
+    Q = orthonormal_columns(fit.design)
     w = fit.whitened
     stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
     scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import SPREAD_RANGE, Coefficient, Effect, EffectScenario
+from .base import Coefficient, Effect, EffectScenario
 
 __all__ = ["SHARED", "PER_CHAIN", "GRANULARITIES", "PerChainForm", "per_chain_form", "form_key",
            "merge_chain_settings", "chain_coefficient_name"]

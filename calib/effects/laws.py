@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .base import Coefficient, Effect, EffectData
+from .base import Coefficient, Effect, EffectData, orthonormal_columns
 from .compliance import EFFECT as COMPLIANCE
-from .granularity import PER_CHAIN, SHARED, PerChainForm, chain_coefficient_name
+from .granularity import PER_CHAIN, SHARED, PerChainForm
 from .periodic_screw_error import EFFECT as SCREW
 from .thermal_warmup import TAU_RANGE_SPANS
 
@@ -258,18 +258,6 @@ def law_from_dict(d: dict) -> tuple[tuple, dict]:
 # ----------------------------------------------------------------------------- the search
 
 
-def _basis(A: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
-    """Orthonormal basis of the column space of ``A`` (columns scaled to unit norm first)."""
-    if A.shape[1] == 0:
-        return A
-    scale = np.linalg.norm(A, axis=0)
-    keep = scale > 0
-    if not keep.any():
-        return A[:, :0]
-    U, s, _ = np.linalg.svd(A[:, keep] / scale[keep], full_matrices=False)
-    return U[:, s > rtol * s[0]]
-
-
 @dataclass(frozen=True, eq=False)
 class LawSpace:
     """The fitted model (geometry and the library's effects) linearised at its solution, where
@@ -295,7 +283,7 @@ class LawSpace:
     def __post_init__(self):
         object.__setattr__(self, "M", -self.winv @ self.dF_dq)
         object.__setattr__(self, "L", np.linalg.inv(self.winv))
-        object.__setattr__(self, "Q0", _basis(self.design))
+        object.__setattr__(self, "Q0", orthonormal_columns(self.design))
         object.__setattr__(self, "q", joint_quantities(self.data, self.channels))
         b = self.whitened.ravel()
         object.__setattr__(self, "b", b - self.Q0 @ (self.Q0.T @ b))
@@ -324,14 +312,14 @@ class LawSpace:
         if X is None or X.shape[1] == 0:
             return float(e @ e)
         Xp = X - Qs @ (Qs.T @ X)
-        Qx = _basis(Xp)
+        Qx = orthonormal_columns(Xp)
         e = e - Qx @ (Qx.T @ e)
         return float(e @ e)
 
     def cv(self, blocks: list, folds: int, seed: int) -> tuple[float, float]:
         """``(whitened RMS, RMS in mm)`` of the deleted residuals of ``folds``-fold
         cross-validation (whole measurements left out), closed form through the hat matrix."""
-        Q = self.Q0 if not blocks else np.hstack([self.Q0, _basis(np.hstack(blocks))])
+        Q = self.Q0 if not blocks else np.hstack([self.Q0, orthonormal_columns(np.hstack(blocks))])
         e = self.b - Q @ (Q.T @ self.b)
         C = self.M.shape[1]
         m = self.n // C
@@ -469,7 +457,7 @@ def search_law(space: LawSpace, *, folds: int = 5, seed: int = 0, max_terms: int
         terms.append(best["term"])
         gran[best["term"].name] = best["form"]
         blocks.append(best["X"])
-        Qs = _basis(np.hstack(blocks))
+        Qs = orthonormal_columns(np.hstack(blocks))
         chi2_cur, p_cur, cv_cur = best["chi2"], p_cur + best["k"], best["cv"]
     return LawSearch(tuple(terms), gran, cv0[0], cv_cur[0], cv0[1], cv_cur[1], steps)
 
