@@ -201,6 +201,12 @@ def print_summary(s: dict) -> None:
         print(f"  held-out position error after: {1e3 * wo['heldout_position_error_mm']['after']:.3f} um without the "
               f"flagged rows, {1e3 * w['heldout_position_error_mm']['after']:.3f} um with them")
     print_determination(s)
+    if s.get("measurement_frame"):
+        f = s["measurement_frame"]
+        print(f"  instrument frame: translation {', '.join(f'{v:.4g}' for v in f['translation_mm'])} mm, rotation "
+              f"{', '.join(f'{v:.4g}' for v in f['rotation_rad'])} rad")
+        for words in s.get("measurement_frame_held") or ():
+            print(f"    {words}")
     for item in s.get("implausible_parameters") or ():
         print(f"  implausible: {item['words']}")
     for warning in s.get("warnings") or ():

@@ -220,6 +220,27 @@ def _instrument_basis(fit) -> str:
             "(includes sensor noise)")
 
 
+#: A frame component this many times less certain than one measurement (its noise) is said to be
+#: held by the geometry's tolerances, not determined by the poses.
+FRAME_HELD_RATIO = 10.0
+
+
+def frame_held_words(fit) -> list[str]:
+    """The instrument frame's components the poses cannot separate from the geometry, in words:
+    those whose standard uncertainty is over :data:`FRAME_HELD_RATIO` times one measurement's noise
+    (with the tolerances as a prior the geometry's tolerance holds them; without, the gauge)."""
+    std = np.asarray(fit.frame_std, dtype=float)
+    names = ("x", "y", "z", "rotation about x", "rotation about y", "rotation about z")
+    units = ("mm",) * 3 + ("rad",) * 3
+    res = np.asarray(fit.result.pose_residuals, dtype=float)
+    spread = np.nanstd(res, axis=0) if res.size else np.zeros(6)
+    scale = np.r_[np.full(3, max(np.nanmax(spread[:3]) if spread.size >= 3 else 0.0, 1e-6)),
+                  np.full(3, max(np.nanmax(spread[3:6]) if spread.size >= 6 else 0.0, 1e-9))]
+    held = "the geometry's tolerances" if fit.result.prior is not None else "the gauge"
+    return [f"frame {name}: std {std[k]:.3g} {units[k]}, not separated from the geometry by the poses: held by {held}"
+            for k, name in enumerate(names) if std[k] > FRAME_HELD_RATIO * scale[k]]
+
+
 def _instrument_block(fit, before, after) -> dict:
     """Summary keys of an instrument frame or target fit."""
     block = {"method": "forward", "solver": "lm", "weighted": True,
@@ -227,6 +248,7 @@ def _instrument_block(fit, before, after) -> dict:
     if fit.frame_estimated:
         block["measurement_frame"] = fit.frame_dict()
         block["measurement_frame_std"] = frame_to_dict(fit.frame_std)
+        block["measurement_frame_held"] = frame_held_words(fit)
     if fit.targets is not None:
         block["measurement_targets_mm"] = fit.targets.tolist()
         block["measurement_targets_estimated"] = fit.targets_estimated
