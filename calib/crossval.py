@@ -19,6 +19,12 @@ validation rows (:mod:`pipeline.workflows.calibration`): it includes the sensor 
 instrument frame or targets (``measurement=``), each fold is fitted by
 :func:`calib.measurement.identify_measured` and predicted in the instrument's coordinates.
 
+Sessions. A recording of several sessions, each in its own instrument frame (``sessions=``, with
+``measurement=``), is cross-validated as it is fitted: each fold's model is one geometry and a
+frame for each session that keeps training rows (the sessions renumbered in order where one keeps
+none), and each left-out row is predicted in its own session's frame. A left-out row whose session
+kept no training row in its fold has no frame to be predicted in: NaN, and the message says so.
+
 A fold whose fit raises (too few rows left, a start the model cannot reach, a step out of the
 workspace) or whose model cannot reach a left-out row leaves those rows without a prediction
 (NaN); the result is returned all the same and its message names the folds. A fold fit that
@@ -35,7 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .engine import METHODS, identify
-from .measurement import MeasurementSettings, checked_measured_inputs, identify_measured, measurement_residuals
+from .measurement import (FRAME_MODES, MeasurementSettings, checked_measured_inputs, identify_measured,
+                          measurement_residuals)
 from .metrics import pose_error_norms
 from .noise import SensorNoise
 from .prior import ParameterPrior
@@ -142,37 +149,78 @@ def fold_assignment(n: int, folds: int, seed: int = 0) -> np.ndarray:
     return out
 
 
-def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, measurement):
-    """The checked arguments: ``(joints (N, C), measured (N, M), folds, fit_kwargs dict)``; the robot,
-    noise, data, free names and start as :func:`calib.measurement.checked_measured_inputs` checks them."""
+def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, measurement, sessions):
+    """The checked arguments: ``(joints (N, C), measured (N, M), folds, fit_kwargs dict, per (S,)
+    settings or None, sessions (N,) int or None)``; the robot, noise, data, free names, start and
+    sessions as :func:`calib.measurement.checked_measured_inputs` checks them."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if prior is not None and not isinstance(prior, ParameterPrior):
         raise TypeError(f"prior must be a calib.prior.ParameterPrior or None, got {type(prior).__name__}")
-    if measurement is not None:
-        if not isinstance(measurement, MeasurementSettings):
-            raise TypeError(f"measurement must be a calib.measurement.MeasurementSettings or None, got "
-                            f"{type(measurement).__name__}")
-        if method != "forward":
-            raise ValueError("with an instrument frame or targets (measurement=) only the forward method is "
-                             "fitted (calib.measurement.identify_measured)")
+    if measurement is not None and method != "forward":
+        raise ValueError("with an instrument frame or targets (measurement=) only the forward method is "
+                         "fitted (calib.measurement.identify_measured)")
+    if sessions is not None and measurement is None:
+        raise ValueError("sessions= needs measurement= (the instrument frame of each session)")
     fit_kwargs = {} if fit_kwargs is None else dict(fit_kwargs)
-    clash = sorted(set(fit_kwargs) & {"method", "prior", "frame", "targets", "initial_frame", "estimate_targets"})
+    clash = sorted(set(fit_kwargs) & {"method", "prior", "frame", "targets", "initial_frame", "estimate_targets",
+                                      "sessions"})
     if clash:
         raise ValueError(f"fit_kwargs must not set {', '.join(clash)}: pass them as crossvalidate's own arguments")
-    settings = MeasurementSettings(frame="base") if measurement is None else measurement
-    data = checked_measured_inputs(robot, joints, measured, noise, settings.frame, settings.targets,
-                                   settings.estimate_targets, fit_kwargs.get("free"), fit_kwargs.get("start"))
+    first = MeasurementSettings(frame="base") if measurement is None else _first_settings(measurement)
+    data = checked_measured_inputs(robot, joints, measured, noise, first.frame, first.targets,
+                                   first.estimate_targets, fit_kwargs.get("free"), fit_kwargs.get("start"),
+                                   sessions=sessions)
     n = data["joints"].shape[0]
     if folds is None:
         folds = n if method == "forward" else min(DEFAULT_CHAINWISE_FOLDS, n)
-    return data["joints"], data["measured"], folds, fit_kwargs
+    per = None if measurement is None else _session_settings(measurement, data["n_sessions"], sessions is not None)
+    return data["joints"], data["measured"], folds, fit_kwargs, per, None if sessions is None else data["sessions"]
 
 
-def _fold_model(robot, joints, measured, noise, method, prior, fit_kwargs, measurement):
+def _first_settings(measurement) -> MeasurementSettings:
+    """``measurement`` itself, or the first of a sequence of them (checked to be settings)."""
+    if isinstance(measurement, MeasurementSettings):
+        return measurement
+    if isinstance(measurement, (list, tuple)) and measurement and \
+            all(isinstance(m, MeasurementSettings) for m in measurement):
+        return measurement[0]
+    raise TypeError("measurement must be a calib.measurement.MeasurementSettings, a list of them (one a session) "
+                    f"or None, got {type(measurement).__name__}")
+
+
+def _session_settings(measurement, n_sessions: int, several: bool) -> list:
+    """Each session's settings (S,): one for all, or one a session (frame mode and start frame of
+    its own, the same targets).
+
+    Raises:
+        ValueError: a list without ``sessions=`` or not one a session, a frame mode not in
+            :data:`~calib.measurement.FRAME_MODES`, or sessions whose targets differ.
+    """
+    if isinstance(measurement, MeasurementSettings):
+        per = [measurement] * n_sessions
+    elif not several:
+        raise ValueError("a list of measurement settings (one a session) needs sessions=")
+    elif len(measurement) != n_sessions:
+        raise ValueError(f"measurement must be one MeasurementSettings or {n_sessions} (one a session), got "
+                         f"{len(measurement)}")
+    else:
+        per = list(measurement)
+    for s, ms in enumerate(per):
+        if ms.frame not in FRAME_MODES:
+            raise ValueError(f"measurement[{s}].frame must be one of {FRAME_MODES}, got {ms.frame!r}")
+        same = (ms.targets is None) == (per[0].targets is None) and ms.estimate_targets == per[0].estimate_targets
+        if not same or (ms.targets is not None and not np.array_equal(ms.targets, per[0].targets)):
+            raise ValueError(f"measurement: session {s}'s targets differ from session 0's (one set of targets "
+                             "serves every session)")
+    return per
+
+
+def _fold_model(robot, joints, measured, noise, method, prior, fit_kwargs, per, sessions):
     """``(predict, success, message)`` of the model fitted to the rows given: ``predict(joints,
-    measured)`` (M rows) -> (M, W) predicted measurements; raises what the fit raises."""
-    if measurement is None:
+    measured)`` (M rows) -> (M, W) predicted measurements, or with ``sessions`` (the given rows'
+    (n,)) ``predict(joints, measured, sessions)``; raises what the fit raises."""
+    if per is None:
         fit = identify(robot, joints, measured, noise, method=method, prior=prior, **fit_kwargs)
         theta = fit.theta
 
@@ -180,26 +228,50 @@ def _fold_model(robot, joints, measured, noise, method, prior, fit_kwargs, measu
             return robot.forward_kinematics(theta, q, initial=m)
 
         return predict, fit.success, fit.message
-    fit = identify_measured(robot, joints, measured, noise, frame=measurement.frame,
-                            initial_frame=measurement.initial_frame, targets=measurement.targets,
-                            estimate_targets=measurement.estimate_targets, prior=prior, **fit_kwargs)
+    if sessions is None:
+        ms = per[0]
+        fit = identify_measured(robot, joints, measured, noise, frame=ms.frame, initial_frame=ms.initial_frame,
+                                targets=ms.targets, estimate_targets=ms.estimate_targets, prior=prior, **fit_kwargs)
 
-    def predict_instrument(q, m):
-        return fit.predict(q, initial=fit.to_base(m) if fit.n_targets == 0 else None)
+        def predict_instrument(q, m):
+            return fit.predict(q, initial=fit.to_base(m) if fit.n_targets == 0 else None)
 
-    return predict_instrument, fit.result.success, fit.result.message
+        return predict_instrument, fit.result.success, fit.result.message
+    return _sessions_fold_model(robot, joints, measured, noise, prior, fit_kwargs, per, sessions)
 
 
-def _predicted_rows(predict, joints, measured) -> np.ndarray:
-    """(M, W) ``predict``'s measurements of the rows, row by row where the batch fails; NaN rows
-    where the model cannot reach them."""
+def _sessions_fold_model(robot, joints, measured, noise, prior, fit_kwargs, per, sessions):
+    """:func:`_fold_model` of rows from several sessions: one frame for each session with rows here
+    (renumbered 0.. in order); ``predict(joints, measured, sessions)`` takes the sessions' own
+    indices (each one with rows here)."""
+    present = np.unique(sessions)
+    renumber = np.full(len(per), -1)
+    renumber[present] = np.arange(present.size)
+    fit = identify_measured(robot, joints, measured, noise, frame=[per[s].frame for s in present],
+                            initial_frame=[per[s].initial_frame for s in present], targets=per[0].targets,
+                            estimate_targets=per[0].estimate_targets, prior=prior, sessions=renumber[sessions],
+                            **fit_kwargs)
+
+    def predict_sessions(q, m, s):
+        own = renumber[s]
+        return fit.predict(q, initial=fit.to_base(m, sessions=own) if fit.n_targets == 0 else None, sessions=own)
+
+    return predict_sessions, fit.result.success, fit.result.message
+
+
+def _predicted_rows(predict, joints, measured, sessions=None) -> np.ndarray:
+    """(M, W) ``predict``'s measurements of the rows (with ``sessions`` (M,): their sessions passed
+    on), row by row where the batch fails; NaN rows where the model cannot reach them."""
+    def rows(sl):
+        return (joints[sl], measured[sl]) if sessions is None else (joints[sl], measured[sl], sessions[sl])
+
     try:
-        return predict(joints, measured)
+        return predict(*rows(slice(None)))
     except KinematicsError:
         out = np.full(measured.shape, np.nan)
         for j in range(len(joints)):
             try:
-                out[j] = predict(joints[j:j + 1], measured[j:j + 1])[0]
+                out[j] = predict(*rows(slice(j, j + 1)))[0]
             except KinematicsError:
                 continue
         return out
@@ -216,13 +288,14 @@ def _row_errors(robot: Robot, residuals: np.ndarray, n_targets: int) -> tuple[np
 
 def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method: str = "forward",
                   folds: int | None = None, prior: ParameterPrior | None = None, fit_kwargs: dict | None = None,
-                  measurement: MeasurementSettings | None = None, seed: int = 0) -> CrossValidation:
+                  measurement=None, seed: int = 0, sessions=None) -> CrossValidation:
     """Cross-validated prediction error of an identification (see the module docstring).
 
     Args:
         robot: the robot.
         joints: (N, C) commanded (or read) joints of the calibration rows.
-        measured: (N, D) measured poses (with ``measurement`` and targets: (N, 3K) positions).
+        measured: (N, D) measured poses (with ``measurement`` and targets: (N, 3K) positions), with
+            ``sessions`` each row in its session's instrument frame.
         noise: declared noise (the fits' weights and verdicts).
         method: ``"forward"`` or ``"chainwise"``.
         folds: number of folds, 2 .. N; default N (leave-one-out) for the forward method,
@@ -232,8 +305,12 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
             ``solver``, ``weighted``, ``epsilon``, ...) or, with ``measurement``,
             :func:`calib.measurement.identify_measured` takes them.
         measurement: the recording's instrument settings when its fit estimates a frame or target
-            offsets (forward method); None: poses in the base frame.
+            offsets (forward method): a :class:`~calib.measurement.MeasurementSettings` (every
+            session's), or with ``sessions`` a list of S of them, each session's frame mode and
+            start frame (one set of targets: theirs must agree); None: poses in the base frame.
         seed: seed of the K-fold assignment.
+        sessions: (N,) int, each row's session 0..S-1 (every one with rows), each session in its
+            own instrument frame (needs ``measurement``); None: one session.
 
     Returns:
         A :class:`CrossValidation`, also when folds fail (their rows NaN, named in the message).
@@ -241,18 +318,19 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
     Raises:
         TypeError, ValueError: bad arguments (naming them); not a fold that fails.
     """
-    joints, measured, folds, fit_kwargs = _checked(robot, joints, measured, noise, method, folds, prior,
-                                                   fit_kwargs, measurement)
+    joints, measured, folds, fit_kwargs, per, sessions = _checked(robot, joints, measured, noise, method, folds,
+                                                                  prior, fit_kwargs, measurement, sessions)
 
     def fit_fold(train: np.ndarray):
-        return _fold_model(robot, joints[train], measured[train], noise, method, prior, fit_kwargs, measurement)
+        return _fold_model(robot, joints[train], measured[train], noise, method, prior, fit_kwargs, per,
+                           None if sessions is None else sessions[train])
 
     return crossvalidate_model(robot, joints, measured, fit_fold, folds=folds, seed=seed, method=method,
-                               n_targets=0 if measurement is None else measurement.n_targets)
+                               n_targets=0 if per is None else per[0].n_targets, sessions=sessions)
 
 
 def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int, seed: int = 0,
-                        method: str = "model", n_targets: int = 0) -> CrossValidation:
+                        method: str = "model", n_targets: int = 0, sessions=None) -> CrossValidation:
     """Cross-validated prediction error of any model fitted to rows (what :func:`crossvalidate` runs
     for the engine's fits; a caller with another model, e.g. the geometry and the effects of
     :mod:`calib.effects.discovery`, passes its own ``fit_fold``).
@@ -269,16 +347,21 @@ def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int,
         method: the model's name in the result and its message.
         n_targets: K when the measurements are target positions (position error: the RMS over
             the row's targets), else 0.
+        sessions: (N,) int, each row's session (a model with a frame for each), or None. With
+            them ``predict(joints, measured, sessions (M,))`` is given the rows' sessions, and only
+            rows whose session kept training rows in their fold (the others: NaN, named).
     """
     joints, measured = np.asarray(joints, dtype=float), np.asarray(measured, dtype=float)
     n = joints.shape[0]
+    sessions = None if sessions is None else np.asarray(sessions, dtype=int)
     fold_of_row = fold_assignment(n, folds, seed)
     fold_of_row.setflags(write=False)
-    residuals, failed, unconverged = _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets)
+    residuals, failed, unconverged = _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets,
+                                                sessions)
     position, orientation = _row_errors(robot, residuals, n_targets)
     scheme = "leave-one-out" if folds == n else f"{folds}-fold"
     message = _message(method, scheme, folds, n, int(np.count_nonzero(np.isfinite(position))), seed, failed,
-                       unconverged)
+                       unconverged, 1 if sessions is None else int(np.unique(sessions).size))
     return CrossValidation(
         method=method, scheme=scheme, folds=folds, fits=folds, seed=int(seed), fold_of_row=fold_of_row,
         residuals=frozen_array(residuals), position_error=frozen_array(position),
@@ -289,9 +372,10 @@ def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int,
         success=bool(np.all(np.isfinite(position))), message=message)
 
 
-def _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets):
-    """Fit each fold's complement and predict the fold: ``(residuals (N, W) measured - predicted,
-    NaN where none; failed {fold: why}; unconverged {fold: the fit's stop message})``."""
+def _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets, sessions=None):
+    """Fit each fold's complement and predict the fold (with ``sessions``: the left-out rows of the
+    sessions that kept training rows): ``(residuals (N, W) measured - predicted, NaN where none;
+    failed {fold: why}; unconverged {fold: the fit's stop message})``."""
     residuals = np.full(measured.shape, np.nan)
     failed, unconverged = {}, {}
     for k in range(folds):
@@ -303,12 +387,25 @@ def _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets)
             continue
         if not ok:
             unconverged[k] = msg.split(";")[0]
-        predicted = _predicted_rows(predict, joints[test], measured[test])
-        residuals[test] = measurement_residuals(robot, measured[test], predicted, n_targets)
+        lost = np.zeros_like(test) if sessions is None else test & ~np.isin(sessions, sessions[~test])
+        ask = test & ~lost
+        predicted = _predicted_rows(predict, joints[ask], measured[ask], None if sessions is None else sessions[ask])
+        residuals[ask] = measurement_residuals(robot, measured[ask], predicted, n_targets)
+        why = [_lost_words(sessions[lost])] if lost.any() else []
         unreached = int(np.count_nonzero(~np.all(np.isfinite(predicted), axis=1)))
         if unreached:
-            failed[k] = f"its model cannot reach {unreached} of its {int(test.sum())} left-out rows"
+            why.append(f"its model cannot reach {unreached} of its {int(test.sum())} left-out rows")
+        if why:
+            failed[k] = "; ".join(why)
     return residuals, failed, unconverged
+
+
+def _lost_words(lost_sessions: np.ndarray) -> str:
+    """Why left-out rows of sessions without training rows have no prediction, in words."""
+    gone = np.unique(lost_sessions)
+    which = ", ".join(str(int(s)) for s in gone)
+    return (f"session{'s' if gone.size > 1 else ''} {which} kept no training row (no instrument frame fitted): "
+            f"its {lost_sessions.size} left-out row(s) cannot be predicted")
 
 
 #: Folds whose reason a message spells out; the others are counted.
@@ -316,13 +413,15 @@ REASONS_SPELLED_OUT = 3
 
 
 def _message(method: str, scheme: str, folds: int, n: int, predicted: int, seed: int, failed: dict,
-             unconverged: dict) -> str:
+             unconverged: dict, n_sessions: int = 1) -> str:
     """The cross-validation in words: which it is, which folds failed or did not converge (1-based)."""
     if folds == n:
         how = f"each of the {n} rows predicted by the {method} model fitted without it ({n} fits)"
     else:
         how = (f"the {n} rows split at random (seed {seed}) into {folds} folds, each predicted by the "
                f"{method} model fitted to the others ({folds} fits)")
+    if n_sessions > 1:
+        how += f"; {n_sessions} sessions, each row predicted in its own session's instrument frame"
     parts = [f"{scheme} cross-validation: {how}; measured minus prediction, includes sensor noise"]
     if predicted < n:
         parts.append(f"{n - predicted} of {n} rows without a prediction")

@@ -138,3 +138,45 @@ def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machin
     got = np.r_[motion["translation_mm"], motion["rotation_rad"]]
     sd = np.r_[std["translation_mm"], std["rotation_rad"]]
     assert np.all(np.abs(got - MOTION) <= 4 * sd + 1e-12), (got - MOTION) / sd
+
+
+@pytest.mark.parametrize("robot_name", sorted(ROBOTS))
+def test_two_sessions_without_validation_rows_get_a_crossvalidated_figure(robot_name, tmp_path):
+    """pipeline.run --real on two sessions (frames 50 mm and 0.6 degree apart), every row a
+    calibration row: the run reports the 10-fold cross-validated prediction error, each row
+    predicted in its own session's frame, and is a success. The independent truth is the noise:
+    the model being exact, a row's position error is the noise of its three coordinates (RMS
+    sqrt(3) um) plus the fold model's own error (a few per cent here); 100 rows know an RMS to ~4%."""
+    from calib.measurement import instrument_measurements
+    from calib.noise import SensorNoise
+    from calib.prior import ParameterPrior
+    from calib.robots import default_robot
+    from calib.workspace import reachable_poses
+    from pipeline.formats import Recording
+    from tests.test_sessions import F0, F1
+
+    robot = default_robot(robot_name)
+    rng = np.random.default_rng(8)
+    prior = ParameterPrior.default(robot)
+    theta = robot.table.nominal.copy()
+    free = robot.table.indices(robot.free_default)
+    theta[free] += rng.normal(size=free.size) * prior.std[free]
+    noise = SensorNoise(0.001, 1e-6, "normal")
+    rows = []
+    for frame in (F0, F1):
+        poses = reachable_poses(robot, 50, rng, theta=theta)
+        joints = robot.inverse_kinematics(theta, poses)
+        rows.append((joints, instrument_measurements(robot, poses, frame) + noise.sample(50, rng, robot.pose_units)))
+    rec = Recording(robot=robot, noise=noise, t_s=np.tile(np.arange(50.0), 2),
+                    joints=np.vstack([r[0] for r in rows]), measured=np.vstack([r[1] for r in rows]),
+                    sets=np.array(["calibration"] * 100), meta={"measurement": {"frame": "estimate"}},
+                    sessions=np.repeat(["1", "2"], 50))
+    write_recording(tmp_path / "two.csv", rec)
+    s = run(["--real", str(tmp_path / "two.csv"), "--out", str(tmp_path), "--quiet"]).summary
+    assert s["success"], s["verdict"]
+    assert not any("cross-validat" in w for w in s.get("warnings", [])), s.get("warnings")
+    block = s["crossvalidation"]
+    assert (block["scheme"], block["rows"], block["rows_predicted"]) == ("10-fold", 100, 100), block
+    assert "2 sessions, each row predicted in its own session's instrument frame" in block["message"]
+    ratio = s["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * noise.position_mm)
+    assert 0.85 <= ratio <= 1.3, ratio

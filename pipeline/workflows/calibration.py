@@ -806,16 +806,16 @@ def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: R
     """The cross-validated prediction error of a recording without validation rows
     (:func:`calib.crossval.crossvalidate` on the rows the fit used, fitted as the run fits them:
     leave-one-out for the forward method, 10-fold for the chain-wise one and with an instrument
-    frame); its ``summary()`` gives ``crossvalidated_position_error_mm`` /
-    ``crossvalidated_orientation_error_rad`` (RMS, mean, max) and ``crossvalidation``."""
+    frame, each session's own with several sessions); its ``summary()`` gives
+    ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS, mean,
+    max) and ``crossvalidation``."""
     rows = ident.used
     if ident.instrument is not None:
-        ms = measurement_settings(inp.rec.meta.get("measurement"))
-        ms = replace(ms, frame="estimate" if ident.instrument.frame_estimated else "base",
-                     initial_frame=ident.instrument.frame if ident.instrument.frame_estimated else None)
+        several = inp.n_sessions > 1
         cv = crossvalidate(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, method="forward",
-                           folds=min(INSTRUMENT_FOLDS, rows.size), prior=inp.prior, measurement=ms,
-                           seed=settings.seed)
+                           folds=min(INSTRUMENT_FOLDS, rows.size), prior=inp.prior,
+                           measurement=crossvalidation_settings(inp, ident.instrument), seed=settings.seed,
+                           sessions=inp.sessions[rows] if several else None)
     else:
         kw = {"solver": ident.solver}
         if settings.method == "chainwise":
@@ -823,6 +823,20 @@ def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: R
         cv = crossvalidate(inp.robot, inp.joints[rows], ident.measured[rows], inp.noise, method=settings.method,
                            prior=inp.prior, fit_kwargs=kw, seed=settings.seed)
     return cv
+
+
+def crossvalidation_settings(inp: CalibrationInput, instrument):
+    """How each fold fits the instrument: the frame estimated (from the run's) where the run
+    estimated it, else the base frame; with several sessions one settings a session (its frame),
+    the targets session 0's (as :func:`sessions_fit`)."""
+    ms = measurement_settings(inp.rec.meta.get("measurement"))
+    if inp.n_sessions == 1:
+        return replace(ms, frame="estimate" if instrument.frame_estimated else "base",
+                       initial_frame=instrument.frame if instrument.frame_estimated else None)
+    per = [session_measurement(inp.rec, name) for name in inp.rec.session_names]
+    return [replace(one, frame="estimate" if estimated else "base", initial_frame=frame if estimated else None,
+                    targets=per[0].targets, estimate_targets=per[0].estimate_targets)
+            for one, frame, estimated in zip(per, instrument.frames, instrument.frames_estimated)]
 
 
 #: False-alarm probability of the verdict's chi-square tests (the fit, the predictions).
@@ -1107,12 +1121,9 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     split["simulate"] += time.perf_counter() - t2
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
     cv = None
-    if inp.rec is not None and held is None and inp.n_sessions == 1:
+    if inp.rec is not None and held is None:
         cv = crossvalidation_of(inp, ident, settings)
         summary.update(cv.summary())
-    elif inp.rec is not None and held is None:
-        warnings.append("no cross-validated figure: the cross-validation of several sessions (an instrument frame "
-                        "each) is not done yet; add validation rows to each session")
     summary.update(verdict_block(inp, ident, held, cv, diagnosis))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
