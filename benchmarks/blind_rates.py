@@ -6,7 +6,8 @@ declared, with 30% gross rows and with the nominal geometry 10% off; every pair 
 nested ones (``--pair-seeds`` recordings each). Leave-one-out removes the effect's family
 (:func:`calib.effects.effect_family`). The recordings carry per-joint spreads (each joint its own
 dead band, growth rate, stiffness, screw phase); ``shared`` draws one value for every joint.
-Delta and rus: single, shared, pair and leave-one-out (``--other-seeds``).
+Delta and rus: single, shared, pair and leave-one-out (``--other-seeds``). Every robot: the laws
+outside the library (kind ``law``, ``--law-seeds`` recordings each, from seed 700).
 Prints one Markdown table per robot and the failures; ``--json FILE`` keeps every result.
 """
 
@@ -25,6 +26,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--pair-seeds", type=int, default=10)
     ap.add_argument("--other-seeds", type=int, default=5)
+    ap.add_argument("--law-seeds", type=int, default=6)
     ap.add_argument("--robots", nargs="+", default=["hexapod", "delta", "rus"])
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
@@ -37,6 +39,7 @@ def main(argv=None) -> int:
         else:
             res = run_blind_suite(None, range(a.other_seeds), robot=robot,
                                   kinds=("single", "shared", "pair", "leave_one_out"))
+        res += run_blind_suite(None, range(700, 700 + a.law_seeds), robot=robot, kinds=("law",))
         print(f"\n## {robot} ({time.perf_counter() - t0:.0f} s)\n")
         print(rates_table(res))
         for line in failure_lines(res):

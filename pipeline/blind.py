@@ -25,6 +25,9 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--effects", nargs="+", default=None,
                     help="single-effect recordings (default every effect that applies to the robot, and none)")
     ap.add_argument("--kinds", nargs="+", default=["single"], choices=KINDS, help="analyses to run")
+    ap.add_argument("--laws", nargs="+", default=None, metavar="LAW",
+                    help="laws for --kinds law (names of pipeline.simulation.LAW_CASES, quoted; default every law the "
+                         "robot has)")
     ap.add_argument("--pairs", nargs="+", default=None, metavar="A,B", help="pairs for --kinds pair (default all)")
     ap.add_argument("--seeds", type=positive_int, default=20, help="recordings per effect (or pair)")
     ap.add_argument("--first-seed", type=nonnegative_int, default=0)
@@ -33,7 +36,7 @@ def run(argv: list[str] | None = None) -> list[dict]:
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:
         res = run_blind_suite(a.effects, range(a.first_seed, a.first_seed + a.seeds), robot=a.robot, kinds=a.kinds,
-                              pairs=pairs, workers=a.workers, scheduler=a.scheduler,
+                              pairs=pairs, laws=a.laws, workers=a.workers, scheduler=a.scheduler,
                               display=ProgressDisplay("blind suite", unit="recordings"))
     except NotImplementedError as exc:
         raise ValueError(str(exc)) from None

@@ -56,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None, help="base name of the .rrd (default <recording>_discover)")
     p.add_argument("--overwrite", action="store_true", help="allow replacing existing output files")
     p.add_argument("--summary-json", type=Path, default=None, help="write the summary as JSON")
+    p.add_argument("--law", type=Path, default=None, metavar="FILE",
+                   help="keep the proposed law (if one is proposed) in this JSON file, for --use-law on the next recording")
+    p.add_argument("--use-law", type=Path, default=None, metavar="FILE",
+                   help="a law kept by --law: one more candidate effect (kept_law), its constants refitted")
     return p
 
 
@@ -65,7 +69,8 @@ def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
                              scenario_seed=args.scenario_seed, scenario_granularity=args.scenario_granularity,
                              candidates=args.candidates, seed=args.seed,
                              resim=not args.no_resim, sysid=not args.no_sysid, out=args.out, name=args.name,
-                             overwrite=args.overwrite, summary_json=args.summary_json)
+                             overwrite=args.overwrite, summary_json=args.summary_json, law_out=args.law,
+                             use_law=args.use_law)
 
 
 def run(argv: list[str] | None = None) -> DiscoveryReport:
@@ -85,6 +90,9 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
         print(f"... and {len(implausible['words']) - 5} more parameters (summary JSON: implausible_parameters)")
     for item in implausible.get("with_effects", []):
         print(f"Still implausible with the effects: {item['words']}")
+    if "law_kept" in report.summary:
+        print(f"kept the proposed law in {report.summary['law_kept']}" if report.summary["law_kept"]
+              else "no law proposed: nothing kept (--law)")
     print(f"wrote {report.summary['rrd']}")
     return report
 

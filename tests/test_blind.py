@@ -30,7 +30,8 @@ def seen(monkeypatch):
         calls.append(tuple(candidates))
         return {"named": [], "explained": False, "follows": ["time"], "flagged": [], "rows": 60,
                 "model_wrong": False, "heldout_before_mm": 0.002, "heldout_after_mm": 0.001,
-                "noise_floor_mm": 0.001, "verdict": "", "consistent": True, "insignificant": []}
+                "noise_floor_mm": 0.001, "verdict": "", "consistent": True, "insignificant": [],
+                "law_proposed": False}
 
     monkeypatch.setattr(scenarios, "effect_recording", fake_recording)
     monkeypatch.setattr(blind, "_analyse", fake_analyse)
@@ -93,9 +94,11 @@ def test_a_suite_of_no_recordings_is_empty_not_an_error():
 def test_criteria_judge_naming_and_granularity_of_single_shared_and_pair_results():
     base = {"named": ["joint_friction"], "effects": ["joint_friction"], "explained": True, "consistent": True,
             "flagged": [], "rows": 60, "heldout_after_mm": 0.0011, "noise_floor_mm": 0.001,
-            "granularity": {"joint_friction": "per_chain"}, "true_granularity": {"joint_friction": "per_chain"}}
+            "granularity": {"joint_friction": "per_chain"}, "true_granularity": {"joint_friction": "per_chain"},
+            "law_proposed": False}
     assert blind.criteria(dict(base, kind="single")) == {"consistent": True, "granularity": True, "named": True,
-                                                         "rows": True}
+                                                         "rows": True, "no_law": True}
+    assert not blind.criteria(dict(base, kind="single", law_proposed=True))["no_law"]
     shared = blind.criteria(dict(base, kind="shared", true_granularity={"joint_friction": "shared"}))
     assert shared["named"] and not shared["granularity"]
     pair = dict(base, kind="pair", effects=["joint_friction", "thermal_drift"], named=["joint_friction"])
@@ -112,3 +115,32 @@ def test_the_shared_kind_is_asked_only_of_effects_with_a_per_chain_form():
     cases = blind.blind_cases(seeds=range(1), robot="hexapod", kinds=("shared",))
     assert {c[1] for c in cases} == {("compliance",), ("joint_friction",), ("thermal_drift",),
                                      ("periodic_screw_error",), ("thermal_warmup",)}
+
+
+def test_criteria_judge_a_law_by_its_terms_their_granularity_and_the_floor():
+    base = {"kind": "law", "consistent": True, "law_proposed": True, "law_terms": ["stroke^2"],
+            "law_granularity": {"stroke^2": "per_chain"}, "true_law_terms": ["stroke^2"],
+            "true_law_granularity": "per_chain", "law_cv_after_mm": 0.00119, "law_noise_floor_mm": 0.001}
+    assert blind.criteria(base) == {"consistent": True, "law_terms": True, "law_floor": True}
+    assert not blind.criteria(dict(base, law_granularity={"stroke^2": "shared"}))["law_terms"]
+    assert not blind.criteria(dict(base, law_terms=["stroke^2", "t"],
+                                   law_granularity={"stroke^2": "per_chain", "t": "per_chain"}))["law_terms"]
+    assert not blind.criteria(dict(base, law_cv_after_mm=0.00121))["law_floor"]  # beyond 1.2 x the floor
+    none = dict(base, law_proposed=False, law_terms=[], law_granularity={}, law_cv_after_mm=None)
+    assert blind.criteria(none) == {"consistent": True, "law_terms": False, "law_floor": False}
+
+
+def test_the_law_kind_asks_every_law_the_robot_has_and_refuses_an_unknown_one():
+    cases = blind.blind_cases(seeds=range(700, 702), robot="delta", kinds=("law", "single"), effects=["none"])
+    laws = [c for c in cases if c[3] == ("law",)]
+    assert {c[1][0] for c in laws} == set(scenarios.LAW_CASES) and len(laws) == 2 * len(scenarios.LAW_CASES)
+    assert [c for c in cases if c[3] != ("law",)] == [("delta", (), 700, ("single",)), ("delta", (), 701, ("single",))]
+    with pytest.raises(ValueError, match="unknown law 'creep'"):
+        blind.blind_cases(seeds=range(1), kinds=("law",), laws=["creep"])
+
+
+def test_a_law_recording_is_judged_by_the_law_search():
+    """One simulated law recording of the hexapod, analysed blind: the law's term, per leg, at the floor."""
+    (r,) = blind.blind_case(("hexapod", ("settle lag",), 3, ("law",)))
+    assert r["kind"] == "law" and r["law"] == "settle lag" and 3 <= r["magnitude_noise"] <= 10
+    assert r["criteria"]["law_terms"] and r["criteria"]["law_floor"], r

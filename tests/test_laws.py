@@ -6,7 +6,7 @@ the noise floor; where the library explains the recording, or nothing is there, 
 import numpy as np
 import pytest
 
-from calib.effects import discover_effects
+from calib.effects import EffectData, discover_effects
 from calib.effects.laws import (LAW_NAME, LAW_WORDS, Term, TermFamily, joint_quantities, law_effect, law_from_dict,
                                 law_to_dict)
 from tests.joint_space_truth import HEXAPOD, NOISE, moved_legs
@@ -128,3 +128,71 @@ def test_the_summary_and_the_report_say_the_proposed_law():
     assert len(law_s["constants"]["stroke^2"]) == 6
     text = "\n".join(report_lines(s))
     assert "Proposed law, not in the library" in text and "stroke^2" in text
+
+
+# ----------------------------------------------------------------------------- blind law recordings, kept laws
+
+
+@pytest.mark.parametrize("robot", ["hexapod", "delta", "rus"])
+def test_a_law_recording_is_the_machine_with_its_joints_moved_by_the_law(robot):
+    """Independent truth: the MuJoCo recording's poses are the calib forward kinematics of the
+    true machine at the commands moved by the law (its constants from the sidecar), to the noise;
+    the law's largest closure contribution is the one drawn, 3-10 x the noise."""
+    from pipeline.simulation.scenarios import LAW_CASES, law_recording
+
+    for k, name in enumerate(LAW_CASES):
+        rec = law_recording(name, 30 + k, robot=robot, n_poses=20)
+        r, sim = rec.robot, rec.meta["simulation"]
+        data = EffectData(r, r.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
+        offset = LAW_CASES[name].shape(joint_quantities(data, rec.extras)) * np.array(sim["law"]["constants"])
+        theta = r.table.nominal + np.array(sim["injected_errors"])
+        reached = r.forward_kinematics(theta, rec.joints + offset, initial=rec.measured)
+        z = (rec.measured - reached)[:, :3] / NOISE.position_mm
+        assert 0.6 < np.sqrt(np.mean(z ** 2)) < 1.4, (name, np.sqrt(np.mean(z ** 2)))  # 60 values: +-4 sd
+        largest = np.max(np.abs(r.closure_jacobians(r.table.nominal, rec.joints, rec.measured).joints
+                                @ offset[..., None]))
+        assert 3 <= sim["law"]["largest_contribution_mm"] / NOISE.position_mm <= 10
+        np.testing.assert_allclose(largest, sim["law"]["largest_contribution_mm"], rtol=0.05)
+
+
+def test_a_proposed_law_is_kept_in_a_file_and_names_the_next_recording(tmp_path, capsys):
+    """``pipeline.discover --law FILE`` keeps the law (refusing to overwrite), ``--use-law FILE``
+    makes it a candidate effect: a second recording of the same law is explained by the kept law,
+    its constants refitted (each leg's within 4 standard deviations of the truth), no new law."""
+    import json
+
+    from pipeline.discover import main as discover_main
+    from pipeline.formats import write_recording
+    from pipeline.simulation.scenarios import law_recording
+
+    recs = [law_recording("settle lag", s, robot="hexapod", n_poses=120) for s in (40, 41)]
+    for k, rec in enumerate(recs):
+        write_recording(tmp_path / f"r{k}.csv", rec)
+    kept, out = tmp_path / "lag.law.json", ["--no-resim", "--out", str(tmp_path)]
+    assert discover_main(["--real", str(tmp_path / "r0.csv"), "--law", str(kept)] + out) == 0
+    assert "kept the proposed law in" in capsys.readouterr().out
+    law = json.loads(kept.read_text())
+    assert law["robot"] == "hexapod" and law["terms"] == ["last move"]
+    assert discover_main(["--real", str(tmp_path / "r0.csv"), "--law", str(kept), "--name", "again"] + out) == 2
+    assert "exists" in capsys.readouterr().err
+    summary = tmp_path / "r1.summary.json"
+    assert discover_main(["--real", str(tmp_path / "r1.csv"), "--use-law", str(kept),
+                          "--summary-json", str(summary)] + out) == 0
+    s = json.loads(summary.read_text())
+    assert "kept_law" in s["effects"] and s["explained"] and s["proposed_law"] is None
+    p = s["effect_parameters"]["kept_law"]
+    coef = {k: v for k, v in p.items() if k not in ("significance", "granularity")}
+    truth = np.array(recs[1].meta["simulation"]["law"]["constants"])
+    assert p["granularity"] == "per_chain" and len(coef) == 6
+    values, std = (np.array([c[k] for c in coef.values()]) for k in ("value", "std"))
+    assert np.all(np.abs(values - truth) < 4 * std + 1e-3 * np.abs(truth)), (values, truth, std)
+
+
+def test_a_bad_kept_law_file_is_refused_in_one_line_naming_it(tmp_path, capsys):
+    from pipeline.discover import main as discover_main
+
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "something else"}')
+    assert discover_main(["--scenario", "none", "--use-law", str(bad), "--no-resim", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "'format'" in err and len(err.strip().splitlines()) == 1

@@ -38,9 +38,10 @@ from .granularity import PER_CHAIN, SHARED, PerChainForm
 from .periodic_screw_error import EFFECT as SCREW
 from .thermal_warmup import TAU_RANGE_SPANS
 
-__all__ = ["LAW_NAME", "LAW_WORDS", "MAX_LAW_TERMS", "LAW_MIN_DELTA_BIC", "LAW_CV_MARGIN", "LAW_TAU_POINTS",
+__all__ = ["LAW_NAME", "LAW_WORDS", "MAX_LAW_TERMS", "LAW_MIN_DELTA_BIC", "LAW_NESTED_DELTA_BIC", "LAW_CV_MARGIN", "LAW_TAU_POINTS",
            "Term", "TermFamily", "term_families", "Law", "law_effect", "LawSpace", "LawSearch", "search_law",
-           "law_formula", "law_to_dict", "law_from_dict", "joint_quantities", "ProposedLaw"]
+           "law_formula", "law_to_dict", "law_from_dict", "joint_quantities", "channels_at", "law_channels",
+           "ProposedLaw"]
 
 #: The name of a proposed law as an effect (one at most in a model).
 LAW_NAME = "proposed_law"
@@ -57,6 +58,10 @@ LAW_CV_MARGIN = 0.01
 #: Grid points of a saturating term's time constant (log grid over
 #: :data:`calib.effects.thermal_warmup.TAU_RANGE_SPANS` times the recording's last time).
 LAW_TAU_POINTS = 12
+#: Evidence a saturating term ``(1 - exp(-t/T)) * x`` needs over its long-time-constant limit
+#: ``x * t`` (nested: the limit is named unless the saturation gains this much BIC; the library's
+#: :data:`calib.effects.discovery.MIN_NESTED_DELTA_BIC` for a warm-up over a drift).
+LAW_NESTED_DELTA_BIC = 10.0
 #: Golden-section iterations refining a parametrised term between its grid neighbours.
 REFINE_ITERATIONS = 25
 
@@ -201,9 +206,12 @@ class Law(Effect):
     physics = LAW_WORDS
     history_dependent = True
 
-    def __init__(self, terms: tuple, per_chain_terms: tuple = (), channels: dict | None = None):
+    def __init__(self, terms: tuple, per_chain_terms: tuple = (), channels: dict | None = None,
+                 name: str = LAW_NAME, channel_times_s: np.ndarray | None = None):
         self.terms = tuple(terms)
+        self.name = name
         self.channels = dict(channels or {})
+        self.channel_times_s = None if channel_times_s is None else np.asarray(channel_times_s, dtype=float)
         self.per_chain_capable = tuple(c for t in self.terms if t.name in per_chain_terms for c in t.column_names())
 
     def coefficients(self, robot):
@@ -211,7 +219,7 @@ class Law(Effect):
         return tuple(Coefficient(c, _constant_unit(ju, t.family.unit)) for t in self.terms for c in t.column_names())
 
     def joint_regressors(self, robot, theta, data, extra=None):
-        q = joint_quantities(data, self.channels)
+        q = joint_quantities(data, channels_at(self.channels, self.channel_times_s, data))
         return np.concatenate([t.regressor(q) for t in self.terms], axis=-1)
 
     def machine_settings(self, coefficients, robot, context, extra=None):
@@ -221,11 +229,30 @@ class Law(Effect):
         return f"<{LAW_WORDS}: {' + '.join(t.name for t in self.terms)}>"
 
 
-def law_effect(terms, granularity: dict, channels: dict | None = None) -> Effect:
+def channels_at(channels: dict, times_s: np.ndarray | None, data: EffectData) -> dict:
+    """``channels`` at ``data``'s rows: as they are (``times_s`` None: already one value per row),
+    or looked up by each row's time in ``times_s`` (the recording's times: a kept law refitted on
+    any subset of the rows of the recording whose channels it was given).
+
+    Raises:
+        ValueError: a row whose time is not among ``times_s``.
+    """
+    if times_s is None or not channels:
+        return channels
+    k = np.clip(np.searchsorted(times_s, data.t_s), 0, times_s.size - 1)
+    if not np.allclose(times_s[k], data.t_s, rtol=0, atol=1e-9):
+        raise ValueError("a row's time is not among the recorded channels' times")
+    return {name: np.asarray(v)[k] for name, v in channels.items()}
+
+
+def law_effect(terms, granularity: dict, channels: dict | None = None, *, name: str = LAW_NAME,
+               channel_times_s: np.ndarray | None = None) -> Effect:
     """The law of ``terms`` with each term's constants ``granularity[term name]`` (``shared`` or
-    ``per_chain``): a :class:`Law`, or its per-chain form when any term is per joint."""
+    ``per_chain``): a :class:`Law` called ``name``, or its per-chain form when any term is per
+    joint. ``channels`` (recorded channels the terms use) are one value per row of the data it is
+    fitted on, or, with ``channel_times_s``, per time of the recording (:func:`channels_at`)."""
     pc = tuple(t.name for t in terms if granularity.get(t.name) == PER_CHAIN)
-    law = Law(tuple(terms), pc, channels)
+    law = Law(tuple(terms), pc, channels, name, channel_times_s)
     return PerChainForm(law) if pc else law
 
 
@@ -246,6 +273,12 @@ def law_to_dict(terms, granularity: dict, constants: np.ndarray | None = None) -
     if constants is not None:
         out["constants"] = np.asarray(constants, dtype=float).tolist()
     return out
+
+
+def law_channels(terms) -> tuple[str, ...]:
+    """The recorded channels ``terms`` use (the quantities that are not each joint's own)."""
+    own = {"stroke", "last move", "|last move|", "sign(last move)", "t", "load"}
+    return tuple(dict.fromkeys(p for t in terms for p in t.family.parts if p not in own))
 
 
 def law_from_dict(d: dict) -> tuple[tuple, dict]:
@@ -415,10 +448,25 @@ def _step(space: LawSpace, fams: list, Qs: np.ndarray, blocks: list, chi2_cur: f
     return trials, m
 
 
+def _linear_limit(fam: TermFamily, fams: list) -> TermFamily | None:
+    """The family a saturating ``fam`` tends to as its time constant grows (its parts times
+    ``t``), or None."""
+    if fam.kind != "saturating":
+        return None
+    want = set(fam.parts) | {"t"}
+    return next((f for f in fams if f.kind == "product" and set(f.parts) == want and len(f.parts) == len(want)), None)
+
+
 def _preferred(ok: list):
     """The lowest cross-validated residual; among the terms within :data:`LAW_CV_MARGIN` of it,
     the one with the fewest constants (a time constant or pitch counted), then the lowest
-    residual: a slow saturation is not named where a straight line in time does as well."""
+    residual: a slow saturation is not named where a straight line in time does as well. A
+    saturating term whose linear limit also passes is dropped unless its BIC is ahead of it by
+    :data:`LAW_NESTED_DELTA_BIC` (nested models: the simpler is named)."""
+    fams = [t["term"].family for t in ok]
+    by_family = {t["term"].family: t for t in ok}
+    ok = [t for t in ok if (lim := _linear_limit(t["term"].family, fams)) is None
+          or t["delta_bic"] - by_family[lim]["delta_bic"] >= LAW_NESTED_DELTA_BIC]
     if not ok:
         return None
     low = min(t["cv"][0] for t in ok)

@@ -33,7 +33,8 @@ from pipeline.formats import Recording
 
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "make_recording",
-           "effects_settings", "effect_recording"]
+           "effects_settings", "effect_recording", "LawCase", "LAW_CASES", "law_cases_for", "law_recording",
+           "TEMPERATURE_CHANNEL"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
@@ -140,12 +141,13 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
 
 
 def make_recording(robot: Robot, t_s: np.ndarray, joints: np.ndarray, measured: np.ndarray, noise: SensorNoise,
-                   meta: dict, sets: np.ndarray | None = None) -> Recording:
-    """A :class:`Recording` of ``robot``'s measurements (``sets`` default all calibration)."""
+                   meta: dict, sets: np.ndarray | None = None, extras: dict | None = None) -> Recording:
+    """A :class:`Recording` of ``robot``'s measurements (``sets`` default all calibration;
+    ``extras`` the recorded channels, ``{"temperature_C": (N,)}``)."""
     n = np.asarray(joints).shape[0]
     return Recording(robot=robot, noise=noise, t_s=np.asarray(t_s, dtype=float), joints=np.asarray(joints, dtype=float),
                      measured=np.asarray(measured, dtype=float),
-                     sets=np.array(["calibration"] * n) if sets is None else sets, meta=meta)
+                     sets=np.array(["calibration"] * n) if sets is None else sets, meta=meta, extras=extras or {})
 
 
 # ----------------------------------------------------------------------------- scenarios
@@ -272,4 +274,126 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
         if eff.searched is not None:
             truth.update({k: v for k, (v, _) in eff.searched_values(extra).items()})
     return make_recording(robot, m.t_s, joints, m.measured, noise,
+                          meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+
+
+# ----------------------------------------------------------------------------- laws outside the library
+
+#: The recorded channel of the temperature law (a word and its unit, as a recording names it).
+TEMPERATURE_CHANNEL = "temperature_C"
+#: The lab's air conditioner: mean temperature, range of the cycle's amplitude and period, and
+#: the thermometer's noise (degC, s).
+LAB_TEMPERATURE_C = 20.0
+AIR_CONDITIONER_AMPLITUDE_C = (0.5, 2.0)
+AIR_CONDITIONER_PERIOD_S = (12.0, 30.0)
+THERMOMETER_NOISE_C = 0.005
+
+
+def _air_conditioner(t_s: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``(true, recorded)`` temperature, degC: a cycle of seeded amplitude, period and phase."""
+    a, p = rng.uniform(*AIR_CONDITIONER_AMPLITUDE_C), rng.uniform(*AIR_CONDITIONER_PERIOD_S)
+    true = LAB_TEMPERATURE_C + a * np.sin(2 * np.pi * t_s / p + rng.uniform(0, 2 * np.pi))
+    return true, true + THERMOMETER_NOISE_C * rng.standard_normal(t_s.size)
+
+
+@dataclass(frozen=True)
+class LawCase:
+    """A law outside the library that a blind recording's joints follow, one constant per joint.
+
+    Attributes:
+        terms: the law search's names of its terms (:mod:`calib.effects.laws`): what it must name.
+        shape: ``shape(q) -> (N, C)`` each joint's offset per unit constant, joint unit, from
+            :func:`calib.effects.laws.joint_quantities` of the commands (``load``: the joint force
+            of the statics per unit platform weight; the recorded channels included).
+        physics: the law in words.
+        short: every joint falls short of its target (a negative constant); else each joint's
+            sign is drawn.
+        needs: the quantities it needs (a robot without one of them has no such case).
+    """
+
+    terms: tuple
+    shape: Callable[[dict], np.ndarray]
+    physics: str
+    short: bool = False
+    needs: tuple = ()
+
+
+#: The laws of the blind suite's ``law`` kind (the issue's five): name -> :class:`LawCase`.
+LAW_CASES: dict[str, LawCase] = {
+    "settle lag": LawCase(("last move",), lambda q: q["last move"],
+                          "each joint measured short of its target by a fraction of its last move", short=True),
+    "dead band growing with time": LawCase(
+        ("sign(last move) * t",), lambda q: q["sign(last move)"] * q["t"],
+        "each joint short of its target by a dead band that grows in proportion to time", short=True),
+    "friction proportional to load": LawCase(
+        ("sign(last move) * load",), lambda q: q["sign(last move)"] * np.abs(q["load"]),
+        "each joint short of its target by a friction in proportion to the load it carries", short=True,
+        needs=("load",)),
+    "scale quadratic in stroke": LawCase(
+        ("stroke^2",), lambda q: (q["stroke"] - np.ptp(q["stroke"], axis=0) / 2 - q["stroke"].min(axis=0)) ** 2,
+        "each joint's transmission error quadratic in its stroke about the middle of the strokes commanded (the part "
+        "an offset and a scale, which the geometry and the library take, cannot make)"),
+    "drift following a recorded temperature": LawCase(
+        (TEMPERATURE_CHANNEL,), lambda q: q[TEMPERATURE_CHANNEL] - LAB_TEMPERATURE_C,
+        "each joint grows in proportion to the recorded lab temperature (an air conditioner cycling)",
+        needs=(TEMPERATURE_CHANNEL,)),
+}
+
+
+def law_cases_for(robot: Robot) -> tuple[str, ...]:
+    """The :data:`LAW_CASES` ``robot`` has (the load's law where the statics give a load)."""
+    from calib.effects.laws import joint_quantities
+
+    data = EffectData(robot, robot.table.nominal, robot.inverse_kinematics(robot.table.nominal, robot.home_pose[None]),
+                      robot.home_pose[None], np.zeros(1), DISCOVERY_NOISE)
+    have = set(joint_quantities(data)) | {TEMPERATURE_CHANNEL}
+    return tuple(n for n, c in LAW_CASES.items() if set(c.needs) <= have)
+
+
+def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_poses: int | None = None,
+                  magnitude_noise: float | None = None, noise: SensorNoise = DISCOVERY_NOISE) -> Recording:
+    """Simulate a blind recording of ``robot``'s MuJoCo machine whose joints follow the law
+    ``name`` of :data:`LAW_CASES` (outside the library of effects), each joint its own constant.
+
+    The poses, machine and noise are :func:`effect_recording`'s; each joint's constant is 0.3 to
+    1.0 times the largest (:data:`calib.effects.granularity.SPREAD_RANGE`), scaled so that the
+    law's largest closure contribution is ``magnitude_noise`` (default drawn in 3..10) times the
+    position noise. The law's offset, computed from the command schedule (the planned times,
+    which the recording keeps, and the recorded channels), enters the servo references: the
+    machine is commanded to ``joints + offset``, settles under its own physics, and the
+    recording holds the commands ``joints`` (the encoders read the command).
+
+    Returns:
+        The recording (``extras`` its recorded channels); ``meta["simulation"]["law"]`` the truth:
+        its name, terms, granularity, each joint's constant and its largest contribution.
+    """
+    from calib.effects.base import SPREAD_RANGE
+    from calib.effects.laws import joint_quantities
+
+    robot = default_robot(robot) if isinstance(robot, str) else robot
+    if name not in LAW_CASES:
+        raise ValueError(f"unknown law {name!r}: expected one of {', '.join(LAW_CASES)}")
+    if name not in law_cases_for(robot):
+        raise ValueError(f"the law {name!r} needs {', '.join(LAW_CASES[name].needs)}, which the {robot.name} lacks")
+    case, machine, nominal = LAW_CASES[name], scenario_machine(robot), robot.table.nominal
+    theta = nominal + machine.errors(robot)
+    rng = np.random.default_rng(seed)
+    n = int(n_poses) if n_poses is not None else int(rng.integers(60, 121))
+    magnitude = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) \
+        * float(noise.pose_std(("mm",))[0])
+    targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot))
+    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
+    temperature, recorded = _air_conditioner(planned.t_s, rng)
+    shape = case.shape(joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature}))
+    c = rng.uniform(*SPREAD_RANGE, robot.n_chains) * (-1.0 if case.short else rng.choice([-1.0, 1.0], robot.n_chains))
+    dF_dq = robot.closure_jacobians(nominal, joints, targets).joints
+    c = c * magnitude / np.max(np.abs(dF_dq @ (shape * c)[..., None]))
+    context = machine_context(robot)
+    m = simulate(robot, theta, joints + shape * c, merged_settings(context), noise, seed=int(rng.integers(2**31)))
+    truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": f"law: {name}",
+             "effects": [], "contributions_mm": {}, "granularity": {}, "machine": merged_settings(context),
+             "law": {"name": name, "physics": case.physics, "terms": list(case.terms), "granularity": PER_CHAIN,
+                     "constants": c.tolist(), "largest_contribution_mm": magnitude}}
+    extras = {TEMPERATURE_CHANNEL: recorded} if TEMPERATURE_CHANNEL in case.needs else {}
+    return make_recording(robot, planned.t_s, joints, m.measured, noise, extras=extras,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})

@@ -24,7 +24,17 @@ Kinds of recording (``--kinds``):
 - ``noise10``, ``noise100``: the sensor noise 10 and 100 times the declared one;
 - ``gross30``: 30% of the rows grossly off;
 - ``geometry_off``: the recording's nominal geometry 10% off (base and platform joints scaled;
-  hexapod only).
+  hexapod only);
+- ``law``: a recording whose joints follow a law outside the library
+  (:data:`pipeline.simulation.LAW_CASES`: a settle lag, a dead band growing with time, a friction
+  in proportion to the load, a scale quadratic in stroke, a drift following a recorded
+  temperature), each joint its own constant (``--laws``; default every law the robot has): the
+  law search must name the law's terms, per joint, and bring the cross-validated residual to the
+  noise floor.
+
+Every analysis records whether a law was proposed (``law_proposed``): on the recordings the
+library explains (``single``, ``shared``, ``pair``, ``gross3``) and the effect-free ones, none
+should be.
 
 The derived kinds reuse the single-effect recordings (no further simulation). Each result says
 whether its acceptance criterion holds (:func:`criteria`); :func:`rates_table` sums them up.
@@ -47,11 +57,15 @@ from calib.robots import default_robot
 
 from pipeline.execution import default_workers, run_tasks
 
-__all__ = ["KINDS", "STRESS_KINDS", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria",
+__all__ = ["KINDS", "STRESS_KINDS", "LIBRARY_KINDS", "LAW_FLOOR_FACTOR", "GROSS_OFFSET_MM", "blind_case", "blind_cases", "run_blind_suite", "criteria",
            "failure_lines", "rates_table"]
 
 #: The kinds of recording (see the module docstring).
-KINDS = ("single", "shared", "pair", "leave_one_out", "gross3", "noise10", "noise100", "gross30", "geometry_off")
+KINDS = ("single", "shared", "pair", "leave_one_out", "gross3", "noise10", "noise100", "gross30", "geometry_off", "law")
+#: Kinds whose recordings the library explains: no law may be proposed there.
+LIBRARY_KINDS = ("single", "shared", "pair", "gross3")
+#: A proposed law's cross-validated residual at the floor: within this factor of the noise floor.
+LAW_FLOOR_FACTOR = 1.2
 #: Kinds where only the verdict's consistency is asked for.
 STRESS_KINDS = ("noise10", "noise100", "gross30", "geometry_off")
 #: A gross row's position error, mm (like the paper's row A2: tens of micrometres).
@@ -73,7 +87,12 @@ def _analyse(rec, candidates, seed: int) -> dict:
         lines[0].startswith("Explained")
     tests_pass = s["tests"]["noise"]["consistent"] and not s["remaining"]["follows"]
     insignificant = [e for e, p in s["effect_parameters"].items() if p["significance"]["p_value"] > SIGNIFICANCE_ALPHA]
+    law = s["proposed_law"]
     return {"named": s["effects"], "explained": s["explained"], "follows": s["remaining"]["follows"],
+            "law_proposed": law is not None, "law_terms": [] if law is None else law["terms"],
+            "law_granularity": {} if law is None else law["term_granularity"],
+            "law_cv_after_mm": None if law is None else law["cv_rms_after_mm"],
+            "law_noise_floor_mm": None if law is None else law["noise_floor_mm"],
             "granularity": {e: p["granularity"] for e, p in s["effect_parameters"].items()},
             "flagged": s["flagged_poses"], "rows": s["rows"], "model_wrong": s["outliers"]["model_wrong"],
             "heldout_before_mm": s["heldout_rms_before_mm"], "heldout_after_mm": s["heldout_rms_after_mm"],
@@ -122,6 +141,8 @@ def blind_case(args: tuple) -> list[dict]:
 
     robot = default_robot(robot_name)
     everything = effects_for(robot)
+    if tuple(kinds) == ("law",):
+        return _with_criteria([_law_case(robot, effects[0], seed, everything)])
     out = []
     if "shared" in kinds:  # its own recording: every joint the same value
         rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=SHARED)
@@ -158,6 +179,18 @@ def blind_case(args: tuple) -> list[dict]:
     return _with_criteria(out)
 
 
+def _law_case(robot, name: str, seed: int, everything) -> dict:
+    """The ``law`` kind: a recording following the law ``name`` (:func:`pipeline.simulation.law_recording`)."""
+    from pipeline.simulation import law_recording
+
+    rec = law_recording(name, seed, robot=robot)
+    truth = rec.meta["simulation"]["law"]
+    return dict(robot=robot.name, effects=[], seed=seed, kind="law", law=name, true_law_terms=truth["terms"],
+                true_law_granularity=truth["granularity"],
+                magnitude_noise=truth["largest_contribution_mm"] / rec.noise.pose_std(("mm",))[0],
+                **_analyse(rec, everything, seed))
+
+
 def _truth(rec, robot_name: str, effects, seed: int) -> dict:
     """What a result says of the recording's truth: effects, seed, sizes, each effect's granularity."""
     sim = rec.meta["simulation"]
@@ -183,10 +216,22 @@ def criteria(r: dict) -> dict:
       ``points``: the remainder's strongest quantity is the one the left-out effect follows;
     - ``rows``: at most 2% of the rows flagged; gross3: exactly the three gross rows flagged;
     - ``consistent``: the verdict agrees with its own tests and every named effect is
-      significantly non-zero.
+      significantly non-zero;
+    - ``law_terms``: law: the law proposed has exactly the true law's terms, each with its true
+      granularity; ``law_floor``: its cross-validated residual within :data:`LAW_FLOOR_FACTOR`
+      x the noise floor;
+    - ``no_law``: the kinds the library explains (:data:`LIBRARY_KINDS`): no law proposed.
     """
     c = {"consistent": r["consistent"]}
     kind = r["kind"]
+    if kind == "law":
+        g = r["law_granularity"]
+        c["law_terms"] = sorted(r["law_terms"]) == sorted(r["true_law_terms"]) \
+            and all(g[t] == r["true_law_granularity"] for t in r["law_terms"])
+        c["law_floor"] = r["law_proposed"] and r["law_cv_after_mm"] <= LAW_FLOOR_FACTOR * r["law_noise_floor_mm"]
+        return c
+    if kind in LIBRARY_KINDS:
+        c["no_law"] = not r["law_proposed"]
     if kind in ("single", "shared", "pair") and r["effects"]:
         said = r.get("granularity", {})
         c["granularity"] = all(said.get(e) == g for e, g in r.get("true_granularity", {}).items() if e in said) \
@@ -206,13 +251,22 @@ def criteria(r: dict) -> dict:
     return c
 
 
-def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None) -> list[tuple]:
+def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
+                laws=None) -> list[tuple]:
     """The recordings :func:`run_blind_suite` runs, each the argument of one :func:`blind_case`:
-    ``(robot, effects, seed, kinds)`` (arguments as :func:`run_blind_suite`'s)."""
+    ``(robot, effects, seed, kinds)`` (arguments as :func:`run_blind_suite`'s; a ``law`` case:
+    ``(robot, (law name,), seed, ("law",))``)."""
+    from pipeline.simulation import LAW_CASES, law_cases_for
+
     names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
     kinds = tuple(kinds)
     cases = []
-    single_kinds = [k for k in kinds if k != "pair"]
+    if "law" in kinds:
+        for name in (law_cases_for(default_robot(robot)) if laws is None else tuple(laws)):
+            if name not in LAW_CASES:
+                raise ValueError(f"unknown law {name!r}: expected one of {', '.join(LAW_CASES)}")
+            cases += [(robot, (name,), int(s), ("law",)) for s in seeds]
+    single_kinds = [k for k in kinds if k not in ("pair", "law")]
     if single_kinds:
         for e in names:
             ks = [k for k in single_kinds if e != "none" or k in ("single",) + STRESS_KINDS]
@@ -229,7 +283,7 @@ def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=
 
 
 def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
-                    workers: int | None = None, scheduler: str | None = None, progress=None,
+                    laws=None, workers: int | None = None, scheduler: str | None = None, progress=None,
                     display=None) -> list[dict]:
     """Run :func:`blind_case` for every recording asked (in parallel; deterministic per case).
 
@@ -243,13 +297,15 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         pairs: pairs of effects for ``pair`` (default every pair of applying effects but nested
             ones, e.g. ``thermal_drift`` and ``thermal_warmup``: a drift plus a warm-up is a
             warm-up with a drift, and selection names one member of a family, never two).
+        laws: the laws of the ``law`` kind (:data:`pipeline.simulation.LAW_CASES` names); default
+            every law the robot has.
         workers: processes of the local Dask cluster (:func:`pipeline.execution.run_tasks`);
             default the cores, at most one a recording; 1 runs here.
         scheduler: address of an existing Dask cluster to run on instead.
         progress: ``progress(done, total)`` after each recording.
         display: a :class:`pipeline.execution.ProgressDisplay` showing the recordings done, however they run.
     """
-    cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs)
+    cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs, laws=laws)
     workers = max(1, min(len(cases), default_workers())) if workers is None else workers
     from pipeline.workflows.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 
@@ -262,6 +318,8 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
 def _group(r: dict) -> str:
     if r["kind"] == "leave_one_out":
         return f"leave_one_out: {r['left_out']}"
+    if r["kind"] == "law":
+        return f"law: {r['law']}"
     return f"{r['kind']}: {' + '.join(r['effects']) or 'none'}"
 
 
@@ -272,13 +330,15 @@ def failure_lines(results: list[dict]) -> list[str]:
         failed = [k for k, v in r["criteria"].items() if not v and k != "points_top3"]
         if failed:
             lines.append(f"  {_group(r)} seed {r['seed']}: {', '.join(failed)} failed; named {r['named'] or 'none'}, "
-                         f"explained {r['explained']}, follows {r['follows'][:3]}, flagged {r['flagged']}")
+                         f"explained {r['explained']}, follows {r['follows'][:3]}, flagged {r['flagged']}"
+                         + (f"; law proposed {r['law_terms']} {r['law_granularity']}" if r["law_proposed"] else ""))
     return lines
 
 
 def rates_table(results: list[dict]) -> str:
     """Markdown table: per kind and truth, the rate of each criterion met."""
-    names = ("named", "granularity", "unknown", "points", "points_top3", "rows", "consistent")
+    names = ("named", "granularity", "unknown", "points", "points_top3", "rows", "consistent", "no_law", "law_terms",
+             "law_floor")
     rows = ["| recordings | n | " + " | ".join(names) + " | held-out after / floor (worst) |",
             "|---|---|" + "---|" * len(names) + "---|"]
     for g in dict.fromkeys(_group(r) for r in results):

@@ -35,7 +35,8 @@ from pipeline.views import verdict_words, write_discovery_rrd
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
 __all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
-           "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT"]
+           "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT", "KEPT_LAW_NAME", "keep_law", "read_kept_law",
+           "kept_law_effect"]
 
 
 #: At rest to 1e-7 m/s (or rad/s) is ample for micrometre comparisons (the settled pose is then
@@ -194,7 +195,7 @@ def heldout_split(rec: Recording, kept: np.ndarray, val: np.ndarray, heldout_fra
 
 
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
-             sysid: bool = True, candidates=None, exclude=()) -> DiscoveryReport:
+             sysid: bool = True, candidates=None, exclude=(), kept_law: dict | None = None) -> DiscoveryReport:
     """Run the whole discovery on a recording (see the module docstring).
 
     Args:
@@ -206,6 +207,11 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
             every effect that applies to the robot.
         exclude: 0-based rows left out of every fit (the gross rows a run named); the motion
             history still counts them.
+        kept_law: a law kept from an earlier recording (:func:`read_kept_law`'s data): one more
+            candidate effect, called :data:`KEPT_LAW_NAME`, its constants refitted here.
+
+    The recording's extra channels (``rec.extras``: a temperature) are quantities a proposed law
+    may use.
 
     The summary's ``flagged_poses`` and ``outliers.bad_rows`` are 1-based data rows of the
     recording (the first measurement is row 1).
@@ -214,6 +220,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     robot = rec.robot
     if candidates is None:
         candidates = effects_for(robot)
+    if kept_law is not None:
+        candidates = list(candidates) + [kept_law_effect(kept_law, rec)]
     names = [registered_effect(c).name for c in candidates]
     cal = np.flatnonzero(rec.sets == "calibration")
     val = np.flatnonzero(rec.sets == "validation")
@@ -223,7 +231,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
         cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
-    disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed)
+    disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
+                            channels={k: v[cal] for k, v in rec.extras.items()} or None)
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
@@ -259,12 +268,83 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     summary["implausible_parameters"] = implausibility(rec, disc)
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
-    if resim:
+    if resim and KEPT_LAW_NAME in disc.effects:
+        summary["mujoco_resimulation_skipped"] = f"{KEPT_LAW_NAME} has no MuJoCo machine field (a law, not in the library)"
+    elif resim:
         t1 = time.perf_counter()
         summary["mujoco_resimulation"] = resimulate(rec, disc, sysid=sysid, seed=seed)
         summary["mujoco_resimulation"]["wall_time_s"] = time.perf_counter() - t1
     summary["wall_time_s"] = time.perf_counter() - t0
     return DiscoveryReport(discovery=disc, summary=summary)
+
+
+#: The name a kept law (``--use-law``) has as a candidate effect.
+KEPT_LAW_NAME = "kept_law"
+#: What a kept law file holds (``--law``): its format's name, written and checked.
+KEPT_LAW_FORMAT = "parallel-calib kept law 1"
+
+
+def keep_law(path: Path, summary: dict, *, overwrite: bool = False) -> Path | None:
+    """Write the summary's proposed law to ``path`` (JSON, atomically; an existing file refused
+    without ``overwrite``): the law as data (terms, granularity, the constants found), the robot,
+    the formula and its units, and where it was found. None (nothing written) when no law was
+    proposed."""
+    law = summary.get("proposed_law")
+    if law is None:
+        return None
+    kept = {"format": KEPT_LAW_FORMAT, "robot": summary["robot"], "formula": law["formula"], "terms": law["terms"],
+            "units": law["units"], "constants": law["constants"], "law": law["law"],
+            "found_on": summary.get("source")}
+    atomic_write(path, json.dumps(kept, indent=1), overwrite=overwrite)
+    return Path(path)
+
+
+def read_kept_law(path: Path, robot: str | None = None) -> dict:
+    """A law kept by :func:`keep_law` (checked: its format, keys and terms; of ``robot`` when
+    given).
+
+    Raises:
+        ValueError: the file cannot be read, is not a kept law, lacks a key, or is another robot's
+            (the message names the file and the key).
+    """
+    from calib.effects.laws import law_from_dict
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot be read as a kept law ({exc})") from None
+    if not isinstance(d, dict) or d.get("format") != KEPT_LAW_FORMAT:
+        raise ValueError(f"{path}: key 'format' is not {KEPT_LAW_FORMAT!r}: not a law kept by pipeline.discover --law")
+    for key in ("robot", "law"):
+        if key not in d:
+            raise ValueError(f"{path}: key {key!r} missing")
+    try:
+        law_from_dict(d["law"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: key 'law' is not a law's terms ({exc!r} missing or bad)") from None
+    if robot is not None and d["robot"] != robot:
+        raise ValueError(f"{path}: key 'robot' is {d['robot']!r}, a law of another robot than the {robot}")
+    return d
+
+
+def kept_law_effect(kept: dict, rec: Recording):
+    """The kept law (:func:`read_kept_law`'s data) as a candidate effect on ``rec`` (name
+    :data:`KEPT_LAW_NAME`; its terms and granularity kept, its constants refitted; a recorded
+    channel it uses taken from ``rec.extras`` by time).
+
+    Raises:
+        ValueError: a law of another robot, or one using a channel ``rec`` does not record.
+    """
+    from calib.effects.laws import law_channels, law_effect, law_from_dict
+
+    if kept["robot"] != rec.robot.name:
+        raise ValueError(f"the kept law is of the {kept['robot']}, the recording of the {rec.robot.name}")
+    terms, gran = law_from_dict(kept["law"])
+    missing = [c for c in law_channels(terms) if c not in rec.extras]
+    if missing:
+        raise ValueError(f"the kept law uses the recorded channel {missing[0]!r}, which the recording lacks")
+    channels = {c: rec.extras[c] for c in law_channels(terms)}
+    return law_effect(terms, gran, channels, name=KEPT_LAW_NAME, channel_times_s=rec.t_s)
 
 
 #: The robot of a scenario that names none.
@@ -289,6 +369,8 @@ class DiscoverySettings:
         out, name: folder and base name of the ``.rrd`` (default ``<recording>_discover``).
         overwrite: allow replacing existing outputs.
         summary_json: write the summary as JSON there.
+        law_out: keep the proposed law in this JSON file (:func:`keep_law`).
+        use_law: a kept law's file: one more candidate effect (:data:`KEPT_LAW_NAME`, refitted).
     """
 
     real: Path | None = None
@@ -304,6 +386,8 @@ class DiscoverySettings:
     name: str | None = None
     overwrite: bool = False
     summary_json: Path | None = None
+    law_out: Path | None = None
+    use_law: Path | None = None
 
 
 def implausibility(rec: Recording, disc: Discovery) -> dict:
@@ -349,7 +433,8 @@ def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) ->
     where = settings.real if settings.real is not None else "the scenario recording"
     try:
         return discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
-                        candidates=settings.candidates, exclude=() if read is None else read.gross_rows)
+                        candidates=settings.candidates, exclude=() if read is None else read.gross_rows,
+                        kept_law=None if settings.use_law is None else read_kept_law(settings.use_law))
     except np.linalg.LinAlgError:
         raise ValueError(f"{where}: the rows do not determine the geometry and the candidate effects together "
                          "(a singular fit: too few distinct poses, or a machine that barely moved); measure poses "
@@ -382,13 +467,16 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     out = Path(settings.out)
     rrd_path = out / f"{settings.name or f'{stem}_discover'}.rrd"
     output_folder(out)
-    check_outputs({"--out": rrd_path, "--summary-json": settings.summary_json}, overwrite=settings.overwrite)
+    check_outputs({"--out": rrd_path, "--summary-json": settings.summary_json, "--law": settings.law_out},
+                  overwrite=settings.overwrite)
     if rec is None:
         rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name,
                                granularity=settings.scenario_granularity)
     robot = rec.robot
     if settings.robot is not None and robot.name != settings.robot:
         raise ValueError(f"{settings.real} is a recording of the {robot.name}, not of the {settings.robot} (--robot)")
+    if settings.use_law is not None:  # a bad or another robot's file refused before the analysis
+        read_kept_law(settings.use_law, robot.name)
     if settings.real is not None:  # as pipeline.run --real reads it: gross rows named, instrument frame taken out
         read = read_as_a_run_does(settings.real, rec, seed=settings.seed)
         rec = read.recording
@@ -400,6 +488,10 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
             report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
+    if settings.law_out is not None:
+        kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
+                        overwrite=settings.overwrite)
+        report.summary["law_kept"] = None if kept is None else str(kept)
     if settings.summary_json is not None:
         atomic_write(settings.summary_json, json.dumps(report.summary, indent=1), overwrite=settings.overwrite)
     return report
