@@ -11,7 +11,8 @@ row) and the chain-wise one (10-fold), and the single fit of each method, for sc
 from __future__ import annotations
 
 import argparse
-import time
+
+from timing import best_time  # benchmarks/timing.py
 
 from calib.crossval import crossvalidate
 from calib.engine import identify
@@ -20,16 +21,6 @@ from calib.robots import ROBOTS, default_robot, reference_errors
 from calib.workspace import reachable_poses
 
 NOISE = SensorNoise(1e-3, 1e-6, "normal")
-
-
-def best_time(call, repeat: int) -> tuple[float, object]:
-    """``(best wall time over repeat calls, the last call's result)``."""
-    times, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = call()
-        times.append(time.perf_counter() - t)
-    return min(times), out
 
 
 def main() -> None:

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import numpy as np
+
+from timing import best_time  # benchmarks/timing.py
 
 from calib.effects import EffectData, discover_effects, propose_law
 from calib.effects.laws import joint_quantities
@@ -33,15 +34,6 @@ def law_recording(law, n: int, seed: int) -> EffectData:
     return moved_legs(lambda data: law(joint_quantities(data)), n, seed)
 
 
-def best_of(repeat: int, f):
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = f()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--poses", type=int, default=120)
@@ -54,9 +46,9 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name, (law, c) in LAWS.items():
         data = law_recording(lambda q: law(q, c), a.poses, a.seed)
-        t_lib, disc = best_of(a.repeat, lambda: discover_effects(data, laws=False))
+        t_lib, disc = best_time(lambda: discover_effects(data, laws=False), a.repeat)
         sub = data.subset(disc.kept)
-        t_law, found = best_of(a.repeat, lambda: propose_law(sub, disc.chosen))
+        t_law, found = best_time(lambda: propose_law(sub, disc.chosen), a.repeat)
         if found is None:
             print(f"| {name} | {disc.effect} | none | | | | | {t_lib:.2f} | {t_law:.2f} | {t_law / t_lib:.2f} |")
             continue

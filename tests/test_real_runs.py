@@ -99,39 +99,48 @@ def test_a_geometry_absorbing_physics_is_said_implausible_and_discovery_brings_i
     assert d["implausible_parameters"]["with_effects"] == []
 
 
-@pytest.mark.parametrize("robot_name", sorted(ROBOTS))
-def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machine(robot_name, tmp_path):
-    """pipeline.run --real on a recording of two sessions (the importer makes one per input file),
-    the instrument moved 50 mm and 0.6 degree between them: one geometry, each session its own
-    frame; the motion between the frames recovered within 4 of its standard deviations, the
-    validation rows of each session predicted to the noise in their own frame (success)."""
+def two_session_recording(robot_name, path, seed, validation_rows):
+    """A machine drawn from the default prior measured in two sessions of 50 rows each, seen from the
+    frames F0 and F1 of tests/test_sessions.py (50 mm and 0.6 degree apart), 1 um / 1 urad noise;
+    the last ``validation_rows`` of each session are validation rows. Written to ``path``."""
     from calib.measurement import instrument_measurements
     from calib.noise import SensorNoise
     from calib.prior import ParameterPrior
     from calib.robots import default_robot
     from calib.workspace import reachable_poses
     from pipeline.formats import Recording
-    from tests.test_sessions import F0, F1, MOTION
+    from tests.test_sessions import F0, F1
 
     robot = default_robot(robot_name)
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(seed)
     prior = ParameterPrior.default(robot)
     theta = robot.table.nominal.copy()
     free = robot.table.indices(robot.free_default)
     theta[free] += rng.normal(size=free.size) * prior.std[free]
     noise = SensorNoise(0.001, 1e-6, "normal")
-    rows, sets, names = [], [], []
-    for s, frame in enumerate((F0, F1)):
+    rows = []
+    for frame in (F0, F1):
         poses = reachable_poses(robot, 50, rng, theta=theta)
         joints = robot.inverse_kinematics(theta, poses)
-        seen = instrument_measurements(robot, poses, frame) + noise.sample(len(poses), rng, robot.pose_units)
-        rows.append((joints, seen))
-        sets += ["calibration"] * 38 + ["validation"] * 12
-        names += [str(s + 1)] * 50
+        rows.append((joints, instrument_measurements(robot, poses, frame) + noise.sample(50, rng, robot.pose_units)))
+    sets = (["calibration"] * (50 - validation_rows) + ["validation"] * validation_rows) * 2
     rec = Recording(robot=robot, noise=noise, t_s=np.tile(np.arange(50.0), 2),
                     joints=np.vstack([r[0] for r in rows]), measured=np.vstack([r[1] for r in rows]),
-                    sets=np.array(sets), meta={"measurement": {"frame": "estimate"}}, sessions=np.array(names))
-    write_recording(tmp_path / "two.csv", rec)
+                    sets=np.array(sets), meta={"measurement": {"frame": "estimate"}},
+                    sessions=np.repeat(["1", "2"], 50))
+    write_recording(path, rec)
+    return path
+
+
+@pytest.mark.parametrize("robot_name", sorted(ROBOTS))
+def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machine(robot_name, tmp_path):
+    """pipeline.run --real on a recording of two sessions (the importer makes one per input file),
+    the instrument moved 50 mm and 0.6 degree between them: one geometry, each session its own
+    frame; the motion between the frames recovered within 4 of its standard deviations, the
+    validation rows of each session predicted to the noise in their own frame (success)."""
+    from tests.test_sessions import MOTION
+
+    two_session_recording(robot_name, tmp_path / "two.csv", 7, validation_rows=12)
     s = run(["--real", str(tmp_path / "two.csv"), "--out", str(tmp_path), "--quiet"]).summary
     assert set(s["measurement_frames"]) == {"1", "2"} and s["success"], s["verdict"]
     motion, std = s["session_motion"]["2"]["motion"], s["session_motion"]["2"]["std"]
@@ -147,36 +156,12 @@ def test_two_sessions_without_validation_rows_get_a_crossvalidated_figure(robot_
     predicted in its own session's frame, and is a success. The independent truth is the noise:
     the model being exact, a row's position error is the noise of its three coordinates (RMS
     sqrt(3) um) plus the fold model's own error (a few per cent here); 100 rows know an RMS to ~4%."""
-    from calib.measurement import instrument_measurements
-    from calib.noise import SensorNoise
-    from calib.prior import ParameterPrior
-    from calib.robots import default_robot
-    from calib.workspace import reachable_poses
-    from pipeline.formats import Recording
-    from tests.test_sessions import F0, F1
-
-    robot = default_robot(robot_name)
-    rng = np.random.default_rng(8)
-    prior = ParameterPrior.default(robot)
-    theta = robot.table.nominal.copy()
-    free = robot.table.indices(robot.free_default)
-    theta[free] += rng.normal(size=free.size) * prior.std[free]
-    noise = SensorNoise(0.001, 1e-6, "normal")
-    rows = []
-    for frame in (F0, F1):
-        poses = reachable_poses(robot, 50, rng, theta=theta)
-        joints = robot.inverse_kinematics(theta, poses)
-        rows.append((joints, instrument_measurements(robot, poses, frame) + noise.sample(50, rng, robot.pose_units)))
-    rec = Recording(robot=robot, noise=noise, t_s=np.tile(np.arange(50.0), 2),
-                    joints=np.vstack([r[0] for r in rows]), measured=np.vstack([r[1] for r in rows]),
-                    sets=np.array(["calibration"] * 100), meta={"measurement": {"frame": "estimate"}},
-                    sessions=np.repeat(["1", "2"], 50))
-    write_recording(tmp_path / "two.csv", rec)
+    two_session_recording(robot_name, tmp_path / "two.csv", 8, validation_rows=0)
     s = run(["--real", str(tmp_path / "two.csv"), "--out", str(tmp_path), "--quiet"]).summary
     assert s["success"], s["verdict"]
     assert not any("cross-validat" in w for w in s.get("warnings", [])), s.get("warnings")
     block = s["crossvalidation"]
     assert (block["scheme"], block["rows"], block["rows_predicted"]) == ("10-fold", 100, 100), block
     assert "2 sessions, each row predicted in its own session's instrument frame" in block["message"]
-    ratio = s["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * noise.position_mm)
+    ratio = s["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * 0.001)  # the noise: 1 um a coordinate
     assert 0.85 <= ratio <= 1.3, ratio

@@ -268,14 +268,21 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     summary["implausible_parameters"] = implausibility(rec, disc)
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
-    if resim and KEPT_LAW_NAME in disc.effects:
-        summary["mujoco_resimulation_skipped"] = f"{KEPT_LAW_NAME} has no MuJoCo machine field (a law, not in the library)"
-    elif resim:
-        t1 = time.perf_counter()
-        summary["mujoco_resimulation"] = resimulate(rec, disc, sysid=sysid, seed=seed)
-        summary["mujoco_resimulation"]["wall_time_s"] = time.perf_counter() - t1
+    if resim:
+        summary.update(resimulation_block(rec, disc, sysid, seed))
     summary["wall_time_s"] = time.perf_counter() - t0
     return DiscoveryReport(discovery=disc, summary=summary)
+
+
+def resimulation_block(rec: Recording, disc: Discovery, sysid: bool, seed: int) -> dict:
+    """``mujoco_resimulation`` (:func:`resimulate`, with its wall time), or why it is skipped: a kept
+    law has no MuJoCo machine field."""
+    if KEPT_LAW_NAME in disc.effects:
+        return {"mujoco_resimulation_skipped": f"{KEPT_LAW_NAME} has no MuJoCo machine field (a law, not in the library)"}
+    t1 = time.perf_counter()
+    out = resimulate(rec, disc, sysid=sysid, seed=seed)
+    out["wall_time_s"] = time.perf_counter() - t1
+    return {"mujoco_resimulation": out}
 
 
 #: The name a kept law (``--use-law``) has as a candidate effect.
