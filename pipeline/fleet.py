@@ -44,7 +44,8 @@ def _report_line(row, done, total) -> str:
         held = "" if row["heldout_after_um"] is None else \
             f", held-out {row['heldout_before_um']:.4g} -> {row['heldout_after_um']:.4g} um"
         found = "" if row["explained"] == NOT_RUN else f"; explained {row['explained']}"
-        what = f"calibrated ({row['robot']}, {row['poses']} poses{held}{found})"
+        verdict = "" if row.get("verdict") in (None, "success") else f"; NOT a success: {row['verdict'][4:]}"
+        what = f"calibrated ({row['robot']}, {row['poses']} poses{held}{found}{verdict})"
     else:
         what = f"error: {row['error']}"
     return f"  [{done}/{total}] {row['machine']}: {what} ({row['wall_s']:.2f} s)"

@@ -273,6 +273,11 @@ def test_fleet_says_which_machines_the_model_explains(tmp_path, capsys):
         "drifting": "yes: geometry + instrument_drift", "bent": "no: geometry alone",
         "short": "n/a: effect discovery needs at least 12 measurements, got 9"}
     assert all(r["status"] == "calibrated" for r in rep.rows)
+    # The run's own verdict: the plain machine fits; the scaled, drifting and bent ones do not fit the
+    # geometric model to the noise, and the table says so rather than "calibrated" alone.
+    verdicts = {r["machine"]: r["verdict"] for r in rep.rows}
+    assert verdicts["plain"] == "success", verdicts
+    assert all(verdicts[m].startswith("no: ") for m in ("scaled", "drifting", "bent")), verdicts
     for r in rep.rows:
         if r["machine"] != "short":
             verdict = json.loads(Path(r["discovery"]).read_text())

@@ -16,7 +16,8 @@ Written to ``--out`` (default ``FOLDER/calibrated``):
 * ``<machine>.rrd``, ``<machine>.summary.json`` and ``<machine>.discovery.json`` (the discovery's
   summary, as ``python -m pipeline.discover --summary-json``) per machine (the machine is the CSV's
   stem);
-* ``fleet.csv`` and ``fleet.md``: one row per machine (machine, robot, calibration poses used,
+* ``fleet.csv`` and ``fleet.md``: one row per machine (machine, robot, the run's verdict:
+  ``success`` or ``no: CAUSE``, calibration poses used,
   held-out position error before/after in um, flagged rows, ``explained``, wall time, status);
   ``explained`` is whether the model the discovery chose explains the recording to its declared
   noise, and the model: ``yes: geometry alone``, ``yes: geometry + thermal_drift``, ``no:
@@ -63,8 +64,8 @@ __all__ = ["FLEET_FORMAT", "TABLE_COLUMNS", "FleetReport", "fleet_inputs", "inpu
 #: The ``format`` of ``fleet.json``.
 FLEET_FORMAT = "parallel-calib fleet"
 #: Columns of ``fleet.csv`` (``fleet.json`` adds ``file``, ``sha256``, ``method`` and the outputs).
-TABLE_COLUMNS = ("machine", "robot", "status", "poses", "poses_used", "heldout_before_um", "heldout_after_um",
-                 "flagged_rows", "explained", "wall_s", "error")
+TABLE_COLUMNS = ("machine", "robot", "status", "verdict", "poses", "poses_used", "heldout_before_um",
+                 "heldout_after_um", "flagged_rows", "explained", "wall_s", "error")
 #: What the ``explained`` column holds when discovery is not run (``NOT_RUN: reason`` when it refused).
 NOT_RUN = "n/a"
 TABLE_NAMES = {"json": "fleet.json", "csv": "fleet.csv", "md": "fleet.md"}
@@ -164,7 +165,7 @@ def calibrate_machine(job: dict) -> dict:
     machine, out = job["machine"], Path(job["out"])
     searched = bool(job.get("discover", False))
     row = {"machine": machine, "file": job["file"], "sha256": job["sha256"], "method": job["method"],
-           "discover": searched, "robot": None, "status": "error", "poses": None, "poses_used": None,
+           "discover": searched, "robot": None, "status": "error", "verdict": None, "poses": None, "poses_used": None,
            "heldout_before_um": None, "heldout_after_um": None, "flagged_rows": [], "explained": NOT_RUN,
            "wall_s": None, "error": None, "rrd": None, "summary": None, "discovery": None}
     summary_path = out / f"{machine}.summary.json"
@@ -178,7 +179,8 @@ def calibrate_machine(job: dict) -> dict:
     else:
         s = result.summary
         held = s.get("heldout_position_error_mm")
-        row.update(robot=s["robot"], status="calibrated", poses=s["calibration_poses"],
+        row.update(robot=s["robot"], status="calibrated",
+                   verdict="success" if s["success"] else f"no: {s['verdict']['cause']}", poses=s["calibration_poses"],
                    poses_used=s["calibration_poses_used"], flagged_rows=list(s["flagged_poses"]),
                    heldout_before_um=None if not held else 1e3 * held["before"],
                    heldout_after_um=None if not held else 1e3 * held["after"],
@@ -239,15 +241,17 @@ def _md_text(rows, folder) -> str:
              "recording's validation rows, before (nominal model) and after calibration. Flagged rows: "
              "1-based data rows of the recording. explained: whether the model effect discovery chose (geometry "
              "alone, or with the effects named) explains the recording to its declared noise (its verdict in "
-             "<machine>.discovery.json; n/a: not searched).", "",
-             "| machine | robot | poses (used) | held-out before (um) | after (um) | flagged rows | explained "
-             "| wall (s) | status |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "<machine>.discovery.json; n/a: not searched). verdict: the run's (success, or no: its likely "
+             "cause; <machine>.summary.json says why).", "",
+             "| machine | robot | verdict | poses (used) | held-out before (um) | after (um) | flagged rows | "
+             "explained | wall (s) | status |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         poses = "" if r["poses"] is None else f"{r['poses']}" + (
             f" ({r['poses_used']})" if r["poses_used"] != r["poses"] else "")
         status = r["status"] if r["status"] != "error" else f"error: {r['error']}"
-        cells = [r["machine"], r["robot"] or "?", poses, _cell(r["heldout_before_um"]), _cell(r["heldout_after_um"]),
+        cells = [r["machine"], r["robot"] or "?", r.get("verdict") or "", poses, _cell(r["heldout_before_um"]),
+                 _cell(r["heldout_after_um"]),
                  _cell(r["flagged_rows"]) or "none" if r["status"] == "calibrated" else "",
                  r["explained"], _cell(r["wall_s"], 3), status]
         lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")
