@@ -64,6 +64,7 @@ __all__ = [
     "select_poses",
     "design_poses",
     "augment_poses",
+    "TooFewFeasiblePoses",
 ]
 
 #: The named workspaces of every robot (see the module docstring).
@@ -253,6 +254,10 @@ def _check_count(n, name: str, minimum: int) -> int:
     return int(n)
 
 
+class TooFewFeasiblePoses(ValueError):
+    """The workspace gives fewer feasible poses than asked for within the draw limit."""
+
+
 def sample_feasible_poses(robot: Robot, theta, workspace: Workspace, n: int, seed: int | np.random.Generator,
                           *, max_draws: int = 2_000_000) -> np.ndarray:
     """Poses drawn uniformly in the workspace bounds, keeping the feasible ones.
@@ -284,7 +289,7 @@ def sample_feasible_poses(robot: Robot, theta, workspace: Workspace, n: int, see
             why = (f"the workspace {workspace.name!r} is (nearly) empty" if got < 0.01 * n else
                    f"{got / drawn:.3g} of the draws are feasible in the workspace {workspace.name!r}: ask for at "
                    f"most about {got} poses")
-            raise ValueError(f"only {got} of {n} feasible poses found in {drawn} draws: {why}")
+            raise TooFewFeasiblePoses(f"only {got} of {n} feasible poses found in {drawn} draws: {why}")
         m = int(min(max(4 * (n - got), 1024), max_draws - drawn))
         p = b[:, 0] + rng.uniform(size=(m, d)) * (b[:, 1] - b[:, 0])
         drawn += m

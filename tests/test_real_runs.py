@@ -165,3 +165,18 @@ def test_two_sessions_without_validation_rows_get_a_crossvalidated_figure(robot_
     assert "2 sessions, each row predicted in its own session's instrument frame" in block["message"]
     ratio = s["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * 0.001)  # the noise: 1 um a coordinate
     assert 0.85 <= ratio <= 1.3, ratio
+
+
+def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
+    """The verdict's cause when the fit is at the noise but the held-out rows cannot be predicted at
+    all (the identified model cannot reach their joints): said so, not a figure it does not have."""
+    from types import SimpleNamespace
+
+    from pipeline.workflows.calibration import likely_cause
+
+    inp = SimpleNamespace(where="rec.csv")
+    ident = SimpleNamespace(gross=None, result=SimpleNamespace(message="converged"))
+    evidence = {"converged": True, "fit_at_noise": True, "fit_ratio": 0.9,
+                "predictions": {"what": "validation rows", "agrees": False, "ratio": None, "rows": 0}}
+    cause, words = likely_cause(inp, ident, evidence)
+    assert cause == "unpredictable_rows" and "cannot predict the validation rows" in words

@@ -933,6 +933,9 @@ def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -
                                 f"beyond the declared noise even after the trimmed fits), so no row can be called "
                                 f"gross: physics the geometric model leaves out (run python -m pipeline.discover "
                                 f"--real {where}) or a mistake in the file")
+    if evidence["fit_at_noise"] and evidence["predictions"]["ratio"] is None:
+        return "unpredictable_rows", (f"not calibrated: the model cannot predict the {evidence['predictions']['what']} "
+                                      "(it cannot reach their joints): a geometry far from the nominal one")
     ratio = evidence["fit_ratio"] if not evidence["fit_at_noise"] else evidence["predictions"]["ratio"]
     what = "the calibration rows" if not evidence["fit_at_noise"] else f"the {evidence['predictions']['what']}"
     return "left_out_physics", (f"not calibrated: {what} are {ratio:.3g} times the declared noise off the model: "

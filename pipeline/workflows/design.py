@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.design import (DesignResult, Workspace, design_poses, minimum_poses,
+from calib.design import (DesignResult, TooFewFeasiblePoses, Workspace, design_poses, minimum_poses,
                           robot_workspace, sample_feasible_poses)
 from calib.noise import SensorNoise
 from calib.observability import analyze_observability, pose_uncertainty
@@ -332,10 +332,8 @@ def run_design(settings: DesignSettings, display=None, announce=None) -> DesignO
         search = design_search(robot, theta, settings.poses, ws, settings.noise, criterion=settings.criterion,
                                seed=settings.seed, n_candidates=settings.candidates, starts=settings.starts,
                                workers=settings.workers, scheduler=settings.scheduler, display=display)
-    except ValueError as exc:
-        if "feasible poses found" in str(exc):
-            raise ValueError(f"--candidates {settings.candidates}: {exc}") from None
-        raise
+    except TooFewFeasiblePoses as exc:
+        raise ValueError(f"--candidates {settings.candidates}: {exc}") from None
     poses = search.design.poses
     joints = robot.inverse_kinematics(theta, poses)
     check_joint_limits(robot, joints, "designed pose")
