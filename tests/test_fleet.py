@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -304,3 +305,24 @@ def test_a_failed_discovery_leaves_the_calibration_standing(fleet_folder, tmp_pa
     rep = run_fleet(some_machines(fleet_folder, tmp_path / "one", "delta_01"), tmp_path / "out", workers=1)
     assert [(r["status"], r["explained"]) for r in rep.rows] == [
         ("calibrated", "n/a: discovery failed: LinAlgError: Singular matrix")]
+
+
+def test_links_that_lead_nowhere_and_command_files(fleet_folder, tmp_path):
+    """A dangling link and a link loop named *.csv are machines whose row says why they cannot be
+    read (they were left out silently); a command file (poses to measure, its sidecar's kind says
+    so) is not a machine."""
+    from calib.robots import default_robot
+    from pipeline.formats import write_command_file
+
+    folder = some_machines(fleet_folder, tmp_path / "in", "hexapod_01")
+    os.symlink(folder / "gone.csv", folder / "dangling.csv")
+    os.symlink(folder / "loop.csv", folder / "loop.csv")
+    robot = default_robot("hexapod")
+    write_command_file(folder / "next_poses.csv", robot, robot.home_pose[None], robot.inverse_kinematics(
+        robot.table.nominal, robot.home_pose[None]), {"kind": "calibration command file"})
+    rep = run_fleet(folder, tmp_path / "out", workers=1, discover=False)
+    rows = {r["machine"]: r for r in rep.rows}
+    assert set(rows) == {"hexapod_01", "dangling", "loop"}
+    assert rows["hexapod_01"]["status"] == "calibrated"
+    for machine in ("dangling", "loop"):
+        assert rows[machine]["status"] == "error" and rows[machine]["error"], rows[machine]
