@@ -228,7 +228,9 @@ FRAME_HELD_RATIO = 10.0
 def frame_held_words(fit) -> list[str]:
     """The instrument frame's components the poses cannot separate from the geometry, in words:
     those whose standard uncertainty is over :data:`FRAME_HELD_RATIO` times one measurement's noise
-    (with the tolerances as a prior the geometry's tolerance holds them; without, the gauge)."""
+    as the data show it (the spread of the fit's residuals, positions and angles; the declared
+    noise may call angles exact) (with the tolerances as a prior the geometry's tolerance holds
+    them; without, the gauge)."""
     std = np.asarray(fit.frame_std, dtype=float)
     names = ("x", "y", "z", "rotation about x", "rotation about y", "rotation about z")
     units = ("mm",) * 3 + ("rad",) * 3
@@ -365,6 +367,10 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=as_read)
 
 
+#: What the summary says of the prior with --no-prior.
+NO_PRIOR = "none (--no-prior: plain least squares)"
+
+
 @dataclass
 class CalibrationInput:
     """The measurements a run calibrates from, simulated or read (the first step of a run).
@@ -378,6 +384,8 @@ class CalibrationInput:
         actual, injected: the true parameter vector and its errors, when known (else None).
         val_joints, val_meas: the recording's validation rows (empty when simulating).
         rec: the recording read (None when simulating); sim: the simulation's parts (None when reading).
+        tolerance: each parameter's tolerance (:func:`machine_tolerance`): the prior, and the yardstick
+            of :func:`implausible_parameters` with or without one; prior: it, or None with --no-prior.
     """
 
     robot: Robot
@@ -393,8 +401,9 @@ class CalibrationInput:
     val_meas: np.ndarray
     rec: Recording | None = None
     sim: dict | None = None
+    tolerance: ParameterPrior | None = None
     prior: ParameterPrior | None = None
-    prior_source: str = "none (--no-prior: plain least squares)"
+    prior_source: str = NO_PRIOR
     sessions: np.ndarray | None = None
     val_sessions: np.ndarray | None = None
 
@@ -402,21 +411,6 @@ class CalibrationInput:
     def n_sessions(self) -> int:
         """Measurement sessions of the recording (1 for a simulated run)."""
         return 1 if self.rec is None else len(self.rec.session_names)
-
-
-def parameter_prior(robot: Robot, settings: RunSettings, meta: dict | None, where: str):
-    """``(prior, source in words)``: the parameters' prior from the sidecar's
-    ``meta.parameter_tolerance`` (by parameter name, or one value per unit: ``{"mm": 0.05, "rad":
-    0.001}``; what it leaves out takes the robot class's default), or the robot class's
-    documented default; ``(None, ...)`` with ``settings.prior`` off.
-
-    Raises:
-        ValueError: a tolerance naming no parameter or unit, or not a number > 0 (file and key named).
-    """
-    tolerance, source = machine_tolerance(robot, meta, where)
-    if not settings.prior:
-        return None, "none (--no-prior: plain least squares)"
-    return tolerance, source
 
 
 def machine_tolerance(robot: Robot, meta: dict | None, where: str) -> tuple[ParameterPrior, str]:
@@ -469,7 +463,7 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     where = str(settings.real)
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
-    prior, prior_source = parameter_prior(robot, settings, rec.meta, sidecar_name(settings.real))
+    tolerance, prior_source = machine_tolerance(robot, rec.meta, sidecar_name(settings.real))
     index = session_index(rec)
     cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
     lost = sorted(set(rec.sessions[val_rows]) - set(rec.sessions[cal_rows]))
@@ -479,7 +473,9 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
                             rows=cal_rows, where=where, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
-                            val_joints=val_joints, val_meas=val_meas, rec=rec, prior=prior, prior_source=prior_source,
+                            val_joints=val_joints, val_meas=val_meas, rec=rec, tolerance=tolerance,
+                            prior=tolerance if settings.prior else None,
+                            prior_source=prior_source if settings.prior else NO_PRIOR,
                             sessions=index[cal_rows], val_sessions=index[val_rows])
 
 
@@ -496,12 +492,13 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))
-    prior, prior_source = parameter_prior(robot, settings, None, "")
+    tolerance, prior_source = machine_tolerance(robot, None, "")
     return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
                             rows=np.arange(len(cal.measured)), where="the simulated calibration poses",
                             scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
-                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, prior=prior,
-                            prior_source=prior_source)
+                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, tolerance=tolerance,
+                            prior=tolerance if settings.prior else None,
+                            prior_source=prior_source if settings.prior else NO_PRIOR)
 
 
 @dataclass
@@ -791,8 +788,7 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         if inp.n_sessions > 1:
             summary.update(sessions_block(inp, instrument))
     summary.update(prior_block(inp, result))
-    tolerance, _ = machine_tolerance(robot, None if inp.rec is None else inp.rec.meta, inp.where)
-    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, tolerance, result.free_names)
+    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, inp.tolerance, result.free_names)
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
