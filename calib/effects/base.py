@@ -30,7 +30,7 @@ from ..validation import as_array
 from ..noise import SensorNoise
 from ..robot import Robot
 
-__all__ = ["FOLLOWED_QUANTITIES", "SPREAD_RANGE", "orthonormal_columns", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
+__all__ = ["FOLLOWED_QUANTITIES", "PAYLOAD_CHANNEL", "SPREAD_RANGE", "orthonormal_columns", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
            "EffectData", "Effect", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
 #: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
@@ -38,6 +38,9 @@ __all__ = ["FOLLOWED_QUANTITIES", "SPREAD_RANGE", "orthonormal_columns", "Coeffi
 #: of travel, the load each chain carries (statics of the platform's weight), and the position in
 #: the workspace (``"position <coordinate>"``).
 FOLLOWED_QUANTITIES = ("time", "direction of the last move", "size of the last move", "stroke", "load", "position")
+#: The recorded channel of the payload carried at each row, kg (a recording's ``extras``; read into
+#: :attr:`EffectData.payload_kg`).
+PAYLOAD_CHANNEL = "payload_kg"
 #: A per-chain scenario (:meth:`Effect.per_chain_draw`) draws each chain's coefficient as this
 #: fraction of the largest (real joints differ, none by orders of magnitude).
 SPREAD_RANGE = (0.3, 1.0)
@@ -158,6 +161,10 @@ class EffectData:
         last_move: (N, C) signed change of each commanded joint in the move that ended at
             measurement j, joint unit (0 for a joint that did not move); default from the
             commands, from the same start.
+        payload_kg: (N,) the payload the platform carried at each measurement, kg (a recording's
+            :data:`PAYLOAD_CHANNEL`), or None when the recording does not say (one payload
+            throughout). Where it varies, compliance is fitted with its payload terms
+            (:func:`calib.effects.compliance.payload_varies`).
     """
 
     robot: Robot
@@ -168,6 +175,7 @@ class EffectData:
     noise: SensorNoise
     direction: np.ndarray = field(default=None)
     last_move: np.ndarray = field(default=None)
+    payload_kg: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         r = self.robot
@@ -184,6 +192,11 @@ class EffectData:
                              f"{q.shape[0]}, {m.shape[0]} and {t.shape[0]}")
         for name, value in (("theta", theta), ("joints", q), ("measured", m), ("t_s", t)):
             object.__setattr__(self, name, value)
+        if self.payload_kg is not None:
+            p = as_array(self.payload_kg, "payload_kg", (q.shape[0],))
+            if not np.all(np.isfinite(p)) or np.any(p < 0):
+                raise ValueError("payload_kg must be finite and >= 0 at every row")
+            object.__setattr__(self, "payload_kg", p)
         start = None
         if self.direction is None or self.last_move is None:
             start = r.inverse_kinematics(theta, r.home_pose[None])[0]
@@ -220,17 +233,18 @@ class EffectData:
     def subset(self, rows: np.ndarray) -> "EffectData":
         """The same analysis restricted to ``rows`` (the motion history is kept)."""
         return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
-                          self.noise, self.direction[rows], self.last_move[rows])
+                          self.noise, self.direction[rows], self.last_move[rows],
+                          None if self.payload_kg is None else self.payload_kg[rows])
 
     def with_measured(self, measured: np.ndarray) -> "EffectData":
         """The same commands with other measured poses."""
         return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction,
-                          self.last_move)
+                          self.last_move, self.payload_kg)
 
     def with_robot(self, robot: Robot, theta: np.ndarray | None = None) -> "EffectData":
         """The same measurements read with another nominal robot (motion history kept)."""
         return EffectData(robot, robot.table.nominal if theta is None else theta, self.joints, self.measured,
-                          self.t_s, self.noise, self.direction, self.last_move)
+                          self.t_s, self.noise, self.direction, self.last_move, self.payload_kg)
 
 
 def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.ndarray:

@@ -10,12 +10,18 @@ from ..robot import Robot, pose_jacobian_of_joints
 from ..rotation import rotation_matrix_derivatives
 from .base import Coefficient, Effect, EffectScenario, PhysicalParameter, scale_to_magnitude
 
-__all__ = ["EFFECT", "Compliance", "COM_HEIGHT_REF_MM", "PAYLOAD_RANGE_KG", "interior_points", "chain_point_height_gradient"]
+__all__ = ["EFFECT", "Compliance", "LoadedCompliance", "LOADED", "COM_HEIGHT_REF_MM", "PAYLOAD_RANGE_KG",
+           "TWO_PAYLOADS_KG", "interior_points", "chain_point_height_gradient", "payload_varies", "for_payload"]
 
 #: Unit of the centre-of-mass height in the second coefficient, mm (conditioning).
 COM_HEIGHT_REF_MM = 100.0
 #: Payloads drawn by the scenarios, kg.
 PAYLOAD_RANGE_KG = (0.0, 5.0)
+#: A recording taken at two payloads (:func:`pipeline.simulation.effect_recording`,
+#: ``payloads=2``): a light one drawn in the first range and a heavy one in the second, kg.
+TWO_PAYLOADS_KG = ((0.0, 1.0), (3.0, 5.0))
+#: Two rows' payloads differing by less than this are one payload, kg.
+PAYLOAD_TOLERANCE_KG = 1e-6
 #: Names of the orientation coordinates the centre-of-mass term understands
 #: (``R = Rz(gamma) Ry(beta) Rx(alpha)``, :mod:`calib.rotation`).
 EULER_ANGLES = ("alpha", "beta", "gamma")
@@ -167,7 +173,13 @@ class Compliance(Effect):
 
     def scenario(self, robot, theta, data, magnitude_mm, rng, context):
         loaded = context.with_payload(rng.uniform(*PAYLOAD_RANGE_KG))
-        shape = np.ones(len(self.coefficients(robot)))
+        X = self.regressors(robot, theta, data)
+        return EffectScenario(scale_to_magnitude(X, self._shape(robot, loaded), magnitude_mm), None, loaded)
+
+    def _shape(self, robot: Robot, loaded) -> np.ndarray:
+        """(p,) the coefficients' ratios on the machine ``loaded`` (every one a weight over the
+        same stiffness: their ratios are the masses' and lever arms')."""
+        shape = np.ones(len(Compliance.coefficients(self, robot)))
         load = _platform_load_kg(robot, loaded)
         if self._rotates(robot):
             # The platform's own centre of mass at its origin (the lumped joint masses too, the
@@ -176,9 +188,78 @@ class Compliance(Effect):
             shape[1] = com_mm / COM_HEIGHT_REF_MM
         k = interior_points(robot)
         if k:
-            # Every coefficient is a weight over the same stiffness: their ratios are the masses'.
             masses = _chain_masses(robot, loaded)
             shape[self._n_platform(robot):] = masses[:k] / load
+        return shape
+
+
+def payload_varies(data) -> bool:
+    """Whether ``data`` records the payload row by row and it is not the same at every row."""
+    p = getattr(data, "payload_kg", None)
+    return p is not None and p.size > 0 and float(np.ptp(p)) > PAYLOAD_TOLERANCE_KG
+
+
+class LoadedCompliance(Compliance):
+    """``compliance`` on a recording whose payload changes from row to row (a recorded
+    ``payload_kg`` channel, :data:`calib.effects.base.PAYLOAD_CHANNEL`).
+
+    The platform's load terms scale with what it carries: ``dq = (g / k) (M + p_n) J^T Q_unit``
+    (and the centre-of-mass term with ``M h + p_n h_p``), ``M`` the platform's own mass, which
+    the analysis does not know. Linear all the same: the shared coefficients keep their
+    meaning at the recording's mean payload ``p̄`` (``weight_over_stiffness``: ``(M + p̄) g / k``,
+    as on a recording at one payload), and each platform term gets a payload twin, its column
+    times ``p_n - p̄``: ``payload_over_stiffness`` is ``g / k`` per kg of payload, the servo's
+    compliance itself, with no mass to know (and ``payload_x_com_height_over_stiffness`` the
+    payload's lever arm over the stiffness, on a rotating platform). The chains' own weight does
+    not change with the payload.
+
+    Why it matters: the geometric errors absorb most of a load pattern taken at one payload (on
+    the Delta about 93% of it: a translating platform's weight pattern is close to what its
+    crank lengths and offsets do), but not the change of the pattern between two payloads,
+    which no geometry makes (on the Delta's scenario workspace 64% of the payload twin's column
+    is left by the geometry, against 8% of the load column); and an actuator scale, fixed,
+    cannot follow it either.
+
+    Used in place of :data:`EFFECT` where the payload varies (:func:`for_payload`); same name,
+    the per-chain form gives every chain its own payload term too (its own stiffness).
+    """
+
+    per_chain_capable = Compliance.per_chain_capable + ("payload_over_stiffness",)
+
+    def coefficients(self, robot):
+        base = Compliance.coefficients(self, robot)
+        unit = base[0].unit
+        out = (Coefficient("payload_over_stiffness", f"{unit}/kg"),)
+        if self._rotates(robot):
+            out += (Coefficient("payload_x_com_height_over_stiffness", f"{unit}/kg x {COM_HEIGHT_REF_MM:g} mm"),)
+        return base + out
+
+    def joint_regressors(self, robot, theta, data, extra=None):
+        X = Compliance.joint_regressors(self, robot, theta, data, extra)
+        npl = self._n_platform(robot)
+        if data.payload_kg is None:
+            dp = np.zeros(data.n)
+        else:
+            dp = data.payload_kg - data.payload_kg.mean()
+        return np.concatenate([X, X[:, :, :npl] * dp[:, None, None]], axis=2)
+
+    def machine_settings(self, coefficients, robot, context, extra=None):
+        # The machine at the mean payload (the payload of each row is the recording's: the
+        # simulation sets it segment by segment); the stiffness from the weight term there.
+        return Compliance.machine_settings(self, coefficients, robot, context, extra)
+
+    def scenario(self, robot, theta, data, magnitude_mm, rng, context):
+        """The payloads are the recording's (``data.payload_kg``, drawn by the experiment, not by
+        the effect): the machine at their mean, each payload twin the platform term per kg."""
+        if data.payload_kg is None:
+            raise ValueError("a loaded compliance scenario needs the planned payload of every row")
+        loaded = context.with_payload(float(data.payload_kg.mean()))
+        shape = self._shape(robot, loaded)
+        npl = self._n_platform(robot)
+        load = _platform_load_kg(robot, loaded)
+        twin = np.array([1.0 / load] + ([loaded.payload_height_m / loaded.m_per_mm / COM_HEIGHT_REF_MM / load]
+                                        if self._rotates(robot) else []))[:npl]
+        shape = np.concatenate([shape, twin])
         X = self.regressors(robot, theta, data)
         return EffectScenario(scale_to_magnitude(X, shape, magnitude_mm), None, loaded)
 
@@ -198,3 +279,13 @@ def _platform_load_kg(robot: Robot, context) -> float:
 
 
 EFFECT = Compliance()
+#: The payload-aware form (one object, so that caches keyed on it hold).
+LOADED = LoadedCompliance()
+
+
+def for_payload(eff, data):
+    """``eff``, or its payload-aware form where ``data``'s payload varies (:class:`LoadedCompliance`
+    in place of :class:`Compliance`; any other effect unchanged)."""
+    if type(eff) is Compliance and payload_varies(data):
+        return LOADED
+    return eff

@@ -52,6 +52,7 @@ from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
+from .compliance import for_payload
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
@@ -1209,6 +1210,8 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     robot = data.robot
     if candidates is None:
         candidates = effects_for(robot)
+    # A recording at several payloads: compliance with its payload terms (calib.effects.compliance).
+    candidates = [for_payload(m, data) for m in _as_models(candidates)]
     models = candidate_forms(candidates, per_chain)
     for m in models.values():
         _check_applies(m, robot)

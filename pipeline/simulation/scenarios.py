@@ -22,6 +22,8 @@ import numpy as np
 
 from calib import paper
 from calib.effects import EffectData, MachineContext, effect as registered_effect
+from calib.effects.base import PAYLOAD_CHANNEL
+from calib.effects.compliance import TWO_PAYLOADS_KG, for_payload
 from calib.effects.granularity import GRANULARITIES, PER_CHAIN, per_chain_form
 from calib.noise import SensorNoise
 from calib.robot import KinematicsError, Robot, check_joint_limits
@@ -115,7 +117,8 @@ def merged_settings(context: MachineContext, settings: dict | None = None) -> di
 
 
 def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict, noise: SensorNoise = SensorNoise(),
-             seed: int = 0, times_s: np.ndarray | None = None, *, settle_velocity: float | None = None):
+             seed: int = 0, times_s: np.ndarray | None = None, *, settle_velocity: float | None = None,
+             payload_kg: np.ndarray | None = None):
     """Measure the MuJoCo machine ``theta`` of ``robot`` at commanded ``joints``.
 
     Args:
@@ -127,10 +130,17 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
         times_s: (N,) lab times of the measurements (to replay a recording's time axis);
             default the simulated time.
         settle_velocity: at rest below this joint speed (SI); default the testbed's.
+        payload_kg: (N,) the payload carried at each row, kg (a payload swapped during the
+            recording); default ``settings``' one payload throughout. Each run of rows at one
+            payload is measured on the machine carrying it, starting from the previous run's
+            last command (the motion history is the recording's), its times following on.
 
     Returns:
         The testbed's :class:`pipeline.testbed.Measurements` (``t_s``, ``true_poses``, ``measured``, ...).
     """
+    if payload_kg is not None:
+        return _simulate_payloads(robot, theta, joints, settings, noise, seed, times_s, settle_velocity,
+                                  np.asarray(payload_kg, dtype=float))
     from .testbed import Testbed
 
     options = MachineOptions(**settings.get("options", {}))
@@ -138,6 +148,32 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
     extra = {} if settle_velocity is None else {"settle_velocity": settle_velocity}
     bed = Testbed(robot, theta, options=options, effects=effects, noise=noise, seed=seed, **extra)
     return bed.measure(joints, times_s=times_s)
+
+
+def _simulate_payloads(robot, theta, joints, settings, noise, seed, times_s, settle_velocity, payload_kg):
+    """:func:`simulate` with the payload changing between runs of rows (see its ``payload_kg``)."""
+    from .testbed import Measurements
+
+    joints = np.asarray(joints, dtype=float)
+    n = joints.shape[0]
+    if payload_kg.shape != (n,):
+        raise ValueError(f"payload_kg must have shape ({n},), got {payload_kg.shape}")
+    starts = np.flatnonzero(np.r_[True, np.abs(np.diff(payload_kg)) > 0])
+    ends = np.r_[starts[1:], n]
+    parts, t_end = [], 0.0
+    for k, (a, b) in enumerate(zip(starts, ends)):
+        lead = 1 if a > 0 else 0  # the previous run's last command first: the history carries on
+        seg = {"options": {**settings.get("options", {}), "payload_kg": float(payload_kg[a])},
+               "effects": dict(settings.get("effects", {}))}
+        seg_t = None if times_s is None else np.asarray(times_s, dtype=float)[a - lead:b]
+        m = simulate(robot, theta, joints[a - lead:b], seg, noise, seed=seed + k, times_s=seg_t,
+                     settle_velocity=settle_velocity)
+        t = m.t_s[lead:] if times_s is not None else m.t_s[lead:] - (m.t_s[0] if lead else 0.0) + t_end
+        parts.append(Measurements(t, *(getattr(m, f)[lead:] for f in
+                                       ("commanded", "settled_joints", "encoders", "true_poses", "measured", "steps"))))
+        t_end = float(t[-1])
+    return Measurements(*(np.concatenate([getattr(p, f) for p in parts]) for f in
+                          ("t_s", "commanded", "settled_joints", "encoders", "true_poses", "measured", "steps")))
 
 
 def make_recording(robot: Robot, t_s: np.ndarray, joints: np.ndarray, measured: np.ndarray, noise: SensorNoise,
@@ -203,7 +239,7 @@ def effects_settings(robot: Robot, context: MachineContext, drawn: list) -> dict
 def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta: np.ndarray | None = None,
                      n_poses: int | None = None, magnitude_noise: float | None = None,
                      noise: SensorNoise = DISCOVERY_NOISE, workspace: np.ndarray | None = None,
-                     granularity: str = "shared") -> Recording:
+                     granularity: str = "shared", payloads: int = 1) -> Recording:
     """Simulate a blind recording of ``robot``'s MuJoCo machine with one effect or several.
 
     Args:
@@ -222,6 +258,13 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
             one stiffness) or ``"per_chain"``: each effect that has a per-chain form
             (:mod:`calib.effects.granularity`) drawn with a per-joint spread (each joint 0.3 to
             1.0 times the largest, random signs where physical) and simulated so, joint by joint.
+        payloads: 1 (one payload throughout: the one compliance draws, else the bare platform)
+            or 2: the recording is taken at two payloads, a light one and a heavy one
+            (:data:`calib.effects.compliance.TWO_PAYLOADS_KG`) swapped three times (four runs of
+            rows, light, heavy, light, heavy, so that the swap does not follow time), recorded
+            row by row as the channel ``payload_kg`` (:data:`calib.effects.base.PAYLOAD_CHANNEL`);
+            the payloads are drawn by their own generator (seeded by ``seed``), the rest as with
+            one payload.
 
     Returns:
         The recording; its ``meta["simulation"]`` holds the truth (errors, each effect's
@@ -237,8 +280,8 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
             raise ValueError(f"effect {eff.name!r} does not apply to the {robot.name}")
     if granularity not in GRANULARITIES:
         raise ValueError(f"granularity must be one of {', '.join(GRANULARITIES)}, got {granularity!r}")
-    if granularity == PER_CHAIN:
-        effs = [per_chain_form(e) or e for e in effs]
+    if payloads not in (1, 2):
+        raise ValueError(f"payloads must be 1 or 2, got {payloads!r}")
     machine = scenario_machine(robot)
     nominal = robot.table.nominal
     theta = nominal + machine.errors(robot) if theta is None else np.asarray(theta, dtype=float)
@@ -248,8 +291,15 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
     magnitudes = [float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) * position_std
                   for _ in effs]
     targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot) if workspace is None else workspace)
-    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
+    payload = _two_payloads(n, seed) if payloads == 2 else None
+    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise,
+                         payload_kg=payload)
+    effs = [for_payload(e, planned) for e in effs]  # compliance with its payload terms
+    if granularity == PER_CHAIN:
+        effs = [per_chain_form(e) or e for e in effs]
     context = machine_context(robot)
+    if payload is not None:
+        context = context.with_payload(float(payload.mean()))
     drawn = []
     for eff, magnitude in zip(effs, magnitudes):
         sc = eff.scenario(robot, theta, planned, magnitude, rng, context)
@@ -261,7 +311,7 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
     # compliant servo, which would shrink a drift, or put a lost count after the last row).
     timed = any(e.follows == "time" for e in effs)
     m = simulate(robot, theta, joints, settings, noise, seed=int(rng.integers(2**31)),
-                 times_s=planned.t_s if timed else None)
+                 times_s=planned.t_s if timed else None, payload_kg=payload)
     real = [e for e in effs if e.name != "none"]
     truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(),
              "effect": "+".join(e.name for e in real) or "none", "effects": [e.name for e in real],
@@ -273,8 +323,20 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
     for eff, _, extra in drawn:
         if eff.searched is not None:
             truth.update({k: v for k, (v, _) in eff.searched_values(extra).items()})
+    if payload is not None:
+        truth["payloads_kg"] = sorted(set(payload.tolist()))
     return make_recording(robot, m.t_s, joints, m.measured, noise,
+                          extras=None if payload is None else {PAYLOAD_CHANNEL: payload},
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+
+
+def _two_payloads(n: int, seed: int) -> np.ndarray:
+    """(n,) a light and a heavy payload (:data:`TWO_PAYLOADS_KG`) in four runs of rows: light,
+    heavy, light, heavy (drawn by a generator of their own)."""
+    rng = np.random.default_rng([seed, 2])
+    light, heavy = (rng.uniform(*r) for r in TWO_PAYLOADS_KG)
+    block = np.arange(n) * 4 // n
+    return np.where(block % 2 == 0, light, heavy)
 
 
 # ----------------------------------------------------------------------------- laws outside the library

@@ -13,6 +13,7 @@ import rerun.blueprint as rrb
 
 from calib.effects import EFFECTS, EffectData
 from calib.effects.discovery import MIN_NESTED_DELTA_BIC
+from calib.effects.base import PAYLOAD_CHANNEL
 from calib.robot import Robot
 from pipeline.formats import Recording
 
@@ -234,7 +235,8 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
     marked (see docs/rerun_views.md)."""
     disc, s = report.discovery, report.summary
     rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
-    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise).subset(rows)
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
+                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL)).subset(rows)
     before = 1e3 * disc.geometry.predict(data)[0]
     after = 1e3 * disc.chosen.predict(data)[0]
     flagged = [int(i) for i in np.flatnonzero(np.isin(rows, disc.flagged))]

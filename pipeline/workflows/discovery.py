@@ -25,6 +25,7 @@ import numpy as np
 from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
+from calib.effects.base import PAYLOAD_CHANNEL
 from calib.crossval import crossvalidate
 from calib.prior import ParameterPrior
 from mjcf.simulator import SettleError
@@ -230,7 +231,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
     if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
         cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
-    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
+    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
+                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL))
     disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
                             channels={k: v[cal] for k, v in rec.extras.items()} or None)
     kept = cal[disc.kept]
