@@ -31,16 +31,19 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--pairs", nargs="+", default=None, metavar="A,B", help="pairs for --kinds pair (default all)")
     ap.add_argument("--seeds", type=positive_int, default=20, help="recordings per effect (or pair)")
     ap.add_argument("--first-seed", type=nonnegative_int, default=0)
+    ap.add_argument("--payloads", type=int, choices=(1, 2), default=1,
+                    help="recordings taken at one payload (default) or at two, a light and a heavy one recorded row by "
+                         "row as the channel payload_kg (not the law kind's)")
     add_executor_arguments(ap)
     a = ap.parse_args(argv)
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]
     try:
         res = run_blind_suite(a.effects, range(a.first_seed, a.first_seed + a.seeds), robot=a.robot, kinds=a.kinds,
-                              pairs=pairs, laws=a.laws, workers=a.workers, scheduler=a.scheduler,
+                              pairs=pairs, laws=a.laws, workers=a.workers, scheduler=a.scheduler, payloads=a.payloads,
                               display=ProgressDisplay("blind suite", unit="recordings"))
     except NotImplementedError as exc:
         raise ValueError(str(exc)) from None
-    print(f"robot: {a.robot}")
+    print(f"robot: {a.robot}" + ("; recordings at two payloads" if a.payloads == 2 else ""))
     print(rates_table(res))
     for line in failure_lines(res):
         print(line)

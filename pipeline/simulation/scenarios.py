@@ -43,6 +43,8 @@ DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribut
 #: Time between measurements of the planned schedule, s: a time-dependent effect is drawn on it,
 #: and a recording carrying one is measured on it (:func:`effect_recording`).
 ESTIMATED_SETTLE_S = 0.35
+#: Step cap per pose of a recording at several payloads (:func:`simulate`), 4 times the testbed's.
+PAYLOAD_SETTLE_STEPS = 80000
 #: Errors of a robot without a :data:`SCENARIO_MACHINES` entry: uniform within +- these on its
 #: free parameters (mm, rad), seeded once (the same machine in every recording).
 DEFAULT_ERROR_MM, DEFAULT_ERROR_RAD = 0.05, 5e-4
@@ -118,7 +120,7 @@ def merged_settings(context: MachineContext, settings: dict | None = None) -> di
 
 def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict, noise: SensorNoise = SensorNoise(),
              seed: int = 0, times_s: np.ndarray | None = None, *, settle_velocity: float | None = None,
-             payload_kg: np.ndarray | None = None):
+             payload_kg: np.ndarray | None = None, max_steps: int | None = None):
     """Measure the MuJoCo machine ``theta`` of ``robot`` at commanded ``joints``.
 
     Args:
@@ -133,7 +135,11 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
         payload_kg: (N,) the payload carried at each row, kg (a payload swapped during the
             recording); default ``settings``' one payload throughout. Each run of rows at one
             payload is measured on the machine carrying it, starting from the previous run's
-            last command (the motion history is the recording's), its times following on.
+            last command (the motion history is the recording's), its times following on, and
+            settled with :data:`PAYLOAD_SETTLE_STEPS` steps at most per pose (a heavy payload on
+            a stiff servo rings longer: the Delta at 4 kg took more than the testbed's default on
+            one pose of 1200; the settle velocity, what "at rest" means, is the testbed's).
+        max_steps: the testbed's step cap per pose; default the testbed's.
 
     Returns:
         The testbed's :class:`pipeline.testbed.Measurements` (``t_s``, ``true_poses``, ``measured``, ...).
@@ -146,6 +152,8 @@ def simulate(robot: Robot, theta: np.ndarray, joints: np.ndarray, settings: dict
     options = MachineOptions(**settings.get("options", {}))
     effects = MachineEffects(**settings.get("effects", {}))
     extra = {} if settle_velocity is None else {"settle_velocity": settle_velocity}
+    if max_steps is not None:
+        extra["max_steps"] = int(max_steps)
     bed = Testbed(robot, theta, options=options, effects=effects, noise=noise, seed=seed, **extra)
     return bed.measure(joints, times_s=times_s)
 
@@ -167,7 +175,7 @@ def _simulate_payloads(robot, theta, joints, settings, noise, seed, times_s, set
                "effects": dict(settings.get("effects", {}))}
         seg_t = None if times_s is None else np.asarray(times_s, dtype=float)[a - lead:b]
         m = simulate(robot, theta, joints[a - lead:b], seg, noise, seed=seed + k, times_s=seg_t,
-                     settle_velocity=settle_velocity)
+                     settle_velocity=settle_velocity, max_steps=PAYLOAD_SETTLE_STEPS)
         t = m.t_s[lead:] if times_s is not None else m.t_s[lead:] - (m.t_s[0] if lead else 0.0) + t_end
         parts.append(Measurements(t, *(getattr(m, f)[lead:] for f in
                                        ("commanded", "settled_joints", "encoders", "true_poses", "measured", "steps"))))

@@ -130,13 +130,16 @@ def blind_case(args: tuple) -> list[dict]:
     """One simulated recording and the analyses asked of it.
 
     Args:
-        args: ``(robot name, effects (tuple, empty for none), seed, kinds)``; ``kinds`` among
-            :data:`KINDS` (``single`` and ``pair`` both mean the recording as simulated).
+        args: ``(robot name, effects (tuple, empty for none), seed, kinds[, payloads])``;
+            ``kinds`` among :data:`KINDS` (``single`` and ``pair`` both mean the recording as
+            simulated); ``payloads`` 1 (default) or 2: the recordings taken at two payloads
+            (:func:`pipeline.simulation.effect_recording`; not the ``law`` kind's).
 
     Returns:
         One dict per analysis: the truth, what discovery said, and :func:`criteria`.
     """
-    robot_name, effects, seed, kinds = args
+    robot_name, effects, seed, kinds, *rest = args
+    payloads = int(rest[0]) if rest else 1
     from pipeline.simulation import effect_recording
 
     robot = default_robot(robot_name)
@@ -145,12 +148,12 @@ def blind_case(args: tuple) -> list[dict]:
         return _with_criteria([_law_case(robot, effects[0], seed, everything)])
     out = []
     if "shared" in kinds:  # its own recording: every joint the same value
-        rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=SHARED)
+        rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=SHARED, payloads=payloads)
         out.append(dict(_truth(rec, robot_name, effects, seed), kind="shared", **_analyse(rec, everything, seed)))
         kinds = tuple(k for k in kinds if k != "shared")
         if not kinds:
             return _with_criteria(out)
-    rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=PER_CHAIN)
+    rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=PER_CHAIN, payloads=payloads)
     base = _truth(rec, robot_name, effects, seed)
     rng = np.random.default_rng(seed + 10_000)
     for kind in kinds:
@@ -195,6 +198,7 @@ def _truth(rec, robot_name: str, effects, seed: int) -> dict:
     """What a result says of the recording's truth: effects, seed, sizes, each effect's granularity."""
     sim = rec.meta["simulation"]
     return {"robot": robot_name, "effects": list(effects), "seed": seed,
+            "payloads_kg": sim.get("payloads_kg"),
             "magnitude_noise": {e: v / rec.noise.pose_std(("mm",))[0] for e, v in sim["contributions_mm"].items()},
             "true_granularity": dict(sim.get("granularity", {}))}
 
@@ -252,10 +256,13 @@ def criteria(r: dict) -> dict:
 
 
 def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
-                laws=None) -> list[tuple]:
+                laws=None, payloads: int = 1) -> list[tuple]:
     """The recordings :func:`run_blind_suite` runs, each the argument of one :func:`blind_case`:
-    ``(robot, effects, seed, kinds)`` (arguments as :func:`run_blind_suite`'s; a ``law`` case:
-    ``(robot, (law name,), seed, ("law",))``)."""
+    ``(robot, effects, seed, kinds)``, with ``payloads`` appended when it is 2 (arguments as
+    :func:`run_blind_suite`'s; a ``law`` case: ``(robot, (law name,), seed, ("law",))``)."""
+    if payloads not in (1, 2):
+        raise ValueError(f"payloads must be 1 or 2, got {payloads!r}")
+    more = () if payloads == 1 else (payloads,)
     from pipeline.simulation import LAW_CASES, law_cases_for
 
     names = effects_for(default_robot(robot)) if effects is None else tuple(effects)
@@ -273,18 +280,18 @@ def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=
             if e == "none" or per_chain_form(EFFECTS[e]) is None:  # no shared form to tell from a per-chain one
                 ks = [k for k in ks if k != "shared"]
             if ks:
-                cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) for s in seeds]
+                cases += [(robot, () if e == "none" else (e,), int(s), tuple(ks)) + more for s in seeds]
     if "pair" in kinds:
         real = [e for e in effects_for(default_robot(robot)) if e != "none"]
         default = [(a, b) for a, b in combinations(real, 2) if b not in effect_family(a)]
         for p in (default if pairs is None else [tuple(p) for p in pairs]):
-            cases += [(robot, p, int(s), ("pair",)) for s in seeds]
+            cases += [(robot, p, int(s), ("pair",)) + more for s in seeds]
     return cases
 
 
 def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=("single",), pairs=None,
                     laws=None, workers: int | None = None, scheduler: str | None = None, progress=None,
-                    display=None) -> list[dict]:
+                    display=None, payloads: int = 1) -> list[dict]:
     """Run :func:`blind_case` for every recording asked (in parallel; deterministic per case).
 
     Args:
@@ -304,8 +311,11 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         scheduler: address of an existing Dask cluster to run on instead.
         progress: ``progress(done, total)`` after each recording.
         display: a :class:`pipeline.execution.ProgressDisplay` showing the recordings done, however they run.
+        payloads: 1, or 2: every recording but the ``law`` kind's taken at two payloads (a light
+            and a heavy one, swapped three times, recorded as the channel ``payload_kg``:
+            :func:`pipeline.simulation.effect_recording`).
     """
-    cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs, laws=laws)
+    cases = blind_cases(effects, seeds, robot=robot, kinds=kinds, pairs=pairs, laws=laws, payloads=payloads)
     workers = max(1, min(len(cases), default_workers())) if workers is None else workers
     from pipeline.workflows.blind import blind_case as entry  # by name in the workers (also when run as __main__)
 
