@@ -52,7 +52,7 @@ from ..robot import KinematicsError, Robot
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
-from .compliance import for_payload
+from .compliance import for_payload, payload_varies
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
@@ -685,7 +685,14 @@ def _features(data: EffectData) -> list[tuple[str, str, np.ndarray]]:
     load = EFFECTS.get("compliance")
     if load is not None and load.applies_to(robot):
         # The axial load of each chain under the platform's weight (statics, per unit weight).
-        out.append(("load", "ordered", load.joint_regressors(robot, data.theta, data)[..., 0]))
+        u = load.joint_regressors(robot, data.theta, data)[..., 0]
+        if payload_varies(data):
+            # Several payloads: the load the payload brings (the platform's own share is the
+            # one-payload pattern, which the geometry mostly absorbs: on the Delta's two-payload
+            # recordings the remainder of a compliance left out followed time, the payload's
+            # swaps, and not the per-unit-weight load).
+            u = u * data.payload_kg[:, None]
+        out.append(("load", "ordered", u))
     for k, name in enumerate(robot.pose_names):
         out.append((f"position {name}", "ordered", np.broadcast_to(data.measured[:, k:k + 1], (n, c))))
     return out
