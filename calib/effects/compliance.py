@@ -220,11 +220,21 @@ class LoadedCompliance(Compliance):
     is left by the geometry, against 8% of the load column); and an actuator scale, fixed,
     cannot follow it either.
 
-    Used in place of :data:`EFFECT` where the payload varies (:func:`for_payload`); same name,
-    the per-chain form gives every chain its own payload term too (its own stiffness).
+    Used in place of :data:`EFFECT` where the payload varies (:func:`for_payload`); same name.
+    Its per-chain form gives every chain its own payload term (its own stiffness) and keeps the
+    weight terms shared (see ``per_chain_capable``): a chain's own stiffness also scales its
+    weight terms, but that pattern is what the chain's own geometric parameters absorb, and left
+    free per chain it took an actuator scale's place.
     """
 
-    per_chain_capable = Compliance.per_chain_capable + ("payload_over_stiffness",)
+    # The per-chain form: each chain's own payload term (its own stiffness, seen in the change of
+    # load no geometry makes); the weight terms at the mean payload stay shared. With them per
+    # chain too (9 coefficients on the Delta) the per-chain weight columns, each 0.9 correlated
+    # with that chain's actuator scale, took the scale's place: on the Delta's two-payload
+    # compliance + actuator_scale recordings (seeds 100-107) both were named in 4 of 8, against
+    # 8 of 8 with only the payload term per chain (and 6 of 8 against 8 of 8 single compliance
+    # recordings named alone).
+    per_chain_capable = ("payload_over_stiffness",)
 
     def coefficients(self, robot):
         base = Compliance.coefficients(self, robot)
