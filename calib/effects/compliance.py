@@ -255,8 +255,13 @@ class LoadedCompliance(Compliance):
 
     def machine_settings(self, coefficients, robot, context, extra=None):
         # The machine at the mean payload (the payload of each row is the recording's: the
-        # simulation sets it segment by segment); the stiffness from the weight term there.
-        return Compliance.machine_settings(self, coefficients, robot, context, extra)
+        # simulation sets it run by run); the stiffness from the payload term, g / k per kg
+        # (the weight term's own mass is unknown to the fit; on a drawn scenario the two agree).
+        out = Compliance.machine_settings(self, coefficients, robot, context, extra)
+        cp = max(float(coefficients[len(Compliance.coefficients(self, robot))]), 1e-12)
+        s = context.si_per_joint_unit(robot)
+        out["options"]["actuator_stiffness"] = context.gravity_m_s2 * context.m_per_mm / (s * s * cp)
+        return out
 
     def scenario(self, robot, theta, data, magnitude_mm, rng, context):
         """The payloads are the recording's (``data.payload_kg``, drawn by the experiment, not by
