@@ -33,7 +33,7 @@ def run(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--first-seed", type=nonnegative_int, default=0)
     ap.add_argument("--payloads", type=int, choices=(1, 2), default=1,
                     help="recordings taken at one payload (default) or at two, a light and a heavy one recorded row by "
-                         "row as the channel payload_kg (not the law kind's)")
+                         "row as the channel payload_kg")
     add_executor_arguments(ap)
     a = ap.parse_args(argv)
     pairs = None if a.pairs is None else [tuple(p.split(",")) for p in a.pairs]

@@ -21,7 +21,7 @@ def seen(monkeypatch):
     """The candidates of every analysis blind_case asks for (the recording is a stand-in)."""
     calls = []
 
-    def fake_recording(effects, seed, robot=None, granularity="shared"):
+    def fake_recording(effects, seed, robot=None, granularity="shared", payloads=1):
         names = () if effects == "none" else tuple(effects)
         return SimpleNamespace(noise=SensorNoise(0.001, 1e-6, "normal"), measured=np.zeros((60, 6)),
                                meta={"simulation": {"contributions_mm": {e: 0.005 for e in names}}})

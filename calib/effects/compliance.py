@@ -235,6 +235,11 @@ class LoadedCompliance(Compliance):
     # 8 of 8 with only the payload term per chain (and 6 of 8 against 8 of 8 single compliance
     # recordings named alone).
     per_chain_capable = ("payload_over_stiffness",)
+    # Its evidence (the Wald test of discovery) is the payload terms: a servo's compliance gives
+    # way more under the heavier payload; load terms without it are something else the load
+    # pattern happens to resemble (a transmission error quadratic in the stroke, on a revolute
+    # robot), which the geometry and the weight terms may fit.
+    evidence_coefficients = ("payload_over_stiffness", "payload_x_com_height_over_stiffness")
 
     def coefficients(self, robot):
         base = Compliance.coefficients(self, robot)

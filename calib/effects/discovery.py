@@ -269,10 +269,17 @@ class EffectFit:
 
     def significance(self, name: str) -> dict:
         """Wald test that effect ``name``'s coefficients are zero: ``{"wald_chi2", "dof",
-        "p_value"}``."""
+        "p_value"}`` (of those the effect names as its evidence, ``evidence_coefficients``, where
+        it names some: a compliance at several payloads is tested on its payload terms)."""
         s = self.slices()[name]
-        phi = self.coefficients[s]
-        cov = self.coefficient_cov[s, s]
+        idx = np.arange(s.start, s.stop)
+        model = next(m for m in self.models if m.name == name)
+        evidence = getattr(_base(model), "evidence_coefficients", ())
+        if evidence:  # the coefficients whose being non-zero is the effect's evidence
+            names = [c.name.split("[")[0] for c in model.coefficients(self.robot)]
+            idx = idx[[n in evidence for n in names]]
+        phi = self.coefficients[idx]
+        cov = self.coefficient_cov[np.ix_(idx, idx)]
         w = float(phi @ np.linalg.pinv(cov, hermitian=True) @ phi)
         return {"wald_chi2": w, "dof": int(phi.size), "p_value": float(chi2_dist.sf(w, phi.size))}
 

@@ -421,7 +421,8 @@ def law_cases_for(robot: Robot) -> tuple[str, ...]:
 
 
 def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_poses: int | None = None,
-                  magnitude_noise: float | None = None, noise: SensorNoise = DISCOVERY_NOISE) -> Recording:
+                  magnitude_noise: float | None = None, noise: SensorNoise = DISCOVERY_NOISE,
+                  payloads: int = 1) -> Recording:
     """Simulate a blind recording of ``robot``'s MuJoCo machine whose joints follow the law
     ``name`` of :data:`LAW_CASES` (outside the library of effects), each joint its own constant.
 
@@ -432,6 +433,10 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     which the recording keeps, and the recorded channels), enters the servo references: the
     machine is commanded to ``joints + offset``, settles under its own physics, and the
     recording holds the commands ``joints`` (the encoders read the command).
+
+    ``payloads=2``: taken at two payloads as :func:`effect_recording`'s (channel ``payload_kg``);
+    the law's quantities are the same (its ``load`` the load per unit platform weight, as the
+    law search's term), only the machine carries the payloads.
 
     Returns:
         The recording (``extras`` its recorded channels); ``meta["simulation"]["law"]`` the truth:
@@ -452,18 +457,26 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     magnitude = float(magnitude_noise if magnitude_noise is not None else rng.uniform(3.0, 10.0)) \
         * float(noise.pose_std(("mm",))[0])
     targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot))
-    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
+    if payloads not in (1, 2):
+        raise ValueError(f"payloads must be 1 or 2, got {payloads!r}")
+    payload = _two_payloads(n, seed) if payloads == 2 else None
+    planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise,
+                         payload_kg=payload)
     temperature, recorded = _air_conditioner(planned.t_s, rng)
     shape = case.shape(joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature}))
     c = rng.uniform(*SPREAD_RANGE, robot.n_chains) * (-1.0 if case.short else rng.choice([-1.0, 1.0], robot.n_chains))
     dF_dq = robot.closure_jacobians(nominal, joints, targets).joints
     c = c * magnitude / np.max(np.abs(dF_dq @ (shape * c)[..., None]))
     context = machine_context(robot)
-    m = simulate(robot, theta, joints + shape * c, merged_settings(context), noise, seed=int(rng.integers(2**31)))
+    m = simulate(robot, theta, joints + shape * c, merged_settings(context), noise, seed=int(rng.integers(2**31)),
+                 payload_kg=payload)
     truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": f"law: {name}",
              "effects": [], "contributions_mm": {}, "granularity": {}, "machine": merged_settings(context),
              "law": {"name": name, "physics": case.physics, "terms": list(case.terms), "granularity": PER_CHAIN,
                      "constants": c.tolist(), "largest_contribution_mm": magnitude}}
     extras = {TEMPERATURE_CHANNEL: recorded} if TEMPERATURE_CHANNEL in case.needs else {}
+    if payload is not None:
+        extras[PAYLOAD_CHANNEL] = payload
+        truth["payloads_kg"] = sorted(set(payload.tolist()))
     return make_recording(robot, planned.t_s, joints, m.measured, noise, extras=extras,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})

@@ -133,7 +133,7 @@ def blind_case(args: tuple) -> list[dict]:
         args: ``(robot name, effects (tuple, empty for none), seed, kinds[, payloads])``;
             ``kinds`` among :data:`KINDS` (``single`` and ``pair`` both mean the recording as
             simulated); ``payloads`` 1 (default) or 2: the recordings taken at two payloads
-            (:func:`pipeline.simulation.effect_recording`; not the ``law`` kind's).
+            (:func:`pipeline.simulation.effect_recording`, :func:`~pipeline.simulation.law_recording`).
 
     Returns:
         One dict per analysis: the truth, what discovery said, and :func:`criteria`.
@@ -145,7 +145,7 @@ def blind_case(args: tuple) -> list[dict]:
     robot = default_robot(robot_name)
     everything = effects_for(robot)
     if tuple(kinds) == ("law",):
-        return _with_criteria([_law_case(robot, effects[0], seed, everything)])
+        return _with_criteria([_law_case(robot, effects[0], seed, everything, payloads)])
     out = []
     if "shared" in kinds:  # its own recording: every joint the same value
         rec = effect_recording(tuple(effects) or "none", seed, robot=robot, granularity=SHARED, payloads=payloads)
@@ -182,11 +182,11 @@ def blind_case(args: tuple) -> list[dict]:
     return _with_criteria(out)
 
 
-def _law_case(robot, name: str, seed: int, everything) -> dict:
+def _law_case(robot, name: str, seed: int, everything, payloads: int = 1) -> dict:
     """The ``law`` kind: a recording following the law ``name`` (:func:`pipeline.simulation.law_recording`)."""
     from pipeline.simulation import law_recording
 
-    rec = law_recording(name, seed, robot=robot)
+    rec = law_recording(name, seed, robot=robot, payloads=payloads)
     truth = rec.meta["simulation"]["law"]
     return dict(robot=robot.name, effects=[], seed=seed, kind="law", law=name, true_law_terms=truth["terms"],
                 true_law_granularity=truth["granularity"],
@@ -272,7 +272,7 @@ def blind_cases(effects=None, seeds=range(20), *, robot: str = "hexapod", kinds=
         for name in (law_cases_for(default_robot(robot)) if laws is None else tuple(laws)):
             if name not in LAW_CASES:
                 raise ValueError(f"unknown law {name!r}: expected one of {', '.join(LAW_CASES)}")
-            cases += [(robot, (name,), int(s), ("law",)) for s in seeds]
+            cases += [(robot, (name,), int(s), ("law",)) + more for s in seeds]
     single_kinds = [k for k in kinds if k not in ("pair", "law")]
     if single_kinds:
         for e in names:
@@ -311,7 +311,7 @@ def run_blind_suite(effects=None, seeds=range(20), *, robot: str = "hexapod", ki
         scheduler: address of an existing Dask cluster to run on instead.
         progress: ``progress(done, total)`` after each recording.
         display: a :class:`pipeline.execution.ProgressDisplay` showing the recordings done, however they run.
-        payloads: 1, or 2: every recording but the ``law`` kind's taken at two payloads (a light
+        payloads: 1, or 2: every recording taken at two payloads (a light
             and a heavy one, swapped three times, recorded as the channel ``payload_kg``:
             :func:`pipeline.simulation.effect_recording`).
     """
