@@ -136,9 +136,11 @@ def replay(rec: Recording, theta: np.ndarray, settings: dict, which: np.ndarray,
     recording's joints at its times, rows ``which``: the whole record replayed in order (the state
     may depend on the motion history) or, without ``history``, those rows alone."""
     kw = dict(settle_velocity=RESIMULATION_SETTLE_VELOCITY)
+    payload = rec.extras.get(PAYLOAD_CHANNEL)  # a recording at several payloads: each row's own
     if not history:
-        return simulate(rec.robot, theta, rec.joints[which], settings, times_s=rec.t_s[which], **kw).true_poses
-    return simulate(rec.robot, theta, rec.joints, settings, times_s=rec.t_s, **kw).true_poses[which]
+        return simulate(rec.robot, theta, rec.joints[which], settings, times_s=rec.t_s[which],
+                        payload_kg=None if payload is None else payload[which], **kw).true_poses
+    return simulate(rec.robot, theta, rec.joints, settings, times_s=rec.t_s, payload_kg=payload, **kw).true_poses[which]
 
 
 def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, rows: np.ndarray, *, max_nfev: int,
