@@ -1274,21 +1274,43 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
                 seed: int = 0) -> ProposedLaw | None:
     """The law over joint-space terms that explains what ``fit`` (geometry and the library's
     effects) leaves, searched on the fit linearised at its solution (:func:`calib.effects.laws.search_law`)
-    and then fitted exactly with it; None when no term earns its place."""
+    and then fitted exactly with it; None when no term earns its place. The library's effects
+    are then re-examined: one that the model with the law does without (no higher BIC, the law
+    searched again without it) is left out of the law's fit (``library_left_out``)."""
     def space(f: EffectFit) -> LawSpace:
         jac = data.robot.closure_jacobians(f.theta, data.joints + f.joint_displacement(data), data.measured)
         winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(data.robot, jac, data)))
         return LawSpace(data, winv, jac.joints, f.design, f.whitened, dict(channels or {}))
 
-    found = search_law(space(fit), folds=folds, seed=seed)
-    if not found.terms:
+    def with_law(f: EffectFit):
+        found = search_law(space(f), folds=folds, seed=seed)
+        if not found.terms:
+            return None
+        eff = law_effect(found.terms, found.granularity, channels)
+        extras = {m.name: e for m, e in zip(f.models, f.extras) if e is not None}
+        return found, eff, fit_effects(data, f.models + (eff,), extras=extras, start=f.theta)
+
+    best = with_law(fit)
+    if best is None:
         return None
-    eff = law_effect(found.terms, found.granularity, channels)
-    extras = {m.name: e for m, e in zip(fit.models, fit.extras) if e is not None}
-    exact = fit_effects(data, fit.models + (eff,), extras=extras, start=fit.theta)
+    # The library's effects re-examined with a law in: each named effect left out in turn, the
+    # law searched again on what the rest leaves; kept out when the model with the law has no
+    # higher BIC without it (a dead band named for a friction that grows with the load takes
+    # each chain's mean level, and the law's per-joint spread no longer pays on three chains).
+    left_out: tuple = ()
+    for m in fit.models:
+        rest = tuple(x for x in fit.models if x is not m and x.name not in left_out)
+        if len(rest) == len(fit.models) - len(left_out):
+            continue
+        extras = {x.name: e for x, e in zip(fit.models, fit.extras) if e is not None and x in rest}
+        trial = with_law(fit_effects(data, rest, extras=extras, start=fit.theta))
+        if trial is not None and trial[2].bic() <= best[2].bic():
+            best, left_out = trial, left_out + (m.name,)
+    found, eff, exact = best
     floor = float(_rms(closure_noise_std(data.robot, exact.theta, data)))
     cv_w, cv_mm = space(exact).cv([], folds, seed)
-    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm)
+    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm,
+                       library_left_out=left_out)
 
 
 def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:

@@ -525,6 +525,8 @@ class ProposedLaw:
         cv_after, cv_after_mm: cross-validated residual (whitened, mm) of the exact fit with the
             law (the search's own figure is linearised at the library's fit, which a large
             remainder makes inexact).
+        library_left_out: names of the library's effects the model with the law does without
+            (:func:`calib.effects.discovery.propose_law`: not in :attr:`fit`).
     """
 
     search: LawSearch
@@ -534,6 +536,7 @@ class ProposedLaw:
     noise_floor_mm: float
     cv_after: float
     cv_after_mm: float
+    library_left_out: tuple = ()
 
     def chain_constants(self) -> tuple[np.ndarray, np.ndarray]:
         """``(values, std)``, each (C, k): every constant of the law joint by joint (a shared one
@@ -567,4 +570,6 @@ class ProposedLaw:
                 "noise_floor_mm": self.noise_floor_mm,
                 "explained_with_law": not self.remaining["present"], "remaining_with_law": self.remaining["summary"],
                 "law": law_to_dict(terms, gran, self.fit.coefficients[self.fit.slices()[LAW_NAME]]),
+                "library_with_law": [m.name for m in self.fit.models if m.name != LAW_NAME],
+                "library_left_out": list(self.library_left_out),
                 "steps": self.search.steps}

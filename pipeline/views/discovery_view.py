@@ -51,6 +51,9 @@ def law_lines(law: dict | None) -> list[str]:
     lines = [f"Proposed law, not in the library: {law['formula']}",
              f"  cross-validated residual RMS {1e3 * law['cv_rms_before_mm']:.2f} um -> "
              f"{1e3 * law['cv_rms_after_mm']:.2f} um (noise floor {1e3 * law['noise_floor_mm']:.2f} um); with it: {after}"]
+    if law.get("library_left_out"):
+        lines.append(f"  with the law, the model does without {', '.join(law['library_left_out'])} (no higher BIC): "
+                     f"fitted with {', '.join(law['library_with_law']) or 'the geometry alone'}")
     for name, values in law["constants"].items():
         std = law["constants_std"][name]
         form = law["constant_granularity"][name]
