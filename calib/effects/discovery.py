@@ -1276,7 +1276,8 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
     effects) leaves, searched on the fit linearised at its solution (:func:`calib.effects.laws.search_law`)
     and then fitted exactly with it; None when no term earns its place. The library's effects
     are then re-examined: one that the model with the law does without (no higher BIC, the law
-    searched again without it) is left out of the law's fit (``library_left_out``)."""
+    searched again without it, with no more terms) is left out of the law's fit
+    (``library_left_out``)."""
     def space(f: EffectFit) -> LawSpace:
         jac = data.robot.closure_jacobians(f.theta, data.joints + f.joint_displacement(data), data.measured)
         winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(data.robot, jac, data)))
@@ -1295,8 +1296,10 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
         return None
     # The library's effects re-examined with a law in: each named effect left out in turn, the
     # law searched again on what the rest leaves; kept out when the model with the law has no
-    # higher BIC without it (a dead band named for a friction that grows with the load takes
-    # each chain's mean level, and the law's per-joint spread no longer pays on three chains).
+    # higher BIC without it and the law no more terms (a dead band named for a friction that
+    # grows with the load takes each chain's mean level, and the law's per-joint spread no
+    # longer pays on three chains; an actuator scale left out only for the law to take `stroke`
+    # as a term of its own stays: on hexapod seed 900 the quadratic law became stroke^2 + stroke).
     left_out: tuple = ()
     for m in fit.models:
         rest = tuple(x for x in fit.models if x is not m and x.name not in left_out)
@@ -1304,7 +1307,7 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
             continue
         extras = {x.name: e for x, e in zip(fit.models, fit.extras) if e is not None and x in rest}
         trial = with_law(fit_effects(data, rest, extras=extras, start=fit.theta))
-        if trial is not None and trial[2].bic() <= best[2].bic():
+        if trial is not None and len(trial[0].terms) <= len(best[0].terms) and trial[2].bic() <= best[2].bic():
             best, left_out = trial, left_out + (m.name,)
     found, eff, exact = best
     floor = float(_rms(closure_noise_std(data.robot, exact.theta, data)))
