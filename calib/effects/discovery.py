@@ -300,6 +300,20 @@ class EffectFit:
             out.update({k: v for k, v in d.items() if k not in ("significance", "granularity")})
         return out
 
+    def geometry_covariance(self) -> np.ndarray:
+        """(P, P) covariance of :attr:`theta` (the free parameters', jointly with the effects'
+        coefficients and marginalised over them; zero rows and columns for the fixed ones), with
+        the same inflation as :attr:`coefficient_cov`."""
+        A = self.design
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        cov = np.linalg.pinv((A / scale).T @ (A / scale), hermitian=True) / np.outer(scale, scale)
+        cov = cov * max(1.0, self.chi2 / max(self.dof, 1))
+        free = _free_indices(self.robot)
+        out = np.zeros((self.robot.n_parameters,) * 2)
+        out[np.ix_(free, free)] = cov[:free.size, :free.size]
+        return out
+
     def joint_displacement(self, data: EffectData) -> np.ndarray:
         """(N, C) joint displacement of the fitted effects on ``data``, joint unit."""
         if not self.models:

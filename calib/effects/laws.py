@@ -222,6 +222,10 @@ class Law(Effect):
         q = joint_quantities(data, channels_at(self.channels, self.channel_times_s, data))
         return np.concatenate([t.regressor(q) for t in self.terms], axis=-1)
 
+    def compensation_inputs(self):
+        timed = any(t.family.kind == "saturating" or "t" in t.family.parts for t in self.terms)
+        return (("t_s",) if timed else ()) + law_channels(self.terms)
+
     def machine_settings(self, coefficients, robot, context, extra=None):
         raise NotImplementedError("a proposed law has no MuJoCo machine field: it is not in the library")
 

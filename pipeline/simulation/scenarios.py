@@ -34,7 +34,7 @@ from pipeline.formats import Recording
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "make_recording",
            "effects_settings", "effect_recording", "LawCase", "LAW_CASES", "law_cases_for", "law_recording",
-           "TEMPERATURE_CHANNEL"]
+           "TEMPERATURE_CHANNEL", "heldout_targets", "command_scenario_machine"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
@@ -397,3 +397,37 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     extras = {TEMPERATURE_CHANNEL: recorded} if TEMPERATURE_CHANNEL in case.needs else {}
     return make_recording(robot, planned.t_s, joints, m.measured, noise, extras=extras,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+
+
+# ----------------------------------------------------------------------------- commanding it again
+
+
+def heldout_targets(rec: Recording, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(targets (n, D), t_s (n,))``: poses drawn in the workspace of ``rec``'s scenario machine
+    (other than the recording's: their own seed) and the times of a schedule continuing it."""
+    robot = rec.robot
+    rng = np.random.default_rng(seed)
+    targets, _ = _draw_poses(robot, robot.table.nominal, n, rng, scenario_machine(robot).workspace(robot))
+    return targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1)
+
+
+def command_scenario_machine(rec: Recording, commands: np.ndarray, t_s: np.ndarray,
+                             channels: dict | None = None) -> np.ndarray:
+    """(N, D) the settled poses (noise-free) of the machine that made the scenario recording
+    ``rec`` (:func:`effect_recording` or :func:`law_recording`: its true geometry, effects and law,
+    from ``meta["simulation"]``) when ``commands`` are given in order at times ``t_s`` from its
+    home pose. A law's offset follows the commands as it did in the recording (its recorded
+    ``channels``, one value per row, where it follows one)."""
+    from calib.effects.laws import joint_quantities
+
+    robot, truth = rec.robot, rec.meta["simulation"]
+    theta = robot.table.nominal + np.asarray(truth["injected_errors"], dtype=float)
+    commands = np.asarray(commands, dtype=float)
+    law = truth.get("law")
+    if law is not None:
+        data = EffectData(robot, robot.table.nominal, commands, robot.forward_kinematics(theta, commands), t_s,
+                          rec.noise)
+        commands = commands + LAW_CASES[law["name"]].shape(joint_quantities(data, channels)) * np.asarray(law["constants"])
+    timed = law is None and any(registered_effect(e).follows == "time" for e in truth["effects"])
+    return simulate(robot, theta, commands, truth["machine"], SensorNoise(),
+                    times_s=np.asarray(t_s, dtype=float) if timed else None).true_poses
