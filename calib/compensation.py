@@ -29,7 +29,7 @@ import numpy as np
 from .effects.base import EffectData
 from .effects.records import FittedEffect
 from .noise import SensorNoise
-from .robot import Robot
+from .robot import Robot, check_joint_limits
 from .validation import as_array
 
 __all__ = ["Compensation", "compensated_commands", "effect_displacement", "COMPENSATION_TOLERANCE",
@@ -104,7 +104,8 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
         channels: recorded channels a law follows, ``{name: (N,)}``.
 
     Raises:
-        KinematicsError: a target the identified geometry cannot reach (names the row).
+        KinematicsError: a target the identified geometry cannot reach, or a command past a
+            joint's stroke (names the row).
         ValueError: arrays of the wrong shape.
     """
     theta = as_array(theta, "theta", (robot.n_parameters,))
@@ -130,6 +131,7 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
         if step <= tolerance * travel:
             break
     d = effect_displacement(robot, theta, used, q, targets, clock)
+    check_joint_limits(robot, q, "row")  # a command past a joint's stroke is none the machine can take
     return Compensation(commands=q, geometric=geometric, displacement=d, compensated=tuple(fe.name for fe in used),
                         left_out=left, iterations=k if used else 0, converged=step <= tolerance * travel,
                         largest_step=step)
