@@ -144,7 +144,8 @@ def test_a_law_recording_is_the_machine_with_its_joints_moved_by_the_law(robot):
         rec = law_recording(name, 30 + k, robot=robot, n_poses=20)
         r, sim = rec.robot, rec.meta["simulation"]
         data = EffectData(r, r.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)
-        offset = LAW_CASES[name].shape(joint_quantities(data, rec.extras)) * np.array(sim["law"]["constants"])
+        offset = LAW_CASES[name].shape(joint_quantities(data, rec.extras), np.array(sim["law"]["stroke_centre"])) \
+            * np.array(sim["law"]["constants"])
         theta = r.table.nominal + np.array(sim["injected_errors"])
         reached = r.forward_kinematics(theta, rec.joints + offset, initial=rec.measured)
         z = (rec.measured - reached)[:, :3] / NOISE.position_mm

@@ -302,9 +302,10 @@ class LawCase:
 
     Attributes:
         terms: the law search's names of its terms (:mod:`calib.effects.laws`): what it must name.
-        shape: ``shape(q) -> (N, C)`` each joint's offset per unit constant, joint unit, from
-            :func:`calib.effects.laws.joint_quantities` of the commands (``load``: the joint force
-            of the statics per unit platform weight; the recorded channels included).
+        shape: ``shape(q, centre) -> (N, C)`` each joint's offset per unit constant, joint unit,
+            from :func:`calib.effects.laws.joint_quantities` of the commands (``load``: the joint
+            force of the statics per unit platform weight; the recorded channels included) and the
+            machine's ``centre`` (C,): the middle of the strokes its recording commanded, joint unit.
         physics: the law in words.
         short: every joint falls short of its target (a negative constant); else each joint's
             sign is drawn.
@@ -312,7 +313,7 @@ class LawCase:
     """
 
     terms: tuple
-    shape: Callable[[dict], np.ndarray]
+    shape: Callable[[dict, np.ndarray], np.ndarray]
     physics: str
     short: bool = False
     needs: tuple = ()
@@ -320,21 +321,21 @@ class LawCase:
 
 #: The laws of the blind suite's ``law`` kind (the issue's five): name -> :class:`LawCase`.
 LAW_CASES: dict[str, LawCase] = {
-    "settle lag": LawCase(("last move",), lambda q: q["last move"],
+    "settle lag": LawCase(("last move",), lambda q, centre: q["last move"],
                           "each joint measured short of its target by a fraction of its last move", short=True),
     "dead band growing with time": LawCase(
-        ("sign(last move) * t",), lambda q: q["sign(last move)"] * q["t"],
+        ("sign(last move) * t",), lambda q, centre: q["sign(last move)"] * q["t"],
         "each joint short of its target by a dead band that grows in proportion to time", short=True),
     "friction proportional to load": LawCase(
-        ("sign(last move) * load",), lambda q: q["sign(last move)"] * np.abs(q["load"]),
+        ("sign(last move) * load",), lambda q, centre: q["sign(last move)"] * np.abs(q["load"]),
         "each joint short of its target by a friction in proportion to the load it carries", short=True,
         needs=("load",)),
     "scale quadratic in stroke": LawCase(
-        ("stroke^2",), lambda q: (q["stroke"] - np.ptp(q["stroke"], axis=0) / 2 - q["stroke"].min(axis=0)) ** 2,
+        ("stroke^2",), lambda q, centre: (q["stroke"] - centre) ** 2,
         "each joint's transmission error quadratic in its stroke about the middle of the strokes commanded (the part "
         "an offset and a scale, which the geometry and the library take, cannot make)"),
     "drift following a recorded temperature": LawCase(
-        (TEMPERATURE_CHANNEL,), lambda q: q[TEMPERATURE_CHANNEL] - LAB_TEMPERATURE_C,
+        (TEMPERATURE_CHANNEL,), lambda q, centre: q[TEMPERATURE_CHANNEL] - LAB_TEMPERATURE_C,
         "each joint grows in proportion to the recorded lab temperature (an air conditioner cycling)",
         needs=(TEMPERATURE_CHANNEL,)),
 }
@@ -384,7 +385,9 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     targets, joints = _draw_poses(robot, nominal, n, rng, machine.workspace(robot))
     planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise)
     temperature, recorded = _air_conditioner(planned.t_s, rng)
-    shape = case.shape(joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature}))
+    quantities = joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature})
+    centre = quantities["stroke"].min(axis=0) + np.ptp(quantities["stroke"], axis=0) / 2
+    shape = case.shape(quantities, centre)
     c = rng.uniform(*SPREAD_RANGE, robot.n_chains) * (-1.0 if case.short else rng.choice([-1.0, 1.0], robot.n_chains))
     dF_dq = robot.closure_jacobians(nominal, joints, targets).joints
     c = c * magnitude / np.max(np.abs(dF_dq @ (shape * c)[..., None]))
@@ -393,7 +396,8 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": f"law: {name}",
              "effects": [], "contributions_mm": {}, "granularity": {}, "machine": merged_settings(context),
              "law": {"name": name, "physics": case.physics, "terms": list(case.terms), "granularity": PER_CHAIN,
-                     "constants": c.tolist(), "largest_contribution_mm": magnitude}}
+                     "constants": c.tolist(), "largest_contribution_mm": magnitude,
+                     "stroke_centre": centre.tolist()}}
     extras = {TEMPERATURE_CHANNEL: recorded} if TEMPERATURE_CHANNEL in case.needs else {}
     return make_recording(robot, planned.t_s, joints, m.measured, noise, extras=extras,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
@@ -427,7 +431,8 @@ def command_scenario_machine(rec: Recording, commands: np.ndarray, t_s: np.ndarr
     if law is not None:
         data = EffectData(robot, robot.table.nominal, commands, robot.forward_kinematics(theta, commands), t_s,
                           rec.noise)
-        commands = commands + LAW_CASES[law["name"]].shape(joint_quantities(data, channels)) * np.asarray(law["constants"])
+        shape = LAW_CASES[law["name"]].shape(joint_quantities(data, channels), np.asarray(law["stroke_centre"]))
+        commands = commands + shape * np.asarray(law["constants"])
     timed = law is None and any(registered_effect(e).follows == "time" for e in truth["effects"])
     return simulate(robot, theta, commands, truth["machine"], SensorNoise(),
                     times_s=np.asarray(t_s, dtype=float) if timed else None).true_poses

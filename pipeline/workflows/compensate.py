@@ -77,26 +77,36 @@ def _rows(mask: np.ndarray) -> str:
     return ", ".join(map(str, rows[:ROWS_LISTED])) + more
 
 
+def _outside(names, units, lows, highs, values) -> tuple[np.ndarray, list[str]]:
+    """Rows with a value outside its range, and per name the count and the range, in words."""
+    mask = np.zeros(len(values), dtype=bool)
+    words = []
+    for name, unit, lo, hi, col in zip(names, units, lows, highs, values.T):
+        bad = (col < lo) | (col > hi)
+        if bad.any():
+            mask |= bad
+            words.append(f"{name} in {int(bad.sum())} outside [{lo:.6g}, {hi:.6g}] {unit}")
+    return mask, words
+
+
 def domain_warnings(cal: Calibration, poses: np.ndarray, commands: np.ndarray, t_s, where) -> list[str]:
     """Warnings naming the targets outside the domain the calibration saw: a pose coordinate
     outside the box of the calibration poses, a command outside a joint's recorded range, a time
-    past the recording's span (a drift extrapolated)."""
+    past the recording's span (a drift extrapolated); one line each."""
     v, robot, out = cal.validity, cal.robot, []
-    for name, unit, lo, hi, col in zip(robot.pose_names, robot.pose_units, v["pose_min"], v["pose_max"], poses.T):
-        bad = (col < lo) | (col > hi)
-        if bad.any():
-            out.append(f"{where}: row(s) {_rows(bad)}: {name} outside the calibration poses' range [{lo:.6g}, "
-                       f"{hi:.6g}] {unit}: the commands extrapolate the calibration there")
-    for name, lo, hi, col in zip(robot.joint_names, v["joint_min"], v["joint_max"], commands.T):
-        bad = (col < lo) | (col > hi)
-        if bad.any():
-            out.append(f"{where}: row(s) {_rows(bad)}: command of {name} outside the recorded range [{lo:.6g}, "
-                       f"{hi:.6g}] {robot.joint_unit}")
+    mask, words = _outside(robot.pose_names, robot.pose_units, v["pose_min"], v["pose_max"], poses)
+    if mask.any():
+        out.append(f"{where}: row(s) {_rows(mask)}: outside the box of the calibration poses ({'; '.join(words)}): "
+                   "the commands extrapolate the calibration there")
+    mask, words = _outside(robot.joint_names, [robot.joint_unit] * robot.n_chains, v["joint_min"], v["joint_max"],
+                           commands)
+    if mask.any():
+        out.append(f"{where}: row(s) {_rows(mask)}: commands outside the joints' recorded ranges ({'; '.join(words)})")
     if t_s is not None:
-        bad = (t_s < v["t_s"][0]) | (t_s > v["t_s"][1])
-        if bad.any():
-            out.append(f"{where}: row(s) {_rows(bad)}: t_s outside the recording's span [{v['t_s'][0]:.6g}, "
-                       f"{v['t_s'][1]:.6g}] s: effects that follow time are extrapolated")
+        mask, words = _outside(["t_s"], ["s"], [v["t_s"][0]], [v["t_s"][1]], t_s[:, None])
+        if mask.any():
+            out.append(f"{where}: row(s) {_rows(mask)}: times outside the recording's span ({words[0]}): effects "
+                       "that follow time are extrapolated")
     return out
 
 
