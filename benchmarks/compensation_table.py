@@ -47,7 +47,7 @@ def errors(rec, seed: int) -> dict:
     found = list(rep.summary["effects"]) + ([f"law: {' + '.join(rep.summary['proposed_law']['terms'])}"]
                                             if rep.summary["proposed_law"] else [])
     return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)),
-            "geometry": error(compensated_commands(robot, cal.theta, targets, [], t_s=t_s).commands),
+            "geometry": error(compensated_commands(robot, rep.discovery.geometry.theta, targets, [], t_s=t_s).commands),
             "physics": error(physics.commands), "floor": rep.summary["noise_floor_mm"], "found": found,
             "left_out": sorted(physics.left_out)}
 
