@@ -123,8 +123,8 @@ def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tu
     if header == columns + (TIME_COLUMN,):  # a compensated command file's times
         columns = header
     if header != columns:
-        raise ValueError(f"{path}: line 1: header must be {','.join(columns)}[,{TIME_COLUMN}] (the {robot.name}'s), "
-                         f"got {','.join(header)}")
+        raise ValueError(f"{path}: line 1: header must be {','.join(columns)} (the {robot.name}'s), "
+                         f"got {','.join(header)} (a last column {TIME_COLUMN} is allowed)")
     data = []
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
