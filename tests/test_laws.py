@@ -104,6 +104,25 @@ def test_a_law_is_an_effect_kept_as_data_and_refitted():
     np.testing.assert_allclose(fit.coefficients, c, atol=4 * fit.coefficient_std.max())
 
 
+def test_library_effects_the_law_contains_are_dropped_once_it_is_in():
+    """A MuJoCo hexapod whose legs settle short by a fraction of their last move (each its own):
+    the library alone names a dead band (it follows the direction of the last move, the law's
+    sign); re-examined with the law in, the dead band no longer earns its place and is dropped, and
+    the law's constants stay those of the truth (within 4 of their standard deviations)."""
+    from pipeline.simulation import law_recording
+
+    rec = law_recording("settle lag", 300, robot="hexapod")
+    d = discover_effects(EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise))
+    assert "joint_friction" in d.effects  # the library's best account of it
+    s = d.proposed_law.summary()
+    assert s["library_effects_dropped"] == list(d.effects) and s["library_effects"] == []
+    assert [m.name for m in d.proposed_law.fit.models] == [LAW_NAME]
+    truth = np.array(rec.meta["simulation"]["law"]["constants"])
+    values, std = (np.array(s[k]["last move"]) for k in ("constants", "constants_std"))
+    assert np.all(np.abs(values - truth) < 4 * std), (values, truth, std)
+    assert s["explained_with_law"] and s["cv_rms_after_mm"] <= 1.2 * s["noise_floor_mm"]
+
+
 def test_a_term_is_each_joints_own_variable():
     data = recording(lambda q: 0 * q["t"], n=20, seed=4)
     q = joint_quantities(data)

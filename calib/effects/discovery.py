@@ -1283,9 +1283,33 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
     eff = law_effect(found.terms, found.granularity, channels)
     extras = {m.name: e for m, e in zip(fit.models, fit.extras) if e is not None}
     exact = fit_effects(data, fit.models + (eff,), extras=extras, start=fit.theta)
+    exact, dropped = reexamined(data, exact, eff, extras)
     floor = float(_rms(closure_noise_std(data.robot, exact.theta, data)))
     cv_w, cv_mm = space(exact).cv([], folds, seed)
-    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm)
+    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm, dropped)
+
+
+def reexamined(data: EffectData, exact: EffectFit, law: Effect, extras: dict,
+               min_delta_bic: float = MIN_DELTA_BIC) -> tuple[EffectFit, tuple]:
+    """The library's effects of ``exact`` re-examined once ``law`` is in: the one whose removal
+    costs least is dropped while that cost (the BIC's rise, exact refits) is below
+    ``min_delta_bic``, the evidence an effect needs to enter at all; a law that contains an
+    effect's physics (a settle lag and a dead band both follow the last move) leaves it nothing to
+    explain. Returns the fit kept and the names dropped, in the order dropped."""
+    dropped: list[str] = []
+    while True:
+        trials = []
+        for m in exact.models:
+            if m is law:
+                continue
+            rest = tuple(x for x in exact.models if x is not m)
+            f = fit_effects(data, rest, extras={k: v for k, v in extras.items() if k != m.name}, start=exact.theta)
+            trials.append((f.bic() - exact.bic(), m.name, f))
+        cheapest = min(trials, key=lambda t: t[0], default=None)
+        if cheapest is None or cheapest[0] >= min_delta_bic:
+            return exact, tuple(dropped)
+        dropped.append(cheapest[1])
+        exact = cheapest[2]
 
 
 def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:

@@ -529,6 +529,8 @@ class ProposedLaw:
         cv_after, cv_after_mm: cross-validated residual (whitened, mm) of the exact fit with the
             law (the search's own figure is linearised at the library's fit, which a large
             remainder makes inexact).
+        dropped: the library's effects the law leaves nothing to explain, dropped from ``fit``
+            when re-examined with the law in (:func:`calib.effects.discovery.reexamined`).
     """
 
     search: LawSearch
@@ -538,6 +540,7 @@ class ProposedLaw:
     noise_floor_mm: float
     cv_after: float
     cv_after_mm: float
+    dropped: tuple = ()
 
     def chain_constants(self) -> tuple[np.ndarray, np.ndarray]:
         """``(values, std)``, each (C, k): every constant of the law joint by joint (a shared one
@@ -571,4 +574,6 @@ class ProposedLaw:
                 "noise_floor_mm": self.noise_floor_mm,
                 "explained_with_law": not self.remaining["present"], "remaining_with_law": self.remaining["summary"],
                 "law": law_to_dict(terms, gran, self.fit.coefficients[self.fit.slices()[LAW_NAME]]),
+                "library_effects": [m.name for m in self.fit.models if m.name != LAW_NAME],
+                "library_effects_dropped": list(self.dropped),
                 "steps": self.search.steps}

@@ -56,6 +56,11 @@ def law_lines(law: dict | None) -> list[str]:
         each = ", ".join(f"{v:.4g} +- {sd:.2g}" for v, sd in zip(values, std))
         lines.append(f"  [{name}] ({form.replace('_', ' ')}): {each if form == 'per_chain' else f'{values[0]:.4g} +- {std[0]:.2g}'} "
                      f"{law['units'][name]}")
+    if law.get("library_effects_dropped"):
+        kept = ", ".join(law["library_effects"]) or "none"
+        lines.append(f"  with the law in, the library's {', '.join(law['library_effects_dropped'])} no longer earns its "
+                     f"place (re-examined: the BIC rises by less than an effect needs to enter); the law's model: "
+                     f"geometry + {kept} + the law")
     return lines
 
 
