@@ -19,11 +19,10 @@ import time
 
 import numpy as np
 
-from calib.compensation import compensated_commands
 from calib.effects import EFFECTS, effects_for
 from calib.robots import ROBOTS, default_robot
-from pipeline.simulation import command_scenario_machine, effect_recording, heldout_targets, law_cases_for, law_recording
-from pipeline.workflows.discovery import discover, discovery_calibration
+from pipeline.simulation import effect_recording, law_cases_for, law_recording
+from pipeline.workflows.compensate import proof_in_the_testbed
 
 #: Two pairs of effects compensated together, where both apply.
 PAIRS = (("joint_friction", "actuator_scale"), ("joint_friction", "compliance"))
@@ -32,24 +31,11 @@ TARGETS = 50
 
 
 def errors(rec, seed: int) -> dict:
-    """Mean position errors (mm) of the three command sets, the floor, what was found and left out."""
-    robot = rec.robot
-    rep = discover(rec, seed=0, resim=False)
-    cal = discovery_calibration(rec, rep, {}, {})
-    targets, t_s = heldout_targets(rec, TARGETS, seed)
-    pos = ~robot.angle_pose_mask
-
-    def error(commands):
-        return float(np.mean(np.linalg.norm((command_scenario_machine(rec, commands, t_s, rec.extras or None)
-                                              - targets)[:, pos], axis=1)))
-
-    physics = compensated_commands(robot, cal.theta, targets, cal.effects(), t_s=t_s)
-    found = list(rep.summary["effects"]) + ([f"law: {' + '.join(rep.summary['proposed_law']['terms'])}"]
-                                            if rep.summary["proposed_law"] else [])
-    return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)),
-            "geometry": error(compensated_commands(robot, rep.discovery.geometry.theta, targets, [], t_s=t_s).commands),
-            "physics": error(physics.commands), "floor": rep.summary["noise_floor_mm"], "found": found,
-            "left_out": sorted(physics.left_out)}
+    """:func:`pipeline.workflows.compensate.proof_in_the_testbed`, with what was found and what left out."""
+    e = proof_in_the_testbed(rec, TARGETS, seed)
+    law = e["summary"]["proposed_law"]
+    return dict(e, found=list(e["summary"]["effects"]) + ([f"law: {' + '.join(law['terms'])}"] if law else []),
+                left_out=sorted(e["compensation"].left_out))
 
 
 def cases(robot):

@@ -15,7 +15,7 @@ from pipeline.compensate import main as compensate_main
 from pipeline.formats import CALIBRATION_VERSION, read_calibration, read_command_file
 from pipeline.simulation import (DISCOVERY_NOISE, command_scenario_machine, effect_recording, heldout_targets,
                                  law_recording, machine_context)
-from pipeline.workflows.discovery import discover, discovery_calibration
+from pipeline.workflows.compensate import proof_in_the_testbed
 
 #: Effects whose model the commands invert (the others say why not).
 COMPENSABLE = [n for n, e in EFFECTS.items() if n != "none" and not e.not_compensable]
@@ -81,26 +81,6 @@ def test_what_cannot_be_compensated_is_named_with_why():
     assert "t_s" in c.left_out["thermal_drift"]
 
 
-def proof(rec, seed, n_targets=50):
-    """Discover on ``rec``, compensate 50 held-out targets from its calibration and command the
-    machine that made it: mean position errors (mm) of nominal, geometry-only and geometry+physics
-    commands, the noise floor, and the discovery's summary."""
-    robot = rec.robot
-    rep = discover(rec, seed=0, resim=False)
-    cal = discovery_calibration(rec, rep, {}, {})
-    targets, t_s = heldout_targets(rec, n_targets, seed)
-    pos = ~robot.angle_pose_mask
-
-    def error(commands):
-        return float(np.mean(np.linalg.norm((command_scenario_machine(rec, commands, t_s) - targets)[:, pos], axis=1)))
-
-    geometry = compensated_commands(robot, rep.discovery.geometry.theta, targets, [], t_s=t_s).commands  # geometry alone
-    physics = compensated_commands(robot, cal.theta, targets, cal.effects(), t_s=t_s)
-    assert physics.converged and not physics.left_out
-    return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)), "geometry": error(geometry),
-            "physics": error(physics.commands), "floor": rep.summary["noise_floor_mm"]}, rep.summary
-
-
 @pytest.mark.parametrize("robot_name", sorted(ROBOTS))
 def test_the_machine_lands_closer_with_the_physics_compensated(robot_name):
     """Each robot's MuJoCo machine with its hidden geometric errors and a dead band of its own in
@@ -108,8 +88,9 @@ def test_the_machine_lands_closer_with_the_physics_compensated(robot_name):
     physics compensated the mean position error is at most 1.5 times the noise floor and at most
     half the geometry-only error (measured here: 0.35-0.45 um against 11-15 um)."""
     rec = effect_recording("joint_friction", 3, robot=robot_name, granularity="per_chain")
-    e, s = proof(rec, 1003)
-    assert s["effects"] == ["joint_friction"]
+    e = proof_in_the_testbed(rec, 50, 1003)
+    assert e["summary"]["effects"] == ["joint_friction"] and e["compensation"].converged
+    assert e["compensation"].compensated == ("joint_friction",)
     assert e["physics"] <= 1.5 * e["floor"] and e["physics"] <= 0.5 * e["geometry"] < e["nominal"], e
 
 

@@ -40,7 +40,7 @@ from calib.robot import Robot
 from calib.robots import ROBOTS, robot_from_description
 
 from .outputs import atomic_write
-from .recording import read_text_file, sidecar_path
+from .recording import read_json_file, sidecar_path
 
 __all__ = ["CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX", "Calibration", "CalibrationFileError",
            "write_calibration", "read_calibration", "calibration_text", "recording_source", "validity_domain"]
@@ -197,12 +197,7 @@ def read_calibration(path, robot: str | None = None) -> Calibration:
             and version, is another robot's, or a key is missing or wrong (the message names it).
     """
     path = Path(path)
-    try:
-        d = json.loads(read_text_file(path, "calibration file"))
-    except json.JSONDecodeError as exc:
-        raise CalibrationFileError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
-    except ValueError as exc:
-        raise CalibrationFileError(str(exc)) from None
+    d = read_json_file(path, "calibration file", CalibrationFileError)
     if not isinstance(d, dict):
         raise CalibrationFileError(f"{path}: not a calibration file (a JSON object with key 'format')")
     if d.get("format") != CALIBRATION_FORMAT:

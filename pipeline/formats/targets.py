@@ -9,8 +9,6 @@ in which the targets are commanded.
 
 from __future__ import annotations
 
-import csv
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,7 +16,7 @@ import numpy as np
 
 from calib.robot import Robot
 
-from .recording import check_channel_name, columns, finite_number, read_text_file
+from .recording import check_channel_name, columns, csv_rows, finite_number, header_names, read_text_file
 
 __all__ = ["Targets", "read_targets", "TargetsError"]
 
@@ -49,27 +47,9 @@ def read_targets(path, robot: Robot) -> Targets:
         TargetsError: naming the file, and the line, row and column of what is wrong.
     """
     path = Path(path)
-    try:
-        text = read_text_file(path, "target file")
-    except ValueError as exc:
-        raise TargetsError(str(exc)) from None
-    try:
-        rows = list(csv.reader(io.StringIO(text, newline="")))
-    except csv.Error as exc:
-        raise TargetsError(f"{path}: not a readable CSV file: {exc}") from None
-    while rows and not any(c.strip() for c in rows[-1]):
-        rows.pop()
     pose_cols = columns(robot)[1]
-    if not rows:
-        raise TargetsError(f"{path}: empty file (expected a header row {','.join(pose_cols)}[,t_s])")
-    header = [h.strip() for h in rows[0]]
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise TargetsError(f"{path}: line 1: column(s) {', '.join(dup)} appear more than once")
-    missing = [c for c in pose_cols if c not in header]
-    if missing:
-        raise TargetsError(f"{path}: line 1: header lacks column(s) {', '.join(missing)} (the {robot.name}'s pose "
-                           f"columns {','.join(pose_cols)}); got {','.join(header)}")
+    rows = csv_rows(path, read_text_file(path, "target file", TargetsError), pose_cols, TargetsError)
+    header = header_names(path, rows[0], pose_cols, f"the {robot.name}'s pose columns", TargetsError)
     others = [h for h in header if h not in pose_cols and h != "t_s"]
     for h in others:
         try:

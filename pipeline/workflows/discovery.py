@@ -31,7 +31,8 @@ from mjcf.simulator import SettleError
 from calib.effects.records import effect_record, fitted_effects
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
-                              read_recording, recording_checks, recording_source, validity_domain, write_calibration)
+                              read_json_file, read_recording, recording_checks, recording_source, validity_domain,
+                              write_calibration)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.views import verdict_words, write_discovery_rrd
 
@@ -319,10 +320,7 @@ def read_kept_law(path: Path, robot: str | None = None) -> dict:
     """
     from calib.effects.laws import law_from_dict
 
-    try:
-        d = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot be read as a kept law ({exc})") from None
+    d = read_json_file(Path(path), "kept law (JSON)", ValueError)
     if not isinstance(d, dict) or d.get("format") != KEPT_LAW_FORMAT:
         raise ValueError(f"{path}: key 'format' is not {KEPT_LAW_FORMAT!r}: not a law kept by pipeline.discover --law")
     for key in ("robot", "law"):
