@@ -14,10 +14,11 @@ the effect is at least 5 times the noise.
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 import numpy as np
+
+from timing import print_table_head  # benchmarks/timing.py
 
 from calib.effects import EFFECTS, effects_for
 from calib.robots import ROBOTS, default_robot
@@ -55,11 +56,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=2, help="recordings per case")
     ap.add_argument("--first-seed", type=int, default=300)
     a = ap.parse_args(argv)
-    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {TARGETS} held-out targets a recording, "
-          f"seeds {a.first_seed}..{a.first_seed + a.seeds - 1}")
-    print("| robot | recording | found (each seed) | nominal (um) | geometry only (um) | geometry + physics (um) "
-          "| floor (um) | physics <= 1.5 floor | physics <= geometry / 2 | not compensated |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print_table_head(f"{TARGETS} held-out targets a recording, seeds {a.first_seed}..{a.first_seed + a.seeds - 1}",
+                     ["robot", "recording", "found (each seed)", "nominal (um)", "geometry only (um)",
+                      "geometry + physics (um)", "floor (um)", "physics <= 1.5 floor", "physics <= geometry / 2",
+                      "not compensated"])
     for name in a.robots:
         robot = default_robot(name)
         for label, make in cases(robot):
