@@ -13,10 +13,11 @@ summary) are timed, best of ``--repeat``.
 from __future__ import annotations
 
 import argparse
-import os
 import time
 
 import numpy as np
+
+from timing import print_table_head  # benchmarks/timing.py
 
 from calib.effects import EffectData, discover_effects
 from pipeline.workflows.discovery import discover
@@ -31,11 +32,9 @@ def main(argv=None) -> int:
     ap.add_argument("--poses", type=int, default=120)
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args(argv)
-    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {a.poses} poses, full library, "
-          f"up to three effects")
-    print("| robot | truth (per joint) | named | granularity | explained | discover_effects (s) | shared forms only (s) "
-          "| ratio | pipeline discover, no resim (s) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print_table_head(f"{a.poses} poses, full library, up to three effects",
+                     ["robot", "truth (per joint)", "named", "granularity", "explained", "discover_effects (s)",
+                      "shared forms only (s)", "ratio", "pipeline discover, no resim (s)"])
     for robot, effects in CASES:
         rec = effect_recording(effects or "none", 5, robot=robot, n_poses=a.poses, granularity="per_chain")
         data = EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise)

@@ -13,11 +13,10 @@ the law search found against the truth.
 from __future__ import annotations
 
 import argparse
-import os
 
 import numpy as np
 
-from timing import best_time  # benchmarks/timing.py
+from timing import best_time, print_table_head  # benchmarks/timing.py
 
 from calib.effects import EffectData, discover_effects, propose_law
 from calib.effects.laws import joint_quantities
@@ -40,10 +39,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
-    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}, {a.poses} poses, hexapod, seed {a.seed}")
-    print("| law (truth) | library named | law found | granularity | constants found / truth (min-max) "
-          "| CV residual before -> after (um) | floor (um) | library search (s) | law search (s) | ratio |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print_table_head(f"{a.poses} poses, hexapod, seed {a.seed}",
+                     ["law (truth)", "library named", "law found", "granularity", "constants found / truth (min-max)",
+                      "CV residual before -> after (um)", "floor (um)", "library search (s)", "law search (s)", "ratio"])
     for name, (law, c) in LAWS.items():
         data = law_recording(lambda q: law(q, c), a.poses, a.seed)
         t_lib, disc = best_time(lambda: discover_effects(data, laws=False), a.repeat)

@@ -53,7 +53,7 @@ __all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETE
            "instrument_measurements", "measurement_jacobians", "measurement_units", "measurement_names",
            "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
            "FrameDetection", "detect_frame", "MeasuredFit", "identify_measured", "identify_as_measured",
-           "measured_gauge_representative", "gauge_null_space", "whitened_residuals", "whitened_jacobian",
+           "measured_gauge_representative", "gauge_null_space", "invert_frame", "whitened_residuals", "whitened_jacobian",
            "MeasurementObservability", "measurement_observability", "checked_measured_inputs"]
 
 #: ``"auto"``: estimate the frame when the data show it (:func:`detect_frame`); ``"base"``: the
@@ -797,7 +797,7 @@ class MeasuredFit:
         robot = self.result.robot
         measured = as_array(measured, "measured", (-1, robot.pose_dim))
         s = self.row_sessions(len(measured), sessions)
-        inverse = np.array([_invert(f) for f in self.frames])
+        inverse = np.array([invert_frame(f) for f in self.frames])
         return _session_measurements(robot, measured, inverse, None, _session_rows(s, self.n_sessions))
 
     def frame_columns(self, session: int) -> np.ndarray:
@@ -814,7 +814,7 @@ class MeasuredFit:
         so its uncertainty is the data's whatever holds the gauge; ``std`` from the joint covariance
         of the two frames (linearised, central differences)."""
         pair = np.r_[self.frames[session], self.frames[reference]]
-        motion = lambda v: _compose_frames(v[:6], _invert(v[6:]))  # noqa: E731
+        motion = lambda v: _compose_frames(v[:6], invert_frame(v[6:]))  # noqa: E731
         J = np.zeros((6, 12))
         for j in range(12):
             step = np.zeros(12)
@@ -845,7 +845,9 @@ class MeasuredFit:
         return np.einsum("nij,jk,nlk->nil", J, self.unknowns_covariance, J)
 
 
-def _invert(frame: np.ndarray) -> np.ndarray:
+def invert_frame(frame) -> np.ndarray:
+    """(6,) the frame F^-1 (a pose seen in frame F taken back: ``compose(invert_frame(F), robot, compose(F, robot, p)) == p``)."""
+    frame = as_array(frame, "frame", (6,))
     R = rotation_matrix(frame[3:])
     return np.concatenate([-R.T @ frame[:3], euler_from_matrix(R.T)])
 

@@ -94,6 +94,7 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
         print(f"kept the proposed law in {report.summary['law_kept']}" if report.summary["law_kept"]
               else "no law proposed: nothing kept (--law)")
     print(f"wrote {report.summary['rrd']}")
+    print(f"wrote {report.summary['calibration']}")
     return report
 
 

@@ -212,7 +212,7 @@ def print_summary(s: dict) -> None:
     for warning in s.get("warnings") or ():
         print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")
-    for k in ("rrd", "csv", "json", "summary_json"):
+    for k in ("rrd", "csv", "json", "calibration", "summary_json"):
         if s.get(k):
             print(f"  wrote {s[k]}")
 

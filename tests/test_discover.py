@@ -251,3 +251,23 @@ def test_discovery_reads_a_recording_in_an_instrument_frame_as_the_run_does(robo
     assert answers["far"] == answers["base"]
     if effect == "none":
         assert answers["far"] == (True, [])
+    # Targets given in the instrument's frame, commanded through the calibration file the far
+    # recording's discovery wrote (its frame, geometry and effects): the machine lands on them
+    # to the noise (1.5 times the declared position noise, mean over 30 targets).
+    from pipeline.formats import read_command_file
+    from pipeline.simulation import command_scenario_machine, heldout_targets
+    from pipeline.workflows.compensate import CompensateSettings, run_compensation
+
+    targets, t_s = heldout_targets(rec, 30, 7)
+    seen = compose(FAR_FRAME, rec.robot, targets)
+    names = [f"{n}_{u}" for n, u in zip(rec.robot.pose_names, rec.robot.pose_units)]
+    (tmp_path / "targets.csv").write_text(",".join(names) + "\n" + "\n".join(",".join(map(repr, map(float, p)))
+                                                                          for p in seen) + "\n")
+    report = run_compensation(CompensateSettings(calibration=tmp_path / "far_discover.calibration.json",
+                                                 targets=tmp_path / "targets.csv", out=tmp_path / "cmd.csv",
+                                                 frame="instrument"))
+    assert report.summary["compensated"] == answers["far"][1]
+    _, commands = read_command_file(tmp_path / "cmd.csv", rec.robot)
+    pos = ~rec.robot.angle_pose_mask
+    error = np.mean(np.linalg.norm((command_scenario_machine(rec, commands, t_s) - targets)[:, pos], axis=1))
+    assert error <= 1.5 * rec.noise.pose_std(("mm",))[0], error

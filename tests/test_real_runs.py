@@ -147,6 +147,28 @@ def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machin
     got = np.r_[motion["translation_mm"], motion["rotation_rad"]]
     sd = np.r_[std["translation_mm"], std["rotation_rad"]]
     assert np.all(np.abs(got - MOTION) <= 4 * sd + 1e-12), (got - MOTION) / sd
+    # The calibration file keeps both sessions' frames; pipeline.compensate takes targets seen in
+    # either (--session), and names the sessions when it is not told which.
+    from calib.measurement import compose, frame_from_dict, invert_frame
+    from pipeline.compensate import main as compensate_main
+    from pipeline.formats import read_calibration, read_command_file, read_recording
+
+    cal = read_calibration(s["calibration"], robot_name)
+    for name in ("1", "2"):
+        np.testing.assert_array_equal(cal.frames[name], frame_from_dict(s["measurement_frames"][name]))
+    rec = read_recording(tmp_path / "two.csv")
+    seen = rec.measured[rec.session_rows("2")][:5]
+    cols = [f"{n}_{u}" for n, u in zip(cal.robot.pose_names, cal.robot.pose_units)]
+    for name, poses in (("seen", seen), ("base", compose(invert_frame(cal.frames["2"]), cal.robot, seen))):
+        (tmp_path / f"{name}.csv").write_text(",".join(cols) + "\n" + "".join(",".join(map(repr, map(float, p))) + "\n"
+                                                                         for p in poses))
+    args = ["--calibration", s["calibration"], "--targets", str(tmp_path / "seen.csv"), "--frame", "instrument"]
+    assert compensate_main(args + ["--out", str(tmp_path / "none.csv")]) == 2
+    assert compensate_main(args + ["--session", "2", "--out", str(tmp_path / "seen_cmd.csv")]) == 0
+    assert compensate_main(["--calibration", s["calibration"], "--targets", str(tmp_path / "base.csv"),
+                            "--out", str(tmp_path / "base_cmd.csv")]) == 0
+    np.testing.assert_array_equal(read_command_file(tmp_path / "seen_cmd.csv")[1],
+                                  read_command_file(tmp_path / "base_cmd.csv")[1])
 
 
 @pytest.mark.parametrize("robot_name", sorted(ROBOTS))

@@ -308,6 +308,20 @@ class EffectFit:
             out.update({k: v for k, v in d.items() if k not in ("significance", "granularity")})
         return out
 
+    def geometry_covariance(self) -> np.ndarray:
+        """(P, P) covariance of :attr:`theta` (the free parameters', jointly with the effects'
+        coefficients and marginalised over them; zero rows and columns for the fixed ones), with
+        the same inflation as :attr:`coefficient_cov`."""
+        A = self.design
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        cov = np.linalg.pinv((A / scale).T @ (A / scale), hermitian=True) / np.outer(scale, scale)
+        cov = cov * max(1.0, self.chi2 / max(self.dof, 1))
+        free = _free_indices(self.robot)
+        out = np.zeros((self.robot.n_parameters,) * 2)
+        out[np.ix_(free, free)] = cov[:free.size, :free.size]
+        return out
+
     def joint_displacement(self, data: EffectData) -> np.ndarray:
         """(N, C) joint displacement of the fitted effects on ``data``, joint unit."""
         if not self.models:
@@ -1274,46 +1288,45 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
                 seed: int = 0) -> ProposedLaw | None:
     """The law over joint-space terms that explains what ``fit`` (geometry and the library's
     effects) leaves, searched on the fit linearised at its solution (:func:`calib.effects.laws.search_law`)
-    and then fitted exactly with it; None when no term earns its place. The library's effects
-    are then re-examined: one that the model with the law does without (no higher BIC, the law
-    searched again without it, with no more terms) is left out of the law's fit
-    (``library_left_out``)."""
+    and then fitted exactly with it; None when no term earns its place."""
     def space(f: EffectFit) -> LawSpace:
         jac = data.robot.closure_jacobians(f.theta, data.joints + f.joint_displacement(data), data.measured)
         winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(data.robot, jac, data)))
         return LawSpace(data, winv, jac.joints, f.design, f.whitened, dict(channels or {}))
 
-    def with_law(f: EffectFit):
-        found = search_law(space(f), folds=folds, seed=seed)
-        if not found.terms:
-            return None
-        eff = law_effect(found.terms, found.granularity, channels)
-        extras = {m.name: e for m, e in zip(f.models, f.extras) if e is not None}
-        return found, eff, fit_effects(data, f.models + (eff,), extras=extras, start=f.theta)
-
-    best = with_law(fit)
-    if best is None:
+    found = search_law(space(fit), folds=folds, seed=seed)
+    if not found.terms:
         return None
-    # The library's effects re-examined with a law in: each named effect left out in turn, the
-    # law searched again on what the rest leaves; kept out when the model with the law has no
-    # higher BIC without it and the law no more terms (a dead band named for a friction that
-    # grows with the load takes each chain's mean level, and the law's per-joint spread no
-    # longer pays on three chains; an actuator scale left out only for the law to take `stroke`
-    # as a term of its own stays: on hexapod seed 900 the quadratic law became stroke^2 + stroke).
-    left_out: tuple = ()
-    for m in fit.models:
-        rest = tuple(x for x in fit.models if x is not m and x.name not in left_out)
-        if len(rest) == len(fit.models) - len(left_out):
-            continue
-        extras = {x.name: e for x, e in zip(fit.models, fit.extras) if e is not None and x in rest}
-        trial = with_law(fit_effects(data, rest, extras=extras, start=fit.theta))
-        if trial is not None and len(trial[0].terms) <= len(best[0].terms) and trial[2].bic() <= best[2].bic():
-            best, left_out = trial, left_out + (m.name,)
-    found, eff, exact = best
+    eff = law_effect(found.terms, found.granularity, channels)
+    extras = {m.name: e for m, e in zip(fit.models, fit.extras) if e is not None}
+    exact = fit_effects(data, fit.models + (eff,), extras=extras, start=fit.theta)
+    exact, dropped = reexamined(data, exact, eff, extras)
     floor = float(_rms(closure_noise_std(data.robot, exact.theta, data)))
     cv_w, cv_mm = space(exact).cv([], folds, seed)
-    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm,
-                       library_left_out=left_out)
+    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm, dropped)
+
+
+def reexamined(data: EffectData, exact: EffectFit, law: Effect, extras: dict,
+               min_delta_bic: float = MIN_DELTA_BIC) -> tuple[EffectFit, tuple]:
+    """The library's effects of ``exact`` re-examined once ``law`` is in: the one whose removal
+    costs least is dropped while that cost (the BIC's rise, exact refits) is below
+    ``min_delta_bic``, the evidence an effect needs to enter at all; a law that contains an
+    effect's physics (a settle lag and a dead band both follow the last move) leaves it nothing to
+    explain. Returns the fit kept and the names dropped, in the order dropped."""
+    dropped: list[str] = []
+    while True:
+        trials = []
+        for m in exact.models:
+            if m is law:
+                continue
+            rest = tuple(x for x in exact.models if x is not m)
+            f = fit_effects(data, rest, extras={k: v for k, v in extras.items() if k != m.name}, start=exact.theta)
+            trials.append((f.bic() - exact.bic(), m.name, f))
+        cheapest = min(trials, key=lambda t: t[0], default=None)
+        if cheapest is None or cheapest[0] >= min_delta_bic:
+            return exact, tuple(dropped)
+        dropped.append(cheapest[1])
+        exact = cheapest[2]
 
 
 def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:

@@ -101,6 +101,11 @@ class PerChainForm(Effect):
         self.refine_search = base.refine_search
         self.generalises = (base.name,)
         self.per_chain_signed = base.per_chain_signed
+        self.needs_time = base.needs_time
+        self.not_compensable = base.not_compensable
+
+    def compensation_inputs(self):
+        return self.base.compensation_inputs()
 
     def applies_to(self, robot):
         return self.base.applies_to(robot)

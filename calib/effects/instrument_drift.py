@@ -32,6 +32,7 @@ class InstrumentDrift(Effect):
     name = "instrument_drift"
     physics = "the measurement frame moves at a constant velocity: every measured position drifts with time"
     follows = "time"
+    not_compensable = "the instrument's frame drifts, not the machine: no command moves it"
 
     def applies_to(self, robot):
         return all(c in robot.pose_names for c in POSITION_NAMES) and robot.pose_dim == robot.n_chains

@@ -222,6 +222,10 @@ class Law(Effect):
         q = joint_quantities(data, channels_at(self.channels, self.channel_times_s, data))
         return np.concatenate([t.regressor(q) for t in self.terms], axis=-1)
 
+    def compensation_inputs(self):
+        timed = any(t.family.kind == "saturating" or "t" in t.family.parts for t in self.terms)
+        return (("t_s",) if timed else ()) + law_channels(self.terms)
+
     def machine_settings(self, coefficients, robot, context, extra=None):
         raise NotImplementedError("a proposed law has no MuJoCo machine field: it is not in the library")
 
@@ -525,8 +529,8 @@ class ProposedLaw:
         cv_after, cv_after_mm: cross-validated residual (whitened, mm) of the exact fit with the
             law (the search's own figure is linearised at the library's fit, which a large
             remainder makes inexact).
-        library_left_out: names of the library's effects the model with the law does without
-            (:func:`calib.effects.discovery.propose_law`: not in :attr:`fit`).
+        dropped: the library's effects the law leaves nothing to explain, dropped from ``fit``
+            when re-examined with the law in (:func:`calib.effects.discovery.reexamined`).
     """
 
     search: LawSearch
@@ -536,7 +540,7 @@ class ProposedLaw:
     noise_floor_mm: float
     cv_after: float
     cv_after_mm: float
-    library_left_out: tuple = ()
+    dropped: tuple = ()
 
     def chain_constants(self) -> tuple[np.ndarray, np.ndarray]:
         """``(values, std)``, each (C, k): every constant of the law joint by joint (a shared one
@@ -570,6 +574,6 @@ class ProposedLaw:
                 "noise_floor_mm": self.noise_floor_mm,
                 "explained_with_law": not self.remaining["present"], "remaining_with_law": self.remaining["summary"],
                 "law": law_to_dict(terms, gran, self.fit.coefficients[self.fit.slices()[LAW_NAME]]),
-                "library_with_law": [m.name for m in self.fit.models if m.name != LAW_NAME],
-                "library_left_out": list(self.library_left_out),
+                "library_effects": [m.name for m in self.fit.models if m.name != LAW_NAME],
+                "library_effects_dropped": list(self.dropped),
                 "steps": self.search.steps}

@@ -49,6 +49,8 @@ class LostCount(Effect):
     refine_search = False
     granularity = "per_chain"  # already one coefficient per chain (no shared form)
     follows = "time"
+    not_compensable = ("a one-off loss of counts during the recording: re-home the machine (its zero is then "
+                       "restored) rather than command around it")
 
     def coefficients(self, robot):
         return (Coefficient("step", robot.joint_unit),)

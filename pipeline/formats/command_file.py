@@ -18,7 +18,7 @@ from calib.robots import ROBOTS, default_robot
 from .outputs import atomic_write
 from .recording import finite_number, sidecar_path
 
-__all__ = ["command_columns", "command_csv", "write_command_file", "read_command_file"]
+__all__ = ["TIME_COLUMN", "command_columns", "command_csv", "write_command_file", "read_command_file"]
 
 
 def command_columns(robot: Robot) -> tuple[str, ...]:
@@ -37,14 +37,19 @@ def _check_rows(robot: Robot, poses, joints) -> tuple[np.ndarray, np.ndarray]:
     return poses, joints
 
 
-def command_csv(robot: Robot, poses, joints) -> str:
-    """CSV text of a command file (full float64 precision)."""
+#: The optional last column of a command file: each command's time since the machine started, s.
+TIME_COLUMN = "t_s"
+
+
+def command_csv(robot: Robot, poses, joints, t_s=None) -> str:
+    """CSV text of a command file (full float64 precision); ``t_s`` (N,) adds the time column."""
     poses, joints = _check_rows(robot, poses, joints)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(command_columns(robot))
-    for p, q in zip(poses, joints):
-        w.writerow([repr(float(v)) for v in np.r_[p, q]])
+    w.writerow(command_columns(robot) + (() if t_s is None else (TIME_COLUMN,)))
+    rows = np.c_[poses, joints] if t_s is None else np.c_[poses, joints, np.asarray(t_s, dtype=float)]
+    for row in rows:
+        w.writerow([repr(float(v)) for v in row])
     return buf.getvalue()
 
 
@@ -82,7 +87,7 @@ def write_command_file(path: str | os.PathLike, robot: Robot, poses, joints, met
 def _robot_of_header(path: Path, header: tuple) -> Robot:
     known = {name: default_robot(name) for name in sorted(ROBOTS)}
     for robot in known.values():
-        if command_columns(robot) == header:
+        if command_columns(robot) in (header, header[:-1]):
             return robot
     expected = "; ".join(f"{name}: {','.join(command_columns(r))}" for name, r in known.items())
     raise ValueError(f"{path}: line 1: header {','.join(header)} is no registered robot's (expected {expected})")
@@ -115,9 +120,11 @@ def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tu
     if robot is None:
         robot = _robot_of_header(path, header)
     columns = command_columns(robot)
+    if header == columns + (TIME_COLUMN,):  # a compensated command file's times
+        columns = header
     if header != columns:
         raise ValueError(f"{path}: line 1: header must be {','.join(columns)} (the {robot.name}'s), "
-                         f"got {','.join(header)}")
+                         f"got {','.join(header)} (a last column {TIME_COLUMN} is allowed)")
     data = []
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
@@ -130,4 +137,4 @@ def read_command_file(path: str | os.PathLike, robot: Robot | None = None) -> tu
         raise ValueError(f"{path}: no data rows after the header")
     a = np.array(data, dtype=float)
     d = robot.pose_dim
-    return a[:, :d].copy(), a[:, d:].copy()
+    return a[:, :d].copy(), a[:, d:d + robot.n_chains].copy()

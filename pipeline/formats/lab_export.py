@@ -353,10 +353,7 @@ def read_map(path: str | Path) -> LabMap:
         LabExportError: naming the file and the key (or the TOML line) at fault.
     """
     path = Path(path)
-    try:
-        text = read_text_file(path, "mapping file (TOML)")
-    except ValueError as exc:
-        raise LabExportError(str(exc)) from None
+    text = read_text_file(path, "mapping file (TOML)", LabExportError)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -444,10 +441,7 @@ def read_lab_table(path: str | Path, lab_map: LabMap) -> LabTable:
     """A lab file split by the map's ``[csv]`` dialect: header line after ``skip_lines``, data rows
     (trailing blank lines dropped)."""
     path = Path(path)
-    try:
-        text = read_text_file(path, "lab file (CSV)")
-    except ValueError as exc:
-        raise LabExportError(str(exc)) from None
+    text = read_text_file(path, "lab file (CSV)", LabExportError)
     dialect = lab_map.tables["csv"]
     skip = dialect["skip_lines"]
     lines = text.splitlines(keepends=True)

@@ -272,22 +272,35 @@ READABLE_VERSIONS = (1, FORMAT_VERSION)
 MIN_ROBOT_SIZE_MM = 5.0
 
 
-def read_text_file(path: Path, what: str) -> str:
-    """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line RecordingError."""
+def read_text_file(path: Path, what: str, error: type[Exception] = None) -> str:
+    """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line ``error``
+    (default :class:`RecordingError`) naming it."""
+    error = error or RecordingError
     if path.is_dir():
-        raise RecordingError(f"{path}: is a folder, not a {what}")
+        raise error(f"{path}: is a folder, not a {what}")
     if not path.exists():
-        raise RecordingError(f"{path}: {what} not found")
+        raise error(f"{path}: {what} not found")
     try:
         data = path.read_bytes()
     except OSError as exc:
-        raise RecordingError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+        raise error(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
     if b"\0" in data:
-        raise RecordingError(f"{path}: not a text file (it holds NUL bytes): expected a {what}")
+        raise error(f"{path}: not a text file (it holds NUL bytes): expected a {what}")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise RecordingError(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
+        raise error(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
+
+
+def read_json_file(path: Path, what: str, error: type[Exception] = None):
+    """The JSON value of ``path`` (:func:`read_text_file`), or a one-line ``error`` (default
+    :class:`RecordingError`) naming the file and the line where it is not JSON."""
+    error = error or RecordingError
+    text = read_text_file(path, what, error)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg}): expected a {what}") from None
 
 
 def _describes(robot_name: str, description: dict) -> bool:
@@ -304,11 +317,7 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
     by :func:`_sidecar_layout`)."""
     if not json_path.exists() and not json_path.is_dir():
         raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
-    text = read_text_file(json_path, "JSON sidecar")
-    try:
-        side = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{json_path}: not valid JSON: {exc}") from None
+    side = read_json_file(json_path, "JSON sidecar")
     _object_of_known_keys(side, SIDECAR_FIELDS, f"{json_path}: top level", f"{json_path}: unknown field(s)",
                           "the fields are")
     for key in ("format", "version", "robot", "units", "nominal_geometry", "declared_noise"):
@@ -424,36 +433,46 @@ def _session_block(json_path: Path, name: str, block) -> dict:
     return block
 
 
-def _csv_rows(csv_path: Path, text: str, expected: tuple[str, ...]) -> list[list[str]]:
-    """The CSV's rows (cells as text), trailing blank lines dropped; at least the header."""
+def csv_rows(csv_path: Path, text: str, expected: tuple[str, ...], error: type[Exception] = None) -> list[list[str]]:
+    """The CSV's rows (cells as text), trailing blank lines dropped; at least the header (else
+    ``error``, default :class:`RecordingError`, naming the file and the ``expected`` columns)."""
+    error = error or RecordingError
     try:
         rows = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
-        raise RecordingError(f"{csv_path}: not a readable CSV file: {exc}") from None
+        raise error(f"{csv_path}: not a readable CSV file: {exc}") from None
     while rows and not any(c.strip() for c in rows[-1]):
         rows.pop()  # trailing blank lines
     if not rows:
-        raise RecordingError(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
+        raise error(f"{csv_path}: empty file (expected a header row {', '.join(expected)})")
     return rows
 
 
-def _header(csv_path: Path, row: list[str], expected: tuple[str, ...], robot: Robot) -> list[str]:
+def header_names(csv_path: Path, row: list[str], expected: tuple[str, ...], whose: str,
+                 error: type[Exception] = None) -> list[str]:
     """The header row's column names, checked: comma-separated, each once, the ``expected``
-    columns all there (in any order), nothing else but ``set`` and ``session``."""
+    columns all there (in any order; ``whose`` says whose they are); else ``error`` (default
+    :class:`RecordingError`) naming line 1."""
+    error = error or RecordingError
     header = [h.strip() for h in row]
-    if len(header) == 1 and ";" in header[0]:
-        raise RecordingError(f"{csv_path}: line 1: the fields are separated by ';'; a recording is "
-                             "comma-separated (t_s,...)")
-    if len(header) == 1 and "\t" in header[0]:
-        raise RecordingError(f"{csv_path}: line 1: the fields are separated by tabs; a recording is "
-                             "comma-separated (t_s,...)")
+    for sep, words in ((";", "';'"), ("\t", "tabs")):
+        if len(header) == 1 and sep in header[0]:
+            raise error(f"{csv_path}: line 1: the fields are separated by {words}; the file is comma-separated "
+                        f"({','.join(expected[:2])},...)")
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
-        raise RecordingError(f"{csv_path}: line 1: column(s) {', '.join(dup)} appear more than once")
+        raise error(f"{csv_path}: line 1: column(s) {', '.join(dup)} appear more than once")
     missing = [c for c in expected if c not in header]
     if missing:
-        raise RecordingError(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} "
-                             f"(a {robot.name} recording, per its sidecar); got {', '.join(header)}")
+        raise error(f"{csv_path}: line 1: header lacks column(s) {', '.join(missing)} ({whose}); got "
+                    f"{', '.join(header)}")
+    return header
+
+
+def _header(csv_path: Path, row: list[str], expected: tuple[str, ...], robot: Robot) -> list[str]:
+    """The header row's column names, checked (:func:`header_names`), nothing else but ``set``
+    and ``session``."""
+    header = header_names(csv_path, row, expected, f"a {robot.name} recording, per its sidecar")
     unknown = [h for h in header if h not in expected + ("set", "session")]
     if unknown:
         raise RecordingError(f"{csv_path}: line 1: unknown column(s) {', '.join(unknown)}")
@@ -551,7 +570,7 @@ def read_recording(csv_path: str | Path) -> Recording:
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
     extras, session_info = _sidecar_layout(json_path, side, (joint_cols, pose_cols))
     expected = ("t_s",) + joint_cols + pose_cols + extras
-    rows = _csv_rows(csv_path, text, expected)
+    rows = csv_rows(csv_path, text, expected)
     header = _header(csv_path, rows[0], expected, robot)
     if len(rows) == 1:
         raise RecordingError(f"{csv_path}: no data rows (the header alone)")

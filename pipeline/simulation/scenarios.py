@@ -36,7 +36,7 @@ from pipeline.formats import Recording
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "make_recording",
            "effects_settings", "effect_recording", "LawCase", "LAW_CASES", "law_cases_for", "law_recording",
-           "TEMPERATURE_CHANNEL"]
+           "TEMPERATURE_CHANNEL", "heldout_targets", "command_scenario_machine"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
@@ -372,9 +372,10 @@ class LawCase:
 
     Attributes:
         terms: the law search's names of its terms (:mod:`calib.effects.laws`): what it must name.
-        shape: ``shape(q) -> (N, C)`` each joint's offset per unit constant, joint unit, from
-            :func:`calib.effects.laws.joint_quantities` of the commands (``load``: the joint force
-            of the statics per unit platform weight; the recorded channels included).
+        shape: ``shape(q, centre) -> (N, C)`` each joint's offset per unit constant, joint unit,
+            from :func:`calib.effects.laws.joint_quantities` of the commands (``load``: the joint
+            force of the statics per unit platform weight; the recorded channels included) and the
+            machine's ``centre`` (C,): the middle of the strokes its recording commanded, joint unit.
         physics: the law in words.
         short: every joint falls short of its target (a negative constant); else each joint's
             sign is drawn.
@@ -382,7 +383,7 @@ class LawCase:
     """
 
     terms: tuple
-    shape: Callable[[dict], np.ndarray]
+    shape: Callable[[dict, np.ndarray], np.ndarray]
     physics: str
     short: bool = False
     needs: tuple = ()
@@ -390,21 +391,21 @@ class LawCase:
 
 #: The laws of the blind suite's ``law`` kind (the issue's five): name -> :class:`LawCase`.
 LAW_CASES: dict[str, LawCase] = {
-    "settle lag": LawCase(("last move",), lambda q: q["last move"],
+    "settle lag": LawCase(("last move",), lambda q, centre: q["last move"],
                           "each joint measured short of its target by a fraction of its last move", short=True),
     "dead band growing with time": LawCase(
-        ("sign(last move) * t",), lambda q: q["sign(last move)"] * q["t"],
+        ("sign(last move) * t",), lambda q, centre: q["sign(last move)"] * q["t"],
         "each joint short of its target by a dead band that grows in proportion to time", short=True),
     "friction proportional to load": LawCase(
-        ("sign(last move) * load",), lambda q: q["sign(last move)"] * np.abs(q["load"]),
+        ("sign(last move) * load",), lambda q, centre: q["sign(last move)"] * np.abs(q["load"]),
         "each joint short of its target by a friction in proportion to the load it carries", short=True,
         needs=("load",)),
     "scale quadratic in stroke": LawCase(
-        ("stroke^2",), lambda q: (q["stroke"] - np.ptp(q["stroke"], axis=0) / 2 - q["stroke"].min(axis=0)) ** 2,
+        ("stroke^2",), lambda q, centre: (q["stroke"] - centre) ** 2,
         "each joint's transmission error quadratic in its stroke about the middle of the strokes commanded (the part "
         "an offset and a scale, which the geometry and the library take, cannot make)"),
     "drift following a recorded temperature": LawCase(
-        (TEMPERATURE_CHANNEL,), lambda q: q[TEMPERATURE_CHANNEL] - LAB_TEMPERATURE_C,
+        (TEMPERATURE_CHANNEL,), lambda q, centre: q[TEMPERATURE_CHANNEL] - LAB_TEMPERATURE_C,
         "each joint grows in proportion to the recorded lab temperature (an air conditioner cycling)",
         needs=(TEMPERATURE_CHANNEL,)),
 }
@@ -463,7 +464,9 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     planned = EffectData(robot, nominal, joints, targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1), noise,
                          payload_kg=payload)
     temperature, recorded = _air_conditioner(planned.t_s, rng)
-    shape = case.shape(joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature}))
+    quantities = joint_quantities(planned, {TEMPERATURE_CHANNEL: temperature})
+    centre = quantities["stroke"].min(axis=0) + np.ptp(quantities["stroke"], axis=0) / 2
+    shape = case.shape(quantities, centre)
     c = rng.uniform(*SPREAD_RANGE, robot.n_chains) * (-1.0 if case.short else rng.choice([-1.0, 1.0], robot.n_chains))
     dF_dq = robot.closure_jacobians(nominal, joints, targets).joints
     c = c * magnitude / np.max(np.abs(dF_dq @ (shape * c)[..., None]))
@@ -473,10 +476,46 @@ def law_recording(name: str, seed: int, *, robot: Robot | str = "hexapod", n_pos
     truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(), "effect": f"law: {name}",
              "effects": [], "contributions_mm": {}, "granularity": {}, "machine": merged_settings(context),
              "law": {"name": name, "physics": case.physics, "terms": list(case.terms), "granularity": PER_CHAIN,
-                     "constants": c.tolist(), "largest_contribution_mm": magnitude}}
+                     "constants": c.tolist(), "largest_contribution_mm": magnitude,
+                     "stroke_centre": centre.tolist()}}
     extras = {TEMPERATURE_CHANNEL: recorded} if TEMPERATURE_CHANNEL in case.needs else {}
     if payload is not None:
         extras[PAYLOAD_CHANNEL] = payload
         truth["payloads_kg"] = sorted(set(payload.tolist()))
     return make_recording(robot, planned.t_s, joints, m.measured, noise, extras=extras,
                           meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+
+
+# ----------------------------------------------------------------------------- commanding it again
+
+
+def heldout_targets(rec: Recording, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(targets (n, D), t_s (n,))``: poses drawn in the workspace of ``rec``'s scenario machine
+    (other than the recording's: their own seed) and the times of a schedule continuing it."""
+    robot = rec.robot
+    rng = np.random.default_rng(seed)
+    targets, _ = _draw_poses(robot, robot.table.nominal, n, rng, scenario_machine(robot).workspace(robot))
+    return targets, ESTIMATED_SETTLE_S * np.arange(1, n + 1)
+
+
+def command_scenario_machine(rec: Recording, commands: np.ndarray, t_s: np.ndarray,
+                             channels: dict | None = None) -> np.ndarray:
+    """(N, D) the settled poses (noise-free) of the machine that made the scenario recording
+    ``rec`` (:func:`effect_recording` or :func:`law_recording`: its true geometry, effects and law,
+    from ``meta["simulation"]``) when ``commands`` are given in order at times ``t_s`` from its
+    home pose. A law's offset follows the commands as it did in the recording (its recorded
+    ``channels``, one value per row, where it follows one)."""
+    from calib.effects.laws import joint_quantities
+
+    robot, truth = rec.robot, rec.meta["simulation"]
+    theta = robot.table.nominal + np.asarray(truth["injected_errors"], dtype=float)
+    commands = np.asarray(commands, dtype=float)
+    law = truth.get("law")
+    if law is not None:
+        data = EffectData(robot, robot.table.nominal, commands, robot.forward_kinematics(theta, commands), t_s,
+                          rec.noise)
+        shape = LAW_CASES[law["name"]].shape(joint_quantities(data, channels), np.asarray(law["stroke_centre"]))
+        commands = commands + shape * np.asarray(law["constants"])
+    timed = law is None and any(registered_effect(e).follows == "time" for e in truth["effects"])
+    return simulate(robot, theta, commands, truth["machine"], SensorNoise(),
+                    times_s=np.asarray(t_s, dtype=float) if timed else None).true_poses

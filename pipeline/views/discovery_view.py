@@ -51,15 +51,17 @@ def law_lines(law: dict | None) -> list[str]:
     lines = [f"Proposed law, not in the library: {law['formula']}",
              f"  cross-validated residual RMS {1e3 * law['cv_rms_before_mm']:.2f} um -> "
              f"{1e3 * law['cv_rms_after_mm']:.2f} um (noise floor {1e3 * law['noise_floor_mm']:.2f} um); with it: {after}"]
-    if law.get("library_left_out"):
-        lines.append(f"  with the law, the model does without {', '.join(law['library_left_out'])} (no higher BIC): "
-                     f"fitted with {', '.join(law['library_with_law']) or 'the geometry alone'}")
     for name, values in law["constants"].items():
         std = law["constants_std"][name]
         form = law["constant_granularity"][name]
         each = ", ".join(f"{v:.4g} +- {sd:.2g}" for v, sd in zip(values, std))
         lines.append(f"  [{name}] ({form.replace('_', ' ')}): {each if form == 'per_chain' else f'{values[0]:.4g} +- {std[0]:.2g}'} "
                      f"{law['units'][name]}")
+    if law.get("library_effects_dropped"):
+        kept = ", ".join(law["library_effects"]) or "none"
+        lines.append(f"  with the law in, the library's {', '.join(law['library_effects_dropped'])} no longer earns its "
+                     f"place (re-examined: the BIC rises by less than an effect needs to enter); the law's model: "
+                     f"geometry + {kept} + the law")
     return lines
 
 

@@ -12,5 +12,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "study": ("StudySettings", "StudyOutcome", "run_study", "monte_carlo", "true_errors", "compensation_errors"),
     "blind": ("run_blind_suite", "blind_cases", "blind_case", "rates_table", "failure_lines", "KINDS"),
     "convert": ("ConvertSettings", "ConvertResult", "run_convert"),
+    "compensate": ("CompensateSettings", "CompensationReport", "run_compensation"),
     "fleet": ("run_fleet", "FleetReport", "calibrate_machine", "fleet_inputs", "input_hash"),
 })

@@ -8,6 +8,7 @@ keys for every robot.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from dataclasses import dataclass, field, replace
@@ -30,8 +31,8 @@ from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import (NameReservation, Recording, command_columns, command_csv, output_folder, row_message,
-                              session_measurement)
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, NameReservation, Recording, command_columns, command_csv,
+                              output_folder, row_message, session_measurement, validity_domain)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
@@ -115,7 +116,7 @@ def default_name(settings: RunSettings) -> str:
     return f"{robot}_{Path(settings.poses).stem}"
 
 
-OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json", ".suggested_poses.csv", ".suggested_poses.json")
+OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json", ".suggested_poses.csv", ".suggested_poses.json", CALIBRATION_SUFFIX)
 #: Poses suggested when the measured ones leave parameter combinations to the prior.
 SUGGESTED_POSES = 10
 
@@ -308,7 +309,8 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.formats import ResultSet, read_recording, recording_checks, recording_texts
+    from pipeline.formats import (ResultSet, calibration_text, read_recording, recording_checks, recording_source,
+                                  recording_texts)
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}
@@ -330,7 +332,8 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                                   extensions=OUTPUT_EXTENSIONS)
     try:
         name = reservation.name
-        targets_out = {"rrd": out / f"{name}.rrd", "suggested_poses": out / f"{name}.suggested_poses.csv",
+        targets_out = {"rrd": out / f"{name}.rrd", "calibration": out / f"{name}{CALIBRATION_SUFFIX}",
+                       "suggested_poses": out / f"{name}.suggested_poses.csv",
                        "suggested_poses_json": out / f"{name}.suggested_poses.json"}
         if rec is None:
             targets_out.update(csv=out / f"{name}.csv", json=out / f"{name}.json")
@@ -355,12 +358,18 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             summary["wall_time_split_s"] = split
             recording = summary.pop("_recording", None)
             as_read = summary.pop("_as_read", None)
+            calibration = summary.pop("_calibration")
             if "summary_json" in targets_out:
                 outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
             if recording is not None:
                 csv_text, json_text = recording_texts(recording)
                 outputs.temp("csv").write_text(csv_text)
                 outputs.temp("json").write_text(json_text)
+                source = {"name": Path(targets_out["csv"]).name, "simulated": summary["scenario"],
+                          "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
+            else:
+                source = recording_source(settings.real)
+            outputs.temp("calibration").write_text(calibration_text(replace(calibration, recording=source)))
             outputs.publish()
     finally:
         reservation.release()
@@ -1126,6 +1135,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     summary.update(verdict_block(inp, ident, held, cv, diagnosis))
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
+    summary["_calibration"] = calibration_of(inp, ident, summary.get("_recording"))
     if summary["left_to_prior"]:
         try:
             summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
@@ -1140,6 +1150,37 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     log_step(inp, ident, held, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
     return summary, ident.result
+
+
+def sha256_text(text: str) -> str:
+    """The SHA-256 of ``text`` as written (UTF-8)."""
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def instrument_frames(inp: CalibrationInput, instrument) -> tuple[dict, dict]:
+    """``({session: (6,) frame}, {session: (6,) std})`` of a fit's instrument frames, empty when the
+    data were in the base frame."""
+    if instrument is None or not np.any(instrument.frames):
+        return {}, {}
+    names = inp.rec.session_names if inp.rec is not None else ("session 1",)
+    return ({n: np.array(f) for n, f in zip(names, instrument.frames)},
+            {n: np.array(f) for n, f in zip(names, instrument.frames_std)})
+
+
+def calibration_of(inp: CalibrationInput, ident: Identification, simulated: Recording | None) -> Calibration:
+    """What the run found, as a calibration file holds it (:mod:`pipeline.formats.calibration_file`;
+    the recording's name and hashes are added when the files are written): the identified
+    geometry, the instrument frames, no effect, the domain of the rows used."""
+    robot, result, used = inp.robot, ident.result, ident.used
+    idx = robot.table.indices(result.free_names)
+    rows = inp.rows[used]
+    t_s = (inp.rec if inp.rec is not None else simulated).t_s[rows]
+    frames, frames_std = instrument_frames(inp, ident.instrument)
+    return Calibration(robot=robot, theta=result.theta, std=result.std, free=tuple(result.free_names),
+                       covariance=result.covariance[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
+                       targets=None if ident.instrument is None else ident.instrument.targets,
+                       validity=validity_domain(robot, ident.measured[used], inp.joints[used], t_s), noise=inp.noise,
+                       produced_by="pipeline.run")
 
 
 def _predicted_or(robot: Robot, theta, joints, measured) -> np.ndarray:

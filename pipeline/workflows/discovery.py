@@ -29,7 +29,11 @@ from calib.effects.base import PAYLOAD_CHANNEL
 from calib.crossval import crossvalidate
 from calib.prior import ParameterPrior
 from mjcf.simulator import SettleError
-from pipeline.formats import Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks
+from calib.effects.records import effect_record, fitted_effects
+from calib.measurement import frame_from_dict
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
+                              read_json_file, read_recording, recording_checks, recording_source, validity_domain,
+                              write_calibration)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.views import verdict_words, write_discovery_rrd
 
@@ -320,10 +324,7 @@ def read_kept_law(path: Path, robot: str | None = None) -> dict:
     """
     from calib.effects.laws import law_from_dict
 
-    try:
-        d = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot be read as a kept law ({exc})") from None
+    d = read_json_file(Path(path), "kept law (JSON)", ValueError)
     if not isinstance(d, dict) or d.get("format") != KEPT_LAW_FORMAT:
         raise ValueError(f"{path}: key 'format' is not {KEPT_LAW_FORMAT!r}: not a law kept by pipeline.discover --law")
     for key in ("robot", "law"):
@@ -433,6 +434,37 @@ def geometry_crossvalidation(rec: Recording, read, seed: int) -> dict:
     return out
 
 
+def frames_of(rec: Recording, block: dict) -> tuple[dict, dict]:
+    """``({session: (6,) frame}, {session: (6,) std})`` a run's read of ``rec`` registered (its
+    summary keys ``measurement_frame(s)``), empty when the data were in the base frame."""
+    if "measurement_frames" in block:
+        return ({s: frame_from_dict(f) for s, f in block["measurement_frames"].items()},
+                {s: frame_from_dict(f) for s, f in block["measurement_frames_std"].items()})
+    if "measurement_frame" in block:
+        s = rec.session_names[0]
+        return {s: frame_from_dict(block["measurement_frame"])}, {s: frame_from_dict(block["measurement_frame_std"])}
+    return {}, {}
+
+
+def discovery_calibration(rec: Recording, report: DiscoveryReport, block: dict, source: dict) -> Calibration:
+    """What discovery found, as a calibration file holds it: the geometry fitted jointly with the
+    effects named (and the proposed law, when one is), the effects with their coefficients, the
+    instrument frames the read registered, the domain of the rows analysed."""
+    disc = report.discovery
+    fit = disc.chosen if disc.proposed_law is None else disc.proposed_law.fit
+    robot = rec.robot
+    cov = fit.geometry_covariance()
+    free = tuple(robot.free_default)
+    idx = robot.table.indices(free)
+    frames, frames_std = frames_of(rec, block)
+    rows = disc.kept
+    return Calibration(robot=robot, theta=fit.theta, std=np.sqrt(np.clip(np.diag(cov), 0.0, None)), free=free,
+                       covariance=cov[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
+                       records=tuple(effect_record(fe, robot) for fe in fitted_effects(fit)),
+                       validity=validity_domain(robot, rec.measured[rows], rec.joints[rows], rec.t_s[rows]),
+                       noise=rec.noise, recording=source, produced_by="pipeline.discover")
+
+
 def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) -> DiscoveryReport:
     """:func:`discover` with its numerical failures said as causes, naming the file: a singular
     fit (the rows do not determine geometry and effects together), a re-simulation that does not
@@ -477,9 +509,10 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         rec = None
     out = Path(settings.out)
     rrd_path = out / f"{settings.name or f'{stem}_discover'}.rrd"
+    calibration_path = out / f"{settings.name or f'{stem}_discover'}{CALIBRATION_SUFFIX}"
     output_folder(out)
-    check_outputs({"--out": rrd_path, "--summary-json": settings.summary_json, "--law": settings.law_out},
-                  overwrite=settings.overwrite)
+    check_outputs({"--out": rrd_path, "--out (calibration file)": calibration_path,
+                   "--summary-json": settings.summary_json, "--law": settings.law_out}, overwrite=settings.overwrite)
     if rec is None:
         rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name,
                                granularity=settings.scenario_granularity)
@@ -499,6 +532,11 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
             report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
+    source = recording_source(settings.real) if settings.real is not None else \
+        {"name": None, "simulated": f"scenario {'+'.join(settings.scenario)}, seed {settings.scenario_seed}, "
+                                    f"{settings.scenario_granularity}"}
+    cal = discovery_calibration(rec, report, {} if read is None else read.block, source)
+    report.summary["calibration"] = str(write_calibration(calibration_path, cal, overwrite=settings.overwrite))
     if settings.law_out is not None:
         kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
                         overwrite=settings.overwrite)

@@ -13,9 +13,10 @@ reads its recording and writes its outputs by path, so the workers of a remote c
 
 Written to ``--out`` (default ``FOLDER/calibrated``):
 
-* ``<machine>.rrd``, ``<machine>.summary.json`` and ``<machine>.discovery.json`` (the discovery's
-  summary, as ``python -m pipeline.discover --summary-json``) per machine (the machine is the CSV's
-  stem);
+* ``<machine>.rrd``, ``<machine>.summary.json``, ``<machine>.calibration.json`` (the geometry
+  identified, as ``python -m pipeline.run`` writes it: ``pipeline.compensate`` reads it) and
+  ``<machine>.discovery.json`` (the discovery's summary, as ``python -m pipeline.discover
+  --summary-json``) per machine (the machine is the CSV's stem);
 * ``fleet.csv`` and ``fleet.md``: one row per machine (machine, robot, the run's verdict:
   ``success`` or ``no: CAUSE``, calibration poses used,
   held-out position error before/after in um, flagged rows, ``explained``, wall time, status);
@@ -155,8 +156,8 @@ def calibrate_machine(job: dict) -> dict:
 
     Returns:
         The machine's row (:data:`TABLE_COLUMNS` plus ``file``, ``sha256``, ``method``,
-        ``discover``, ``rrd``, ``summary``, ``discovery``: the discovery's summary file, None when
-        not searched); a file that cannot be calibrated gives ``status="error"`` and ``error``,
+        ``discover``, ``rrd``, ``summary``, ``calibration`` (the run's calibration file),
+        ``discovery``: the discovery's summary file, None when not searched); a file that cannot be calibrated gives ``status="error"`` and ``error``,
         the reason in one line.
     """
     from pipeline.workflows.calibration import RunSettings, run_calibration
@@ -167,7 +168,7 @@ def calibrate_machine(job: dict) -> dict:
     row = {"machine": machine, "file": job["file"], "sha256": job["sha256"], "method": job["method"],
            "discover": searched, "robot": None, "status": "error", "verdict": None, "poses": None, "poses_used": None,
            "heldout_before_um": None, "heldout_after_um": None, "flagged_rows": [], "explained": NOT_RUN,
-           "wall_s": None, "error": None, "rrd": None, "summary": None, "discovery": None}
+           "wall_s": None, "error": None, "rrd": None, "summary": None, "calibration": None, "discovery": None}
     summary_path = out / f"{machine}.summary.json"
     try:
         result = run_calibration(RunSettings(real=Path(job["file"]), out=out, name=machine, overwrite=True,
@@ -184,7 +185,7 @@ def calibrate_machine(job: dict) -> dict:
                    poses_used=s["calibration_poses_used"], flagged_rows=list(s["flagged_poses"]),
                    heldout_before_um=None if not held else 1e3 * held["before"],
                    heldout_after_um=None if not held else 1e3 * held["after"],
-                   rrd=s.get("rrd"), summary=str(summary_path))
+                   rrd=s.get("rrd"), summary=str(summary_path), calibration=s.get("calibration"))
         if searched:
             row.update(_discovered(result.as_read, out / f"{machine}.discovery.json"))
     row["wall_s"] = time.perf_counter() - t0
@@ -285,7 +286,7 @@ def _done(row: dict | None, sha: str, method: str, discover: bool) -> bool:
             bool(row.get("discover", False)) != discover:
         return False
     if row.get("status") == "calibrated":
-        outputs = ("rrd", "summary") + (("discovery",) if row.get("discovery") else ())
+        outputs = ("rrd", "summary", "calibration") + (("discovery",) if row.get("discovery") else ())
         return all(row.get(k) and Path(row[k]).is_file() for k in outputs)
     return row.get("status") == "error"
 

@@ -1,0 +1,215 @@
+"""Compensated commands from a calibration file, as a library function.
+
+:func:`run_compensation` does what ``python -m pipeline.compensate`` does: read the calibration
+file (:mod:`pipeline.formats.calibration_file`) and the targets (:mod:`pipeline.formats.targets`),
+take the targets out of the instrument's frame when asked, compute the commands
+(:func:`calib.compensation.compensated_commands`: the identified geometry, and every found effect
+the command sequence lets it invert) and write them as a command file (the targets in the base
+frame, the commands, ``t_s`` when the targets have it; a JSON sidecar saying what was compensated
+and what not, and why). Targets outside the domain the calibration saw are named in warnings:
+the commands are extrapolations there.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calib.compensation import Compensation, compensated_commands
+from calib.measurement import compose, invert_frame
+from calib.robot import KinematicsError
+
+from pipeline.formats import (Calibration, ResultSet, Targets, check_outputs, command_csv, read_calibration,
+                              read_targets, row_message, sidecar_path)
+
+__all__ = ["TARGET_FRAMES", "CompensateSettings", "CompensationReport", "run_compensation", "domain_warnings",
+           "proof_in_the_testbed"]
+
+#: The frames a target file may be in: the robot's base, or an instrument frame the calibration found.
+TARGET_FRAMES = ("base", "instrument")
+#: Rows listed in one warning at most.
+ROWS_LISTED = 8
+
+
+@dataclass(frozen=True)
+class CompensateSettings:
+    """What :func:`run_compensation` does (``python -m pipeline.compensate --help`` for each field).
+
+    Attributes:
+        calibration: the calibration file.
+        targets: the target file.
+        out: the command file to write (CSV; its sidecar beside it, ``.json``).
+        frame: the targets' frame (:data:`TARGET_FRAMES`).
+        session: with ``frame == "instrument"``, the session whose frame it is (needed when the
+            calibration has several).
+        geometry_only: compensate the geometry alone (the effects found left out).
+        overwrite: allow replacing an existing command file.
+    """
+
+    calibration: Path
+    targets: Path
+    out: Path
+    frame: str = "base"
+    session: str | None = None
+    geometry_only: bool = False
+    overwrite: bool = False
+
+
+@dataclass
+class CompensationReport:
+    """What :func:`run_compensation` did."""
+
+    calibration: Calibration
+    targets: Targets
+    poses: np.ndarray
+    compensation: Compensation
+    warnings: list = field(default_factory=list)
+    paths: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+
+
+def _rows(mask: np.ndarray) -> str:
+    rows = [int(i) + 1 for i in np.flatnonzero(mask)]
+    more = f" and {len(rows) - ROWS_LISTED} more" if len(rows) > ROWS_LISTED else ""
+    return ", ".join(map(str, rows[:ROWS_LISTED])) + more
+
+
+def _outside(names, units, lows, highs, values) -> tuple[np.ndarray, list[str]]:
+    """Rows with a value outside its range, and per name the count and the range, in words."""
+    mask = np.zeros(len(values), dtype=bool)
+    words = []
+    for name, unit, lo, hi, col in zip(names, units, lows, highs, values.T):
+        bad = (col < lo) | (col > hi)
+        if bad.any():
+            mask |= bad
+            words.append(f"{name} in {int(bad.sum())} outside [{lo:.6g}, {hi:.6g}] {unit}")
+    return mask, words
+
+
+def domain_warnings(cal: Calibration, poses: np.ndarray, commands: np.ndarray, t_s, where) -> list[str]:
+    """Warnings naming the targets outside the domain the calibration saw: a pose coordinate
+    outside the box of the calibration poses, a command outside a joint's recorded range, a time
+    past the recording's span (a drift extrapolated); one line each."""
+    v, robot, out = cal.validity, cal.robot, []
+    mask, words = _outside(robot.pose_names, robot.pose_units, v["pose_min"], v["pose_max"], poses)
+    if mask.any():
+        out.append(f"{where}: row(s) {_rows(mask)}: outside the box of the calibration poses ({'; '.join(words)}): "
+                   "the commands extrapolate the calibration there")
+    mask, words = _outside(robot.joint_names, [robot.joint_unit] * robot.n_chains, v["joint_min"], v["joint_max"],
+                           commands)
+    if mask.any():
+        out.append(f"{where}: row(s) {_rows(mask)}: commands outside the joints' recorded ranges ({'; '.join(words)})")
+    if t_s is not None:
+        mask, words = _outside(["t_s"], ["s"], [v["t_s"][0]], [v["t_s"][1]], t_s[:, None])
+        if mask.any():
+            out.append(f"{where}: row(s) {_rows(mask)}: times outside the recording's span ({words[0]}): effects "
+                       "that follow time are extrapolated")
+    return out
+
+
+def _base_poses(cal: Calibration, settings: CompensateSettings, poses: np.ndarray) -> tuple[np.ndarray, str]:
+    if settings.frame not in TARGET_FRAMES:
+        raise ValueError(f"--frame {settings.frame}: expected one of {', '.join(TARGET_FRAMES)}")
+    if settings.frame == "base":
+        if settings.session is not None:
+            raise ValueError("--session: only with --frame instrument")
+        return poses, "base frame"
+    if not cal.frames:
+        raise ValueError(f"--frame instrument: {settings.calibration} has no instrument frame (its recording was in "
+                         "the base frame); use --frame base")
+    session = settings.session
+    if session is None:
+        if len(cal.frames) > 1:
+            raise ValueError(f"--frame instrument: {settings.calibration} has {len(cal.frames)} sessions' frames "
+                             f"({', '.join(cal.frames)}); name one with --session")
+        session = next(iter(cal.frames))
+    if session not in cal.frames:
+        raise ValueError(f"--session {session}: not a session of {settings.calibration} ({', '.join(cal.frames)})")
+    return compose(invert_frame(cal.frames[session]), cal.robot, poses), f"instrument frame of session {session}"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def run_compensation(settings: CompensateSettings) -> CompensationReport:
+    """Read, compensate, write (see the module docstring).
+
+    Raises:
+        ValueError: a bad calibration or target file, flag or target the machine cannot reach
+            (the message names the file, the key, or the row and column).
+        FileExistsError: the command file exists and ``overwrite`` is off.
+    """
+    cal = read_calibration(settings.calibration)
+    out = Path(settings.out)
+    if out.suffix.lower() == ".json":
+        raise ValueError(f"--out {out}: a command file is a CSV (its sidecar gets the .json)")
+    check_outputs({"--out": out, "--out (sidecar)": sidecar_path(out)}, overwrite=settings.overwrite)
+    tg = read_targets(settings.targets, cal.robot)
+    poses, frame_words = _base_poses(cal, settings, tg.poses)
+    effects = [] if settings.geometry_only else cal.effects(channels=tg.channels)
+    try:
+        comp = compensated_commands(cal.robot, cal.theta, poses, effects, t_s=tg.t_s, channels=tg.channels)
+    except KinematicsError as exc:
+        raise ValueError(f"{row_message(exc, settings.targets, np.arange(len(poses)))}: the identified machine "
+                         "cannot reach it") from None
+    warnings = [f"{name} not compensated: {why}" for name, why in comp.left_out.items()]
+    if not comp.converged:
+        warnings.append(f"the compensation did not converge in {comp.iterations} iterations (last change "
+                        f"{comp.largest_step:.3g} {cal.robot.joint_unit}): the effects found are too large to invert "
+                        "this way")
+    warnings += domain_warnings(cal, poses, comp.commands, tg.t_s, settings.targets)
+    summary = {"robot": cal.robot.name, "targets": len(poses), "targets_frame": frame_words,
+               "calibration": {"path": str(settings.calibration), "sha256": _sha256(settings.calibration),
+                               "produced_by": cal.produced_by, "recording": cal.recording},
+               "targets_file": {"path": str(settings.targets), "sha256": _sha256(settings.targets)},
+               "geometry_only": settings.geometry_only, "compensated": list(comp.compensated),
+               "not_compensated": comp.left_out, "iterations": comp.iterations, "converged": comp.converged,
+               "largest_physics_correction": float(np.max(np.abs(comp.displacement))) if len(poses) else 0.0,
+               "joint_unit": cal.robot.joint_unit, "warnings": warnings}
+    paths = {"commands": out, "sidecar": sidecar_path(out)}
+    with ResultSet(paths, overwrite=settings.overwrite, flags={"commands": "--out", "sidecar": "--out"}) as files:
+        files.temp("commands").write_text(command_csv(cal.robot, poses, comp.commands, tg.t_s))
+        files.temp("sidecar").write_text(json.dumps({"robot": cal.robot.name, "produced_by": "pipeline.compensate",
+                                                     **summary}, indent=1) + "\n")
+        files.publish()
+    return CompensationReport(calibration=cal, targets=tg, poses=poses, compensation=comp, warnings=warnings,
+                              paths={k: str(v) for k, v in paths.items()}, summary=summary)
+
+
+def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
+    """The proof in the testbed: discover on the scenario recording ``rec``
+    (:func:`pipeline.workflows.discovery.discover`, no re-simulation), then command the MuJoCo
+    machine that made it (:func:`pipeline.simulation.command_scenario_machine`) on ``n_targets``
+    held-out targets of its workspace (``seed``) three ways: nominal commands, the geometry fitted
+    alone compensated, the geometry and the physics found compensated (the calibration discovery
+    gives, :func:`pipeline.workflows.discovery.discovery_calibration`).
+
+    Returns:
+        ``nominal``, ``geometry``, ``physics``: mean position error of the settled poses (noise-free),
+        mm; ``floor``: the discovery's noise floor, mm; ``summary``: the discovery's summary;
+        ``compensation``: the :class:`calib.compensation.Compensation` with physics.
+    """
+    from pipeline.simulation import command_scenario_machine, heldout_targets
+
+    from .discovery import discover, discovery_calibration
+
+    robot = rec.robot
+    report = discover(rec, seed=0, resim=False)
+    cal = discovery_calibration(rec, report, {}, {})
+    targets, t_s = heldout_targets(rec, n_targets, seed)
+    position = ~robot.angle_pose_mask
+
+    def error(commands):
+        reached = command_scenario_machine(rec, commands, t_s, rec.extras or None)
+        return float(np.mean(np.linalg.norm((reached - targets)[:, position], axis=1)))
+
+    physics = compensated_commands(robot, cal.theta, targets, cal.effects(), t_s=t_s)
+    geometry = compensated_commands(robot, report.discovery.geometry.theta, targets, [], t_s=t_s)
+    return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)), "geometry": error(geometry.commands),
+            "physics": error(physics.commands), "floor": report.summary["noise_floor_mm"], "summary": report.summary,
+            "compensation": physics}
