@@ -216,3 +216,21 @@ def test_a_bad_kept_law_file_is_refused_in_one_line_naming_it(tmp_path, capsys):
     assert discover_main(["--scenario", "none", "--use-law", str(bad), "--no-resim", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "'format'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_law_is_searched_again_without_the_library_effects_it_makes_redundant():
+    """A Delta whose joints stop short by a friction growing with the load (seed 705, each joint
+    its own constant): the library names a dead band, whose per-chain level took the law's
+    spread (searched beside it, the law came out with one constant for every joint); searched
+    again without the dead band, it has its constant per joint and the dead band is dropped."""
+    from pipeline.simulation import law_recording
+    from pipeline.views import report_lines
+    from pipeline.workflows.discovery import discover
+
+    s = discover(law_recording("friction proportional to load", 705, robot="delta"), resim=False).summary
+    law = s["proposed_law"]
+    assert s["effects"] == ["joint_friction"]
+    assert law["terms"] == ["sign(last move) * load"] and law["granularity"] == "per_chain"
+    assert law["library_effects_dropped"] == ["joint_friction"] and law["library_effects"] == []
+    assert law["explained_with_law"]
+    assert any("joint_friction no longer earns" in line for line in report_lines(s))
