@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .effects.base import EffectData
+from .effects.base import PAYLOAD_CHANNEL, EffectData
 from .effects.records import FittedEffect
 from .noise import SensorNoise
 from .robot import Robot, check_joint_limits
@@ -81,12 +81,13 @@ def _why_not(fe: FittedEffect, t_s, channels: dict) -> str:
 
 
 def effect_displacement(robot: Robot, theta: np.ndarray, effects, joints: np.ndarray, poses: np.ndarray,
-                        t_s: np.ndarray) -> np.ndarray:
+                        t_s: np.ndarray, payload_kg: np.ndarray | None = None) -> np.ndarray:
     """(N, C) the joint displacement ``sum Xq phi`` of fitted ``effects`` when ``joints`` are
-    commanded in this order towards ``poses`` at times ``t_s`` (from the home pose)."""
+    commanded in this order towards ``poses`` at times ``t_s`` (from the home pose), the platform
+    carrying ``payload_kg`` (N,) where a compliance fitted at several payloads needs it."""
     if not effects:
         return np.zeros_like(joints)
-    data = EffectData(robot, theta, joints, poses, t_s, SensorNoise())
+    data = EffectData(robot, theta, joints, poses, t_s, SensorNoise(), payload_kg=payload_kg)
     return sum(fe.effect.joint_regressors(robot, theta, data, fe.extra) @ fe.coefficients for fe in effects)
 
 
@@ -101,7 +102,8 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
         effects: :class:`calib.effects.records.FittedEffect` s (laws built with ``channels``).
         t_s: (N,) time of each target since the machine started, s; None: effects that follow
             time are left out.
-        channels: recorded channels a law follows, ``{name: (N,)}``.
+        channels: recorded channels a law follows, ``{name: (N,)}``; ``payload_kg`` (the payload
+            at each target) for a compliance fitted at several payloads.
 
     Raises:
         KinematicsError: a target the identified geometry cannot reach, or a command past a
@@ -124,13 +126,14 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
     clock = np.zeros(n) if times is None else times  # no effect used follows it when it is None
     travel = float(np.max(np.ptp(robot.joint_limits(), axis=1)))
     q, step, k = geometric.copy(), 0.0, 0
+    payload = channels.get(PAYLOAD_CHANNEL)
     for k in range(1, max_iterations + 1):
-        new = geometric - effect_displacement(robot, theta, used, q, targets, clock)
+        new = geometric - effect_displacement(robot, theta, used, q, targets, clock, payload)
         step = float(np.max(np.abs(new - q))) if n else 0.0
         q = new
         if step <= tolerance * travel:
             break
-    d = effect_displacement(robot, theta, used, q, targets, clock)
+    d = effect_displacement(robot, theta, used, q, targets, clock, payload)
     check_joint_limits(robot, q, "row")  # a command past a joint's stroke is none the machine can take
     return Compensation(commands=q, geometric=geometric, displacement=d, compensated=tuple(fe.name for fe in used),
                         left_out=left, iterations=k if used else 0, converged=step <= tolerance * travel,

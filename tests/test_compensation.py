@@ -244,3 +244,24 @@ def test_a_run_calibration_file_reads_back_as_the_run_found_it(calibrated):
     assert cal.records == () and cal.frames == {} and cal.produced_by == "pipeline.run"
     with pytest.raises(ValueError, match="another robot"):
         read_calibration(calibrated / "r.calibration.json", "delta")
+
+
+def test_a_compliance_found_at_two_payloads_is_compensated_at_each_targets_payload():
+    """A Delta recorded at two payloads (its compliance separates from its geometry only so): the
+    calibration keeps the compliance with its payload terms and the payload they stand for (the
+    recording's mean); commands for targets at the light and the heavy payload land within 1.5
+    times the noise floor and half the geometry-alone error. Without the targets' payloads the
+    compliance is named as not compensated."""
+    rec = effect_recording("compliance", 3, robot="delta", payloads=2, granularity="per_chain")
+    e = proof_in_the_testbed(rec, 30, 1003)
+    assert e["summary"]["effects"] == ["compliance"] and e["compensation"].compensated == ("compliance",)
+    assert e["physics"] <= 1.5 * e["floor"] and e["physics"] <= 0.5 * e["geometry"], e
+    from pipeline.workflows.discovery import discover, discovery_calibration
+
+    cal = discovery_calibration(rec, discover(rec, resim=False), {}, {})
+    (record,) = cal.records
+    assert record["reference_payload_kg"] == np.mean(rec.extras["payload_kg"])
+    assert any(name.startswith("payload_over_stiffness") for name in record["coefficients"])
+    targets = rec.measured[:5]
+    c = compensated_commands(rec.robot, cal.theta, targets, cal.effects())
+    assert "payload_kg" in c.left_out["compliance"] and c.compensated == ()

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..robot import Robot, pose_jacobian_of_joints
 from ..rotation import rotation_matrix_derivatives
-from .base import Coefficient, Effect, EffectScenario, PhysicalParameter, scale_to_magnitude
+from .base import PAYLOAD_CHANNEL, Coefficient, Effect, EffectScenario, PhysicalParameter, scale_to_magnitude
 
 __all__ = ["EFFECT", "Compliance", "LoadedCompliance", "LOADED", "COM_HEIGHT_REF_MM", "PAYLOAD_RANGE_KG",
            "TWO_PAYLOADS_KG", "interior_points", "chain_point_height_gradient", "payload_varies", "for_payload"]
@@ -241,6 +241,15 @@ class LoadedCompliance(Compliance):
     # robot), which the geometry and the weight terms may fit.
     evidence_coefficients = ("payload_over_stiffness", "payload_x_com_height_over_stiffness")
 
+    def __init__(self, reference_payload_kg: float | None = None):
+        #: The payload the weight terms stand for, kg: the mean of the data the regressors are
+        #: evaluated on (None, as when fitting), or, to act on other data (commands at other
+        #: payloads), the mean of the recording the coefficients were fitted on.
+        self.reference_payload_kg = None if reference_payload_kg is None else float(reference_payload_kg)
+
+    def compensation_inputs(self):
+        return (PAYLOAD_CHANNEL,)  # each command's payload: the load follows it
+
     def coefficients(self, robot):
         base = Compliance.coefficients(self, robot)
         unit = base[0].unit
@@ -255,7 +264,8 @@ class LoadedCompliance(Compliance):
         if data.payload_kg is None:
             dp = np.zeros(data.n)
         else:
-            dp = data.payload_kg - data.payload_kg.mean()
+            reference = data.payload_kg.mean() if self.reference_payload_kg is None else self.reference_payload_kg
+            dp = data.payload_kg - reference
         return np.concatenate([X, X[:, :, :npl] * dp[:, None, None]], axis=2)
 
     def machine_settings(self, coefficients, robot, context, extra=None):

@@ -6,7 +6,9 @@ A record is JSON-ready::
     {"name": "joint_friction", "granularity": "per_chain",
      "coefficients": {"dead_band[leg 1]": 0.0041, ...}, "std": {...}, "units": {...},
      "searched": 12.7 | {"joint": 3, "step_time_s": 41.2} | null,
-     "law": {"terms": [...]} (a proposed or kept law only)}
+     "law": {"terms": [...]} (a proposed or kept law only),
+     "reference_payload_kg": 2.4 (a compliance fitted at several payloads only: the payload its
+                                  weight terms stand for, the mean of its recording's)}
 
 ``coefficients`` are in the order of the effect's own (:meth:`Effect.coefficients`), and
 :func:`effect_from_record` checks that the rebuilt effect names the same ones: a record of a
@@ -21,6 +23,7 @@ import numpy as np
 
 from ..robot import Robot
 from .base import Effect
+from .compliance import LoadedCompliance
 from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form
 from .laws import LAW_NAME, Law, law_effect, law_from_dict, law_to_dict
 from .lost_count import JointStep
@@ -75,14 +78,22 @@ def _searched_data(extra):
     return float(extra)
 
 
-def effect_record(fe: FittedEffect, robot: Robot) -> dict:
-    """The JSON-ready record of a fitted effect on ``robot`` (see the module docstring)."""
+def effect_record(fe: FittedEffect, robot: Robot, reference_payload_kg: float | None = None) -> dict:
+    """The JSON-ready record of a fitted effect on ``robot`` (see the module docstring);
+    ``reference_payload_kg``: the mean payload of the rows a payload-aware compliance was fitted on
+    (needed for one, unless it already holds its reference)."""
     coefs = fe.effect.coefficients(robot)
     d = {"name": fe.name, "granularity": fe.effect.granularity,
          "coefficients": {c.name: float(v) for c, v in zip(coefs, fe.coefficients)},
          "std": {c.name: float(v) for c, v in zip(coefs, fe.std)},
          "units": {c.name: c.unit for c in coefs},
          "searched": _searched_data(fe.extra)}
+    base = fe.effect.base if isinstance(fe.effect, PerChainForm) else fe.effect
+    if isinstance(base, LoadedCompliance):
+        reference = base.reference_payload_kg if base.reference_payload_kg is not None else reference_payload_kg
+        if reference is None:
+            raise ValueError("a compliance fitted at several payloads needs the mean payload of its rows")
+        d["reference_payload_kg"] = float(reference)
     law = _law_of(fe.effect)
     if law is not None:
         gran = {t.name: PER_CHAIN if set(t.column_names()) & set(law.per_chain_capable) else SHARED
@@ -135,6 +146,13 @@ def effect_from_record(d: dict, robot: Robot, *, channels: dict | None = None,
         eff = law_effect(terms, term_gran, channels, name=str(name))
     elif name in EFFECTS and name not in ("none", LAW_NAME):
         eff = EFFECTS[name]
+        if "reference_payload_kg" in d:  # compliance at several payloads: its payload terms
+            reference = d["reference_payload_kg"]
+            if name != EFFECTS["compliance"].name or isinstance(reference, bool) or \
+                    not isinstance(reference, (int, float)) or not np.isfinite(reference):
+                raise ValueError(f"{where}.reference_payload_kg: {reference!r} is not a compliance's payload (a "
+                                 "finite number of kg)")
+            eff = LoadedCompliance(reference)
         if not eff.applies_to(robot):
             raise ValueError(f"{where}.name: {name!r} does not apply to the {robot.name}")
         if gran == PER_CHAIN and eff.granularity != PER_CHAIN:

@@ -10,5 +10,5 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "scenarios": ("DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine", "machine_context",
                   "merged_settings", "simulate", "make_recording", "effects_settings", "effect_recording",
                   "LawCase", "LAW_CASES", "law_cases_for", "law_recording", "TEMPERATURE_CHANNEL",
-                  "heldout_targets", "command_scenario_machine"),
+                  "heldout_targets", "command_scenario_machine", "heldout_payloads"),
 })

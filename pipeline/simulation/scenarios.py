@@ -36,7 +36,7 @@ from pipeline.formats import Recording
 __all__ = ["DISCOVERY_NOISE", "ScenarioMachine", "SCENARIO_MACHINES", "scenario_machine",
            "machine_context", "merged_settings", "simulate", "make_recording",
            "effects_settings", "effect_recording", "LawCase", "LAW_CASES", "law_cases_for", "law_recording",
-           "TEMPERATURE_CHANNEL", "heldout_targets", "command_scenario_machine"]
+           "TEMPERATURE_CHANNEL", "heldout_targets", "command_scenario_machine", "heldout_payloads"]
 
 #: 1 um on positions, 1 urad on angles (standard deviations).
 DISCOVERY_NOISE = SensorNoise(position_mm=0.001, orientation_rad=1e-6, distribution="normal")
@@ -504,7 +504,8 @@ def command_scenario_machine(rec: Recording, commands: np.ndarray, t_s: np.ndarr
     ``rec`` (:func:`effect_recording` or :func:`law_recording`: its true geometry, effects and law,
     from ``meta["simulation"]``) when ``commands`` are given in order at times ``t_s`` from its
     home pose. A law's offset follows the commands as it did in the recording (its recorded
-    ``channels``, one value per row, where it follows one)."""
+    ``channels``, one value per row, where it follows one); ``channels["payload_kg"]``: the
+    payload the platform carries at each command."""
     from calib.effects.laws import joint_quantities
 
     robot, truth = rec.robot, rec.meta["simulation"]
@@ -517,5 +518,17 @@ def command_scenario_machine(rec: Recording, commands: np.ndarray, t_s: np.ndarr
         shape = LAW_CASES[law["name"]].shape(joint_quantities(data, channels), np.asarray(law["stroke_centre"]))
         commands = commands + shape * np.asarray(law["constants"])
     timed = law is None and any(registered_effect(e).follows == "time" for e in truth["effects"])
+    payload = (channels or {}).get(PAYLOAD_CHANNEL)
     return simulate(robot, theta, commands, truth["machine"], SensorNoise(),
-                    times_s=np.asarray(t_s, dtype=float) if timed else None).true_poses
+                    times_s=np.asarray(t_s, dtype=float) if timed or payload is not None else None,
+                    payload_kg=payload).true_poses
+
+
+def heldout_payloads(rec: Recording, n: int) -> dict:
+    """The channels of ``n`` held-out targets of a recording at several payloads: its lightest
+    payload for the first half, its heaviest for the rest (``{"payload_kg": (n,)}``); empty for a
+    recording at one payload."""
+    payload = rec.extras.get(PAYLOAD_CHANNEL)
+    if payload is None:
+        return {}
+    return {PAYLOAD_CHANNEL: np.where(np.arange(n) < n // 2, np.min(payload), np.max(payload))}

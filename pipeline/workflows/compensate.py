@@ -185,7 +185,8 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     """The proof in the testbed: discover on the scenario recording ``rec``
     (:func:`pipeline.workflows.discovery.discover`, no re-simulation), then command the MuJoCo
     machine that made it (:func:`pipeline.simulation.command_scenario_machine`) on ``n_targets``
-    held-out targets of its workspace (``seed``) three ways: nominal commands, the geometry fitted
+    held-out targets of its workspace (``seed``; half at the recording's lightest payload and half
+    at its heaviest where it has several) three ways: nominal commands, the geometry fitted
     alone compensated, the geometry and the physics found compensated (the calibration discovery
     gives, :func:`pipeline.workflows.discovery.discovery_calibration`).
 
@@ -194,7 +195,7 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
         mm; ``floor``: the discovery's noise floor, mm; ``summary``: the discovery's summary;
         ``compensation``: the :class:`calib.compensation.Compensation` with physics.
     """
-    from pipeline.simulation import command_scenario_machine, heldout_targets
+    from pipeline.simulation import command_scenario_machine, heldout_payloads, heldout_targets
 
     from .discovery import discover, discovery_calibration
 
@@ -202,13 +203,14 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     report = discover(rec, seed=0, resim=False)
     cal = discovery_calibration(rec, report, {}, {})
     targets, t_s = heldout_targets(rec, n_targets, seed)
+    channels = heldout_payloads(rec, n_targets)  # a recording at several payloads: the targets at two
     position = ~robot.angle_pose_mask
 
     def error(commands):
-        reached = command_scenario_machine(rec, commands, t_s, rec.extras or None)
+        reached = command_scenario_machine(rec, commands, t_s, channels)
         return float(np.mean(np.linalg.norm((reached - targets)[:, position], axis=1)))
 
-    physics = compensated_commands(robot, cal.theta, targets, cal.effects(), t_s=t_s)
+    physics = compensated_commands(robot, cal.theta, targets, cal.effects(channels), t_s=t_s, channels=channels)
     geometry = compensated_commands(robot, report.discovery.geometry.theta, targets, [], t_s=t_s)
     return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)), "geometry": error(geometry.commands),
             "physics": error(physics.commands), "floor": report.summary["noise_floor_mm"], "summary": report.summary,

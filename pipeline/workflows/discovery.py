@@ -458,9 +458,11 @@ def discovery_calibration(rec: Recording, report: DiscoveryReport, block: dict, 
     idx = robot.table.indices(free)
     frames, frames_std = frames_of(rec, block)
     rows = disc.kept
+    payload = rec.extras.get(PAYLOAD_CHANNEL)
+    reference = None if payload is None else float(np.mean(payload[rows]))  # a compliance at several payloads
     return Calibration(robot=robot, theta=fit.theta, std=np.sqrt(np.clip(np.diag(cov), 0.0, None)), free=free,
                        covariance=cov[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
-                       records=tuple(effect_record(fe, robot) for fe in fitted_effects(fit)),
+                       records=tuple(effect_record(fe, robot, reference) for fe in fitted_effects(fit)),
                        validity=validity_domain(robot, rec.measured[rows], rec.joints[rows], rec.t_s[rows]),
                        noise=rec.noise, recording=source, produced_by="pipeline.discover")
 
