@@ -58,10 +58,10 @@ def law_lines(law: dict | None) -> list[str]:
         lines.append(f"  [{name}] ({form.replace('_', ' ')}): {each if form == 'per_chain' else f'{values[0]:.4g} +- {std[0]:.2g}'} "
                      f"{law['units'][name]}")
     if law.get("library_effects_dropped"):
-        kept = ", ".join(law["library_effects"]) or "none"
+        model = " + ".join(["geometry"] + law["library_effects"] + ["the law"])
         lines.append(f"  with the law in, the library's {', '.join(law['library_effects_dropped'])} no longer earns its "
                      f"place (re-examined: the BIC rises by less than an effect needs to enter); the law's model: "
-                     f"geometry + {kept} + the law")
+                     f"{model}")
     return lines
 
 
