@@ -223,9 +223,13 @@ def test_ctrl_c_at_the_terminal_stops_a_cluster_job_with_one_line(tmp_path):
     import time
 
     env = {**os.environ, "HOME": str(tmp_path)}
+    # As a terminal starts a command: SIGINT at its default (a test run launched in the background
+    # of a non-interactive shell inherits it ignored, and so would the command, which then rightly
+    # ignores a Ctrl-C meant for the foreground).
     proc = subprocess.Popen([sys.executable, "-m", "pipeline.blind", "--robot", "hexapod", "--seeds", "3",
                              "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=env)
+                            start_new_session=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     started = time.monotonic()
     while time.monotonic() - started < 60:  # until the cluster runs tasks (its first progress report)
         line = proc.stderr.readline()

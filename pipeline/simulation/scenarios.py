@@ -320,8 +320,20 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
     timed = any(e.follows == "time" for e in effs)
     m = simulate(robot, theta, joints, settings, noise, seed=int(rng.integers(2**31)),
                  times_s=planned.t_s if timed else None, payload_kg=payload)
+    truth = _effects_truth(robot, theta - nominal, drawn, magnitudes, settings, payload)
+    return make_recording(robot, m.t_s, joints, m.measured, noise,
+                          extras=None if payload is None else {PAYLOAD_CHANNEL: payload},
+                          meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+
+
+def _effects_truth(robot: Robot, errors: np.ndarray, drawn: list, magnitudes: list, settings: dict,
+                   payload: np.ndarray | None) -> dict:
+    """An effect recording's ``meta["simulation"]``: the injected errors, each effect drawn
+    (``(effect, coefficients, searched value)``) with its size and granularity, the machine's
+    settings and the payloads."""
+    effs = [eff for eff, _, _ in drawn]
     real = [e for e in effs if e.name != "none"]
-    truth = {"robot": robot.name, "injected_errors": (theta - nominal).tolist(),
+    truth = {"robot": robot.name, "injected_errors": errors.tolist(),
              "effect": "+".join(e.name for e in real) or "none", "effects": [e.name for e in real],
              "largest_contribution_mm": max(magnitudes) if real else magnitudes[0],
              "contributions_mm": {e.name: mag for e, mag in zip(effs, magnitudes) if e.name != "none"},
@@ -333,9 +345,7 @@ def effect_recording(effect, seed: int, *, robot: Robot | str = "hexapod", theta
             truth.update({k: v for k, (v, _) in eff.searched_values(extra).items()})
     if payload is not None:
         truth["payloads_kg"] = sorted(set(payload.tolist()))
-    return make_recording(robot, m.t_s, joints, m.measured, noise,
-                          extras=None if payload is None else {PAYLOAD_CHANNEL: payload},
-                          meta={"moving_mass_kg": context.moving_mass_kg, "seed": seed, "simulation": truth})
+    return truth
 
 
 def _two_payloads(n: int, seed: int) -> np.ndarray:

@@ -309,8 +309,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         FileExistsError: an output exists and ``overwrite`` is off.
         ValueError: bad settings or a recording that cannot be analysed (the message names it).
     """
-    from pipeline.formats import (ResultSet, calibration_text, read_recording, recording_checks, recording_source,
-                                  recording_texts)
+    from pipeline.formats import ResultSet, read_recording, recording_checks
 
     t0 = time.perf_counter()
     split: dict[str, float] = {}
@@ -356,24 +355,33 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                 summary["suggested_poses_path"] = paths["suggested_poses"]
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
-            recording = summary.pop("_recording", None)
             as_read = summary.pop("_as_read", None)
-            calibration = summary.pop("_calibration")
-            if "summary_json" in targets_out:
-                outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
-            if recording is not None:
-                csv_text, json_text = recording_texts(recording)
-                outputs.temp("csv").write_text(csv_text)
-                outputs.temp("json").write_text(json_text)
-                source = {"name": Path(targets_out["csv"]).name, "simulated": summary["scenario"],
-                          "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
-            else:
-                source = recording_source(settings.real)
-            outputs.temp("calibration").write_text(calibration_text(replace(calibration, recording=source)))
+            write_data_files(outputs, summary, settings, targets_out)
             outputs.publish()
     finally:
         reservation.release()
     return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=as_read)
+
+
+def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict) -> None:
+    """Write the summary JSON (when asked), the simulated recording (when simulating) and the
+    calibration file (its recording named and hashed) to their temporary files in ``outputs``;
+    the summary's private keys (``_recording``, ``_calibration``) are taken out of it first."""
+    from pipeline.formats import calibration_text, recording_source, recording_texts
+
+    recording = summary.pop("_recording", None)
+    calibration = summary.pop("_calibration")
+    if "summary_json" in targets_out:
+        outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
+    if recording is not None:
+        csv_text, json_text = recording_texts(recording)
+        outputs.temp("csv").write_text(csv_text)
+        outputs.temp("json").write_text(json_text)
+        source = {"name": Path(targets_out["csv"]).name, "simulated": summary["scenario"],
+                  "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
+    else:
+        source = recording_source(settings.real)
+    outputs.temp("calibration").write_text(calibration_text(replace(calibration, recording=source)))
 
 
 #: What the summary says of the prior with --no-prior.
