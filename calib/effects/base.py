@@ -311,8 +311,6 @@ class Effect:
             between the two by the evidence.
         per_chain_signed: whether a per-chain scenario may flip a chain's sign (physical for a
             phase, not for a dead band or a stiffness).
-        needs_time: whether the joint regressors follow the time since the machine started
-            (``EffectData.t_s``): commands are compensated for it only at given times.
         not_compensable: why commands cannot compensate the effect (empty: they can): an effect
             of the instrument, not of the machine, or a one-off event of the recording.
     """
@@ -327,13 +325,13 @@ class Effect:
     granularity: ClassVar[str] = "shared"
     per_chain_capable: ClassVar[tuple[str, ...]] = ()
     per_chain_signed: ClassVar[bool] = False
-    needs_time: ClassVar[bool] = False
     not_compensable: ClassVar[str] = ""
 
     def compensation_inputs(self) -> tuple[str, ...]:
         """What compensating the effect needs beside the commands: ``"t_s"`` (the times of the
-        targets) and the names of recorded channels (a law's temperature), in that order."""
-        return ("t_s",) if self.needs_time else ()
+        targets, for an effect that follows time) and the names of recorded channels (a law's
+        temperature), in that order."""
+        return ("t_s",) if self.follows == "time" else ()
 
     def applies_to(self, robot: Robot) -> bool:
         """Whether the effect makes physical sense on ``robot`` (subclasses say why not)."""

@@ -101,7 +101,6 @@ class PerChainForm(Effect):
         self.refine_search = base.refine_search
         self.generalises = (base.name,)
         self.per_chain_signed = base.per_chain_signed
-        self.needs_time = base.needs_time
         self.not_compensable = base.not_compensable
 
     def compensation_inputs(self):

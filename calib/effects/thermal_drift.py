@@ -22,7 +22,6 @@ class ThermalDrift(Effect):
     name = "thermal_drift"
     physics = "every leg grows at a constant rate with time"
     follows = "time"
-    needs_time = True
     per_chain_capable = ("growth_rate",)
 
     def applies_to(self, robot):

@@ -40,7 +40,6 @@ class ThermalWarmup(Effect):
     physics = "every leg grows with time, levelling off with a thermal time constant"
     searched = SearchedParameter("time_constant", "s")
     follows = "time"
-    needs_time = True
     per_chain_capable = ("initial_growth_rate",)
     generalises = (THERMAL_DRIFT.name,)
 

@@ -193,6 +193,7 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     Returns:
         ``nominal``, ``geometry``, ``physics``: mean position error of the settled poses (noise-free),
         mm; ``floor``: the discovery's noise floor, mm; ``summary``: the discovery's summary;
+        ``calibration``: the :class:`pipeline.formats.Calibration` it gives;
         ``compensation``: the :class:`calib.compensation.Compensation` with physics.
     """
     from pipeline.simulation import command_scenario_machine, heldout_payloads, heldout_targets
@@ -214,4 +215,4 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     geometry = compensated_commands(robot, report.discovery.geometry.theta, targets, [], t_s=t_s)
     return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)), "geometry": error(geometry.commands),
             "physics": error(physics.commands), "floor": report.summary["noise_floor_mm"], "summary": report.summary,
-            "compensation": physics}
+            "calibration": cal, "compensation": physics}
