@@ -64,6 +64,9 @@ FIT_ALPHA = 1e-3
 MIN_IMPROVEMENT = 10.0
 #: A fit is plausible when no free parameter moved more than this many tolerances.
 PLAUSIBLE_TOLERANCES = 10.0
+#: A parameter's movement counts for the plausibility only beyond this many of its standard
+#: deviations in the fit (the rows place it there).
+SIGNIFICANT = 3.0
 #: Conversions given the full fit after the screen.
 SCREEN_KEEP = 3
 #: The screen fits this many times the fewest rows that identify the unknowns (all rows if fewer).
@@ -250,7 +253,10 @@ class FitFigures:
         limit: the chi-square(dof) ``1 - FIT_ALPHA`` quantile.
         frame_estimated: whether an instrument frame was estimated.
         worst_parameter: the free parameter that moved most, in tolerances ('' when no fit).
-        worst_tolerances: how many tolerances it moved.
+        worst_tolerances: how many tolerances it moved (movements within :data:`SIGNIFICANT` of
+            their standard deviations count as none).
+        worst_offset, worst_unit, worst_tolerance: how far it moved from nominal, its unit and its
+            tolerance.
         error: why the fit could not run ('' when it ran).
         fit: the :class:`calib.measurement.MeasuredFit` (None when it could not run).
     """
@@ -261,6 +267,9 @@ class FitFigures:
     frame_estimated: bool = False
     worst_parameter: str = ""
     worst_tolerances: float = float("inf")
+    worst_offset: float = float("nan")
+    worst_unit: str = ""
+    worst_tolerance: float = float("nan")
     error: str = ""
     fit: object = field(default=None, repr=False)
 
@@ -287,8 +296,13 @@ class FitFigures:
         if self.frame_estimated:
             s += ", instrument frame estimated"
         if not self.plausible:
-            s += f", {self.worst_parameter} moved {self.worst_tolerances:.3g} tolerances"
+            s += f", {self.moved_words()}"
         return s
+
+    def moved_words(self) -> str:
+        """``P5.x moved 2.9 mm from nominal (tolerance 0.1 mm)``."""
+        return (f"{self.worst_parameter} moved {self.worst_offset:.3g} {self.worst_unit} from nominal "
+                f"(tolerance {self.worst_tolerance:.3g} {self.worst_unit})")
 
     def summary(self) -> dict:
         """JSON-ready figures."""
@@ -297,6 +311,7 @@ class FitFigures:
                 "limit_per_dof": finite(self.limit / self.dof) if self.dof > 0 else None, "fits": self.fits,
                 "plausible": self.plausible, "frame_estimated": self.frame_estimated,
                 "worst_parameter": self.worst_parameter or None, "worst_tolerances": finite(self.worst_tolerances),
+                "worst_offset": finite(self.worst_offset), "worst_unit": self.worst_unit or None,
                 "error": self.error or None}
 
 
@@ -324,11 +339,19 @@ def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFi
         return FitFigures(float("inf"), 0, float("inf"), error=str(exc).split("\n")[0])
     r = fit.result
     chi2 = float(r.chi2) if np.isfinite(r.chi2) and np.all(np.isfinite(r.residuals)) else float("inf")
-    moved = np.abs(r.theta - robot.table.nominal)[problem.free] / problem.tolerance[problem.free]
+    offset = np.abs(r.theta - robot.table.nominal)[problem.free]
+    # A movement counts where the rows place it (beyond SIGNIFICANT standard deviations): a plain
+    # fit of poses that leave a combination undetermined (one plane) moves it anywhere, and that is
+    # no evidence of a mistake in the file.
+    moved = np.where(offset > SIGNIFICANT * r.std[problem.free], offset / problem.tolerance[problem.free], 0.0)
     worst = int(np.argmax(moved)) if moved.size else 0
+    k = problem.free[worst] if moved.size else 0
     return FitFigures(chi2, int(r.dof), chi2_limit(int(r.dof)), bool(fit.frame_estimated),
-                      robot.table.names[problem.free[worst]] if moved.size else "",
-                      float(moved[worst]) if moved.size and np.isfinite(moved[worst]) else float("inf"), fit=fit)
+                      robot.table.names[k] if moved.size else "",
+                      float(moved[worst]) if moved.size and np.isfinite(moved[worst]) else float("inf"),
+                      worst_offset=float(offset[worst]) if moved.size else float("nan"),
+                      worst_unit=robot.table.units[k] if moved.size else "",
+                      worst_tolerance=float(problem.tolerance[k]) if moved.size else float("nan"), fit=fit)
 
 
 def _screen_rows(problem: _Problem, n: int, m: int) -> np.ndarray:
@@ -484,8 +507,8 @@ def _unexplained(problem: _Problem, joints, measured, written: FitFigures, scree
 def _fit_words(robot: Robot, written: FitFigures) -> str:
     if written.plausible:
         return f"the data fit the {robot.name} at the declared noise ({written.words()}): nothing wrong"
-    return (f"the data fit the {robot.name} at the declared noise, but only with {written.worst_parameter} "
-            f"{written.worst_tolerances:.3g} times its tolerance from nominal ({written.words()}) and no conversion "
+    return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()} "
+            f"(chi-square {written.chi2_dof:.3g} per degree of freedom) and no conversion "
             "of the file fits better: an offset the geometry absorbs (a capture body mounted turned on the "
             "platform turns the platform joints' coordinates) or a machine far from its nominal geometry")
 

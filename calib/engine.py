@@ -131,7 +131,8 @@ class IdentificationResult:
 
     def parameter_sources(self) -> dict[str, str]:
         """``{name: source}`` of every parameter: ``"data"`` where the posterior standard deviation
-        is below :data:`calib.prior.DATA_SOURCE_RATIO` (one half) of the prior's, ``"prior"``
+        is below :data:`calib.prior.DATA_SOURCE_RATIO` (one half) of the prior's or the fit moved
+        it beyond :data:`calib.prior.MOVED_BY_DATA` prior standard deviations, ``"prior"``
         where it is not (the poses left it to the tolerance), ``"held"`` for a fixed parameter.
         Without a prior every identified parameter's source is ``"data"``."""
         out = dict.fromkeys(self.robot.table.names, "held")
@@ -139,7 +140,7 @@ class IdentificationResult:
         if self.prior is None:
             src = ["data"] * idx.size
         else:
-            src = parameter_sources(self.std[idx], self.prior.std[idx])
+            src = parameter_sources(self.std[idx], self.prior.std[idx], self.theta[idx] - self.prior.mean[idx])
         out.update({self.robot.table.names[i]: str(v) for i, v in zip(idx, src)})
         return out
 

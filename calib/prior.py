@@ -31,7 +31,7 @@ import numpy as np
 from .robot import Robot
 from .validation import as_array, frozen_array
 
-__all__ = ["ParameterPrior", "PARAMETER_UNITS", "DATA_SOURCE_RATIO", "parameter_sources"]
+__all__ = ["ParameterPrior", "PARAMETER_UNITS", "DATA_SOURCE_RATIO", "MOVED_BY_DATA", "parameter_sources"]
 
 #: The units a ``parameter_tolerance`` mapping may name as keys (one value for every parameter
 #: in that unit).
@@ -41,6 +41,10 @@ PARAMETER_UNITS = ("mm", "rad")
 #: this fraction of its prior's (the data shrank the tolerance at least twofold, i.e. they carry
 #: at least three times the prior's information on it); else as left to the prior.
 DATA_SOURCE_RATIO = 0.5
+#: A parameter the fit placed beyond this many prior standard deviations from the prior's mean was
+#: moved there by the data (under the prior alone that is a 1-in-370 event), so it counts as
+#: determined by the data even where the posterior is not much narrower than the prior.
+MOVED_BY_DATA = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,8 +148,15 @@ def _tolerance_vector(robot: Robot, tolerance: Mapping, what: str, base=None) ->
     return std
 
 
-def parameter_sources(posterior_std, prior_std) -> np.ndarray:
+def parameter_sources(posterior_std, prior_std, moved=None) -> np.ndarray:
     """(K,) ``"data"`` where the posterior standard deviation is below :data:`DATA_SOURCE_RATIO`
-    times the prior's, else ``"prior"``; both (K,) in each parameter's unit."""
+    times the prior's, or where the data moved the parameter beyond :data:`MOVED_BY_DATA` prior
+    standard deviations from the prior's mean (``moved`` (K,): estimate minus prior mean; a prior
+    that far off was overruled by the rows, whatever the posterior's width); else ``"prior"``.
+    All (K,) in each parameter's unit."""
     post = np.asarray(posterior_std, dtype=float)
-    return np.where(post < DATA_SOURCE_RATIO * np.asarray(prior_std, dtype=float), "data", "prior")
+    prior = np.asarray(prior_std, dtype=float)
+    data = post < DATA_SOURCE_RATIO * prior
+    if moved is not None:
+        data |= np.abs(np.asarray(moved, dtype=float)) > MOVED_BY_DATA * prior
+    return np.where(data, "data", "prior")

@@ -77,6 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="plain least squares: no parameter prior (default: each parameter's nominal value with "
                         "the sidecar's meta.parameter_tolerance, or the robot's default tolerance, as its prior; "
                         "maximum a posteriori)")
+    p.add_argument("--tolerance", default=None, metavar="KEY=VALUE[,KEY=VALUE...]",
+                   help="declare the parameters' manufacturing tolerance (one standard deviation about nominal): "
+                        "per unit ('mm=2,rad=0.02') and/or by parameter name ('B3.z=0.5'); overrides the sidecar's "
+                        "meta.parameter_tolerance. Default: the sidecar's, else learnt from the rows (empirical "
+                        "Bayes, calib.evidence)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -111,7 +116,24 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
     from pipeline.workflows.calibration import RunSettings
 
     fields = {k: v for k, v in vars(args).items() if k != "quiet"}
+    fields["tolerance"] = None if args.tolerance is None else tolerance_argument(args.tolerance)
     return RunSettings(**fields)
+
+
+def tolerance_argument(text: str) -> dict:
+    """``{"mm": 2.0, "B3.z": 0.5}`` from ``--tolerance mm=2,B3.z=0.5`` (ValueError naming the flag;
+    the keys and values are checked against the robot when the run reads it)."""
+    out = {}
+    for part in text.split(","):
+        key, sep, value = part.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--tolerance {text!r}: expected KEY=VALUE pairs separated by commas "
+                             f"(e.g. mm=2,rad=0.02), got {part!r}")
+        try:
+            out[key.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"--tolerance {text!r}: {key.strip()!r} must be a number, got {value!r}") from None
+    return out
 
 
 def _progress(enabled: bool):
@@ -173,6 +195,23 @@ def print_determination(s: dict) -> None:
         print(f"  suggested: measure {sp['poses']} more poses ({sp['what']}): {s.get('suggested_poses_path', '')}")
 
 
+#: Implausible parameters printed one a line; the rest are counted (the summary JSON lists them all).
+IMPLAUSIBLE_LINES = 3
+
+
+def print_implausible(items: list) -> None:
+    """The identified errors beyond the implausibility bound, in a few lines."""
+    if not items:
+        return
+    print(f"  implausible: {len(items)} parameter{'s' if len(items) > 1 else ''} far beyond the tolerance: the "
+          "geometry may be absorbing unmodelled physics (python -m pipeline.discover) or the declared tolerance "
+          "is too tight")
+    for item in items[:IMPLAUSIBLE_LINES]:
+        print(f"    {item['words']}")
+    if len(items) > IMPLAUSIBLE_LINES:
+        print(f"    ... {len(items) - IMPLAUSIBLE_LINES} more in the summary JSON (implausible_parameters)")
+
+
 def print_summary(s: dict) -> None:
     """The summary in plain words, for the terminal."""
     print(f"Calibration of the {s['robot']} - {s['scenario']}")
@@ -207,8 +246,7 @@ def print_summary(s: dict) -> None:
               f"{', '.join(f'{v:.4g}' for v in f['rotation_rad'])} rad")
         for words in s.get("measurement_frame_held") or ():
             print(f"    {words}")
-    for item in s.get("implausible_parameters") or ():
-        print(f"  implausible: {item['words']}")
+    print_implausible(s.get("implausible_parameters") or [])
     for warning in s.get("warnings") or ():
         print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")

@@ -18,6 +18,7 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from calib import paper
+from calib.evidence import ToleranceEstimate, tolerance_from_data
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
 from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
     measured_gauge_representative, measurement_residuals, measurement_settings
@@ -74,6 +75,7 @@ class RunSettings:
     summary_json: Path | None = None
     keep_outliers: bool = False
     prior: bool = True
+    tolerance: dict | None = None
 
 
 @dataclass
@@ -403,6 +405,12 @@ class CalibrationInput:
         rec: the recording read (None when simulating); sim: the simulation's parts (None when reading).
         tolerance: each parameter's tolerance (:func:`machine_tolerance`): the prior, and the yardstick
             of :func:`implausible_parameters` with or without one; prior: it, or None with --no-prior.
+            Where none is declared both become the tolerance learnt from the rows
+            (:func:`learn_tolerance`) once the gross rows are out.
+        tolerance_declared: the sidecar declares ``meta.parameter_tolerance``.
+        tolerance_estimate: the tolerance the rows support (:class:`calib.evidence.ToleranceEstimate`),
+            the prior where none is declared, a check of the declared one otherwise; None with
+            --no-prior or before :func:`learn_tolerance`.
     """
 
     robot: Robot
@@ -423,11 +431,18 @@ class CalibrationInput:
     prior_source: str = NO_PRIOR
     sessions: np.ndarray | None = None
     val_sessions: np.ndarray | None = None
+    tolerance_declared: bool = False
+    tolerance_estimate: ToleranceEstimate | None = None
 
     @property
     def n_sessions(self) -> int:
         """Measurement sessions of the recording (1 for a simulated run)."""
         return 1 if self.rec is None else len(self.rec.session_names)
+
+
+#: The key of a recording-as-read's meta saying where its ``parameter_tolerance`` came from when a
+#: run learnt it from the rows (:func:`learn_tolerance`; never written to a file).
+TOLERANCE_SOURCE_KEY = "parameter_tolerance_source"
 
 
 def machine_tolerance(robot: Robot, meta: dict | None, where: str) -> tuple[ParameterPrior, str]:
@@ -439,6 +454,7 @@ def machine_tolerance(robot: Robot, meta: dict | None, where: str) -> tuple[Para
         ValueError: a tolerance naming no parameter or unit, or not a number > 0 (file and key named).
     """
     tolerance = (meta or {}).get("parameter_tolerance")
+    learnt = (meta or {}).get(TOLERANCE_SOURCE_KEY)
     if tolerance is None:
         default = ", ".join(f"{v:g} {u}" for u, v in robot.default_parameter_tolerance.items())
         return ParameterPrior.default(robot), f"the {robot.name}'s default tolerance ({default}, one standard deviation)"
@@ -446,7 +462,17 @@ def machine_tolerance(robot: Robot, meta: dict | None, where: str) -> tuple[Para
         prior = ParameterPrior.from_tolerance(robot, tolerance)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: field 'meta.parameter_tolerance': {exc}") from None
-    return prior, f"the sidecar's parameter_tolerance ({where})"
+    return prior, learnt or f"the sidecar's parameter_tolerance ({where})"
+
+
+def declared_tolerance(robot: Robot, meta: dict | None, where: str, flag: dict | None) -> tuple[ParameterPrior, str]:
+    """:func:`machine_tolerance`, the command line's ``--tolerance`` (``flag``) overriding the sidecar's."""
+    if flag is None:
+        return machine_tolerance(robot, meta, where)
+    try:
+        return ParameterPrior.from_tolerance(robot, flag), "the tolerance declared with --tolerance"
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--tolerance: {exc}") from None
 
 
 #: An identified error beyond this many tolerances is physically implausible.
@@ -462,8 +488,8 @@ def implausible_parameters(robot: Robot, errors: np.ndarray, tolerance: Paramete
         tol, err, unit = float(tolerance.std[k]), float(errors[k]), robot.table.units[k]
         if abs(err) > IMPLAUSIBLE_TOLERANCES * tol:
             out.append({"name": name, "error": err, "tolerance": tol, "unit": unit,
-                        "words": f"{name} = {err:+.4g} {unit}, tolerance {tol:.4g} {unit}: the geometry may be "
-                                 "absorbing unmodelled physics; run pipeline.discover"})
+                        "words": f"{name} = {err:+.4g} {unit} from nominal, {abs(err) / tol:.3g} times its tolerance "
+                                 f"{tol:.4g} {unit}"})
     return sorted(out, key=lambda d: -abs(d["error"]) / d["tolerance"])
 
 
@@ -480,7 +506,7 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     where = str(settings.real)
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
-    tolerance, prior_source = machine_tolerance(robot, rec.meta, sidecar_name(settings.real))
+    tolerance, prior_source = declared_tolerance(robot, rec.meta, sidecar_name(settings.real), settings.tolerance)
     index = session_index(rec)
     cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
     lost = sorted(set(rec.sessions[val_rows]) - set(rec.sessions[cal_rows]))
@@ -493,7 +519,8 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
                             val_joints=val_joints, val_meas=val_meas, rec=rec, tolerance=tolerance,
                             prior=tolerance if settings.prior else None,
                             prior_source=prior_source if settings.prior else NO_PRIOR,
-                            sessions=index[cal_rows], val_sessions=index[val_rows])
+                            sessions=index[cal_rows], val_sessions=index[val_rows],
+                            tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None)
 
 
 def session_index(rec: Recording) -> np.ndarray:
@@ -509,13 +536,14 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))
-    tolerance, prior_source = machine_tolerance(robot, None, "")
+    tolerance, prior_source = declared_tolerance(robot, None, "", settings.tolerance)
     return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
                             rows=np.arange(len(cal.measured)), where="the simulated calibration poses",
                             scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
                             val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, tolerance=tolerance,
                             prior=tolerance if settings.prior else None,
-                            prior_source=prior_source if settings.prior else NO_PRIOR)
+                            prior_source=prior_source if settings.prior else NO_PRIOR,
+                            tolerance_declared=settings.tolerance is not None)
 
 
 @dataclass
@@ -632,6 +660,48 @@ def sessions_fit(inp: CalibrationInput, search, kept: np.ndarray):
                              sessions=inp.sessions[kept])
 
 
+def _first_fit(inp: CalibrationInput, settings: RunSettings, search, kept: np.ndarray):
+    """``(instrument, measured, (result, solver))`` of the rows ``kept`` under ``inp.prior``: the
+    instrument fit where the recording needs one (then ``measured`` the poses in the base frame
+    and the result pair None), else the run's identification of the base-frame poses."""
+    instrument = instrument_fit(inp, search, kept)
+    measured = inp.measured if instrument is None else instrument.base_poses(
+        inp.joints, inp.measured, sessions=inp.sessions if inp.n_sessions > 1 else None)
+    if instrument is not None:
+        return instrument, measured, None
+    return None, measured, _identify(inp.robot, inp.joints[kept], measured[kept], inp.noise, settings, inp.where,
+                                     inp.prior, inp.rows[kept])
+
+
+def learn_tolerance(inp: CalibrationInput, fit) -> bool:
+    """The tolerance the rows support (:func:`calib.evidence.tolerance_from_data`), from ``fit``
+    (an identification result, or the ``(result, solver)`` pair, made under ``inp.prior``). Where
+    the recording declares none it becomes the prior and the yardstick of the run (``inp`` is
+    updated, its ``prior_source`` says so) and True is returned (refit under it); a declared one
+    is kept and checked (``inp.tolerance_estimate`` says whether the rows contradict it). Without
+    a prior (--no-prior) nothing is learnt."""
+    result = fit[0] if isinstance(fit, tuple) else fit
+    if inp.prior is None or result is None or result.prior is None:
+        return False
+    try:
+        estimate = tolerance_from_data(result, reference=inp.prior)
+    except (ValueError, np.linalg.LinAlgError):
+        return False
+    inp.tolerance_estimate = estimate
+    if inp.tolerance_declared:
+        return False
+    default = estimate.tolerance_words("reference")
+    if all(f == 1.0 for f in estimate.factor.values()):
+        inp.prior_source = (f"the {inp.robot.name}'s default tolerance ({default}, one standard deviation): the rows "
+                            "determine too few parameters to learn one")
+        return False
+    verdict = ("contradicted: " + estimate.evidence_words()) if estimate.contradicted else "consistent with the rows"
+    inp.prior = inp.tolerance = estimate.prior
+    inp.prior_source = (f"tolerance estimated from the data: {estimate.tolerance_words()} (the {inp.robot.name}'s "
+                        f"default {default} is {verdict})")
+    return True
+
+
 def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) -> Identification:
     """Gross rows first (:func:`gross_row_stage`), then, on the rows kept, the instrument frame
     where the recording needs one (:func:`instrument_fit`), the outlier test (closed-form
@@ -640,9 +710,13 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
     robot, joints, noise = inp.robot, inp.joints, inp.noise
     search, kept = gross_row_stage(inp, settings)
     gross_idx = [] if search is None or not search.success else [int(i) for i in search.gross]
-    instrument = instrument_fit(inp, search, kept)
-    measured = inp.measured if instrument is None else instrument.base_poses(
-        joints, inp.measured, sessions=inp.sessions if inp.n_sessions > 1 else None)
+    instrument, measured, first = _first_fit(inp, settings, search, kept)
+    if learn_tolerance(inp, instrument.result if instrument is not None else first):
+        instrument, measured, first = _first_fit(inp, settings, search, kept)  # under the learnt tolerance
+    est = inp.tolerance_estimate
+    if inp.tolerance_declared and est is not None and est.contradicted:
+        warnings.append(f"the declared tolerance ({est.tolerance_words('reference')}) is contradicted by the rows: "
+                        f"{est.evidence_words()}; the rows support {est.tolerance_words()} (declared, so obeyed)")
     try:
         report = find_outliers(robot, joints[kept], measured[kept], noise)
     except (ValueError, KinematicsError) as exc:
@@ -651,11 +725,7 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
         outlier_verdict = report.verdict
     loo_idx = [int(kept[i]) for i in report.flagged] if report is not None else []
     flagged_idx = sorted(set(gross_idx) | set(loo_idx))
-    if instrument is not None:
-        result_all, solver = instrument.result, "lm"
-    else:
-        result_all, solver = _identify(robot, joints[kept], measured[kept], noise, settings, inp.where, inp.prior,
-                                       inp.rows[kept])
+    result_all, solver = (instrument.result, "lm") if instrument is not None else first
     keep = np.setdiff1d(kept, loo_idx)
     left_out = bool(loo_idx) and not settings.keep_outliers and instrument is None
     if loo_idx and instrument is not None:
@@ -942,6 +1012,10 @@ def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -
     search = ident.gross
     if search is not None and not search.success:
         beyond = int(np.sum(search.statistic > search.cutoff))
+        if 2 * beyond <= search.statistic.size:  # the search failed for another reason: say which
+            return "gross_search_failed", (f"not calibrated: the gross-row search could not judge the rows "
+                                           f"({search.message}), and the fit on every row is "
+                                           f"{evidence['fit_ratio']:.3g} times the declared noise off the model")
         return "model_misfit", (f"not calibrated: the model misfits most rows ({beyond} of {search.statistic.size} "
                                 f"beyond the declared noise even after the trimmed fits), so no row can be called "
                                 f"gross: physics the geometric model leaves out (run python -m pipeline.discover "
@@ -976,7 +1050,13 @@ def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
         if several:
             block.update(sessions_block(inp, instrument))
     gross = [int(inp.rows[i]) for i in ident.gross_idx]
-    return AsRead(recording=replace(rec, measured=measured), gross_rows=gross, block=block)
+    meta = rec.meta
+    if inp.tolerance is not None and not inp.tolerance_declared and inp.tolerance_estimate is not None:
+        # The tolerance learnt from the rows travels with the recording as read: every later fit of it
+        # (discovery's) takes it as the run did, and says where it came from.
+        meta = {**rec.meta, "parameter_tolerance": inp.tolerance.tolerance_by_name(inp.robot),
+                TOLERANCE_SOURCE_KEY: inp.prior_source}
+    return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block)
 
 
 def sessions_block(inp: CalibrationInput, fit) -> dict:
@@ -1022,8 +1102,11 @@ def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
     left = [c["combination"] + (f" ({inp.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
             + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
     sources = result.parameter_sources()
+    est = inp.tolerance_estimate
     return {"prior": {"used": inp.prior is not None, "source": inp.prior_source,
-                      "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot)},
+                      "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot),
+                      "declared": inp.tolerance_declared,
+                      "learnt": None if est is None else est.summary()},
             "parameter_determination": result.determination(),
             "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
             "left_to_prior": left}

@@ -27,7 +27,6 @@ from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, 
 from calib.effects.discovery import MIN_ROWS
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.crossval import crossvalidate
-from calib.prior import ParameterPrior
 from mjcf.simulator import SettleError
 from calib.effects.records import effect_record, fitted_effects
 from calib.measurement import frame_from_dict
@@ -427,8 +426,7 @@ def geometry_crossvalidation(rec: Recording, read, seed: int) -> dict:
     geometry alone, on the rows the run would use (the gross rows left out), base frame."""
     rows = np.setdiff1d(np.arange(len(rec.sets)), read.gross_rows)
     cv = crossvalidate(rec.robot, rec.joints[rows], rec.measured[rows], rec.noise, method="forward",
-                       prior=ParameterPrior.default(rec.robot) if "parameter_tolerance" not in rec.meta else
-                       ParameterPrior.from_tolerance(rec.robot, rec.meta["parameter_tolerance"]), seed=seed)
+                       prior=machine_tolerance(rec.robot, rec.meta, "the recording's sidecar")[0], seed=seed)
     out = cv.summary()
     out["crossvalidation"]["model"] = "the geometry alone (forward fit with the tolerances as prior)"
     return out

@@ -1,0 +1,287 @@
+"""Tolerances learnt from the data: the prior's scale that maximises the evidence (empirical Bayes).
+
+A machine built by hand is millimetres off its drawing; a precision hexapod micrometres. The
+robot's documented ``default_parameter_tolerance`` (:class:`calib.prior.ParameterPrior`) cannot
+fit both, and a prior far too tight holds every parameter at its nominal value whatever the rows
+say. Where no tolerance is declared the run estimates the prior's scale from the rows instead:
+one factor per unit (mm, rad) on the reference prior's standard deviations, chosen to maximise
+the marginal likelihood of the rows (MacKay, "Bayesian interpolation", Neural Computation 4, 1992;
+Bishop, *Pattern Recognition and Machine Learning*, section 3.5). Where a tolerance is declared the
+same figures say whether the rows contradict it (:attr:`ToleranceEstimate.contradicted`).
+
+The model is the fit linearised at its solution (a maximum a posteriori fit under the reference
+prior, :class:`calib.engine.IdentificationResult`): with the free parameters' errors ``d = theta -
+mean`` (K,), the whitened rows ``y = J d + e`` (``e`` ~ N(0, I), the declared noise), and the prior
+``d ~ N(0, S(s))``, ``S(s) = diag((s_u sigma_k)^2)`` (``sigma_k`` the reference standard deviation,
+``s_u`` the factor of parameter k's unit), everything the evidence needs is in the fit's posterior:
+its precision ``P0 = Sigma0^-1`` gives the data's information ``H = J^T J = P0 - S0^-1`` and its
+mean ``m0`` the data's vector ``b = J^T y = P0 m0`` (nuisance unknowns fitted without a prior, an
+instrument frame or target offsets, are already marginalised in ``Sigma0``). Then, up to a
+constant,
+
+    log p(y | s) = 1/2 b^T A^-1 b - 1/2 log det(I + S^1/2 H S^1/2),     A = H + S^-1,
+
+maximised by MacKay's fixed point per unit ``u``:
+``gamma_u = sum_k in u (1 - (A^-1)_kk / S_kk)`` (the parameters of unit u the data determine) and
+``s_u^2 = sum_k in u (m_k / sigma_k)^2 / gamma_u``, ``m = A^-1 b``. Directions the rows do not see
+add nothing to ``gamma`` or to ``m``: a gauge or a plane of poses does not drive the scale to zero
+or to infinity, the estimate comes from the directions the data determine. A unit whose
+parameters the rows leave undetermined (``gamma_u`` below :data:`MIN_DETERMINED`) keeps the
+reference scale. The cost is one small (K, K) problem per step, nothing beside the fit it reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .prior import ParameterPrior
+from .robot import Robot
+
+__all__ = ["ToleranceEstimate", "tolerance_from_data", "MIN_DETERMINED", "SCALE_BOUNDS", "CONTRADICTION_NATS",
+           "CONTRADICTION_FACTOR", "FAR_TOLERANCES"]
+
+#: A unit whose free parameters the rows determine less than this many of (``gamma_u``, MacKay's
+#: effective number of parameters) keeps the reference prior's scale: the rows say nothing of it.
+MIN_DETERMINED = 1.0
+#: The estimated factor on the reference standard deviations is kept within these bounds (a
+#: thousandth to ten thousand times): beyond them the linearised evidence is no guide.
+SCALE_BOUNDS = (1e-3, 1e4)
+#: A reference tolerance counts as contradicted by the rows when the evidence at the estimate
+#: exceeds the evidence at the reference by more than this many nats (a likelihood ratio of about
+#: 20, "strong" on Jeffreys' scale) ...
+CONTRADICTION_NATS = 3.0
+#: ... and the estimated tolerance of some unit is more than this factor from the reference's.
+CONTRADICTION_FACTOR = 3.0
+#: A parameter the rows determine counts as far from nominal, in the reference tolerance's
+#: terms, beyond this many reference standard deviations.
+FAR_TOLERANCES = 3.0
+#: Fixed-point steps: at most this many, stopping when no factor's square moves by a relative
+#: :data:`STEP_RTOL` (the evidence is flat near its maximum: a tolerance right to a part in a
+#: million is far more than the prior needs).
+MAX_STEPS = 500
+STEP_RTOL = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class ToleranceEstimate:
+    """The prior's scale learnt from the rows (:func:`tolerance_from_data`).
+
+    Attributes:
+        prior: the estimated prior (P,): the reference's means, its standard deviations times the
+            factor of each parameter's unit.
+        reference: the prior the fit was made under (the robot's default or the declared one).
+        factor: ``{unit: s_u}`` the factor on the reference's standard deviations of that unit's
+            parameters (1.0 where the rows determine none of them).
+        tolerance: ``{unit: tolerance}`` the estimated one-sigma tolerance of the unit (the
+            reference's typical value of the unit, its median over the free parameters, times the
+            factor), in the unit.
+        reference_tolerance: ``{unit: tolerance}`` the reference's typical value of the unit.
+        determined: ``{unit: gamma_u}`` MacKay's effective number of parameters of that unit the
+            rows determine, at the estimate.
+        log_evidence_gain: log evidence at the estimate minus at the reference (nats, >= 0 up to
+            the fixed point's precision).
+        far: ``((name, reference tolerances from nominal), ...)`` the free parameters the rows
+            place away from nominal (estimated error beyond :data:`FAR_TOLERANCES` of its own
+            posterior standard deviation at the estimate) and beyond :data:`FAR_TOLERANCES`
+            reference standard deviations from nominal, farthest first (the estimated error over
+            the reference standard deviation).
+        unit_of: ``{name: unit}`` of the free parameters.
+        error: ``{name: estimated error}`` of the free parameters at the estimate (linearised MAP,
+            parameter units).
+    """
+
+    prior: ParameterPrior
+    reference: ParameterPrior
+    factor: dict
+    tolerance: dict
+    reference_tolerance: dict
+    determined: dict
+    log_evidence_gain: float
+    far: tuple = ()
+    unit_of: dict = field(default_factory=dict)
+    error: dict = field(default_factory=dict)
+
+    @property
+    def contradicted(self) -> bool:
+        """The rows contradict the reference tolerance: the evidence prefers the estimate by more
+        than :data:`CONTRADICTION_NATS` and some unit's factor is beyond :data:`CONTRADICTION_FACTOR`
+        either way."""
+        beyond = any(f > CONTRADICTION_FACTOR or f < 1.0 / CONTRADICTION_FACTOR for f in self.factor.values())
+        return bool(self.log_evidence_gain > CONTRADICTION_NATS and beyond)
+
+    def tolerance_words(self, which: str = "estimate") -> str:
+        """``"2.1 mm, 0.012 rad"``: the estimated (or ``"reference"``) tolerance per unit."""
+        tol = self.tolerance if which == "estimate" else self.reference_tolerance
+        return ", ".join(f"{v:.3g} {u}" for u, v in tol.items())
+
+    def evidence_words(self) -> str:
+        """Why the reference is (or is not) contradicted, in figures: ``"28 parameters the rows
+        determine lie beyond 3 of its tolerances from nominal (up to 29 for B2.y); the evidence
+        prefers the estimate by 412 nats"``."""
+        parts = []
+        if self.far:
+            name, z = self.far[0]
+            parts.append(f"{len(self.far)} parameter{'s' if len(self.far) > 1 else ''} the rows determine "
+                         f"lie{'s' if len(self.far) == 1 else ''} beyond {FAR_TOLERANCES:g} times the tolerance "
+                         f"from nominal (up to {z:.3g} for {name})")
+        narrower = [u for u, f in self.factor.items() if f < 1.0 / CONTRADICTION_FACTOR]
+        if narrower:
+            parts.append(f"the rows show {' and '.join(narrower)} errors {1.0 / min(self.factor.values()):.3g} "
+                         "times smaller than it")
+        parts.append(f"the evidence prefers the estimate by {self.log_evidence_gain:.3g} nats")
+        return "; ".join(parts)
+
+    def summary(self) -> dict:
+        """JSON-ready figures."""
+        return {"tolerance": dict(self.tolerance), "reference_tolerance": dict(self.reference_tolerance),
+                "factor": dict(self.factor), "determined_parameters": dict(self.determined),
+                "log_evidence_gain_nats": float(self.log_evidence_gain), "contradicted": self.contradicted,
+                "far_from_nominal": [{"name": n, "reference_tolerances": float(z)} for n, z in self.far],
+                "method": "empirical Bayes: the prior's scale per unit maximising the marginal likelihood of "
+                          "the rows (MacKay's fixed point, the fit linearised at its solution)"}
+
+
+def tolerance_from_data(result, reference: ParameterPrior | None = None) -> ToleranceEstimate:
+    """The prior's scale per unit that maximises the evidence of the rows behind ``result``.
+
+    Args:
+        result: a :class:`calib.engine.IdentificationResult` fitted under a prior (its ``prior``,
+            ``theta``, ``covariance`` the posterior's, ``free_indices``, ``robot``).
+        reference: the prior whose standard deviations are scaled; default ``result.prior``. Its
+            means must be the prior means of the fit (the scale, not the centre, is estimated).
+
+    Raises:
+        ValueError: a result without a prior, or whose covariance is not finite.
+    """
+    if getattr(result, "prior", None) is None:
+        raise ValueError("the tolerance is learnt from a fit made under a prior (result.prior is None)")
+    robot: Robot = result.robot
+    reference = result.prior if reference is None else reference
+    reference.check(robot)
+    idx = result.free_indices
+    cov0 = np.asarray(result.covariance, dtype=float)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(cov0)):
+        raise ValueError("the fit's covariance is not finite: no tolerance can be learnt from it")
+    fit_std = np.asarray(result.prior.std, dtype=float)[idx]
+    sigma = np.asarray(reference.std, dtype=float)[idx]
+    m0 = np.asarray(result.theta, dtype=float)[idx] - np.asarray(result.prior.mean, dtype=float)[idx]
+    H, b = _data_information(cov0, fit_std, m0)
+    units = np.array([str(u) for u in robot.table.units], dtype=object)[idx]
+    names = [robot.table.names[i] for i in idx]
+    present = [u for u in dict.fromkeys(units)]
+    factor = _fixed_point(H, b, sigma, units, present)
+    gain = _log_evidence(H, b, sigma * _per_parameter(factor, units)) - _log_evidence(H, b, sigma)
+    m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
+    gamma = 1.0 - post_var / (sigma * _per_parameter(factor, units)) ** 2
+    determined = {u: float(np.sum(gamma[units == u])) for u in present}
+    z = np.abs(m) / sigma
+    seen = np.abs(m) > FAR_TOLERANCES * np.sqrt(post_var)  # the rows place it away from nominal
+    far = sorted(((names[k], float(z[k])) for k in range(len(idx)) if seen[k] and z[k] > FAR_TOLERANCES),
+                 key=lambda t: -t[1])
+    std = np.array(reference.std, dtype=float)
+    all_units = np.array(robot.table.units)
+    for u, f in factor.items():
+        std[all_units == u] *= f
+    typical = {u: float(np.median(sigma[units == u])) for u in present}
+    return ToleranceEstimate(prior=ParameterPrior(mean=reference.mean, std=std), reference=reference,
+                             factor={u: float(f) for u, f in factor.items()},
+                             tolerance={u: typical[u] * float(factor[u]) for u in present},
+                             reference_tolerance=typical, determined=determined, log_evidence_gain=float(gain),
+                             far=tuple(far), unit_of=dict(zip(names, [str(u) for u in units])),
+                             error=dict(zip(names, m.tolist())))
+
+
+def _data_information(cov0: np.ndarray, prior_std: np.ndarray, m0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, b)``: the data's information (K, K) and vector (K,) behind a posterior of covariance
+    ``cov0`` and mean ``m0`` under the prior N(0, diag(prior_std^2)). Computed in the prior's
+    scale (``C = D^-1 cov0 D^-1``, ``D = diag(prior_std)``: a well-conditioned matrix whose
+    eigenvalues lie in (0, 1]); eigenvalues of the scaled information below zero by rounding are
+    set to zero."""
+    D = prior_std
+    C = cov0 / np.outer(D, D)
+    C = 0.5 * (C + C.T)
+    w, V = np.linalg.eigh(C)
+    w = np.clip(w, np.finfo(float).tiny, None)
+    Ps = (V / w) @ V.T                                  # scaled precision D P0 D
+    Hs = Ps - np.eye(len(D))                            # scaled information D H D
+    hw, hV = np.linalg.eigh(0.5 * (Hs + Hs.T))
+    Hs = (hV * np.clip(hw, 0.0, None)) @ hV.T
+    H = Hs / np.outer(D, D)
+    b = (Ps @ (m0 / D)) / D
+    return H, b
+
+
+def _per_parameter(factor: dict, units: np.ndarray) -> np.ndarray:
+    return np.array([factor[u] for u in units])
+
+
+def _posterior(H: np.ndarray, b: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(m, diag(A^-1))`` under the prior N(0, diag(std^2)): mean (K,) and variances (K,)."""
+    Bm = std[:, None] * H * std[None, :] + np.eye(len(std))
+    L = np.linalg.cholesky(Bm)
+    Linv = np.linalg.solve(L, np.eye(len(std)))
+    Binv = Linv.T @ Linv
+    m = std * (Binv @ (std * b))
+    return m, std ** 2 * np.diag(Binv)
+
+
+def _log_evidence(H: np.ndarray, b: np.ndarray, std: np.ndarray) -> float:
+    """``1/2 b^T A^-1 b - 1/2 log det(I + S^1/2 H S^1/2)``, the log evidence up to a constant."""
+    Bm = std[:, None] * H * std[None, :] + np.eye(len(std))
+    L = np.linalg.cholesky(Bm)
+    v = np.linalg.solve(L, std * b)
+    return float(0.5 * v @ v - np.sum(np.log(np.diag(L))))
+
+
+def _one_unit_fixed_point(H, b, sigma) -> float:
+    """MacKay's fixed point with a single factor ``s``: in the eigenbasis of the scaled information
+    ``D H D = V diag(l) V^T`` (``c = V^T D b``) each step is ``gamma = sum s^2 l / (s^2 l + 1)``,
+    ``s^2 = s^4 sum c^2 / (s^2 l + 1)^2 / gamma``: O(K) a step after one eigendecomposition."""
+    lam, V = np.linalg.eigh(sigma[:, None] * H * sigma[None, :])
+    lam = np.clip(lam, 0.0, None)
+    c2 = (V.T @ (sigma * b)) ** 2
+    s2, (lo, hi) = 1.0, SCALE_BOUNDS
+    for _ in range(MAX_STEPS):
+        shrink = 1.0 / (s2 * lam + 1.0)
+        gamma = float(np.sum(s2 * lam * shrink))
+        if gamma < MIN_DETERMINED:
+            return 1.0
+        new = float(np.clip(s2 * s2 * np.sum(c2 * shrink ** 2) / gamma, lo * lo, hi * hi))
+        moved = abs(new / s2 - 1.0)
+        s2 = new
+        if moved < STEP_RTOL:
+            break
+    return float(np.sqrt(s2))
+
+
+def _fixed_point(H, b, sigma, units, present) -> dict:
+    """MacKay's fixed point for one factor per unit (see the module's docstring)."""
+    if len(present) == 1:
+        return {present[0]: _one_unit_fixed_point(H, b, sigma)}
+    factor = dict.fromkeys(present, 1.0)
+    lo, hi = SCALE_BOUNDS
+    for _ in range(MAX_STEPS):
+        m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
+        prior_var = (sigma * _per_parameter(factor, units)) ** 2
+        gamma = 1.0 - post_var / prior_var
+        new = {}
+        for u in present:
+            k = units == u
+            g = float(np.sum(gamma[k]))
+            if g < MIN_DETERMINED:
+                new[u] = 1.0 if factor[u] == 1.0 else factor[u]
+                continue
+            new[u] = float(np.clip(np.sqrt(np.sum((m[k] / sigma[k]) ** 2) / g), lo, hi))
+        moved = max(abs(new[u] / factor[u] - 1.0) for u in present)
+        factor = new
+        if moved < STEP_RTOL:
+            break
+    # A unit the rows leave undetermined at the estimate keeps the reference's scale.
+    m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
+    gamma = 1.0 - post_var / (sigma * _per_parameter(factor, units)) ** 2
+    for u in present:
+        if float(np.sum(gamma[units == u])) < MIN_DETERMINED:
+            factor[u] = 1.0
+    return factor

@@ -1,0 +1,145 @@
+"""Tolerances learnt from the data (calib.evidence): the prior's scale that maximises the evidence.
+
+Independent truths: the exact log evidence of a linear-Gaussian model written here in the rows'
+space (``log N(y; 0, I + J S J^T)``, n x n, no parameter-space shortcut), maximised over a fine
+grid; fits under a prior made by calib.engine on rows simulated with the kinematic model and
+injected errors of a known spread; the evidence's invariance to the prior the fit was made under
+(the data's information read back from its posterior is the same whichever prior was used).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from calib.engine import identify_forward
+from calib.evidence import CONTRADICTION_NATS, MIN_DETERMINED, tolerance_from_data
+from calib.noise import SensorNoise
+from calib.prior import ParameterPrior
+from calib.robots import ROBOTS, default_robot
+from calib.workspace import reachable_poses
+
+
+def _linear_result(robot, J, y, prior_std, mean=None):
+    """A result object of a linear-Gaussian MAP fit ``y = J d + e`` under N(mean, prior_std^2):
+    what tolerance_from_data reads (robot, prior, theta, covariance, free_indices)."""
+    p = robot.n_parameters
+    mean = robot.table.nominal if mean is None else mean
+    A = J.T @ J + np.diag(1.0 / prior_std ** 2)
+    cov = np.linalg.inv(A)
+    d = cov @ (J.T @ y)
+    return SimpleNamespace(robot=robot, prior=ParameterPrior(mean=mean, std=prior_std), theta=mean + d,
+                           covariance=cov, free_indices=np.arange(p))
+
+
+def _exact_log_evidence(J, y, std):
+    """log N(y; 0, I + J diag(std^2) J^T), in the rows' space."""
+    C = np.eye(len(y)) + (J * std ** 2) @ J.T
+    sign, logdet = np.linalg.slogdet(C)
+    return -0.5 * (y @ np.linalg.solve(C, y) + logdet + len(y) * np.log(2 * np.pi))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_single_unit_scale_is_the_exact_evidence_maximum(seed):
+    """Hexapod (every parameter in mm): a random rank-deficient design (a third of the directions
+    unseen, as on a plane of poses), errors drawn at 2 mm: the learnt tolerance is the grid maximum
+    of the exact evidence, whichever prior the fit was made under."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(seed)
+    p = robot.n_parameters
+    J = rng.normal(size=(150, p)) @ np.diag(np.r_[np.full(28, 3.0), np.zeros(p - 28)])
+    J = J @ np.linalg.qr(rng.normal(size=(p, p)))[0]  # the unseen directions mix every parameter
+    truth = 2.0 * rng.normal(size=p)
+    y = J @ truth + rng.normal(size=150)
+    grid = np.exp(np.linspace(np.log(0.05), np.log(50.0), 4001))
+    exact = np.array([_exact_log_evidence(J, y, np.full(p, t)) for t in grid[::40]])
+    best = grid[::40][np.argmax(exact)]
+    fine = grid[(grid > best / 1.2) & (grid < best * 1.2)]
+    best = fine[np.argmax([_exact_log_evidence(J, y, np.full(p, t)) for t in fine])]
+    for prior_mm in (0.1, 1.0, 10.0):
+        est = tolerance_from_data(_linear_result(robot, J, y, np.full(p, prior_mm)))
+        assert est.tolerance["mm"] == pytest.approx(best, rel=2e-3)   # the grid's step is 0.17%
+        assert est.determined["mm"] <= 28 + 1e-9
+    gain = _exact_log_evidence(J, y, np.full(p, best)) - _exact_log_evidence(J, y, np.full(p, 0.1))
+    est = tolerance_from_data(_linear_result(robot, J, y, np.full(p, 0.1)))
+    assert est.log_evidence_gain == pytest.approx(gain, rel=1e-3)
+    assert est.contradicted and est.far, "2 mm errors under a 0.1 mm tolerance are contradicted, with names"
+
+
+def test_two_units_each_scaled_by_its_own_evidence():
+    """Delta (mm and rad parameters): each unit's factor maximises the exact evidence over a 2-D
+    grid about the estimate (no grid point beats it)."""
+    robot = default_robot("delta")
+    rng = np.random.default_rng(5)
+    units = np.array(robot.table.units)
+    p = robot.n_parameters
+    ref = ParameterPrior.default(robot).std
+    truth = np.where(units == "mm", 1.5, 0.004) * rng.normal(size=p)
+    J = rng.normal(size=(200, p)) / ref  # every parameter seen, in its reference's scale
+    y = J @ truth + rng.normal(size=200)
+    est = tolerance_from_data(_linear_result(robot, J, y, ref))
+    f_mm, f_rad = est.factor["mm"], est.factor["rad"]
+    at = lambda a, b: _exact_log_evidence(J, y, ref * np.where(units == "mm", a, b))  # noqa: E731
+    top = at(f_mm, f_rad)
+    for da in (0.97, 1.03):
+        for db in (0.97, 1.0, 1.03):
+            assert at(f_mm * da, f_rad * db) <= top + 1e-9
+    assert 1.0 < est.tolerance["mm"] < 2.5 and 0.002 < est.tolerance["rad"] < 0.008
+
+
+def test_rows_that_see_nothing_keep_the_reference():
+    robot = default_robot("hexapod")
+    p = robot.n_parameters
+    J = np.zeros((10, p))
+    J[:, 0] = 1e-3  # barely one parameter, far below one determined
+    y = np.random.default_rng(0).normal(size=10)
+    est = tolerance_from_data(_linear_result(robot, J, y, np.full(p, 0.1)))
+    assert est.determined["mm"] < MIN_DETERMINED
+    assert est.factor == {"mm": 1.0} and not est.contradicted
+
+
+def test_a_tolerance_that_fits_is_not_contradicted():
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(3)
+    p = robot.n_parameters
+    J = rng.normal(size=(300, p)) * 20.0
+    truth = 0.1 * rng.normal(size=p)
+    y = J @ truth + rng.normal(size=300)
+    est = tolerance_from_data(_linear_result(robot, J, y, np.full(p, 0.1)))
+    assert 0.07 < est.tolerance["mm"] < 0.14
+    assert est.log_evidence_gain < CONTRADICTION_NATS and not est.contradicted and not est.far
+
+
+def test_without_a_prior_nothing_is_learnt():
+    robot = default_robot("hexapod")
+    res = SimpleNamespace(robot=robot, prior=None)
+    with pytest.raises(ValueError, match="under a prior"):
+        tolerance_from_data(res)
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_learnt_from_a_nonlinear_fit_matches_the_spread_of_the_injected_errors(name):
+    """Every robot, kinematic model: errors drawn with a spread 20 times the default tolerance,
+    rows at a noise far below it: the learnt tolerance of each unit is the errors' RMS within the
+    sampling spread of an RMS over the parameters (a factor 1.5)."""
+    robot = default_robot(name)
+    rng = np.random.default_rng(11)
+    ref = ParameterPrior.default(robot).std
+    free = robot.table.indices(robot.free_default)
+    errors = np.zeros(robot.n_parameters)
+    errors[free] = 20.0 * ref[free] * rng.normal(size=free.size)
+    theta = robot.table.nominal + errors
+    poses = reachable_poses(robot, 120, rng, theta=theta)
+    noise = SensorNoise(1e-3, 1e-6, "normal")
+    joints = robot.inverse_kinematics(theta, poses)
+    measured = poses + rng.normal(size=poses.shape) * noise.pose_std(robot.pose_units)
+    fit = identify_forward(robot, joints, measured, noise, prior=ParameterPrior.default(robot))
+    est = tolerance_from_data(fit)
+    units = np.array(robot.table.units)
+    for u, tol in est.tolerance.items():
+        k = free[units[free] == u]
+        rms = float(np.sqrt(np.mean(errors[k] ** 2)))
+        assert rms / 1.5 < tol < 1.5 * rms, (u, tol, rms)
+    assert est.contradicted
