@@ -33,7 +33,8 @@ from .validation import as_array, frozen_array
 __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians", "Robot",
            "newton_forward_kinematics", "pose_jacobian_of_joints", "pose_jacobian_of_parameters",
            "check_joint_limits", "pose_whitening", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
-           "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES", "raise_if_singular"]
+           "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES", "raise_if_singular", "JOINT_RANGES_KEY",
+           "checked_joint_ranges"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -224,9 +225,27 @@ class Robot(ABC):
     def workspace_bounds(self) -> np.ndarray:
         """(D, 2) low/high of each pose coordinate of the default calibration workspace."""
 
-    @abstractmethod
+    #: (C, 2) read-only low/high of each joint as built (joint unit), declared by a description's
+    #: ``joint_ranges`` (:func:`checked_joint_ranges`), or None: :meth:`default_joint_limits` hold.
+    joint_ranges: np.ndarray | None = None
+
     def joint_limits(self) -> np.ndarray:
-        """(C, 2) low/high of each commanded joint value the machine accepts."""
+        """(C, 2) low/high of each commanded joint value the machine accepts (joint unit): the
+        declared :attr:`joint_ranges` where the description gives them, else the robot's
+        :meth:`default_joint_limits` (the hexapod's ``home length +- stroke_mm``). Every user of
+        a joint's range (checks, pose design, suggested poses, compensation) calls this one."""
+        if self.joint_ranges is not None:
+            return self.joint_ranges.copy()
+        return self.default_joint_limits()
+
+    @abstractmethod
+    def default_joint_limits(self) -> np.ndarray:
+        """(C, 2) low/high of each joint when the description declares no ``joint_ranges``."""
+
+    def joint_ranges_description(self) -> dict:
+        """``{"joint_ranges": [[low, high], ...]}`` when ranges are declared, else ``{}``: the part
+        of :meth:`description` that :func:`checked_joint_ranges` reads back."""
+        return {} if self.joint_ranges is None else {JOINT_RANGES_KEY: self.joint_ranges.tolist()}
 
     @abstractmethod
     def description(self) -> dict:
@@ -510,6 +529,42 @@ def pose_jacobian_of_parameters(robot: Robot, theta: np.ndarray, joints: np.ndar
     """
     jac = robot.closure_jacobians(theta, joints, poses)
     return -np.linalg.solve(jac.pose, jac.parameters)
+
+
+#: The description key of the joints' declared ranges: ``[[low, high], ...]``, one pair per joint
+#: in chain order, joint unit (e.g. a hexapod's legs from 640.2 to 920.2 mm, fully retracted to
+#: fully extended).
+JOINT_RANGES_KEY = "joint_ranges"
+
+
+def checked_joint_ranges(value, robot: Robot) -> np.ndarray | None:
+    """(C, 2) read-only declared joint ranges of ``robot`` from a description's ``joint_ranges``
+    value (None: none declared).
+
+    Raises:
+        ValueError: one line naming the key and the joint: not a list of ``robot.n_chains``
+            ``[low, high]`` pairs, a value not a finite number, or ``low >= high``.
+    """
+    if value is None:
+        return None
+    c, key, unit = robot.n_chains, JOINT_RANGES_KEY, robot.joint_unit
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__") or len(value) != c:
+        got = f"{len(value)} entries" if hasattr(value, "__len__") and not isinstance(value, (str, bytes)) \
+            else repr(value)
+        raise ValueError(f"{key}: expected one [low, high] pair ({unit}) per {robot.chain_word} ({c}), got {got}")
+    out = np.empty((c, 2))
+    for i, pair in enumerate(value):
+        where = f"{key}[{i}] ({robot.chain_word} {i + 1}, {robot.joint_names[i]})"
+        if isinstance(pair, (str, bytes, dict)) or not hasattr(pair, "__len__") or len(pair) != 2:
+            raise ValueError(f"{where}: expected [low, high] in {unit}, got {pair!r}")
+        for k, v in enumerate(pair):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+                raise ValueError(f"{where}: {('low', 'high')[k]} must be a finite number ({unit}), got {v!r}")
+            out[i, k] = float(v)
+        if not out[i, 0] < out[i, 1]:
+            raise ValueError(f"{where}: low must be below high, got [{out[i, 0]:.6g}, {out[i, 1]:.6g}] {unit}")
+    out.setflags(write=False)
+    return out
 
 
 def check_joint_limits(robot: Robot, joints: np.ndarray, what: str = "row") -> None:

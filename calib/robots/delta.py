@@ -41,7 +41,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..robot import ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot
+from ..robot import (JOINT_RANGES_KEY, ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot,
+                     checked_joint_ranges)
 
 __all__ = [
     "Delta",
@@ -605,6 +606,8 @@ class Delta(Robot):
             built in MuJoCo; the kinematics use the reduced model.
         home_position_mm: (3,) home plate position, start of iterations.
         workspace_mm: (3, 2) calibration workspace box, mm.
+        joint_ranges: (3, 2) rad, each motor's range as built (:attr:`Robot.joint_ranges`);
+            None: :data:`JOINT_RANGE_RAD` for every motor.
     """
 
     name = "delta"
@@ -621,7 +624,7 @@ class Delta(Robot):
     default_parameter_tolerance = {"mm": 0.5, "rad": 0.01}
 
     def __init__(self, nominal: DeltaParams | None = None, *, rn_mm: float = NOMINAL_GEOMETRY["Rn_mm"],
-                 home_position_mm=HOME_POSITION_MM, workspace_mm=WORKSPACE_BOUNDS_MM):
+                 home_position_mm=HOME_POSITION_MM, workspace_mm=WORKSPACE_BOUNDS_MM, joint_ranges=None):
         self.nominal_params = DeltaParams.nominal() if nominal is None else nominal
         _check_params(self.nominal_params)
         if not (np.isfinite(rn_mm) and rn_mm >= 0):
@@ -629,6 +632,7 @@ class Delta(Robot):
         self.rn_mm = float(rn_mm)
         self._home = _as_array(home_position_mm, "home_position_mm", (3,))
         self._workspace = _as_array(workspace_mm, "workspace_mm", (3, 2))
+        self.joint_ranges = checked_joint_ranges(joint_ranges, self)
         v = self.nominal_params.to_vector()
         self.table = ParameterTable([
             Parameter(_chain_name(t, c), CHAIN_PARAMETER_UNITS[k], float(v[8 * c + k]), c)
@@ -645,12 +649,13 @@ class Delta(Robot):
     def workspace_bounds(self) -> np.ndarray:
         return self._workspace.copy()
 
-    def joint_limits(self) -> np.ndarray:
+    def default_joint_limits(self) -> np.ndarray:
         return np.tile(JOINT_RANGE_RAD, (3, 1))
 
     def description(self) -> dict:
         return {"parameters": self.table.to_dict(self.table.nominal), "rn_mm": self.rn_mm,
-                "home_position_mm": self._home.tolist(), "workspace_mm": self._workspace.tolist()}
+                "home_position_mm": self._home.tolist(), "workspace_mm": self._workspace.tolist(),
+                **self.joint_ranges_description()}
 
     @classmethod
     def from_description(cls, description: dict) -> "Delta":
@@ -662,7 +667,8 @@ class Delta(Robot):
         return cls(DeltaParams.from_vector([values[n] for n in names]),
                    rn_mm=description.get("rn_mm", NOMINAL_GEOMETRY["Rn_mm"]),
                    home_position_mm=description.get("home_position_mm", HOME_POSITION_MM),
-                   workspace_mm=description.get("workspace_mm", WORKSPACE_BOUNDS_MM))
+                   workspace_mm=description.get("workspace_mm", WORKSPACE_BOUNDS_MM),
+                   joint_ranges=description.get(JOINT_RANGES_KEY))
 
     @staticmethod
     def params(theta: np.ndarray) -> DeltaParams:

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import paper
 from ..validation import as_array
-from ..robot import ClosureJacobians, Parameter, ParameterTable, Robot
+from ..robot import JOINT_RANGES_KEY, ClosureJacobians, Parameter, ParameterTable, Robot, checked_joint_ranges
 from ..rotation import rotation_matrix
 
 __all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS",
@@ -55,7 +55,9 @@ class Hexapod(Robot):
         platform_joints: (6, 3) mm, nominal platform joint centres, platform frame.
         home_lengths: (6,) mm, leg lengths at ``home_pose``.
         home_pose: (6,) the pose the home lengths refer to; start of the forward kinematics.
-        stroke_mm: each leg accepts ``home length +- stroke_mm``.
+        stroke_mm: each leg accepts ``home length +- stroke_mm`` (when no ``joint_ranges``).
+        joint_ranges: (6, 2) mm, each leg's commanded length from fully retracted to fully
+            extended, as built (:attr:`Robot.joint_ranges`); None: ``home length +- stroke_mm``.
     """
 
     name = "hexapod"
@@ -71,7 +73,7 @@ class Hexapod(Robot):
     default_parameter_tolerance = {"mm": 0.1}
 
     def __init__(self, base_joints, platform_joints, home_lengths, home_pose=paper.TABLE2_HOME_POSE,
-                 stroke_mm: float = DEFAULT_STROKE_MM):
+                 stroke_mm: float = DEFAULT_STROKE_MM, joint_ranges=None):
         self.base_joints = as_array(base_joints, "base_joints", (6, 3))
         self.platform_joints = as_array(platform_joints, "platform_joints", (6, 3))
         self.home_lengths = as_array(home_lengths, "home_lengths", (6,))
@@ -79,6 +81,7 @@ class Hexapod(Robot):
         if not (np.isfinite(stroke_mm) and stroke_mm > 0):
             raise ValueError(f"stroke_mm must be > 0, got {stroke_mm!r}")
         self.stroke_mm = float(stroke_mm)
+        self.joint_ranges = checked_joint_ranges(joint_ranges, self)
         for a in (self.base_joints, self.platform_joints, self.home_lengths, self._home_pose):
             a.setflags(write=False)
         nominal = np.concatenate([self.base_joints, np.zeros((6, 1)), self.platform_joints], axis=1)
@@ -98,7 +101,7 @@ class Hexapod(Robot):
     def workspace_bounds(self) -> np.ndarray:
         return self._home_pose[:, None] + PAPER_WORKSPACE_HALF_WIDTHS
 
-    def joint_limits(self) -> np.ndarray:
+    def default_joint_limits(self) -> np.ndarray:
         return np.stack([self.home_lengths - self.stroke_mm, self.home_lengths + self.stroke_mm], axis=1)
 
     def full_workspace_bounds(self) -> np.ndarray:
@@ -117,13 +120,13 @@ class Hexapod(Robot):
     def description(self) -> dict:
         return {"base_joints_mm": self.base_joints.tolist(), "platform_joints_mm": self.platform_joints.tolist(),
                 "home_lengths_mm": self.home_lengths.tolist(), "home_pose": self._home_pose.tolist(),
-                "stroke_mm": self.stroke_mm}
+                "stroke_mm": self.stroke_mm, **self.joint_ranges_description()}
 
     @classmethod
     def from_description(cls, description: dict) -> "Hexapod":
         return cls(description["base_joints_mm"], description["platform_joints_mm"],
                    description["home_lengths_mm"], description.get("home_pose", paper.TABLE2_HOME_POSE),
-                   description.get("stroke_mm", DEFAULT_STROKE_MM))
+                   description.get("stroke_mm", DEFAULT_STROKE_MM), description.get(JOINT_RANGES_KEY))
 
     # -- parameter layout -----------------------------------------------------------------
     @staticmethod

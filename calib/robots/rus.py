@@ -23,7 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..validation import as_array
-from ..robot import ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot
+from ..robot import (JOINT_RANGES_KEY, ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot,
+                     checked_joint_ranges)
 from ..rotation import rotation_matrix, rotation_matrix_derivatives
 
 __all__ = ["RotaryHexapod", "CHAIN_PARAMETERS", "CHAIN_UNITS", "WORKSPACE_HALF_WIDTHS",
@@ -59,7 +60,9 @@ class RotaryHexapod(Robot):
             order (mm, rad).
         home_pose: (6,) the home pose, start of the forward kinematics.
         workspace_half_widths: (6, 2) calibration workspace about the home pose (mm, rad).
-        joint_range_rad: (2,) accepted range of every motor angle, rad.
+        joint_range_rad: (2,) accepted range of every motor angle, rad (when no ``joint_ranges``).
+        joint_ranges: (6, 2) rad, each motor's range as built (:attr:`Robot.joint_ranges`);
+            None: ``joint_range_rad`` for every motor.
     """
 
     name = "rus"
@@ -75,7 +78,7 @@ class RotaryHexapod(Robot):
     default_parameter_tolerance = {"mm": 0.2, "rad": 5e-3}
 
     def __init__(self, chains, home_pose, workspace_half_widths=WORKSPACE_HALF_WIDTHS,
-                 joint_range_rad=JOINT_RANGE_RAD):
+                 joint_range_rad=JOINT_RANGE_RAD, joint_ranges=None):
         self.chains = as_array(chains, "chains", (6, len(CHAIN_PARAMETERS)))
         self._home_pose = as_array(home_pose, "home_pose", (6,))
         self.workspace_half_widths = as_array(workspace_half_widths, "workspace_half_widths", (6, 2))
@@ -86,6 +89,7 @@ class RotaryHexapod(Robot):
             raise ValueError(f"joint_range_rad must be (low, high) with low < high, got {self.joint_range_rad}")
         for a in (self.chains, self._home_pose, self.workspace_half_widths, self.joint_range_rad):
             a.setflags(write=False)
+        self.joint_ranges = checked_joint_ranges(joint_ranges, self)
         self.table = ParameterTable([
             Parameter(t.format(i=c + 1), CHAIN_UNITS[k], float(self.chains[c, k]), c)
             for c in range(6) for k, t in enumerate(CHAIN_PARAMETERS)])
@@ -102,13 +106,13 @@ class RotaryHexapod(Robot):
     def workspace_bounds(self) -> np.ndarray:
         return self._home_pose[:, None] + self.workspace_half_widths
 
-    def joint_limits(self) -> np.ndarray:
+    def default_joint_limits(self) -> np.ndarray:
         return np.tile(self.joint_range_rad, (6, 1))
 
     def description(self) -> dict:
         return {"parameters": self.table.to_dict(self.table.nominal), "home_pose": self._home_pose.tolist(),
                 "workspace_half_widths": self.workspace_half_widths.tolist(),
-                "joint_range_rad": self.joint_range_rad.tolist()}
+                "joint_range_rad": self.joint_range_rad.tolist(), **self.joint_ranges_description()}
 
     @classmethod
     def from_description(cls, description: dict) -> "RotaryHexapod":
@@ -119,7 +123,7 @@ class RotaryHexapod(Robot):
             raise KeyError(f"parameters: missing {', '.join(missing)}")
         return cls(np.reshape([values[n] for n in names], (6, len(CHAIN_PARAMETERS))), description["home_pose"],
                    description.get("workspace_half_widths", WORKSPACE_HALF_WIDTHS),
-                   description.get("joint_range_rad", JOINT_RANGE_RAD))
+                   description.get("joint_range_rad", JOINT_RANGE_RAD), description.get(JOINT_RANGES_KEY))
 
     # -- parameter layout -----------------------------------------------------------------
     @staticmethod

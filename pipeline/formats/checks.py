@@ -109,7 +109,8 @@ def _joint_tolerance(rec: Recording, path: Path, span: np.ndarray) -> np.ndarray
 
 
 def _check_joint_range(rec: Recording, path: Path) -> str | None:
-    """Refuse joint values outside the nominal geometry's range (the stroke of a leg) by more than
+    """Refuse joint values outside the nominal geometry's range (:meth:`calib.robot.Robot.joint_limits`:
+    its declared ``joint_ranges``, else the robot's default, e.g. a leg's stroke about home) by more than
     the tolerance (:func:`_joint_tolerance`), saying so when the whole file seems to hold metres for
     mm or degrees for rad; a warning naming the rows read past the range within the tolerance."""
     robot = rec.robot
@@ -120,6 +121,8 @@ def _check_joint_range(rec: Recording, path: Path) -> str | None:
     if not out.any():
         return None
     unit = robot.joint_unit
+    source = "declared in the nominal geometry's joint_ranges" if robot.joint_ranges is not None \
+        else "of the nominal geometry"
     tol = _joint_tolerance(rec, path, limits[:, 1] - limits[:, 0])
     far = (q < limits[:, 0] - tol) | (q > limits[:, 1] + tol)
     if far.any():
@@ -130,13 +133,13 @@ def _check_joint_range(rec: Recording, path: Path) -> str | None:
                                  f"{other} (e.g. {q[0, 0]:.6g}), a recording holds {unit}")
         r, c = np.argwhere(far)[0]
         raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
-                             f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} of the nominal geometry by "
+                             f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} {source} by "
                              f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it")
     past = np.maximum(limits[:, 0] - q, q - limits[:, 1])
     r, c = np.unravel_index(np.argmax(np.where(out, past, -np.inf)), q.shape)
     cols = [joint_cols[j] for j in np.flatnonzero(out.any(axis=0))]
     return (f"{path}: rows {_rows_in_words(np.flatnonzero(out.any(axis=1)))}, column(s) {', '.join(cols)}: joint "
-            f"readings past the range of the nominal geometry by up to {past[r, c]:.3g} {unit} (row {r + 1}, "
+            f"readings past the range {source} by up to {past[r, c]:.3g} {unit} (row {r + 1}, "
             f"{joint_cols[c]} = {q[r, c]:.6g} {unit}, range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit}), within "
             f"the tolerance {tol[c]:.3g} {unit}: accepted as read")
 
