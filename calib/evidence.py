@@ -90,6 +90,7 @@ class ToleranceEstimate:
         unit_of: ``{name: unit}`` of the free parameters.
         error: ``{name: estimated error}`` of the free parameters at the estimate (linearised MAP,
             parameter units).
+        prior_units: (P,) the unit of every parameter of the robot's table.
     """
 
     prior: ParameterPrior
@@ -102,6 +103,7 @@ class ToleranceEstimate:
     far: tuple = ()
     unit_of: dict = field(default_factory=dict)
     error: dict = field(default_factory=dict)
+    prior_units: tuple = ()
 
     @property
     def contradicted(self) -> bool:
@@ -110,6 +112,26 @@ class ToleranceEstimate:
         either way."""
         beyond = any(f > CONTRADICTION_FACTOR or f < 1.0 / CONTRADICTION_FACTOR for f in self.factor.values())
         return bool(self.log_evidence_gain > CONTRADICTION_NATS and beyond)
+
+    @property
+    def wider(self) -> tuple:
+        """The units whose errors the rows show wider than the reference tolerance, contradicting it:
+        the evidence prefers the estimate by more than :data:`CONTRADICTION_NATS` and the unit's
+        factor is beyond :data:`CONTRADICTION_FACTOR`."""
+        if self.log_evidence_gain <= CONTRADICTION_NATS:
+            return ()
+        return tuple(u for u, f in self.factor.items() if f > CONTRADICTION_FACTOR)
+
+    def widened_prior(self) -> ParameterPrior:
+        """The reference prior with the units of :attr:`wider` at their estimated scale and every
+        other unit at the reference's: the prior a run takes when no tolerance is declared. A prior
+        looser than the machine costs little where the rows determine the parameters, one too
+        tight biases them; so the documented default stands unless the rows show it too tight."""
+        std = np.array(self.reference.std, dtype=float)
+        units = np.array([str(u) for u in self.prior_units])
+        for u in self.wider:
+            std[units == u] *= self.factor[u]
+        return ParameterPrior(mean=self.reference.mean, std=std)
 
     def tolerance_words(self, which: str = "estimate") -> str:
         """``"2.1 mm, 0.012 rad"``: the estimated (or ``"reference"``) tolerance per unit."""
@@ -138,6 +160,7 @@ class ToleranceEstimate:
         return {"tolerance": dict(self.tolerance), "reference_tolerance": dict(self.reference_tolerance),
                 "factor": dict(self.factor), "determined_parameters": dict(self.determined),
                 "log_evidence_gain_nats": float(self.log_evidence_gain), "contradicted": self.contradicted,
+                "wider_than_reference": list(self.wider),
                 "far_from_nominal": [{"name": n, "reference_tolerances": float(z)} for n, z in self.far],
                 "method": "empirical Bayes: the prior's scale per unit maximising the marginal likelihood of "
                           "the rows (MacKay's fixed point, the fit linearised at its solution)"}
@@ -190,7 +213,8 @@ def tolerance_from_data(result, reference: ParameterPrior | None = None) -> Tole
                              tolerance={u: typical[u] * float(factor[u]) for u in present},
                              reference_tolerance=typical, determined=determined, log_evidence_gain=float(gain),
                              far=tuple(far), unit_of=dict(zip(names, [str(u) for u in units])),
-                             error=dict(zip(names, m.tolist())))
+                             error=dict(zip(names, m.tolist())),
+                             prior_units=tuple(str(u) for u in robot.table.units))
 
 
 def _data_information(cov0: np.ndarray, prior_std: np.ndarray, m0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -184,8 +184,12 @@ def print_determination(s: dict) -> None:
         print("  prior: none (--no-prior: plain least squares)")
         return
     left = by.get("prior") or []
-    print(f"  prior: {prior['source']}; determined by the data: {len(by.get('data') or [])} parameters, left to "
-          f"the prior: {len(left)}" + (f" ({', '.join(left[:8])}{', ...' if len(left) > 8 else ''})" if left else ""))
+    seen = s.get("directions_determined")
+    print(f"  prior: {prior['source']}")
+    print(f"  determined by the data: {len(by.get('data') or [])} parameters" +
+          (f" (the rows determine about {seen:.0f} of the {len(by.get('data') or []) + len(left)} free directions, "
+           "singly or in combinations)" if seen is not None else "") +
+          f"; left to the prior: {len(left)}" + (f" ({', '.join(left[:8])}{', ...' if len(left) > 8 else ''})" if left else ""))
     for words in (s.get("left_to_prior") or [])[:3]:
         print(f"    left to the prior: {words}")
     if len(s.get("left_to_prior") or []) > 3:

@@ -676,8 +676,10 @@ def _first_fit(inp: CalibrationInput, settings: RunSettings, search, kept: np.nd
 def learn_tolerance(inp: CalibrationInput, fit) -> bool:
     """The tolerance the rows support (:func:`calib.evidence.tolerance_from_data`), from ``fit``
     (an identification result, or the ``(result, solver)`` pair, made under ``inp.prior``). Where
-    the recording declares none it becomes the prior and the yardstick of the run (``inp`` is
-    updated, its ``prior_source`` says so) and True is returned (refit under it); a declared one
+    the recording declares none and the rows show the robot's default too tight (the units of
+    :attr:`calib.evidence.ToleranceEstimate.wider`), the learnt tolerance becomes the prior and the
+    yardstick of the run (``inp`` is updated, its ``prior_source`` says so) and True is returned
+    (refit under it); a default the rows do not contradict stays, with the estimate said; a declared one
     is kept and checked (``inp.tolerance_estimate`` says whether the rows contradict it). Without
     a prior (--no-prior) nothing is learnt."""
     result = fit[0] if isinstance(fit, tuple) else fit
@@ -695,10 +697,18 @@ def learn_tolerance(inp: CalibrationInput, fit) -> bool:
         inp.prior_source = (f"the {inp.robot.name}'s default tolerance ({default}, one standard deviation): the rows "
                             "determine too few parameters to learn one")
         return False
-    verdict = ("contradicted: " + estimate.evidence_words()) if estimate.contradicted else "consistent with the rows"
-    inp.prior = inp.tolerance = estimate.prior
-    inp.prior_source = (f"tolerance estimated from the data: {estimate.tolerance_words()} (the {inp.robot.name}'s "
-                        f"default {default} is {verdict})")
+    if not estimate.wider:
+        inp.prior_source = (f"the {inp.robot.name}'s default tolerance ({default}, one standard deviation), "
+                            f"consistent with the rows or wider than they show (estimated from the data: "
+                            f"{estimate.tolerance_words()}); a default wider than the machine costs nothing where "
+                            "the rows determine the parameters")
+        return False
+    inp.prior = inp.tolerance = estimate.widened_prior()
+    kept = [u for u in estimate.factor if u not in estimate.wider]
+    inp.prior_source = (f"tolerance estimated from the data: "
+                        f"{', '.join(f'{estimate.tolerance[u]:.3g} {u}' for u in estimate.wider)} (the "
+                        f"{inp.robot.name}'s default {default} is contradicted: {estimate.evidence_words()})"
+                        + (f"; the default kept for {', '.join(kept)}" if kept else ""))
     return True
 
 
@@ -1103,12 +1113,17 @@ def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
             + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
     sources = result.parameter_sources()
     est = inp.tolerance_estimate
+    idx = result.free_indices
+    # MacKay's effective number of parameters: trace(I - S^-1 Sigma_post), how many of the free
+    # directions the rows determine (the rest the prior holds), parameter by parameter or in combinations.
+    seen = None if inp.prior is None else float(np.sum(1.0 - np.diag(result.covariance)[idx] / inp.prior.std[idx] ** 2))
     return {"prior": {"used": inp.prior is not None, "source": inp.prior_source,
                       "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot),
                       "declared": inp.tolerance_declared,
                       "learnt": None if est is None else est.summary()},
             "parameter_determination": result.determination(),
             "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
+            "directions_determined": seen,
             "left_to_prior": left}
 
 

@@ -1,0 +1,120 @@
+"""A machine built by hand, calibrated with the defaults: the simulated twin of a hobby Stewart
+platform (issue 37).
+
+The MuJoCo hexapod of a hand-built size (base joints on a 300 mm circle, platform joints on a 150 mm
+one, home 700 mm up: legs of about 720 mm), built with geometry errors of 1 to 3 mm on every
+parameter, legs with one-sided strokes (0 to 280 mm from fully retracted, home 100 mm above
+retracted), measured by a motion capture of 0.3 mm / 1.5 mrad (normal) in its own frame (574.3 mm
+below the base, turned 2 degrees): a 10 x 10 level grid at the home height (the calibration rows,
+commanded with the nominal inverse kinematics, as a lab does) and 40 runs off it (tilted up to
+4.6 degrees, 50 mm above and below the grid; validation rows). No tolerance is declared.
+
+Independent truths: the errors injected (their RMS is the tolerance to learn), a fit told that
+tolerance (``--tolerance``), the off-plane rows the fit never saw.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from calib.measurement import compose
+from calib.noise import SensorNoise
+from calib.robots.hexapod import Hexapod
+from pipeline.formats.recording import Recording, write_recording
+from pipeline.run import run
+from pipeline.simulation.testbed import Testbed
+
+#: The capture's noise: 0.3 mm on positions, 1.5 mrad on angles, one standard deviation.
+CAPTURE_NOISE = SensorNoise(0.3, 1.5e-3, "normal")
+#: Each leg's stroke as built, from fully retracted; home is this far above retracted.
+STROKE_MM, HOME_ABOVE_RETRACTED_MM = 280.0, 100.0
+#: The capture's frame relative to the base: 574.3 mm below, turned 2 degrees about x.
+CAPTURE_FRAME = np.array([3.0, -2.0, -574.3, np.deg2rad(2.0), 0.0, 0.01])
+#: The acceptance of issue 37, point 7: within 1.5 times the fit told the true tolerance.
+TOLD_RATIO = 1.5
+
+
+def hand_built_hexapod() -> Hexapod:
+    """The nominal hand-built hexapod, its legs' ranges one-sided about home."""
+    a = np.deg2rad([-10, 10, 110, 130, 230, 250])
+    base = np.stack([300 * np.cos(a), 300 * np.sin(a), np.zeros(6)], axis=1)
+    b = np.deg2rad([-50, 50, 70, 170, 190, 290])
+    platform = np.stack([150 * np.cos(b), 150 * np.sin(b), np.zeros(6)], axis=1)
+    home = np.array([0.0, 0.0, 700.0, 0.0, 0.0, 0.0])
+    legs = np.linalg.norm(platform + home[:3] - base, axis=1)
+    low = legs - HOME_ABOVE_RETRACTED_MM
+    return Hexapod(base, platform, legs, home_pose=home, joint_ranges=np.stack([low, low + STROKE_MM], axis=1))
+
+
+def level_grid() -> np.ndarray:
+    """(100, 6) a 10 x 10 grid, 240 mm square, at the home height, level."""
+    xs = np.linspace(-120.0, 120.0, 10)
+    X, Y = np.meshgrid(xs, xs)
+    poses = np.zeros((100, 6))
+    poses[:, 0], poses[:, 1], poses[:, 2] = X.ravel(), Y.ravel(), 700.0
+    return poses
+
+
+def off_plane_runs(rng: np.random.Generator, n: int = 40) -> np.ndarray:
+    """(n, 6) poses off the grid: other heights and tilts."""
+    poses = np.zeros((n, 6))
+    poses[:, :2] = rng.uniform(-100.0, 100.0, (n, 2))
+    poses[:, 2] = rng.uniform(650.0, 750.0, n)
+    poses[:, 3:] = rng.uniform(-0.08, 0.08, (n, 3))
+    return poses
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory):
+    """The recording of the twin (MuJoCo), and the RMS of its injected errors."""
+    robot = hand_built_hexapod()
+    rng = np.random.default_rng(37)
+    errors = rng.uniform(1.0, 3.0, robot.n_parameters) * rng.choice([-1.0, 1.0], robot.n_parameters)
+    theta = robot.table.nominal + errors
+    poses = np.vstack([level_grid(), off_plane_runs(rng)])
+    commands = robot.inverse_kinematics(robot.table.nominal, poses)
+    limits = robot.joint_limits()
+    assert np.all((commands > limits[:, 0]) & (commands < limits[:, 1])), "the runs stay inside the legs' ranges"
+    measured = Testbed(robot, theta, noise=CAPTURE_NOISE, seed=5).measure(commands).measured
+    sets = np.array(["calibration"] * 100 + ["validation"] * 40)
+    rec = Recording(robot=robot, noise=CAPTURE_NOISE, t_s=np.arange(len(poses), dtype=float), joints=commands,
+                    measured=compose(CAPTURE_FRAME, robot, measured), sets=sets,
+                    meta={"simulation": {"injected_errors": robot.table.to_dict(errors)}})
+    folder = tmp_path_factory.mktemp("hand_built")
+    csv, _ = write_recording(folder / "hand.csv", rec)
+    return csv, float(np.sqrt(np.mean(errors ** 2)))
+
+
+def _run(csv, out, *flags):
+    summary = out / "summary.json"
+    run(["--real", str(csv), "--out", str(out), "--quiet", "--summary-json", str(summary), *flags])
+    return json.loads(summary.read_text())
+
+
+def test_the_defaults_learn_the_tolerance_and_match_a_fit_told_it(twin, tmp_path):
+    csv, rms = twin
+    learnt = _run(csv, tmp_path / "defaults")
+    told = _run(csv, tmp_path / "told", "--tolerance", f"mm={rms:.6g}")
+    prior = learnt["prior"]
+    assert prior["source"].startswith("tolerance estimated from the data")
+    assert "default 0.1 mm is contradicted" in prior["source"]
+    assert rms / 2 < prior["learnt"]["tolerance"]["mm"] < 2 * rms
+    assert learnt["success"], learnt["verdict"]["words"]
+    assert learnt["parameter_error"]["rms_mm"] <= TOLD_RATIO * told["parameter_error"]["rms_mm"]
+    held, held_told = learnt["heldout_position_error_mm"], told["heldout_position_error_mm"]
+    assert held["after"] <= TOLD_RATIO * held_told["after"]
+    assert held["after"] < held["before"] / 3, "the off-plane runs are predicted far better than nominal"
+    # the verdict agrees with its numbers: parameters the data moved are the data's, few implausible
+    assert learnt["directions_determined"] >= 10, "the grid determines combinations, and the summary says how many"
+    assert len(learnt["implausible_parameters"]) <= 3
+
+
+def test_the_old_default_declared_is_said_contradicted_with_figures(twin, tmp_path):
+    csv, rms = twin
+    s = _run(csv, tmp_path, "--tolerance", "mm=0.1")
+    words = [w for w in s["warnings"] if w.startswith("the declared tolerance (0.1 mm) is contradicted")]
+    assert words and "nats" in words[0] and "the rows support" in words[0]
+    assert s["prior"]["learnt"]["contradicted"] and s["prior"]["learnt"]["wider_than_reference"] == ["mm"]
