@@ -102,7 +102,9 @@ def _notes(cal: Calibration, source: str, kinematics: str, tables, held, given, 
              + (", ".join(fe.name for fe in held) or "none") + ". LinuxCNC adds `trim = nominal - actual` to the joint "
              "value, interpolated linearly between entries, the up or down column by the sign of the joint's commanded "
              "velocity, the end entries held beyond the table. The tables span the joint values the calibrated "
-             "commands reach (its validity: `joint_min` .. `joint_max`).", "",
+             "commands reach (its validity: `joint_min` .. `joint_max`); beyond them the end trims hold (the offset "
+             "stays right, the effects are not extrapolated, where `pipeline.compensate` extrapolates them with a "
+             "warning).", "",
              "| joint | span | interpolation error |", "|---|---|---|"]
     lines += [f"| {t.joint} | {t.nominal[0]:.6g} .. {t.nominal[-1]:.6g} {unit} | {t.interpolation_error:.3g} {unit} |"
               for t in tables]
