@@ -275,3 +275,14 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_accuracy_given_up(tmp_path,
     drift = record["not_held"]["thermal_drift"]
     assert 0 < drift["rms_mm"] <= drift["max_mm"] and record["given_up"]["poses"] > 100
     assert record["given_up"]["rms_mm"] == pytest.approx(drift["rms_mm"], rel=1e-9)
+
+
+def test_the_library_function_exports_from_python(exported, tmp_path):
+    from pipeline.workflows import EXPORTERS, ExportSettings, run_export
+
+    report = run_export(ExportSettings(exported["calibration"], "linuxcnc", tmp_path / "py"))
+    assert "linuxcnc" in EXPORTERS and report.robot == "hexapod" and report.messages == []
+    assert sorted(report.paths) == sorted(p.name for p in exported["dir"].iterdir())
+    for name in report.paths:  # the same calibration, the same files (but the record's path)
+        if name != "export.json":
+            assert (tmp_path / "py" / name).read_bytes() == (exported["dir"] / name).read_bytes(), name

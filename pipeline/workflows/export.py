@@ -23,9 +23,8 @@ import numpy as np
 
 from calib.linuxcnc import (COMP_TABLE_SIZE, FINE_FACTOR, accuracy_given_up, comp_tables, genhex_geometry, genhex_joints,
                             joint_table_effects, workspace_sample)
-from pipeline.formats import Calibration, read_calibration
-from pipeline.formats.linuxcnc import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, comp_file_name, comp_text,
-                                       check_export_folder, genhex_hal_text, kins_ini_text, write_export_folder)
+from pipeline.formats import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, Calibration, check_export_folder, comp_file_name, comp_text, genhex_hal_text,
+                              kins_ini_text, read_calibration, write_export_folder)
 
 __all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "EXPORTERS"]
 
@@ -121,8 +120,8 @@ def _notes(cal: Calibration, source: str, kinematics: str, tables, held, given, 
         lines += ["", f"All left out together: {_um(given.rms_mm)} RMS, {_um(given.max_mm)} max. Figures: position "
                   f"error of the identified model (geometry and effects) over {given.poses} poses drawn in the "
                   "calibrated workspace (the box of the calibration poses), visited in order, commanded as LinuxCNC "
-                  "will command it, against 0 with everything compensated (`pipeline.compensate`, or "
-                  "`Calibration.commands`). Noise-free model figures, not measurements."]
+                  "will command it, against 0 with everything compensated (`pipeline.compensate`)."
+                  " Noise-free model figures, not measurements."]
     return "\n".join(lines) + "\n"
 
 
@@ -185,15 +184,20 @@ def _hexapod(cal: Calibration, settings: ExportSettings) -> ExportReport:
 
 #: The robots LinuxCNC has kinematics for, and how each is exported.
 LINUXCNC_ROBOTS = {"hexapod": _hexapod}
+#: Robots LinuxCNC has kinematics for that this export does not project onto yet, and why.
+LINUXCNC_NOT_YET = {"delta": "LinuxCNC's rotarydeltakins fitted to the identified Delta is not built yet"}
 
 
 def export_linuxcnc(cal: Calibration, settings: ExportSettings) -> ExportReport:
     """The LinuxCNC export of ``cal`` into the folder ``settings.out`` (see the module docstring).
 
     Raises:
-        ValueError: a robot LinuxCNC has no kinematics for (the 6-RUS).
+        ValueError: a robot LinuxCNC has no kinematics for (the 6-RUS), or the Delta (its
+            rotarydeltakins projection is not built yet).
         FileExistsError: a file of the export exists and ``overwrite`` is off.
     """
+    if cal.robot.name in LINUXCNC_NOT_YET:
+        raise ValueError(f"--to linuxcnc: {LINUXCNC_NOT_YET[cal.robot.name]} ({settings.calibration})")
     if cal.robot.name not in LINUXCNC_ROBOTS:
         raise ValueError(f"--to linuxcnc: LinuxCNC has no kinematics for the {cal.robot.name} ({settings.calibration}); "
                          f"it has for the {', '.join(LINUXCNC_ROBOTS)}")
