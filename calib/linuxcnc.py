@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .compensation import compensated_commands, effect_displacement
-from .effects.base import EffectData
+from .effects.base import PAYLOAD_CHANNEL, EffectData
 from .effects.granularity import PerChainForm
 from .effects.laws import Law
 from .noise import SensorNoise
@@ -341,7 +341,7 @@ def accuracy_given_up(robot: Robot, theta, effects, held, poses, t_s, channels: 
         channels: recorded channels a law or a compliance at several payloads follows, ``{name: (N,)}``.
     """
     poses = as_array(poses, "poses", (-1, robot.pose_dim))
-    payload = (channels or {}).get("payload_kg")
+    payload = (channels or {}).get(PAYLOAD_CHANNEL)
     held_names = {fe.name for fe in held}
     _, why = joint_table_effects(effects)
     full = compensated_commands(robot, theta, poses, effects, t_s=t_s, channels=channels)
