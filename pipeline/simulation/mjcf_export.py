@@ -53,7 +53,6 @@ HELD_EFFECTS_IN_WORDS = {
     "gravity": "gravity on",
     "payload_kg": "payload on the platform (kg)",
     "payload_height_m": "the payload's height over the platform (m)",
-    "platform_mass_kg": "platform mass (kg)",
 }
 #: Why a proposed law is not in the model.
 LAW_NOT_HELD = "a proposed law: no MuJoCo element follows its terms"
@@ -166,8 +165,8 @@ def _comment(cal: Calibration, options: MachineOptions, held: list, not_held: di
         fields = [f for f in HELD_EFFECTS_IN_WORDS if f in _set_fields(options)]
         lines.append(f"Effects held: {', '.join(held)}, as " + "; ".join(HELD_EFFECTS_IN_WORDS[f] for f in fields) + ".")
         if "joint_friction" in held:
-            lines.append("MuJoCo's frictionloss is a soft constraint: settled slowly, a joint creeps through it "
-                         "towards its target, so the dead band shows in the dynamics, not as a hard stop.")
+            lines.append("MuJoCo's frictionloss is a soft constraint: at rest a joint creeps through it to its target, "
+                         "so the friction acts while the joints move but leaves no dead band at rest.")
     else:
         lines.append("Effects held: none" + (" (the calibration found none)." if not cal.records else "."))
     if not_held:
