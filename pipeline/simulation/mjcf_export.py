@@ -63,7 +63,7 @@ class IdentifiedMachine:
     """A calibration's identified machine, ready to be written.
 
     Attributes:
-        spec: the compiled-once ``mujoco.MjSpec`` (its ``comment`` the file's header comment).
+        spec: the ``mujoco.MjSpec`` (its ``comment`` the header comment of the file).
         options: the :class:`mjcf.machine.MachineOptions` it was built with (the effects held).
         held: names of the effects held, in the calibration's order.
         not_held: ``{name: why}`` of the effects left out.
