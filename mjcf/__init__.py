@@ -3,8 +3,9 @@
 robot), commanded, settled and read by :class:`mjcf.simulator.MachineSimulator` (MuJoCo in SI
 metres; the conversion lives in :mod:`mjcf.units`).
 
-Adding a robot: write its builder module (``build_machine(robot, theta, options) -> Machine``, the
-contract of :mod:`mjcf.machine`) and add one line to :data:`MACHINES`.
+Adding a robot: write its builder module (``build_spec(robot, theta, options) -> MjSpec``, the
+uncompiled machine with its keyframe, and ``build_machine(robot, theta, options) -> Machine``, its
+compiled form: the contract of :mod:`mjcf.machine`) and add one line to :data:`MACHINES`.
 
 MuJoCo and the builder modules are imported when first used: ``import mjcf.units`` does not load
 MuJoCo.
@@ -23,7 +24,7 @@ if TYPE_CHECKING:
 
     from .machine import Machine, MachineOptions
 
-__all__ = ["MACHINES", "build_machine", "Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2",
+__all__ = ["MACHINES", "build_machine", "build_spec", "Machine", "MachineOptions", "MachineEffects", "GRAVITY_M_S2",
            "MachineSimulator", "SettleError", "M_PER_MM", "m_to_mm", "mm_to_m"]
 
 
@@ -34,7 +35,11 @@ class _Builders(Mapping):
         self._modules = dict(modules)
 
     def __getitem__(self, name: str):
-        return importlib.import_module(f".{self._modules[name]}", __name__).build_machine
+        return self.module(name).build_machine
+
+    def module(self, name: str):
+        """The builder module of robot ``name`` (``KeyError`` for an unknown one)."""
+        return importlib.import_module(f".{self._modules[name]}", __name__)
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._modules)
@@ -43,12 +48,40 @@ class _Builders(Mapping):
         return len(self._modules)
 
 
-#: robot name -> its builder ``build_machine(robot, theta, options) -> Machine`` (module ``mjcf.<name>``).
+#: robot name -> its builder ``build_machine(robot, theta, options) -> Machine`` (module ``mjcf.<name>``,
+#: which also has ``build_spec``: :func:`build_spec`).
 MACHINES: Mapping = _Builders({
     "hexapod": "hexapod",
     "delta": "delta",
     "rus": "rus",
 })
+
+
+def _builder_module(robot: Robot):
+    try:
+        return MACHINES.module(robot.name)
+    except KeyError:
+        raise KeyError(f"no MuJoCo machine for robot {robot.name!r}: machines exist for "
+                       f"{', '.join(sorted(MACHINES))}") from None
+
+
+def _options(options: MachineOptions | None) -> MachineOptions:
+    if options is None:
+        from .machine import MachineOptions
+
+        options = MachineOptions()
+    return options
+
+
+def build_spec(robot: Robot, theta, options: MachineOptions | None = None):
+    """The machine of ``robot`` with parameters ``theta`` ((P,), mm and rad) as an uncompiled
+    ``mujoco.MjSpec`` with its keyframe ``home``: what :func:`build_machine` compiles (the same
+    builder module, the same options; default: the defaults).
+
+    Raises:
+        KeyError: no builder for this robot (the message lists the registered ones).
+    """
+    return _builder_module(robot).build_spec(robot, theta, _options(options))
 
 
 def build_machine(robot: Robot, theta, options: MachineOptions | None = None) -> Machine:
@@ -59,16 +92,7 @@ def build_machine(robot: Robot, theta, options: MachineOptions | None = None) ->
     Raises:
         KeyError: no builder for this robot (the message lists the registered ones).
     """
-    try:
-        builder = MACHINES[robot.name]
-    except KeyError:
-        raise KeyError(f"no MuJoCo machine for robot {robot.name!r}: machines exist for "
-                       f"{', '.join(sorted(MACHINES))}") from None
-    if options is None:
-        from .machine import MachineOptions
-
-        options = MachineOptions()
-    return builder(robot, theta, options)
+    return _builder_module(robot).build_machine(robot, theta, _options(options))
 
 
 def __getattr__(name: str):

@@ -22,7 +22,7 @@ from calib.rotation import quaternion_from_euler, rotation_matrix
 from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, chain_values, new_spec
 from .units import mm_to_m
 
-__all__ = ["build_machine", "DEFAULT_STIFFNESS_NM_PER_RAD", "MOTOR_ARMATURE_KG_M2", "DEFAULT_PLATFORM_MASS_KG"]
+__all__ = ["build_machine", "build_spec", "MOTOR_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD", "MOTOR_ARMATURE_KG_M2", "DEFAULT_PLATFORM_MASS_KG"]
 
 #: Default servo stiffness of each motor, N m/rad.
 DEFAULT_STIFFNESS_NM_PER_RAD = 200.0
@@ -35,6 +35,8 @@ CRANK_MASS_KG, ROD_MASS_KG = 0.05, 0.02
 #: The chain's masses lumped at its crank tip and at its platform joint, kg: the crank's centre of
 #: mass is half-way to its tip, the rod's half-way along it (see ``Machine.chain_point_masses_kg``).
 CHAIN_POINT_MASSES_KG = (CRANK_MASS_KG / 2 + ROD_MASS_KG / 2, ROD_MASS_KG / 2)
+#: Names of the actuated (motor) hinge joints, chain order.
+MOTOR_JOINTS: tuple[str, ...] = tuple(f"motor{i + 1}" for i in range(6))
 #: Damping of each rod's ball joint (settles the rod's free spin about its own axis), N m s/rad.
 BALL_DAMPING = 1e-4
 
@@ -89,7 +91,7 @@ def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: Mac
         c, sn = np.cos(p["q0"][i]), np.sin(p["q0"][i])
         R_motor = np.column_stack([c * u[i] + sn * v[i], -sn * u[i] + c * v[i], a[i]])
         motor = world.add_body(name=f"motor{i + 1}", pos=M[i], quat=_quat(R_motor))
-        motor.add_joint(name=f"motor{i + 1}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
+        motor.add_joint(name=MOTOR_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
                         armature=MOTOR_ARMATURE_KG_M2, frictionloss=float(friction[i]))
         motor.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, r[i], 0, 0], size=[0.006, 0, 0],
                        mass=CRANK_MASS_KG, contype=0, conaffinity=0, rgba=[0.35, 0.4, 0.5, 1])
@@ -131,7 +133,7 @@ def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: np.ndarray, kv: np.
                           solimp=[0.99, 0.999, 1e-4, 0.5, 2])
         # gear g: the servo holds the hinge at ctrl / g; kp / g^2 keeps its stiffness at kp.
         g = 1.0 / (1.0 + scale[i])
-        act = spec.add_actuator(name=f"motor{i + 1}", target=f"motor{i + 1}", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act = spec.add_actuator(name=f"motor{i + 1}", target=MOTOR_JOINTS[i], trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.gear[0] = g
         act.set_to_position(kp=float(kp[i]) / g ** 2, kv=float(kv[i]) / g ** 2)
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
@@ -140,8 +142,10 @@ def _add_closures_and_servos(spec: mujoco.MjSpec, scale, kp: np.ndarray, kv: np.
                     objname=PLATFORM_SITE)
 
 
-def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions = MachineOptions()) -> Machine:
-    """The machine of parameter set ``theta`` (66,) (mm, rad) of ``robot`` (see the module docstring).
+def build_spec(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions = MachineOptions(),
+               name: str = "rus") -> mujoco.MjSpec:
+    """The machine of parameter set ``theta`` (66,) (mm, rad) of ``robot`` as an uncompiled ``MjSpec``
+    with its keyframe ``home`` (see the module docstring).
 
     Raises:
         calib.robot.KinematicsError: ``theta`` cannot reach the robot's home pose.
@@ -154,15 +158,25 @@ def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptio
     p = robot.split(theta)
     q_home = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
     kp, kv, step = _servo(o, mm_to_m(p["r"]))
-    spec = new_spec("rus", step, o.gravity)
+    spec = new_spec(name, step, o.gravity)
     _add_chains(spec.worldbody, robot, p, q_home, o)
     _add_platform(spec.worldbody, robot, p, o)
     _add_closures_and_servos(spec, scale, kp, kv, step)
-    model = spec.compile()
+    model = spec.compile()  # the keyframe's qpos: the compiled layout, the motors at q_home
     qpos = model.qpos0.copy()
-    motors = tuple(f"motor{i + 1}" for i in range(6))
-    qpos[[model.joint(n).qposadr[0] for n in motors]] = q_home
+    qpos[[model.joint(n).qposadr[0] for n in MOTOR_JOINTS]] = q_home
     gears = 1.0 / (1.0 + np.asarray(scale))
     spec.add_key(name=HOME_KEY, qpos=qpos, ctrl=q_home * gears)
-    return Machine(robot, theta, spec.compile(), joint_offset=np.zeros(6), joint_scale=np.ones(6),
-                   actuated_joints=motors, chain_point_masses_kg=CHAIN_POINT_MASSES_KG)
+    return spec
+
+
+def build_machine(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions = MachineOptions()) -> Machine:
+    """The compiled machine of parameter set ``theta`` (66,) (mm, rad) of ``robot`` (the builder
+    contract of :mod:`mjcf.machine`; :func:`build_spec` composes it).
+
+    Raises:
+        calib.robot.KinematicsError: ``theta`` cannot reach the robot's home pose.
+        ValueError: ``options.transmission_scale`` is not six numbers.
+    """
+    return Machine(robot, theta, build_spec(robot, theta, options).compile(), joint_offset=np.zeros(6),
+                   joint_scale=np.ones(6), actuated_joints=MOTOR_JOINTS, chain_point_masses_kg=CHAIN_POINT_MASSES_KG)

@@ -60,6 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the proposed law (if one is proposed) in this JSON file, for --use-law on the next recording")
     p.add_argument("--use-law", type=Path, default=None, metavar="FILE",
                    help="a law kept by --law: one more candidate effect (kept_law), its constants refitted")
+    p.add_argument("--export-mjcf", type=Path, default=None, metavar="PATH",
+                   help="also write the identified machine, with the effects MuJoCo can hold, as a MuJoCo model "
+                        "(MJCF .xml) to this path (docs/export_mjcf.md)")
     return p
 
 
@@ -70,7 +73,7 @@ def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
                              candidates=args.candidates, seed=args.seed,
                              resim=not args.no_resim, sysid=not args.no_sysid, out=args.out, name=args.name,
                              overwrite=args.overwrite, summary_json=args.summary_json, law_out=args.law,
-                             use_law=args.use_law)
+                             use_law=args.use_law, export_mjcf=args.export_mjcf)
 
 
 def run(argv: list[str] | None = None) -> DiscoveryReport:
@@ -95,6 +98,8 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
               else "no law proposed: nothing kept (--law)")
     print(f"wrote {report.summary['rrd']}")
     print(f"wrote {report.summary['calibration']}")
+    if report.summary.get("mjcf"):
+        print(f"wrote {report.summary['mjcf']}")
     return report
 
 

@@ -76,6 +76,7 @@ class RunSettings:
     keep_outliers: bool = False
     prior: bool = True
     tolerance: dict | None = None
+    export_mjcf: Path | None = None
 
 
 @dataclass
@@ -340,7 +341,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             targets_out.update(csv=out / f"{name}.csv", json=out / f"{name}.json")
         if settings.summary_json is not None:
             targets_out["summary_json"] = Path(settings.summary_json)
-        flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json"}
+        if settings.export_mjcf is not None:
+            targets_out["mjcf"] = Path(settings.export_mjcf)
+        flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
             summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis)
             suggestion = summary.pop("_suggested_poses", None)
@@ -366,8 +369,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
 
 
 def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict) -> None:
-    """Write the summary JSON (when asked), the simulated recording (when simulating) and the
-    calibration file (its recording named and hashed) to their temporary files in ``outputs``;
+    """Write the summary JSON (when asked), the simulated recording (when simulating), the
+    calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
+    :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
     the summary's private keys (``_recording``, ``_calibration``) are taken out of it first."""
     from pipeline.formats import calibration_text, recording_source, recording_texts
 
@@ -383,7 +387,12 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
                   "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
     else:
         source = recording_source(settings.real)
-    outputs.temp("calibration").write_text(calibration_text(replace(calibration, recording=source)))
+    calibration = replace(calibration, recording=source)
+    outputs.temp("calibration").write_text(calibration_text(calibration))
+    if "mjcf" in targets_out:
+        from pipeline.simulation.mjcf_export import mjcf_text
+
+        outputs.temp("mjcf").write_text(mjcf_text(calibration))
 
 
 #: What the summary says of the prior with --no-prior.

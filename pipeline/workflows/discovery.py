@@ -34,6 +34,7 @@ from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic
                               read_json_file, read_recording, recording_checks, recording_source, validity_domain,
                               write_calibration)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
+from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.views import verdict_words, write_discovery_rrd
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
@@ -382,6 +383,8 @@ class DiscoverySettings:
         summary_json: write the summary as JSON there.
         law_out: keep the proposed law in this JSON file (:func:`keep_law`).
         use_law: a kept law's file: one more candidate effect (:data:`KEPT_LAW_NAME`, refitted).
+        export_mjcf: write the identified machine, with the effects MuJoCo can hold, as an MJCF file
+            there (:func:`pipeline.simulation.mjcf_export.export_mjcf`).
     """
 
     real: Path | None = None
@@ -399,6 +402,7 @@ class DiscoverySettings:
     summary_json: Path | None = None
     law_out: Path | None = None
     use_law: Path | None = None
+    export_mjcf: Path | None = None
 
 
 def implausibility(rec: Recording, disc: Discovery) -> dict:
@@ -512,7 +516,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     calibration_path = out / f"{settings.name or f'{stem}_discover'}{CALIBRATION_SUFFIX}"
     output_folder(out)
     check_outputs({"--out": rrd_path, "--out (calibration file)": calibration_path,
-                   "--summary-json": settings.summary_json, "--law": settings.law_out}, overwrite=settings.overwrite)
+                   "--summary-json": settings.summary_json, "--law": settings.law_out,
+                   "--export-mjcf": settings.export_mjcf}, overwrite=settings.overwrite)
     if rec is None:
         rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name,
                                granularity=settings.scenario_granularity)
@@ -537,6 +542,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
                                     f"{settings.scenario_granularity}"}
     cal = discovery_calibration(rec, report, {} if read is None else read.block, source)
     report.summary["calibration"] = str(write_calibration(calibration_path, cal, overwrite=settings.overwrite))
+    if settings.export_mjcf is not None:
+        report.summary["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=settings.overwrite))
     if settings.law_out is not None:
         kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
                         overwrite=settings.overwrite)
