@@ -26,7 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calibration", required=True, help="calibration file (NAME.calibration.json, written by "
                                                           "pipeline.run or pipeline.discover)")
     p.add_argument("--to", required=True, choices=list(EXPORTERS), help="the format to write")
-    p.add_argument("--out", required=True, help="where to write (linuxcnc: a folder, created if missing)")
+    p.add_argument("--out", required=True, help="where to write (linuxcnc: a folder, created if missing; mjcf: the .xml file)")
     p.add_argument("--overwrite", action="store_true", help="allow replacing existing files")
     return p
 

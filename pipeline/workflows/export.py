@@ -5,6 +5,9 @@
 (:data:`EXPORTERS`, one function per format: ``exporter(cal, settings) -> ExportReport``). A new
 format is one entry there.
 
+``mjcf`` (:func:`export_to_mjcf`): the identified machine as a MuJoCo model file
+(:mod:`pipeline.simulation.mjcf_export`).
+
 ``linuxcnc`` (:func:`export_linuxcnc`): the robot's LinuxCNC kinematics with its identified
 parameters (a HAL file), an INI fragment, one compensation file per joint holding the joint's
 offset and the effects a joint's table can hold, a ``NOTES.md`` naming what LinuxCNC cannot hold
@@ -26,7 +29,7 @@ from calib.linuxcnc import (COMP_TABLE_SIZE, FINE_FACTOR, accuracy_given_up, com
 from pipeline.formats import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, Calibration, check_export_folder, comp_file_name, comp_text, genhex_hal_text,
                               kins_ini_text, read_calibration, write_export_folder)
 
-__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "EXPORTERS"]
+__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "export_to_mjcf", "EXPORTERS"]
 
 #: Micrometres per millimetre (figures on stderr and in NOTES.md are in um).
 UM_PER_MM = 1000.0
@@ -205,8 +208,26 @@ def export_linuxcnc(cal: Calibration, settings: ExportSettings) -> ExportReport:
 
 
 #: The formats ``pipeline.export`` writes: ``{name: exporter(cal, settings) -> ExportReport}``.
+def export_to_mjcf(cal: Calibration, settings: ExportSettings) -> ExportReport:
+    """The identified machine as a MuJoCo MJCF file at ``settings.out`` (a file path;
+    :func:`pipeline.simulation.mjcf_export.export_mjcf`): the effects MuJoCo can hold built in, the
+    others named in the file's comment and here, one line each.
+
+    Raises:
+        FileExistsError: the file exists and ``overwrite`` is off.
+    """
+    from pipeline.simulation.mjcf_export import export_mjcf, identified_machine  # MuJoCo only for this format
+
+    path = export_mjcf(cal, settings.out, overwrite=settings.overwrite)
+    machine = identified_machine(cal)
+    messages = [f"not held by the MuJoCo model: {name} ({why})" for name, why in machine.not_held.items()]
+    return ExportReport(format="mjcf", robot=cal.robot.name, paths={Path(path).name: str(path)}, messages=messages,
+                        summary={"path": str(path), "held": list(machine.held), "not_held": dict(machine.not_held)})
+
+
 EXPORTERS = {
     "linuxcnc": export_linuxcnc,
+    "mjcf": export_to_mjcf,
 }
 
 
