@@ -716,3 +716,37 @@ def test_hostile_two_day_map_keys_are_refused_in_one_line(case, tmp_path, capsys
     for needle in needles:
         assert needle in err, (needle, err)
     assert not (tmp_path / "days.csv").exists()
+
+
+def test_compensate_writes_the_commands_in_each_days_revolutions(tmp_path, capsys):
+    """``pipeline.compensate --map``: the commands again in the map's readings, by the session's own
+    mapping; read back through the mapping they are the mm commands (a few roundings: 4u relative)."""
+    from pipeline.compensate import main as compensate_main
+
+    two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    heldout_after(tmp_path, "days")
+    names = ["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"]
+    targets = reachable_poses(default_robot("hexapod"), 5, 9)
+    (tmp_path / "targets.csv").write_text(",".join(names) + "\n" + "".join(
+        ",".join(repr(float(v)) for v in p) + "\n" for p in targets))
+    base = ["--calibration", str(tmp_path / "days_cal.calibration.json"), "--targets", str(tmp_path / "targets.csv"),
+            "--map", str(tmp_path / "map.toml")]
+    revs = [f"rev{i + 1}" for i in range(6)]
+    for session, extra in (("grid", []), ("feb12", ["--session", "feb12"])):
+        out = tmp_path / f"cmd_{session}.csv"
+        assert compensate_main(base + ["--out", str(out)] + extra) == 0
+        header, *rows = [line.split(",") for line in out.read_text().splitlines()]
+        table = np.array(rows, dtype=float)
+        mm = table[:, [header.index(f"l{i + 1}_mm") for i in range(6)]]
+        rev = table[:, [header.index(c) for c in revs]]
+        scale, zero = DAY_MAPPINGS[session]
+        assert np.allclose(zero + scale * rev, mm, rtol=8 * U, atol=0), session
+        side = json.loads(out.with_suffix(".json").read_text())["controller_readings"]
+        assert side["reading"] == "revolutions" and side["columns"] == revs and np.allclose(side["scale"], scale)
+    assert not np.allclose(np.loadtxt(tmp_path / "cmd_grid.csv", delimiter=",", skiprows=1)[:, -6:],
+                           np.loadtxt(tmp_path / "cmd_feb12.csv", delimiter=",", skiprows=1)[:, -6:])
+    capsys.readouterr()
+    assert compensate_main(base + ["--out", str(tmp_path / "c.csv"), "--session", "march"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--session march" in err and "not a session" in err, err
