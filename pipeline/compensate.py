@@ -6,7 +6,9 @@ geometry and every effect found that the command sequence lets it invert (dead b
 scale, compliance, screw error, a kept law; drift and warm-up when the targets give ``t_s``).
 What is not compensated, and targets outside what the calibration saw, are named on stderr; the
 command file (the targets in the base frame, then the commands) and its ``.json`` sidecar are
-written together. A bad file or flag: exit 2 and one line naming the file and the key, or the row
+written together; with ``--map MAP.toml`` (a lab's mapping file) the commands again in its joint
+readings (revolutions or counts; ``--session`` picks a session's own mapping), after the mm
+columns. A bad file or flag: exit 2 and one line naming the file and the key, or the row
 and column.
 """
 
@@ -34,7 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frame", choices=TARGET_FRAMES, default="base",
                    help="frame of the targets: the robot's base (default) or the instrument frame the calibration "
                         "found")
-    p.add_argument("--session", help="with --frame instrument: the session whose instrument frame it is")
+    p.add_argument("--session", help="with --frame instrument: the session whose instrument frame it is; with --map: "
+                                      "the session whose joint mapping ([sessions.NAME.joints]) converts the commands")
+    p.add_argument("--map", help="a lab's mapping file (TOML, see docs/importer.md): the commands also in its joint "
+                                 "readings (revolutions or counts), in its joint columns")
     p.add_argument("--geometry-only", action="store_true", help="compensate the geometry alone")
     p.add_argument("--overwrite", action="store_true", help="allow replacing an existing command file")
     return p
@@ -43,7 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
 def settings_from_args(args: argparse.Namespace) -> CompensateSettings:
     """The :class:`CompensateSettings` of parsed flags."""
     return CompensateSettings(calibration=args.calibration, targets=args.targets, out=args.out, frame=args.frame,
-                              session=args.session, geometry_only=args.geometry_only, overwrite=args.overwrite)
+                              session=args.session, geometry_only=args.geometry_only, overwrite=args.overwrite,
+                              map=args.map)
 
 
 def run(argv: list[str] | None = None) -> CompensationReport:
@@ -57,6 +63,10 @@ def run(argv: list[str] | None = None) -> CompensationReport:
           f"{s['robot']} (targets in the {s['targets_frame']})")
     print(f"  geometry: the identified parameters of {s['calibration']['path']}; physics compensated: {physics}"
           + (f" (largest correction {s['largest_physics_correction']:.4g} {s['joint_unit']})" if s["compensated"] else ""))
+    if "controller_readings" in s:
+        r = s["controller_readings"]
+        print(f"  the commands also in {r['reading']} ({', '.join(r['columns'])}) by {r['map']}"
+              + (f", session {r['session']}" if r["session"] else ""))
     for name, why in s["not_compensated"].items():
         print(f"  not compensated: {name}: {why}")
     return report

@@ -541,3 +541,212 @@ def test_bad_sessions_and_channels_name_file_row_and_column(edit, match, tmp_pat
     with pytest.raises(RecordingError, match=match):
         read_recording(csv_path)
 
+
+
+# --------------------------------------------------------------------------- a lab's two days (issue 37)
+
+from pipeline.run import run as run_main  # noqa: E402
+
+#: The capture's frame (mm, rad): where the lab's motion capture sits relative to the base.
+CAPTURE_FRAME = np.array([30.0, -20.0, 15.0, 0.01, -0.02, 0.3])
+#: The lab's position offset (mm): its capture reports positions this far from what it sees.
+CAPTURE_OFFSET = np.array([1.5, -2.0, 574.3])
+#: Each day's revolutions-to-mm mapping: (mm per revolution, length at zero revolutions) per leg.
+DAY_MAPPINGS = {"grid": (2.0 + 0.01 * np.arange(6), 180.0 + np.arange(6)),
+                "feb12": (1.01 * (2.0 + 0.01 * np.arange(6)), 181.5 + np.arange(6))}
+LAB_NOISE = SensorNoise(0.01, 1e-4, "normal", 0.0)
+
+
+def two_days(tmp_path, *, map_edit=lambda m: m, n_cal: int = 40, n_val: int = 15):
+    """A hexapod with geometry errors up to 1.5 mm, measured on two days in one capture frame:
+    ``grid.csv`` (calibration) and ``feb12.csv`` (validation only), each with its own
+    revolutions-to-mm mapping, positions in metres less :data:`CAPTURE_OFFSET`; the map declares
+    the per-day mappings, the offset, the shared frame, the sets and a tolerance. Returns the
+    map's path and the true geometry."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(37)
+    actual = robot.table.nominal + rng.uniform(-1.5, 1.5, robot.n_parameters)  # built by hand: mm errors
+    files = {}
+    for name, n, seed in (("grid", n_cal, 1), ("feb12", n_val, 2)):
+        poses = reachable_poses(robot, n, seed)
+        joints = robot.inverse_kinematics(actual, poses)  # the legs the machine really had
+        seen = instrument_measurements(robot, poses, CAPTURE_FRAME)
+        seen[:, :3] += rng.normal(0.0, LAB_NOISE.position_mm, (n, 3))
+        seen[:, 3:] += rng.normal(0.0, LAB_NOISE.orientation_rad, (n, 3))
+        scale, zero = DAY_MAPPINGS[name]
+        rows = [[*((seen[k, :3] - CAPTURE_OFFSET) / MM_PER_M), *Rotation.from_euler("xyz", seen[k, 3:]).as_quat(),
+                 *((joints[k] - zero) / scale)] for k in range(n)]
+        files[name] = lab_csv(["X", "Y", "Z", "QX", "QY", "QZ", "QW"] + [f"rev{i + 1}" for i in range(6)], rows)
+        (tmp_path / f"{name}.csv").write_text(files[name])
+    mapping = (f'[robot]\nname = "hexapod"\ntolerance = {{mm = 2.0, rad = 0.02}}\n'
+               f'[noise]\nposition_mm = {LAB_NOISE.position_mm}\norientation_rad = {LAB_NOISE.orientation_rad}\n'
+               'distribution = "normal"\n[time]\nformat = "none"\n'
+               f'[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\noffset = {toml_list(CAPTURE_OFFSET)}\n'
+               '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
+               f'[joints]\ncolumns = {toml_list([f"rev{i + 1}" for i in range(6)])}\nreading = "revolutions"\n'
+               f'unit = "mm"\nscale = {toml_list(DAY_MAPPINGS["grid"][0])}\nzero = {toml_list(DAY_MAPPINGS["grid"][1])}\n'
+               '[sessions]\nnames = ["grid", "feb12"]\nframe = ["estimate", "grid"]\nset = ["calibration", "validation"]\n'
+               f'[sessions.feb12.joints]\nscale = {toml_list(DAY_MAPPINGS["feb12"][0])}\n'
+               f'zero = {toml_list(DAY_MAPPINGS["feb12"][1])}\n')
+    (tmp_path / "map.toml").write_text(map_edit(mapping))
+    return tmp_path / "map.toml", actual
+
+
+def convert_two_days(tmp_path, out="days"):
+    return main([str(tmp_path / "grid.csv"), str(tmp_path / "feb12.csv"), "--map", str(tmp_path / "map.toml"),
+                 "--out", str(tmp_path / out)])
+
+
+def test_two_days_convert_with_their_own_mappings_offset_sets_frame_and_tolerance(tmp_path):
+    _, actual = two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    rec = read_recording(tmp_path / "days.csv")
+    robot = rec.robot
+    grid, feb12 = rec.session_rows("grid"), rec.session_rows("feb12")
+    assert (rec.sets[grid] == "calibration").all() and (rec.sets[feb12] == "validation").all()
+    assert rec.meta["parameter_tolerance"] == {"mm": 2.0, "rad": 0.02}
+    assert rec.session_info["feb12"]["measurement"] == {"frame": "grid"}
+    assert session_measurement(rec, "feb12").frame == "estimate"  # the frame of the session it names
+    for name, rows in (("grid", grid), ("feb12", feb12)):  # each day's legs by its own mapping: the truth's
+        poses = reachable_poses(robot, len(rows), 1 if name == "grid" else 2)
+        truth = robot.inverse_kinematics(actual, poses)
+        assert np.allclose(rec.joints[rows], truth, rtol=0, atol=1e-9 * np.abs(truth).max())
+        seen = instrument_measurements(robot, poses, CAPTURE_FRAME)  # offset undone: within the noise
+        assert np.abs(rec.measured[rows, :3] - seen[:, :3]).max() < 6 * LAB_NOISE.position_mm
+
+
+def heldout_after(tmp_path, name) -> dict:
+    s = run_main(["--real", str(tmp_path / f"{name}.csv"), "--out", str(tmp_path), "--name", f"{name}_cal",
+                  "--quiet"]).summary
+    return s
+
+
+def test_a_validation_only_day_is_predicted_in_the_first_days_frame_to_the_noise(tmp_path):
+    two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    s = heldout_after(tmp_path, "days")
+    held = s["heldout_position_error_mm"]
+    # 3-D Gaussian noise of sigma per coordinate: the error norm's mean is 1.6 sigma; the fit's own
+    # uncertainty at 40 poses adds less than that; 4 sqrt(3) sigma bounds both.
+    bound = 4 * math.sqrt(3) * LAB_NOISE.position_mm
+    assert held["after"] < bound < held["before"], held
+    assert "measurement_frames" not in s  # one frame, shared: fitted once
+    frames = json.loads((tmp_path / "days_cal.calibration.json").read_text())["measurement_frames"]
+    assert frames["feb12"] == frames["grid"], frames  # compensate --session feb12 finds its frame
+
+
+def test_a_wrong_mapping_for_the_second_day_spoils_its_held_out_figure(tmp_path):
+    """The per-session mapping is applied: the second day read with the first day's mapping (its
+    [sessions.feb12.joints] left out) predicts far worse."""
+    two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    right = heldout_after(tmp_path, "days")["heldout_position_error_mm"]["after"]
+    text = (tmp_path / "map.toml").read_text()
+    (tmp_path / "map.toml").write_text(text[:text.index("[sessions.feb12.joints]")])
+    assert convert_two_days(tmp_path, "wrong") == 0
+    wrong = heldout_after(tmp_path, "wrong")["heldout_position_error_mm"]["after"]
+    assert wrong > 20 * right, (wrong, right)
+
+
+def test_a_validation_only_day_with_a_frame_of_its_own_is_refused(tmp_path, capsys):
+    two_days(tmp_path, map_edit=lambda m: m.replace('frame = ["estimate", "grid"]', 'frame = "estimate"'))
+    assert convert_two_days(tmp_path) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "map.toml: key sessions.frame" in err and "'feb12'" in err, err
+
+
+def test_the_run_names_a_lost_session_as_written(tmp_path):
+    """A recording whose validation-only session has its own estimated frame: the run refuses it
+    naming the session as written ('feb12', not numpy's repr)."""
+    two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    side = json.loads((tmp_path / "days.json").read_text())
+    side["sessions"]["feb12"]["measurement"] = {"frame": "estimate"}
+    (tmp_path / "days.json").write_text(json.dumps(side))
+    with pytest.raises(ValueError, match=r"session 'feb12' has validation rows but no calibration rows"):
+        heldout_after(tmp_path, "days")
+
+
+TWO_DAY_REFUSALS = {
+    "frame names no session": (('frame = ["estimate", "grid"]', 'frame = ["estimate", "june"]'),
+                               ["key sessions.frame", "'june'", "neither"]),
+    "frame names itself": (('frame = ["estimate", "grid"]', 'frame = ["grid", "grid"]'), ["key sessions.frame"]),
+    "frame names a validation session": (('set = ["calibration", "validation"]', 'set = ["validation", "calibration"]'),
+                                         ["key sessions.frame", "'grid'"]),
+    "bad set": (('set = ["calibration", "validation"]', 'set = ["calibration", "held-out"]'),
+                ["key sessions.set", "'held-out'"]),
+    "set count": (('set = ["calibration", "validation"]', 'set = ["calibration"]'),
+                  ["key sessions.set", "lists 1 sessions for 2 files"]),
+    "set twice": (("[sessions]\n", '[set]\ncolumn = "X"\ncalibration = "c"\nvalidation = "v"\n[sessions]\n'),
+                  ["key sessions.set", "[set]"]),
+    "session table of no session": (("[sessions.feb12.joints]", "[sessions.march.joints]"),
+                                    ["key sessions.march", "names no session"]),
+    "session joints unknown key": (("[sessions.feb12.joints]\n", "[sessions.feb12.joints]\npitch = 2.0\n"),
+                                   ["key sessions.feb12.joints.pitch", "unknown key"]),
+    "session joints bad scale": (("[sessions.feb12.joints]\nscale = [", "[sessions.feb12.joints]\nscale = [0.0, "),
+                                 ["key sessions.feb12.joints.scale"]),
+    "session joints bad column": (("[sessions.feb12.joints]\n", '[sessions.feb12.joints]\ncolumns = ["a"]\n'),
+                                  ["key sessions.feb12.joints.columns", "list of 6 column names"]),
+    "session table not joints": (("[sessions.feb12.joints]", "[sessions.feb12.legs]"),
+                                 ["key sessions.feb12", "[sessions.feb12.joints]"]),
+    "offset count": (("offset = [", "offset = [1.0, "), ["key position.offset", "[x, y, z]"]),
+    "offset text": (("offset = [", 'offset = ["a", '), ["key position.offset"]),
+    "offset infinite": (("offset = [", "offset = [inf, 0.0, 0.0]\n#"), ["key position.offset", "finite"]),
+    "tolerance a number": (("tolerance = {mm = 2.0, rad = 0.02}", "tolerance = 2.0"),
+                           ["key robot.tolerance", "a table by unit"]),
+    "tolerance unknown unit": (("tolerance = {mm = 2.0, rad = 0.02}", "tolerance = {cm = 0.2}"),
+                               ["key robot.tolerance", "unknown key 'cm'", "nor a unit"]),
+    "tolerance negative": (("tolerance = {mm = 2.0, rad = 0.02}", 'tolerance = {"B3.y" = -1.0}'),
+                           ["key robot.tolerance.B3.y", "> 0"]),
+    "tolerance text": (("tolerance = {mm = 2.0, rad = 0.02}", 'tolerance = {mm = "big"}'),
+                       ["key robot.tolerance.mm", "finite number"]),
+    "tolerance nan": (("tolerance = {mm = 2.0, rad = 0.02}", "tolerance = {mm = nan}"),
+                      ["key robot.tolerance.mm", "finite number"]),
+}
+
+
+@pytest.mark.parametrize("case", list(TWO_DAY_REFUSALS))
+def test_hostile_two_day_map_keys_are_refused_in_one_line(case, tmp_path, capsys):
+    (old, new), needles = TWO_DAY_REFUSALS[case]
+    assert old in two_days(tmp_path, n_cal=8, n_val=4)[0].read_text()
+    two_days(tmp_path, map_edit=lambda m: m.replace(old, new, 1), n_cal=8, n_val=4)
+    assert convert_two_days(tmp_path) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and str(tmp_path / "map.toml") in err, err
+    for needle in needles:
+        assert needle in err, (needle, err)
+    assert not (tmp_path / "days.csv").exists()
+
+
+def test_compensate_writes_the_commands_in_each_days_revolutions(tmp_path, capsys):
+    """``pipeline.compensate --map``: the commands again in the map's readings, by the session's own
+    mapping; read back through the mapping they are the mm commands (a few roundings: 4u relative)."""
+    from pipeline.compensate import main as compensate_main
+
+    two_days(tmp_path)
+    assert convert_two_days(tmp_path) == 0
+    heldout_after(tmp_path, "days")
+    names = ["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"]
+    targets = reachable_poses(default_robot("hexapod"), 5, 9)
+    (tmp_path / "targets.csv").write_text(",".join(names) + "\n" + "".join(
+        ",".join(repr(float(v)) for v in p) + "\n" for p in targets))
+    base = ["--calibration", str(tmp_path / "days_cal.calibration.json"), "--targets", str(tmp_path / "targets.csv"),
+            "--map", str(tmp_path / "map.toml")]
+    revs = [f"rev{i + 1}" for i in range(6)]
+    for session, extra in (("grid", []), ("feb12", ["--session", "feb12"])):
+        out = tmp_path / f"cmd_{session}.csv"
+        assert compensate_main(base + ["--out", str(out)] + extra) == 0
+        header, *rows = [line.split(",") for line in out.read_text().splitlines()]
+        table = np.array(rows, dtype=float)
+        mm = table[:, [header.index(f"l{i + 1}_mm") for i in range(6)]]
+        rev = table[:, [header.index(c) for c in revs]]
+        scale, zero = DAY_MAPPINGS[session]
+        assert np.allclose(zero + scale * rev, mm, rtol=8 * U, atol=0), session
+        side = json.loads(out.with_suffix(".json").read_text())["controller_readings"]
+        assert side["reading"] == "revolutions" and side["columns"] == revs and np.allclose(side["scale"], scale)
+    assert not np.allclose(np.loadtxt(tmp_path / "cmd_grid.csv", delimiter=",", skiprows=1)[:, -6:],
+                           np.loadtxt(tmp_path / "cmd_feb12.csv", delimiter=",", skiprows=1)[:, -6:])
+    capsys.readouterr()
+    assert compensate_main(base + ["--out", str(tmp_path / "c.csv"), "--session", "march"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--session march" in err and "not a session" in err, err

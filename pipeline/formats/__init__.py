@@ -10,18 +10,19 @@ from .calibration_file import (CALIBRATION_FORMAT, CALIBRATION_SUFFIX, CALIBRATI
 from .command_file import TIME_COLUMN, command_columns, command_csv, read_command_file, write_command_file
 from .linuxcnc import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, check_export_folder, comp_file_name, comp_text, genhex_hal_text, kins_ini_text,
                        write_export_folder)
-from .lab_export import LabExportError, LabMap, convert_lab_files, read_map
+from .lab_export import LabExportError, LabMap, convert_lab_files, joint_readings, read_map, session_joint_mapping
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
                       one_line, output_folder, publish, remove_stale_temporaries, writing)
 from .targets import Targets, TargetsError, read_targets
 from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SESSION_KEYS,
                         SESSION_TIMES, SETS, SIDECAR_FIELDS, Recording, RecordingError, columns, read_json_file,
                         read_recording,
-                        recording_texts, row_message, row_words, session_measurement, sidecar_path,
+                        recording_texts, row_message, row_words, session_measurement, frame_session, sidecar_path,
                         write_recording)
 
 __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
-           "sidecar_path", "read_json_file", "session_measurement", "row_words", "row_message", "plausibility", "recording_checks", "RecordingChecks",
+           "sidecar_path", "read_json_file", "session_measurement", "frame_session", "joint_readings",
+           "session_joint_mapping", "row_words", "row_message", "plausibility", "recording_checks", "RecordingChecks",
            "LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv",
            "read_command_file", "write_command_file", "check_outputs", "one_line", "FileLock", "LockHeld",
            "NameReservation", "remove_stale_temporaries", "OutputError", "ResultSet", "atomic_write",

@@ -15,7 +15,8 @@ outputs; ``pipeline.compensate`` reads it. It holds:
   :mod:`calib.effects.records`: name, granularity, coefficients by name with std and unit,
   searched parameter, and a law's terms for a proposed or kept law); empty for a run;
 - ``validity``: the domain the calibration saw: pose box (``pose_min``/``pose_max`` by pose
-  coordinate, base frame), joint ranges (``joint_min``/``joint_max``), time span ``t_s``;
+  coordinate: the platform poses of the calibration rows in the base frame, by the identified
+  model's forward kinematics, not what the instrument reported), joint ranges (``joint_min``/``joint_max``), time span ``t_s``;
 - ``declared_noise``; ``recording``: the input's file name and SHA-256 (CSV and sidecar), or the
   simulated scenario in words; ``produced_by``: the command.
 
@@ -36,7 +37,7 @@ import numpy as np
 from calib.effects.records import FittedEffect, effect_from_record
 from calib.measurement import frame_from_dict, frame_to_dict
 from calib.noise import SensorNoise
-from calib.robot import Robot
+from calib.robot import KinematicsError, Robot
 from calib.robots import ROBOTS, robot_from_description
 
 from .outputs import atomic_write
@@ -142,14 +143,42 @@ def recording_source(csv_path) -> dict:
             "sidecar_sha256": hashlib.sha256(side.read_bytes()).hexdigest() if side.is_file() else None}
 
 
-def validity_domain(robot: Robot, poses, joints, t_s) -> dict:
-    """The domain a calibration saw: the box of its poses (base frame), its joints' ranges and
-    its time span."""
+def validity_domain(robot: Robot, poses, joints, t_s, theta=None) -> dict:
+    """The domain a calibration saw: the box of its platform poses in the base frame, its joints'
+    ranges and its time span.
+
+    Args:
+        poses: (N, D) the calibration rows' poses in the base frame (the measured ones taken out
+            of the instrument frame), mm and rad.
+        joints: (N, C) their joints; t_s: (N,) their times, s.
+        theta: (P,) the identified parameters: the box is then over the platform poses the
+            identified model puts at ``joints`` (its forward kinematics, the poses compensation's
+            targets are commanded in): what the instrument reports beyond the platform's pose (a
+            capture body's constant tilt, the noise) is not the platform's. A row it cannot reach
+            keeps its ``poses`` row. None: the box of ``poses``.
+    """
     poses, joints, t_s = (np.asarray(a, dtype=float) for a in (poses, joints, t_s))
+    if theta is not None:
+        poses = platform_poses(robot, theta, joints, poses)
     return {"pose_names": list(robot.pose_names), "pose_min": poses.min(axis=0).tolist(),
             "pose_max": poses.max(axis=0).tolist(), "joint_names": list(robot.joint_names),
             "joint_min": joints.min(axis=0).tolist(), "joint_max": joints.max(axis=0).tolist(),
             "t_s": [float(t_s.min()), float(t_s.max())]}
+
+
+def platform_poses(robot: Robot, theta, joints, poses) -> np.ndarray:
+    """(N, D) the identified model's forward kinematics at ``joints`` (N, C), started at ``poses``
+    (N, D, base frame), a row it cannot reach keeping its ``poses`` row."""
+    try:
+        return robot.forward_kinematics(theta, joints, initial=poses)
+    except KinematicsError:
+        out = np.array(poses, dtype=float)
+        for k in range(len(out)):
+            try:
+                out[k] = robot.forward_kinematics(theta, joints[k:k + 1], initial=poses[k:k + 1])[0]
+            except KinematicsError:
+                pass
+        return out
 
 
 def _key(d: dict, key: str, where: str):

@@ -41,13 +41,17 @@ def _check_rows(robot: Robot, poses, joints) -> tuple[np.ndarray, np.ndarray]:
 TIME_COLUMN = "t_s"
 
 
-def command_csv(robot: Robot, poses, joints, t_s=None) -> str:
-    """CSV text of a command file (full float64 precision); ``t_s`` (N,) adds the time column."""
+def command_csv(robot: Robot, poses, joints, t_s=None, extra: dict | None = None) -> str:
+    """CSV text of a command file (full float64 precision); ``t_s`` (N,) adds the time column;
+    ``extra`` (``{column: (N,) values}``) columns after it (the commands in a controller's units)."""
     poses, joints = _check_rows(robot, poses, joints)
+    extra = extra or {}
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(command_columns(robot) + (() if t_s is None else (TIME_COLUMN,)))
+    w.writerow(command_columns(robot) + (() if t_s is None else (TIME_COLUMN,)) + tuple(extra))
     rows = np.c_[poses, joints] if t_s is None else np.c_[poses, joints, np.asarray(t_s, dtype=float)]
+    if extra:
+        rows = np.c_[rows, np.column_stack([np.asarray(v, dtype=float) for v in extra.values()])]
     for row in rows:
         w.writerow([repr(float(v)) for v in row])
     return buf.getvalue()

@@ -5,7 +5,9 @@ The map says which lab column is which joint and pose coordinate and how to conv
 
 * ``[robot]`` ``name`` (a registered robot), ``description`` (optional: a ``Robot.description()``
   JSON, or a recording's or command file's sidecar, whose ``nominal_geometry`` is taken; a path
-  relative to the map);
+  relative to the map), ``tolerance`` (optional: the machine's manufacturing tolerance, one
+  standard deviation, as a table by unit ``{mm = 2.0, rad = 0.02}`` and/or by parameter name
+  ``{"B3.y" = 5.0}``; written as the sidecar's ``meta.parameter_tolerance``, the run's prior);
 * ``[noise]`` (optional) the declared noise, the keys of a recording's ``declared_noise``;
 * ``[csv]`` (optional) ``delimiter`` (one character), ``decimal`` (``"."`` or ``","``),
   ``skip_lines`` (lines before the header line);
@@ -13,7 +15,8 @@ The map says which lab column is which joint and pose coordinate and how to conv
   order: ``t_s`` = 0, 1, 2, ...), ``column``, ``unit`` (``"s"`` | ``"ms"``, seconds),
   ``origin`` (iso: an ISO timestamp, default the session's first kept row; seconds: a number,
   default 0): ``t_s`` is the time since the origin;
-* ``[position]`` ``columns`` (x, y, z), ``unit`` (``"m"`` | ``"mm"`` | ``"in"``);
+* ``[position]`` ``columns`` (x, y, z), ``unit`` (``"m"`` | ``"mm"`` | ``"in"``), ``offset``
+  (optional ``[x, y, z]``, mm: added to every position after the unit conversion);
 * ``[orientation]`` (robots whose pose has angles) ``kind`` ``"quaternion"`` (``scalar``
   ``"first"`` | ``"last"``) | ``"matrix"`` (9 columns, ``order`` ``"row"`` (R11 R12 R13 R21 ...) |
   ``"column"``) | ``"euler"`` (``sequence``: SciPy's, lowercase = fixed axes, uppercase = moving
@@ -26,11 +29,18 @@ The map says which lab column is which joint and pose coordinate and how to conv
   ``joint = zero + scale * reading``;
 * ``[rows]`` (optional: rows to keep, 1-based data rows of each file) ``first``, ``last``,
   ``drop`` (a list), ``keep_column`` (a column whose cell is 1/true/yes to keep, 0/false/no to drop);
-* ``[set]`` (optional) ``column``, ``calibration`` and ``validation`` (the cell values);
+* ``[set]`` (optional) ``column``, ``calibration`` and ``validation`` (the cell values); or
+  ``[sessions] set``;
 * ``[extra]`` (optional) ``name = "lab column"``: channels kept by name (``temperature_C``);
 * ``[sessions]`` (optional; one session per input file) ``names`` (default ``"1"``, ``"2"``, ...),
-  ``frame`` (``"auto"`` | ``"base"`` | ``"estimate"``, or one per file): the instrument frame of
-  each session (with one file: the recording's ``meta.measurement``).
+  ``frame`` (``"auto"`` | ``"base"`` | ``"estimate"``, or one per file, where an entry may also
+  name another session: that file was captured in the named session's instrument frame, and its
+  rows are predicted there; the named session has its own frame and calibration rows, and a
+  session without calibration rows must name one or be ``"base"``): the instrument frame of each
+  session (with one file: the recording's ``meta.measurement``); ``set`` (one per file, or one for
+  all: ``"calibration"`` | ``"validation"``, every row of that file in that set; not with
+  ``[set]``); ``[sessions.NAME.joints]``: keys of ``[joints]`` (``columns``, ``reading``, ``unit``,
+  ``scale``, ``zero``) that differ for that session's file, each overriding ``[joints]``'s.
 
 Every key is checked (an unknown one is named); every fault of a lab file names the file, the
 row (1-based data row and its line) and the column.
@@ -51,21 +61,23 @@ import numpy as np
 
 from calib.measurement import FRAME_MODES
 from calib.noise import SensorNoise
+from calib.prior import ParameterPrior
 from calib.robot import Robot
 from calib.robots import ROBOTS, default_robot, robot_from_description
 from calib.rotation import euler_from_matrix, euler_from_quaternion
 from mjcf.units import M_PER_MM
 
-from .recording import (DEFAULT_SESSION, MIN_ROBOT_SIZE_MM, SETS, Recording, check_channel_name, check_session_name,
-                        columns, finite_number, read_text_file)
+from .recording import (DEFAULT_SESSION, MIN_ROBOT_SIZE_MM, SESSION_NAME, SETS, Recording, check_channel_name,
+                        check_session_name, columns, finite_number, read_text_file)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10 (pyproject installs tomli there)
     import tomli as tomllib
 
-__all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "LENGTH_UNITS", "ANGLE_UNITS", "TIME_UNITS",
-           "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS", "MAP_SCHEMA"]
+__all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "session_joint_mapping", "joint_readings",
+           "LENGTH_UNITS", "ANGLE_UNITS", "TIME_UNITS", "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS",
+           "MAP_SCHEMA", "SESSION_JOINT_KEYS"]
 
 #: mm per unit of length.
 LENGTH_UNITS = {"mm": 1.0, "m": 1.0 / M_PER_MM, "in": 25.4}
@@ -85,19 +97,21 @@ ORIENTATION_TOLERANCE = 0.01
 KEEP_WORDS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False}
 #: table -> (whether the table is required, {key: whether required}).
 MAP_SCHEMA = {
-    "robot": (True, {"name": True, "description": False}),
+    "robot": (True, {"name": True, "description": False, "tolerance": False}),
     "noise": (False, {"position_mm": False, "orientation_rad": False, "joint": False, "distribution": False}),
     "csv": (False, {"delimiter": False, "decimal": False, "skip_lines": False}),
     "time": (True, {"format": True, "column": False, "unit": False, "origin": False}),
-    "position": (True, {"columns": True, "unit": True}),
+    "position": (True, {"columns": True, "unit": True, "offset": False}),
     "orientation": (False, {"kind": True, "columns": True, "scalar": False, "order": False, "sequence": False,
                             "unit": False}),
     "joints": (True, {"columns": True, "reading": True, "unit": False, "scale": False, "zero": False}),
     "rows": (False, {"first": False, "last": False, "drop": False, "keep_column": False}),
     "set": (False, {"column": True, "calibration": True, "validation": True}),
     "extra": (False, {}),
-    "sessions": (False, {"names": False, "frame": False}),
+    "sessions": (False, {"names": False, "frame": False, "set": False}),
 }
+#: The keys a session's own ``[sessions.NAME.joints]`` may override.
+SESSION_JOINT_KEYS = ("columns", "reading", "unit", "scale", "zero")
 
 
 class LabExportError(ValueError):
@@ -179,7 +193,8 @@ def _tables(path: Path, doc: dict) -> dict:
             raise _fail(path, name, f"must be a table [{name}], got {type(table).__name__}")
         if required and name not in doc:
             raise LabExportError(f"{path}: missing table [{name}]")
-        extra = [k for k in table if k not in keys] if keys else []
+        extra = [k for k in table if k not in keys and not (name == "sessions" and isinstance(table[k], dict))] \
+            if keys else []
         if extra:
             raise _fail(path, f"{name}.{extra[0]}", f"unknown key; the keys of [{name}] are {', '.join(keys)}")
         missing = [k for k, req in keys.items() if req and k not in table] if name in doc else []
@@ -286,18 +301,67 @@ def _check_orientation(path: Path, robot: Robot, t: dict) -> None:
                                                       f"uppercase (moving axes), e.g. \"xyz\" or \"ZYX\", got {seq!r}")
 
 
-def _check_joints(path: Path, robot: Robot, t: dict) -> None:
+def _check_joints(path: Path, robot: Robot, t: dict, key: str = "joints") -> None:
+    """Check a ``[joints]`` table (``key``: how messages name it, ``sessions.NAME.joints`` for a
+    session's own), its numbers made (C,) arrays."""
     c = robot.n_chains
-    t["columns"] = _column_names(path, "joints.columns", t["columns"], c)
-    reading = _choice(path, "joints.reading", t["reading"], JOINT_READINGS)
+    t["columns"] = _column_names(path, f"{key}.columns", t["columns"], c)
+    reading = _choice(path, f"{key}.reading", t["reading"], JOINT_READINGS)
     units = LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS
-    _choice(path, "joints.unit", t.setdefault("unit", robot.joint_unit), tuple(units))
+    _choice(path, f"{key}.unit", t.setdefault("unit", robot.joint_unit), tuple(units))
     if reading == "value" and "scale" in t:
-        raise _fail(path, "joints.scale", "has no meaning with joints.reading = \"value\" (give zero for an offset)")
+        raise _fail(path, f"{key}.scale", "has no meaning with joints.reading = \"value\" (give zero for an offset)")
     if reading != "value" and "scale" not in t:
-        raise _fail(path, "joints.scale", f"missing: the {t['unit']} per {reading[:-1]} of each joint")
-    t["scale"] = _per_joint(path, "joints.scale", t.get("scale", 1.0), c, nonzero=True)
-    t["zero"] = _per_joint(path, "joints.zero", t.get("zero", 0.0), c)
+        raise _fail(path, f"{key}.scale", f"missing: the {t['unit']} per {reading[:-1]} of each joint")
+    t["scale"] = _per_joint(path, f"{key}.scale", t.get("scale", 1.0), c, nonzero=True)
+    t["zero"] = _per_joint(path, f"{key}.zero", t.get("zero", 0.0), c)
+
+
+def _session_joints(path: Path, robot: Robot, base: dict, name: str, table) -> dict:
+    """Session ``name``'s joint mapping: ``[joints]`` (``base``, as written) with the keys of
+    ``[sessions.NAME.joints]`` in place of its own, checked."""
+    key = f"sessions.{name}"
+    if not isinstance(table, dict) or set(table) != {"joints"}:
+        got = sorted(table) if isinstance(table, dict) else type(table).__name__
+        raise _fail(path, key, f"a session's table holds one table, [{key}.joints] (the keys of [joints] that "
+                               f"differ for its file), got {got}")
+    own = table["joints"]
+    if not isinstance(own, dict) or not own:
+        raise _fail(path, f"{key}.joints", f"must be a table of [joints] keys ({', '.join(SESSION_JOINT_KEYS)})")
+    extra = [k for k in own if k not in SESSION_JOINT_KEYS]
+    if extra:
+        raise _fail(path, f"{key}.joints.{extra[0]}", f"unknown key; a session may override "
+                                                      f"{', '.join(SESSION_JOINT_KEYS)}")
+    merged = {k: v for k, v in base.items() if not (k == "scale" and own.get("reading") == "value")}
+    merged.update(own)
+    _check_joints(path, robot, merged, f"{key}.joints")
+    return merged
+
+
+def _check_tolerance(path: Path, robot: Robot, value) -> dict:
+    """``[robot] tolerance`` as the sidecar's ``meta.parameter_tolerance``: ``{unit or parameter
+    name: standard deviation}``, checked by :meth:`calib.prior.ParameterPrior.from_tolerance`."""
+    if not isinstance(value, dict) or not value:
+        raise _fail(path, "robot.tolerance", "must be a table by unit (mm = ..., rad = ...) "
+                                             f"or by parameter name (\"{robot.table.names[0]}\" = ...), got {value!r}")
+    for k, v in value.items():
+        if _number(path, f"robot.tolerance.{k}", v) <= 0:
+            raise _fail(path, f"robot.tolerance.{k}", f"must be > 0, got {v!r}")
+    tolerance = {k: float(v) for k, v in value.items()}
+    try:
+        ParameterPrior.from_tolerance(robot, tolerance)
+    except (TypeError, ValueError) as exc:
+        raise _fail(path, "robot.tolerance", str(exc)) from None
+    return tolerance
+
+
+def _check_position(path: Path, t: dict) -> None:
+    t["columns"] = _column_names(path, "position.columns", t["columns"], 3)
+    _choice(path, "position.unit", t["unit"], tuple(LENGTH_UNITS))
+    offset = t.setdefault("offset", [0.0, 0.0, 0.0])
+    if not isinstance(offset, list) or len(offset) != 3:
+        raise _fail(path, "position.offset", f"must be [x, y, z] in mm, got {offset!r}")
+    t["offset"] = np.array([_number(path, "position.offset", v) for v in offset])
 
 
 def _check_rows(path: Path, t: dict) -> None:
@@ -332,7 +396,10 @@ def _check_extra(path: Path, robot: Robot, t: dict) -> None:
         t[name] = _column_names(path, f"extra.{name}", [column], 1)[0]
 
 
-def _check_sessions(path: Path, t: dict) -> None:
+def _check_sessions(path: Path, robot: Robot, t: dict, joints: dict, has_set_table: bool) -> None:
+    """Check ``[sessions]``: ``names``, ``frame`` (modes or session names), ``set``, and each
+    session's ``[sessions.NAME.joints]`` (merged with ``joints``, ``[joints]`` as written, into
+    ``t["joints"]``: session name -> its mapping)."""
     if "names" in t:
         names = t["names"]
         if not isinstance(names, list) or not names:
@@ -343,7 +410,18 @@ def _check_sessions(path: Path, t: dict) -> None:
             raise _fail(path, "sessions.names", f"names a session twice: {names!r}")
     frame = t.get("frame", "auto")
     for f in frame if isinstance(frame, list) else [frame]:
-        _choice(path, "sessions.frame", f, FRAME_MODES)
+        if not isinstance(f, str) or f not in FRAME_MODES and not SESSION_NAME.fullmatch(f):
+            raise _fail(path, "sessions.frame", f"each must be one of {', '.join(map(repr, FRAME_MODES))} or the "
+                                                f"name of another session, got {f!r}")
+    if "set" in t:
+        if has_set_table:
+            raise _fail(path, "sessions.set", "and the table [set] both say which rows are validation; keep one")
+        for s in t["set"] if isinstance(t["set"], list) else [t["set"]]:
+            _choice(path, "sessions.set", s, SETS)
+    own = {k: t.pop(k) for k in [k for k in t if k not in MAP_SCHEMA["sessions"][1]]}
+    for name in own:
+        check_session_name(name, LabExportError, f"{path}: key sessions.{name}")
+    t["joints"] = {name: _session_joints(path, robot, joints, name, table) for name, table in own.items()}
 
 
 def read_map(path: str | Path) -> LabMap:
@@ -360,17 +438,19 @@ def read_map(path: str | Path) -> LabMap:
         raise LabExportError(f"{path}: not valid TOML: {exc}") from None
     tables = _tables(path, doc)
     robot = _robot(path, tables["robot"])
+    if "tolerance" in tables["robot"]:
+        tables["robot"]["tolerance"] = _check_tolerance(path, robot, tables["robot"]["tolerance"])
     noise = _noise(path, tables["noise"])
     _check_csv(path, tables["csv"])
     _check_time(path, tables["time"])
-    tables["position"]["columns"] = _column_names(path, "position.columns", tables["position"]["columns"], 3)
-    _choice(path, "position.unit", tables["position"]["unit"], tuple(LENGTH_UNITS))
+    _check_position(path, tables["position"])
     _check_orientation(path, robot, tables["orientation"])
+    joints_as_written = dict(tables["joints"])
     _check_joints(path, robot, tables["joints"])
     _check_rows(path, tables["rows"])
     _check_set(path, tables["set"])
     _check_extra(path, robot, tables["extra"])
-    _check_sessions(path, tables["sessions"])
+    _check_sessions(path, robot, tables["sessions"], joints_as_written, bool(tables["set"]))
     return LabMap(path=path, robot=robot, noise=noise, tables=tables)
 
 
@@ -554,9 +634,24 @@ def _orientation(table: LabTable, kept: np.ndarray, spec: dict) -> np.ndarray:
     return euler_from_quaternion(q) if kind == "quaternion" else euler_from_matrix(R)
 
 
-def _convert_file(lab_map: LabMap, path: Path) -> dict:
+def joint_readings(spec: dict, robot: Robot, joints) -> np.ndarray:
+    """(N, C) the lab's readings of joint values ``joints`` (N, C, the robot's unit) by the checked
+    ``[joints]`` mapping ``spec``: ``(joint / unit - zero) / scale`` (the inverse of the import)."""
+    factor = (LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS)[spec["unit"]]
+    return (np.asarray(joints, dtype=float) / factor - spec["zero"]) / spec["scale"]
+
+
+def session_joint_mapping(lab_map: LabMap, session: str | None = None) -> dict:
+    """The checked ``[joints]`` mapping of ``session`` (its ``[sessions.NAME.joints]`` over
+    ``[joints]``; None or a session without its own: ``[joints]``)."""
+    return lab_map.tables["sessions"].get("joints", {}).get(session, lab_map.tables["joints"])
+
+
+def _convert_file(lab_map: LabMap, path: Path, joint_spec: dict, joint_key: str, whole_set: str | None) -> dict:
     """One lab file's kept rows in the recording's units: ``t_s``, ``joints``, ``measured``,
-    ``sets``, ``extras``, ``time`` (what its session declares of its time), ``data_rows``."""
+    ``sets``, ``extras``, ``time`` (what its session declares of its time), ``data_rows``;
+    ``joint_spec``: its joint mapping (``joint_key`` the map's table of it); ``whole_set``: every
+    row's set (``[sessions] set``), or None (``[set]``, or every row calibration)."""
     robot, t = lab_map.robot, lab_map.tables
     table = read_lab_table(path, lab_map)
     kept = _kept_rows(table, t["rows"])
@@ -564,13 +659,13 @@ def _convert_file(lab_map: LabMap, path: Path) -> dict:
     poses = np.empty((len(kept), robot.pose_dim))
     angle = robot.angle_pose_mask
     poses[:, ~angle] = table.numbers(kept, t["position"]["columns"], "position.columns") \
-        * LENGTH_UNITS[t["position"]["unit"]]
+        * LENGTH_UNITS[t["position"]["unit"]] + t["position"]["offset"]
     if angle.any():
         poses[:, angle] = _orientation(table, kept, t["orientation"])
-    j = t["joints"]
+    j = joint_spec
     factor = (LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS)[j["unit"]]
-    joints = (j["zero"] + j["scale"] * table.numbers(kept, j["columns"], "joints.columns")) * factor
-    sets = np.full(len(kept), SETS[0], dtype=object)
+    joints = (j["zero"] + j["scale"] * table.numbers(kept, j["columns"], f"{joint_key}.columns")) * factor
+    sets = np.full(len(kept), whole_set or SETS[0], dtype=object)
     if t["set"]:
         col = table.index(t["set"]["column"], "set.column")
         labels = {t["set"][s].strip(): s for s in SETS}
@@ -586,11 +681,36 @@ def _convert_file(lab_map: LabMap, path: Path) -> dict:
             "time": time_info, "data_rows": len(table.rows)}
 
 
+def _session_frames(lab_map: LabMap, names: list, frames: list, parts: list) -> None:
+    """Refuse a frame naming a session that is not another with its own frame and calibration
+    rows, and a session without calibration rows whose frame is to be estimated."""
+    path = lab_map.path
+    own = {n: f for n, f in zip(names, frames)}
+    calibrated = {n: bool(np.any(p["sets"] == SETS[0])) for n, p in zip(names, parts)}
+    for name, frame in own.items():
+        if frame is None or frame in FRAME_MODES:
+            if not calibrated[name] and len(names) > 1 and frame != "base":
+                raise _fail(path, "sessions.frame", f"session {name!r} has no calibration rows, so its instrument "
+                                                    f"frame ({frame or 'auto'!r}) cannot be estimated: name the "
+                                                    "session whose frame it was captured in, or \"base\"")
+            continue
+        if frame == name or frame not in own:
+            raise _fail(path, "sessions.frame", f"session {name!r}: {frame!r} is neither one of "
+                                                f"{', '.join(map(repr, FRAME_MODES))} nor another session "
+                                                f"({', '.join(map(repr, names))})")
+        if own[frame] is not None and own[frame] not in FRAME_MODES:
+            raise _fail(path, "sessions.frame", f"session {name!r} names session {frame!r}, whose frame is "
+                                                f"session {own[frame]!r}'s: name {own[frame]!r}")
+        if not calibrated[frame]:
+            raise _fail(path, "sessions.frame", f"session {name!r} names session {frame!r}, which has no "
+                                                "calibration rows: its frame cannot be estimated")
+
+
 def convert_lab_files(lab_map: LabMap, files) -> Recording:
     """The recording of a lab's files, one session per file (see the module's description).
 
     The sidecar's ``meta.imported`` names the map and, per file, its session, its data rows and
-    the rows kept.
+    the rows kept; ``meta.parameter_tolerance`` is the map's ``[robot] tolerance``.
 
     Raises:
         LabExportError: naming the file and the row and column, or the map's key, at fault.
@@ -604,13 +724,22 @@ def convert_lab_files(lab_map: LabMap, files) -> Recording:
     s = lab_map.tables["sessions"]
     names = s.get("names", [DEFAULT_SESSION] if len(files) == 1 else [str(k + 1) for k in range(len(files))])
     frames = s["frame"] if isinstance(s.get("frame"), list) else [s.get("frame")] * len(files)
-    for key, given in (("sessions.names", names), ("sessions.frame", frames)):
+    sets = s["set"] if isinstance(s.get("set"), list) else [s.get("set")] * len(files)
+    for key, given in (("sessions.names", names), ("sessions.frame", frames), ("sessions.set", sets)):
         if len(given) != len(files):
             raise _fail(lab_map.path, key, f"lists {len(given)} sessions for {len(files)} files")
-    parts = [_convert_file(lab_map, f) for f in files]
+    stray = [n for n in s.get("joints", {}) if n not in names]
+    if stray:
+        raise _fail(lab_map.path, f"sessions.{stray[0]}", f"names no session ({', '.join(map(repr, names))})")
+    parts = [_convert_file(lab_map, f, session_joint_mapping(lab_map, n),
+                           f"sessions.{n}.joints" if n in s.get("joints", {}) else "joints", w)
+             for f, n, w in zip(files, names, sets)]
+    _session_frames(lab_map, names, frames, parts)
     meta = {"imported": {"map": str(lab_map.path), "files": [
         {"file": str(f), "session": n, "data_rows": p["data_rows"], "kept_rows": len(p["t_s"])}
         for f, n, p in zip(files, names, parts)]}}
+    if "tolerance" in lab_map.tables["robot"]:
+        meta["parameter_tolerance"] = dict(lab_map.tables["robot"]["tolerance"])
     info = {n: {"source": str(f), **p["time"]} for f, n, p in zip(files, names, parts)}
     if len(files) == 1 and frames[0] is not None:
         meta["measurement"] = {"frame": frames[0]}

@@ -16,7 +16,9 @@ column names each row's session (a short name; default one session ``"1"``): one
 session its own instrument frame and its own time origin (``t_s`` may restart at a new session; a
 session's rows are together, and its time does not go backwards). The sidecar's optional
 ``sessions`` field declares, per session, its instrument frame (``measurement``: ``frame``,
-``initial_frame`` as in ``meta.measurement``, which they override for that session), its
+``initial_frame`` as in ``meta.measurement``, which they override for that session; or ``frame``
+naming another session: the session was captured in that session's instrument frame, which has
+its own), its
 ``source`` file, its ``time_origin`` and whether ``time`` was ``measured`` or is the ``row order``.
 The JSON sidecar names the robot, its nominal geometry and parameter table, the declared noise and
 the units.
@@ -50,7 +52,8 @@ from .outputs import ResultSet
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
            "sidecar_path", "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
-           "check_session_name", "check_channel_name", "read_text_file"]
+           "check_session_name", "check_channel_name", "read_text_file", "frame_session", "shared_frame_error",
+           "SESSION_NAME"]
 
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
@@ -135,6 +138,9 @@ class Recording:
         unused = [name for name in self.session_info if name not in sessions]
         if unused:
             raise ValueError(f"session_info names session(s) {', '.join(map(repr, unused))} without rows")
+        wrong = shared_frame_error(self.session_info, set(sessions.tolist()))
+        if wrong:
+            raise ValueError(f"session_info: {wrong}")
 
     @property
     def session_names(self) -> tuple[str, ...]:
@@ -218,11 +224,36 @@ def check_channel_name(name, recording_columns: tuple[tuple[str, ...], tuple[str
     return name
 
 
+def frame_session(rec: Recording, name: str) -> str:
+    """The session in whose instrument frame session ``name`` was captured: ``name`` itself, or the
+    session its ``measurement.frame`` names."""
+    frame = rec.session_info.get(name, {}).get("measurement", {}).get("frame", "auto")
+    return name if frame in FRAME_MODES else frame
+
+
+def shared_frame_error(session_info: dict, sessions: set) -> str | None:
+    """What is wrong with a session's ``measurement.frame`` naming another session (it must name
+    another session of the recording, one with its own frame), in words; None when nothing is."""
+    for name, block in session_info.items():
+        frame = block.get("measurement", {}).get("frame", "auto")
+        if frame in FRAME_MODES:
+            continue
+        if frame == name or frame not in sessions:
+            return (f"sessions.{name}.measurement.frame must be one of {', '.join(FRAME_MODES)} or another "
+                    f"session of the recording, got {frame!r}")
+        theirs = session_info.get(frame, {}).get("measurement", {}).get("frame", "auto")
+        if theirs not in FRAME_MODES:
+            return (f"sessions.{name}.measurement.frame names session {frame!r}, whose frame is session "
+                    f"{theirs!r}'s: name {theirs!r}")
+    return None
+
+
 def session_measurement(rec: Recording, name: str) -> MeasurementSettings:
-    """How session ``name`` was measured: ``meta.measurement`` with the session's own
-    ``measurement`` (its instrument frame: ``frame``, ``initial_frame``) in place of the recording's."""
+    """How session ``name`` was measured: ``meta.measurement`` with the own ``measurement`` (its
+    instrument frame: ``frame``, ``initial_frame``) of the session whose frame it was captured in
+    (:func:`frame_session`) in place of the recording's."""
     merged = dict(rec.meta.get("measurement") or {})
-    merged.update(rec.session_info.get(name, {}).get("measurement", {}))
+    merged.update(rec.session_info.get(frame_session(rec, name), {}).get("measurement", {}))
     return measurement_settings(merged or None)
 
 
@@ -423,8 +454,13 @@ def _session_block(json_path: Path, name: str, block) -> dict:
         raise RecordingError(f"{where}.measurement: unknown key(s) {', '.join(map(repr, extra))}: a session "
                              f"declares its instrument frame ({', '.join(SESSION_MEASUREMENT_KEYS)}); the targets "
                              "are the recording's (meta.measurement)")
-    if m.get("frame", "auto") not in FRAME_MODES:
-        raise RecordingError(f"{where}.measurement.frame must be one of {', '.join(FRAME_MODES)}, got {m['frame']!r}")
+    frame = m.get("frame", "auto")
+    if frame not in FRAME_MODES and not (isinstance(frame, str) and SESSION_NAME.fullmatch(frame)):
+        raise RecordingError(f"{where}.measurement.frame must be one of {', '.join(FRAME_MODES)} or another "
+                             f"session's name, got {frame!r}")
+    if frame not in FRAME_MODES and "initial_frame" in m:
+        raise RecordingError(f"{where}.measurement.initial_frame: the session is in session {frame!r}'s frame "
+                             "(measurement.frame), which declares it")
     if "initial_frame" in m:
         try:
             frame_from_dict(m["initial_frame"], f"sessions.{name}.measurement.initial_frame")
@@ -579,6 +615,9 @@ def read_recording(csv_path: str | Path) -> Recording:
     if idle:
         raise RecordingError(f"{json_path}: field 'sessions' declares session(s) {', '.join(map(repr, idle))} "
                              f"that no row of {csv_path.name} is in")
+    wrong = shared_frame_error(session_info, set(sessions.tolist()))
+    if wrong:
+        raise RecordingError(f"{json_path}: field {wrong}")
     c, d = len(joint_cols), len(pose_cols)
     return Recording(robot=robot, noise=noise, t_s=values[:, 0], joints=values[:, 1:1 + c],
                      measured=values[:, 1 + c:1 + c + d], sets=sets, meta=meta, sessions=sessions,

@@ -33,7 +33,7 @@ from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobia
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, NameReservation, Recording, command_columns, command_csv,
-                              output_folder, row_message, session_measurement, validity_domain)
+                              output_folder, frame_session, row_message, session_measurement, validity_domain)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
@@ -200,21 +200,40 @@ def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, fre
 def _instrument_heldout(robot: Robot, fit, val_joints, val_meas, sessions=None):
     """Held-out errors of a recording in an instrument frame or of targets: measured minus the
     prediction, before (nominal geometry, the registered frame, the start offsets) and after;
-    ``sessions``: (M,) each validation row's session (None: one session)."""
+    ``sessions``: (M,) each validation row's frame group (None: one; :data:`BASE_FRAME`: the
+    base frame, the fit's targets)."""
     k = fit.n_targets
     nominal = robot.forward_kinematics(robot.table.nominal, val_joints)
     rows = np.zeros(len(val_joints), dtype=int) if sessions is None else np.asarray(sessions)
+    several = fit.n_sessions > 1
     before = np.empty_like(np.asarray(val_meas, dtype=float))
+    after = np.empty_like(before)
     for s in np.unique(rows):
-        reg = fit.registrations[s] if sessions is not None else fit.registration
-        estimated = fit.frames_estimated[s] if sessions is not None else fit.frame_estimated
-        frame = reg.frame if estimated and reg is not None else (fit.frames[s] if sessions is not None else np.zeros(6))
-        targets = None if k == 0 else (reg.targets if reg is not None and estimated else fit.targets)
         at = rows == s
+        if s == BASE_FRAME:
+            frame, targets = np.zeros(6), fit.targets
+            predicted = instrument_measurements(robot, robot.forward_kinematics(fit.result.theta, val_joints[at]),
+                                                None, fit.targets)
+        else:
+            reg = fit.registrations[s] if several else fit.registration
+            estimated = fit.frames_estimated[s] if several else fit.frame_estimated
+            frame = reg.frame if estimated and reg is not None else fit.frames[s]
+            targets = None if k == 0 else (reg.targets if reg is not None and estimated else fit.targets)
+            predicted = fit.predict(val_joints[at], sessions=s if several else None)
         before[at] = measurement_residuals(robot, val_meas[at], instrument_measurements(robot, nominal[at], frame,
                                                                                           targets), k)
-    after = measurement_residuals(robot, val_meas, fit.predict(val_joints, sessions=sessions), k)
+        after[at] = measurement_residuals(robot, val_meas[at], predicted, k)
     return before, after
+
+
+def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
+    """(N, D) full poses ``measured`` taken out of their rows' instrument frames (``groups``: each
+    row's frame group, :func:`frame_groups`; rows in :data:`BASE_FRAME` as they are; ``several``:
+    the fit has several frames)."""
+    out = np.array(measured, dtype=float)
+    at = groups != BASE_FRAME
+    out[at] = fit.to_base(out[at], sessions=groups[at] if several else None)
+    return out
 
 
 def _instrument_basis(fit) -> str:
@@ -442,11 +461,18 @@ class CalibrationInput:
     val_sessions: np.ndarray | None = None
     tolerance_declared: bool = False
     tolerance_estimate: ToleranceEstimate | None = None
+    frame_sessions: tuple = ()
 
     @property
     def n_sessions(self) -> int:
-        """Measurement sessions of the recording (1 for a simulated run)."""
-        return 1 if self.rec is None else len(self.rec.session_names)
+        """Instrument frames of the recording: its sessions with a frame of their own and
+        calibration rows (:func:`frame_groups`; 1 for a simulated run)."""
+        return 1 if self.rec is None else len(self.frame_sessions)
+
+    def measurement(self, s: int = 0):
+        """How frame group ``s`` was measured (:func:`pipeline.formats.session_measurement` of the
+        session that owns its frame)."""
+        return session_measurement(self.rec, self.frame_sessions[s])
 
 
 #: The key of a recording-as-read's meta saying where its ``parameter_tolerance`` came from when a
@@ -516,26 +542,51 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
     tolerance, prior_source = declared_tolerance(robot, rec.meta, sidecar_name(settings.real), settings.tolerance)
-    index = session_index(rec)
+    groups, index = frame_groups(rec, where)
     cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
-    lost = sorted(set(rec.sessions[val_rows]) - set(rec.sessions[cal_rows]))
-    if len(rec.session_names) > 1 and lost:
-        raise ValueError(f"{where}, column 'session': session {lost[0]!r} has validation rows but no calibration "
-                         "rows: its instrument frame cannot be estimated")
     return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
                             rows=cal_rows, where=where, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
                             val_joints=val_joints, val_meas=val_meas, rec=rec, tolerance=tolerance,
                             prior=tolerance if settings.prior else None,
                             prior_source=prior_source if settings.prior else NO_PRIOR,
-                            sessions=index[cal_rows], val_sessions=index[val_rows],
+                            sessions=index[cal_rows], val_sessions=index[val_rows], frame_sessions=groups,
                             tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None)
 
 
+#: A row's frame group in :func:`frame_groups` when it is predicted in the base frame (a session
+#: without calibration rows declared in the base frame).
+BASE_FRAME = -1
+
+
+def frame_groups(rec: Recording, where: str = "the recording") -> tuple[tuple[str, ...], np.ndarray]:
+    """``(frame sessions, (N,) int)``: the sessions whose instrument frame the run fits (those with
+    a frame of their own whose rows, or the rows of the sessions captured in it, include
+    calibration rows; in order), and each row's place among them (:data:`BASE_FRAME` for the rows
+    of a session without calibration rows declared in the base frame).
+
+    Raises:
+        ValueError: a session with validation rows and no calibration rows whose frame cannot be
+            estimated (the session named as written).
+    """
+    owner = {name: frame_session(rec, name) for name in rec.session_names}
+    calibrated = set(rec.sessions[rec.rows("calibration")].tolist())
+    fitted = {owner[name] for name in calibrated}
+    groups = tuple(name for name in rec.session_names if name in fitted)
+    place = {name: groups.index(owner[name]) for name in rec.session_names if owner[name] in fitted}
+    for name in rec.session_names:
+        if name not in place:
+            if len(rec.session_names) > 1 and session_measurement(rec, name).frame != "base":
+                raise ValueError(f"{where}, column 'session': session {str(name)!r} has validation rows but no "
+                                 "calibration rows: its instrument frame cannot be estimated (declare it in the frame "
+                                 "of a session with calibration rows, or in the base frame)")
+            place[name] = BASE_FRAME if len(rec.session_names) > 1 else 0
+    return groups, np.array([place[name] for name in rec.sessions.tolist()], dtype=int)
+
+
 def session_index(rec: Recording) -> np.ndarray:
-    """(N,) int, each row's session as its place in ``rec.session_names``."""
-    place = {name: i for i, name in enumerate(rec.session_names)}
-    return np.array([place[name] for name in rec.sessions], dtype=int)
+    """(N,) int, each row's frame group (:func:`frame_groups`)."""
+    return frame_groups(rec)[1]
 
 
 def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
@@ -589,7 +640,7 @@ def gross_row_stage(inp: CalibrationInput, settings: RunSettings):
     if inp.n_sessions > 1:
         search = SessionSearch([session_search(inp, settings, s) for s in range(inp.n_sessions)], inp.sessions)
     else:
-        ms = measurement_settings(inp.rec.meta.get("measurement"))
+        ms = inp.measurement(0)
         search = find_gross_rows(inp.robot, inp.joints, inp.measured, inp.noise, frame=ms.frame, targets=ms.targets,
                                  estimate_targets=ms.estimate_targets if ms.targets is not None else None,
                                  seed=settings.seed)
@@ -600,7 +651,7 @@ def gross_row_stage(inp: CalibrationInput, settings: RunSettings):
 
 def session_search(inp: CalibrationInput, settings: RunSettings, s: int):
     """The gross-row search of session ``s``'s calibration rows, in its own instrument frame."""
-    ms = session_measurement(inp.rec, inp.rec.session_names[s])
+    ms = inp.measurement(s)
     rows = np.flatnonzero(inp.sessions == s)
     return find_gross_rows(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, frame=ms.frame,
                            targets=ms.targets, estimate_targets=ms.estimate_targets if ms.targets is not None else None,
@@ -635,7 +686,7 @@ def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
         return None
     if inp.n_sessions > 1:
         return sessions_fit(inp, search, kept)
-    ms = measurement_settings(inp.rec.meta.get("measurement"))
+    ms = inp.measurement(0)
     joints, measured = inp.joints[kept], inp.measured[kept]
     if search is None or not search.success:  # the search could not judge: the frame test on every row
         return identify_as_measured(inp.robot, joints, measured, inp.noise, ms, prior=inp.prior)
@@ -653,8 +704,8 @@ def sessions_fit(inp: CalibrationInput, search, kept: np.ndarray):
     """One geometry, an instrument frame for each session (estimated where its own search found one
     or its settings ask for it), fitted together on the rows kept (:func:`calib.measurement.identify_measured`
     with ``sessions``)."""
-    names = inp.rec.session_names
-    per = [session_measurement(inp.rec, name) for name in names]
+    names = inp.frame_sessions
+    per = [inp.measurement(s) for s in range(len(names))]
     searches = search.searches if isinstance(search, SessionSearch) else [None] * len(names)
     frames, starts = [], []
     for ms, found in zip(per, searches):
@@ -782,8 +833,7 @@ def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress
             "measuring held-out poses (compensated commands)", d, t))
         return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
     if instrument is not None and len(inp.val_joints):
-        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas,
-                                   inp.val_sessions if inp.n_sessions > 1 else None)
+        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas, inp.val_sessions)
     if sim is None and len(inp.val_joints):
         # A recording holds the validation poses measured under nominal commands only: the
         # identified model's prediction error there stands for the compensated error (equal to
@@ -931,11 +981,11 @@ def crossvalidation_settings(inp: CalibrationInput, instrument):
     """How each fold fits the instrument: the frame estimated (from the run's) where the run
     estimated it, else the base frame; with several sessions one settings a session (its frame),
     the targets session 0's (as :func:`sessions_fit`)."""
-    ms = measurement_settings(inp.rec.meta.get("measurement"))
+    ms = inp.measurement(0)
     if inp.n_sessions == 1:
         return replace(ms, frame="estimate" if instrument.frame_estimated else "base",
                        initial_frame=instrument.frame if instrument.frame_estimated else None)
-    per = [session_measurement(inp.rec, name) for name in inp.rec.session_names]
+    per = [inp.measurement(s) for s in range(inp.n_sessions)]
     return [replace(one, frame="estimate" if estimated else "base", initial_frame=frame if estimated else None,
                     targets=per[0].targets, estimate_targets=per[0].estimate_targets)
             for one, frame, estimated in zip(per, instrument.frames, instrument.frames_estimated)]
@@ -972,12 +1022,17 @@ def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> 
     joints, poses, residuals = joints[ok], poses[ok], residuals[ok]
     std = inp.noise.pose_std(robot.pose_units)
     try:
-        if ident.instrument is not None and held is not None:  # geometry and frames' uncertainty together
-            sessions = inp.val_sessions[ok] if inp.n_sessions > 1 else None
-            cov = ident.instrument.prediction_covariance(joints, sessions=sessions) + np.diag(std ** 2)
-        else:
-            jac = pose_jacobian_of_parameters(robot, result.theta, joints, poses)
-            cov = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac) + np.diag(std ** 2)
+        groups = inp.val_sessions[ok] if ident.instrument is not None and held is not None else \
+            np.full(len(joints), BASE_FRAME)
+        cov = np.empty((len(joints), robot.pose_dim, robot.pose_dim))
+        base = groups == BASE_FRAME  # in the base frame: the geometry's uncertainty alone
+        if base.any():
+            jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
+            cov[base] = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac)
+        if (~base).any():  # geometry and frames' uncertainty together
+            cov[~base] = ident.instrument.prediction_covariance(
+                joints[~base], sessions=groups[~base] if inp.n_sessions > 1 else None)
+        cov += np.diag(std ** 2)
     except KinematicsError:
         return {"what": what, "agrees": False, "ratio": None, "rows": 0}
     w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
@@ -1063,7 +1118,7 @@ def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
             raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
                              "needs full poses")
         several = inp.n_sessions > 1
-        measured = instrument.to_base(rec.measured, sessions=session_index(rec) if several else None)
+        measured = in_base_frame(instrument, rec.measured, session_index(rec), several)
         block["measurement_frame"] = instrument.frame_dict()
         block["measurement_frame_std"] = frame_to_dict(instrument.frame_std)
         if several:
@@ -1081,7 +1136,7 @@ def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
 def sessions_block(inp: CalibrationInput, fit) -> dict:
     """Summary keys of a recording with several sessions: each session's instrument frame and its
     standard uncertainty, and how each moved from the first (the gauge-free figure)."""
-    names = inp.rec.session_names
+    names = inp.frame_sessions
     motion = {}
     for s in range(1, len(names)):
         m, sd = fit.session_motion(s, 0)
@@ -1277,9 +1332,12 @@ def instrument_frames(inp: CalibrationInput, instrument) -> tuple[dict, dict]:
     data were in the base frame."""
     if instrument is None or not np.any(instrument.frames):
         return {}, {}
-    names = inp.rec.session_names if inp.rec is not None else ("session 1",)
-    return ({n: np.array(f) for n, f in zip(names, instrument.frames)},
-            {n: np.array(f) for n, f in zip(names, instrument.frames_std)})
+    if inp.rec is None:
+        return {"session 1": np.array(instrument.frames[0])}, {"session 1": np.array(instrument.frames_std[0])}
+    groups, index = frame_groups(inp.rec)  # every session (those captured in another's frame too)
+    first = {name: int(index[inp.rec.session_rows(name)[0]]) for name in inp.rec.session_names}
+    return ({n: np.array(instrument.frames[g]) for n, g in first.items() if g != BASE_FRAME},
+            {n: np.array(instrument.frames_std[g]) for n, g in first.items() if g != BASE_FRAME})
 
 
 def calibration_of(inp: CalibrationInput, ident: Identification, simulated: Recording | None) -> Calibration:
@@ -1294,7 +1352,8 @@ def calibration_of(inp: CalibrationInput, ident: Identification, simulated: Reco
     return Calibration(robot=robot, theta=result.theta, std=result.std, free=tuple(result.free_names),
                        covariance=result.covariance[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
                        targets=None if ident.instrument is None else ident.instrument.targets,
-                       validity=validity_domain(robot, ident.measured[used], inp.joints[used], t_s), noise=inp.noise,
+                       validity=validity_domain(robot, ident.measured[used], inp.joints[used], t_s, result.theta),
+                       noise=inp.noise,
                        produced_by="pipeline.run")
 
 

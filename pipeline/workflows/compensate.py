@@ -5,9 +5,12 @@ file (:mod:`pipeline.formats.calibration_file`) and the targets (:mod:`pipeline.
 take the targets out of the instrument's frame when asked, compute the commands
 (:func:`calib.compensation.compensated_commands`: the identified geometry, and every found effect
 the command sequence lets it invert) and write them as a command file (the targets in the base
-frame, the commands, ``t_s`` when the targets have it; a JSON sidecar saying what was compensated
-and what not, and why). Targets outside the domain the calibration saw are named in warnings:
-the commands are extrapolations there.
+frame, the commands, ``t_s`` when the targets have it; with a lab's mapping file the commands
+again in its joint readings, revolutions or counts, ``reading = (joint / unit - zero) / scale`` by
+the map's ``[joints]`` (or a session's ``[sessions.NAME.joints]``); a JSON sidecar saying what was
+compensated and what not, and why). Targets outside the domain the calibration saw (the box of
+its platform poses in the base frame, and its joints' ranges) are named in warnings: the commands
+are extrapolations there.
 """
 
 from __future__ import annotations
@@ -23,11 +26,12 @@ from calib.compensation import Compensation, compensated_commands
 from calib.measurement import compose, invert_frame
 from calib.robot import KinematicsError
 
-from pipeline.formats import (Calibration, ResultSet, Targets, check_outputs, command_csv, read_calibration,
-                              read_targets, row_message, sidecar_path)
+from pipeline.formats import (TIME_COLUMN, Calibration, ResultSet, Targets, check_outputs, command_columns, command_csv,
+                              joint_readings, read_calibration, read_map, read_targets, row_message,
+                              session_joint_mapping, sidecar_path)
 
 __all__ = ["TARGET_FRAMES", "CompensateSettings", "CompensationReport", "run_compensation", "domain_warnings",
-           "proof_in_the_testbed"]
+           "controller_readings", "proof_in_the_testbed"]
 
 #: The frames a target file may be in: the robot's base, or an instrument frame the calibration found.
 TARGET_FRAMES = ("base", "instrument")
@@ -45,9 +49,11 @@ class CompensateSettings:
         out: the command file to write (CSV; its sidecar beside it, ``.json``).
         frame: the targets' frame (:data:`TARGET_FRAMES`).
         session: with ``frame == "instrument"``, the session whose frame it is (needed when the
-            calibration has several).
+            calibration has several); with ``map``, the session whose joint mapping is used.
         geometry_only: compensate the geometry alone (the effects found left out).
         overwrite: allow replacing an existing command file.
+        map: a lab's mapping file (TOML, :mod:`pipeline.formats.lab_export`): the commands also
+            in its joint readings, in its joint columns (None: in the robot's unit alone).
     """
 
     calibration: Path
@@ -57,6 +63,7 @@ class CompensateSettings:
     session: str | None = None
     geometry_only: bool = False
     overwrite: bool = False
+    map: Path | None = None
 
 
 @dataclass
@@ -115,8 +122,8 @@ def _base_poses(cal: Calibration, settings: CompensateSettings, poses: np.ndarra
     if settings.frame not in TARGET_FRAMES:
         raise ValueError(f"--frame {settings.frame}: expected one of {', '.join(TARGET_FRAMES)}")
     if settings.frame == "base":
-        if settings.session is not None:
-            raise ValueError("--session: only with --frame instrument")
+        if settings.session is not None and settings.map is None:
+            raise ValueError("--session: only with --frame instrument or --map")
         return poses, "base frame"
     if not cal.frames:
         raise ValueError(f"--frame instrument: {settings.calibration} has no instrument frame (its recording was in "
@@ -132,6 +139,32 @@ def _base_poses(cal: Calibration, settings: CompensateSettings, poses: np.ndarra
     return compose(invert_frame(cal.frames[session]), cal.robot, poses), f"instrument frame of session {session}"
 
 
+def controller_readings(cal: Calibration, settings: CompensateSettings) -> tuple[dict, dict]:
+    """``(readings, what the sidecar says of them)`` of ``settings.map`` (``(None, {})`` without
+    one): ``readings(commands)`` gives ``{lab column: (N,) reading}`` of (N, C) commands by the
+    map's checked joint mapping (``settings.session``'s own where it has one)."""
+    if settings.map is None:
+        return None, {}
+    lab_map = read_map(settings.map)
+    if lab_map.robot.name != cal.robot.name:
+        raise ValueError(f"--map {settings.map}: maps a {lab_map.robot.name}; {settings.calibration} calibrates a "
+                         f"{cal.robot.name}")
+    names = lab_map.tables["sessions"].get("names")
+    own = lab_map.tables["sessions"].get("joints", {})
+    if settings.session is not None and settings.session not in own and names is not None \
+            and settings.session not in names:
+        raise ValueError(f"--session {settings.session}: not a session of {settings.map} ({', '.join(names)})")
+    spec = session_joint_mapping(lab_map, settings.session)
+    taken = set(command_columns(cal.robot)) | {TIME_COLUMN}
+    clash = [c for c in spec["columns"] if c in taken]
+    if clash:
+        raise ValueError(f"--map {settings.map}: joint column {clash[0]!r} is one of the command file's own columns")
+    about = {"map": str(settings.map), "session": settings.session, "columns": list(spec["columns"]),
+             "reading": spec["reading"], "unit": spec["unit"], "scale": spec["scale"].tolist(),
+             "zero": spec["zero"].tolist()}
+    return (lambda commands: dict(zip(spec["columns"], joint_readings(spec, cal.robot, commands).T))), about
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -145,6 +178,7 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
         FileExistsError: the command file exists and ``overwrite`` is off.
     """
     cal = read_calibration(settings.calibration)
+    readings, readings_about = controller_readings(cal, settings)
     out = Path(settings.out)
     if out.suffix.lower() == ".json":
         raise ValueError(f"--out {out}: a command file is a CSV (its sidecar gets the .json)")
@@ -170,10 +204,12 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
                "geometry_only": settings.geometry_only, "compensated": list(comp.compensated),
                "not_compensated": comp.left_out, "iterations": comp.iterations, "converged": comp.converged,
                "largest_physics_correction": float(np.max(np.abs(comp.displacement))) if len(poses) else 0.0,
-               "joint_unit": cal.robot.joint_unit, "warnings": warnings}
+               "joint_unit": cal.robot.joint_unit, "warnings": warnings,
+               **({"controller_readings": readings_about} if readings_about else {})}
     paths = {"commands": out, "sidecar": sidecar_path(out)}
     with ResultSet(paths, overwrite=settings.overwrite, flags={"commands": "--out", "sidecar": "--out"}) as files:
-        files.temp("commands").write_text(command_csv(cal.robot, poses, comp.commands, tg.t_s))
+        files.temp("commands").write_text(command_csv(cal.robot, poses, comp.commands, tg.t_s,
+                                                      readings(comp.commands) if readings else None))
         files.temp("sidecar").write_text(json.dumps({"robot": cal.robot.name, "produced_by": "pipeline.compensate",
                                                      **summary}, indent=1) + "\n")
         files.publish()
