@@ -118,3 +118,41 @@ def test_the_old_default_declared_is_said_contradicted_with_figures(twin, tmp_pa
     words = [w for w in s["warnings"] if w.startswith("the declared tolerance (0.1 mm) is contradicted")]
     assert words and "nats" in words[0] and "the rows support" in words[0]
     assert s["prior"]["learnt"]["contradicted"] and s["prior"]["learnt"]["wider_than_reference"] == ["mm"]
+
+
+def test_level_targets_inside_the_grid_are_inside_the_domain_with_a_tilted_capture_body(tmp_path):
+    """The capture body is mounted on the platform turned 2 degrees about x (every measured
+    orientation carries it, the platform is level): the calibration's domain is the platform's,
+    so level targets inside the grid compensate without a domain warning, and a target tilted by
+    0.2 rad (far beyond anything the grid saw) is still warned of. Kinematic model, 0.3 mm / 1.5
+    mrad capture noise."""
+    from calib.rotation import euler_from_matrix, rotation_matrix
+    from pipeline.workflows.compensate import CompensateSettings, run_compensation
+
+    robot = hand_built_hexapod()
+    rng = np.random.default_rng(8)
+    errors = rng.uniform(1.0, 3.0, robot.n_parameters) * rng.choice([-1.0, 1.0], robot.n_parameters)
+    theta = robot.table.nominal + errors
+    grid = level_grid()
+    commands = robot.inverse_kinematics(robot.table.nominal, grid)
+    platform = robot.forward_kinematics(theta, commands, initial=grid)
+    body = rotation_matrix(np.array([np.deg2rad(2.0), 0.0, 0.0]))
+    seen = platform.copy()
+    seen[:, 3:] = euler_from_matrix(rotation_matrix(platform[:, 3:]) @ body)
+    seen += rng.normal(size=seen.shape) * CAPTURE_NOISE.pose_std(robot.pose_units)
+    rec = Recording(robot=robot, noise=CAPTURE_NOISE, t_s=np.arange(100.0), joints=commands,
+                    measured=compose(CAPTURE_FRAME, robot, seen), sets=np.array(["calibration"] * 100), meta={})
+    csv, _ = write_recording(tmp_path / "tilted.csv", rec)
+    run(["--real", str(csv), "--out", str(tmp_path), "--quiet", "--name", "tilted"])
+    targets = grid[(np.abs(grid[:, 0]) < 100) & (np.abs(grid[:, 1]) < 100)][::4]
+    tilted = np.r_[0.0, 0.0, 700.0, 0.2, 0.0, 0.0]
+    names = ["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"]
+    for label, rows in (("level", targets), ("tilted", np.vstack([targets, tilted]))):
+        (tmp_path / f"{label}.csv").write_text(",".join(names) + "\n" + "\n".join(
+            ",".join(repr(float(v)) for v in p) for p in rows) + "\n")
+    level = run_compensation(CompensateSettings(calibration=tmp_path / "tilted.calibration.json",
+                                                targets=tmp_path / "level.csv", out=tmp_path / "level_cmd.csv"))
+    assert not [w for w in level.warnings if "outside" in w], level.warnings
+    far = run_compensation(CompensateSettings(calibration=tmp_path / "tilted.calibration.json",
+                                              targets=tmp_path / "tilted.csv", out=tmp_path / "tilted_cmd.csv"))
+    assert any("alpha" in w for w in far.warnings), far.warnings

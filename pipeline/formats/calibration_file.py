@@ -155,15 +155,41 @@ def validity_domain(robot: Robot, poses, joints, t_s, theta=None) -> dict:
             identified model puts at ``joints`` (its forward kinematics, the poses compensation's
             targets are commanded in): what the instrument reports beyond the platform's pose (a
             capture body's constant tilt, the noise) is not the platform's. A row it cannot reach
-            keeps its ``poses`` row. None: the box of ``poses``.
+            keeps its ``poses`` row. The box also spans the nominal model's forward kinematics at
+            ``joints``: the poses the lab commanded (exactly so where its commands came from the
+            nominal inverse kinematics), in the terms its later targets are given. Level poses
+            cannot tell a capture body's constant tilt from the platform's, so the fit may put some
+            of it into the geometry; the commanded level poses keep level targets inside the box.
+            None: the box of ``poses``. Likewise the joints' ranges span the recorded joints and
+            the identified model's inverse kinematics of the commanded poses (the commands
+            compensation gives for what the lab commanded).
     """
     poses, joints, t_s = (np.asarray(a, dtype=float) for a in (poses, joints, t_s))
+    commands = joints
     if theta is not None:
-        poses = platform_poses(robot, theta, joints, poses)
+        identified = platform_poses(robot, theta, joints, poses)
+        commanded = platform_poses(robot, robot.table.nominal, joints, identified)
+        poses = np.vstack([identified, commanded])
+        commands = np.vstack([joints, compensated_joints(robot, theta, commanded)])
     return {"pose_names": list(robot.pose_names), "pose_min": poses.min(axis=0).tolist(),
             "pose_max": poses.max(axis=0).tolist(), "joint_names": list(robot.joint_names),
-            "joint_min": joints.min(axis=0).tolist(), "joint_max": joints.max(axis=0).tolist(),
+            "joint_min": commands.min(axis=0).tolist(), "joint_max": commands.max(axis=0).tolist(),
             "t_s": [float(t_s.min()), float(t_s.max())]}
+
+
+def compensated_joints(robot: Robot, theta, poses) -> np.ndarray:
+    """(M, C) the identified model's inverse kinematics of ``poses`` (N, D), the rows it cannot
+    reach left out."""
+    try:
+        return robot.inverse_kinematics(theta, poses)
+    except KinematicsError:
+        rows = []
+        for k in range(len(poses)):
+            try:
+                rows.append(robot.inverse_kinematics(theta, poses[k:k + 1])[0])
+            except KinematicsError:
+                pass
+        return np.array(rows).reshape(-1, robot.n_chains)
 
 
 def platform_poses(robot: Robot, theta, joints, poses) -> np.ndarray:
