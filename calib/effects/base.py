@@ -165,6 +165,11 @@ class EffectData:
             :data:`PAYLOAD_CHANNEL`), or None when the recording does not say (one payload
             throughout). Where it varies, compliance is fitted with its payload terms
             (:func:`calib.effects.compliance.payload_varies`).
+        tolerance: (P,) each parameter's manufacturing tolerance (the standard deviation of its
+            prior about ``theta``, its unit: :class:`calib.prior.ParameterPrior`'s ``std``), or
+            None (no prior: the fits take the geometry the rows determine, as plain least
+            squares). With it, the combinations of the free parameters the rows leave to the
+            prior are held at ``theta`` (:mod:`calib.effects.separability`).
     """
 
     robot: Robot
@@ -176,6 +181,7 @@ class EffectData:
     direction: np.ndarray = field(default=None)
     last_move: np.ndarray = field(default=None)
     payload_kg: np.ndarray | None = field(default=None)
+    tolerance: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         r = self.robot
@@ -197,6 +203,11 @@ class EffectData:
             if not np.all(np.isfinite(p)) or np.any(p < 0):
                 raise ValueError("payload_kg must be finite and >= 0 at every row")
             object.__setattr__(self, "payload_kg", p)
+        if self.tolerance is not None:
+            tol = as_array(self.tolerance, "tolerance", (r.n_parameters,))
+            if not np.all(np.isfinite(tol) & (tol > 0)):
+                raise ValueError("tolerance must be finite and > 0 for every parameter")
+            object.__setattr__(self, "tolerance", tol)
         start = None
         if self.direction is None or self.last_move is None:
             start = r.inverse_kinematics(theta, r.home_pose[None])[0]
@@ -234,15 +245,16 @@ class EffectData:
         """The same analysis restricted to ``rows`` (the motion history is kept)."""
         return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
                           self.noise, self.direction[rows], self.last_move[rows],
-                          None if self.payload_kg is None else self.payload_kg[rows])
+                          None if self.payload_kg is None else self.payload_kg[rows], self.tolerance)
 
     def with_measured(self, measured: np.ndarray) -> "EffectData":
         """The same commands with other measured poses."""
         return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction,
-                          self.last_move, self.payload_kg)
+                          self.last_move, self.payload_kg, self.tolerance)
 
     def with_robot(self, robot: Robot, theta: np.ndarray | None = None) -> "EffectData":
-        """The same measurements read with another nominal robot (motion history kept)."""
+        """The same measurements read with another nominal robot (motion history kept; no prior:
+        a tolerance belongs to the robot it was declared for)."""
         return EffectData(robot, robot.table.nominal if theta is None else theta, self.joints, self.measured,
                           self.t_s, self.noise, self.direction, self.last_move, self.payload_kg)
 

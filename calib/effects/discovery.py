@@ -43,17 +43,21 @@ robot's free parameters (``robot.free_default``).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist, norm
 
-from ..robot import KinematicsError, Robot
+from ..observability import describe_combination
+from ..robot import KinematicsError, Robot, check_joint_limits
 from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
 from .compliance import for_payload, payload_varies
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
+from .separability import (HELD_INFORMATION, GeometryBasis, flat_coordinates, geometry_basis, pose_families,
+                           unseparated_combinations)
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
            "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
@@ -152,6 +156,26 @@ def _free_indices(robot: Robot) -> np.ndarray:
     return np.sort(robot.table.indices(robot.free_default))
 
 
+_BASES: "weakref.WeakKeyDictionary[EffectData, GeometryBasis | None]" = weakref.WeakKeyDictionary()
+
+
+def _geometry(data: EffectData) -> GeometryBasis | None:
+    """The determined and held geometric combinations of ``data`` (at ``data.theta``;
+    :mod:`calib.effects.separability`), or None: no prior, or every combination determined
+    (the fits are then those without a prior, unchanged)."""
+    if data.tolerance is None:
+        return None
+    if data not in _BASES:
+        robot = data.robot
+        free = _free_indices(robot)
+        jac = robot.closure_jacobians(data.theta, data.joints, data.measured)
+        winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
+        G = _whiten(winv, jac.parameters[:, :, free]).reshape(-1, free.size)
+        basis = geometry_basis(G, data.tolerance[free], free)
+        _BASES[data] = basis if basis.held.shape[1] else None
+    return _BASES[data]
+
+
 def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
@@ -197,9 +221,14 @@ class EffectFit:
         whitened: (N, C) whitened residuals (unit variance under the declared noise).
         chi2: sum of squares of ``whitened``; dof = N C - n_params.
         n_params: free geometric parameters + p (+1 per searched parameter).
-        design: (N C, free + p) whitened derivatives of the residuals at the solution (the
-            hat matrix of the leave-one-out tests).
+        design: (N C, g + p) whitened derivatives of the residuals at the solution (the
+            hat matrix of the leave-one-out tests): g geometric columns, the free parameters or,
+            with a prior, the combinations the rows determine (``basis``).
         coefficient_cov: (p, p) covariance of ``coefficients`` (same inflation as the std).
+        basis: the geometric combinations fitted and those held at the prior mean
+            (:class:`calib.effects.separability.GeometryBasis`), or None: every free parameter fitted.
+        held_design: (N C, F - g) whitened derivatives of the residuals along the held
+            combinations (per tolerance), or None.
     """
 
     models: tuple
@@ -214,6 +243,8 @@ class EffectFit:
     n_params: int
     design: np.ndarray = field(repr=False, default=None)
     coefficient_cov: np.ndarray = field(repr=False, default=None)
+    basis: GeometryBasis | None = field(repr=False, default=None)
+    held_design: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def effects(self) -> tuple[str, ...]:
@@ -257,6 +288,13 @@ class EffectFit:
 
     def aic(self) -> float:
         return float(self.chi2 + 2 * self.n_params)
+
+    @property
+    def span(self) -> np.ndarray:
+        """(N C, k) the columns whatever the model could explain lies in: :attr:`design` and,
+        with held geometric combinations, theirs (the remainder's tests and the outlier scan
+        project them out: what a held combination could explain is no evidence of anything else)."""
+        return self.design if self.held_design is None else np.hstack([self.design, self.held_design])
 
     def slices(self) -> dict:
         """name -> slice of each effect's coefficients in :attr:`coefficients`."""
@@ -319,7 +357,11 @@ class EffectFit:
         cov = cov * max(1.0, self.chi2 / max(self.dof, 1))
         free = _free_indices(self.robot)
         out = np.zeros((self.robot.n_parameters,) * 2)
-        out[np.ix_(free, free)] = cov[:free.size, :free.size]
+        if self.basis is None:
+            out[np.ix_(free, free)] = cov[:free.size, :free.size]
+        else:  # the held combinations with the prior's covariance
+            g = self.basis.size
+            out[np.ix_(free, free)] = self.basis.covariance(cov[:g, :g])
         return out
 
     def joint_displacement(self, data: EffectData) -> np.ndarray:
@@ -336,9 +378,10 @@ class EffectFit:
         return r, _whiten(_whitening(self.robot, self.theta, data), r)
 
 
-def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras):
+def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras, basis: GeometryBasis | None = None):
     """Closure residuals (N, C) with the effects' joint displacement applied, their derivatives
-    (N, C, free + p) (geometry columns, then the effects'), and the closure Jacobians."""
+    (N, C, g + p) (geometry columns: the free parameters', or the determined combinations' of
+    ``basis``; then the effects'), and the closure Jacobians."""
     robot = data.robot
     if models:
         Xq = np.concatenate([m.joint_regressors(robot, theta, data, e) for m, e in zip(models, extras)], axis=-1)
@@ -347,13 +390,16 @@ def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras):
     joints = data.joints + Xq @ coef
     r = robot.closure(theta, joints, data.measured)
     jac = robot.closure_jacobians(theta, joints, data.measured)
-    return r, np.concatenate([jac.parameters[:, :, free], jac.joints @ Xq], axis=-1), jac
+    geo = jac.parameters[:, :, free] if basis is None else jac.parameters[:, :, free] @ basis.step
+    return r, np.concatenate([geo, jac.joints @ Xq], axis=-1), jac
 
 
 def fit_effects(data: EffectData, effects=(), *, extras=None, iterations: int = GN_ITERATIONS,
                 start: np.ndarray | None = None) -> EffectFit:
     """Fit the robot's free geometric parameters and several effects' coefficients jointly
-    (whitened Gauss-Newton, to convergence).
+    (whitened Gauss-Newton, to convergence). With a prior (``data.tolerance``) the geometric
+    combinations the rows leave to it are held at ``data.theta`` and the others fitted
+    (:mod:`calib.effects.separability`).
 
     Args:
         data: the measurements.
@@ -384,18 +430,21 @@ def fit_effects(data: EffectData, effects=(), *, extras=None, iterations: int = 
         start = geo.theta
     ex = tuple(extras.get(m.name) if m.searched is not None else None for m in models)
     theta = np.array(data.theta if start is None else start, dtype=float)
-    g = free.size
+    basis = _geometry(data)
+    if basis is not None:
+        theta = basis.hold(theta, data.theta)
+    g = free.size if basis is None else basis.size
     coef = np.zeros(sum(len(m.coefficients(robot)) for m in models))
     for _ in range(max(int(iterations), 1)):
-        r, D, jac = _design(models, theta, coef, data, free, ex)
+        r, D, jac = _design(models, theta, coef, data, free, ex, basis)
         winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
         A = _whiten(winv, D).reshape(-1, D.shape[-1])
         x = _solve(A, -_whiten(winv, r).ravel())
-        theta[free] += x[:g]
+        theta[free] += x[:g] if basis is None else basis.step @ x[:g]
         coef = coef + x[g:]
         if float(np.sum((A @ x) ** 2)) < GN_TOLERANCE:
             break
-    resid, D, jac = _design(models, theta, coef, data, free, ex)
+    resid, D, jac = _design(models, theta, coef, data, free, ex, basis)
     winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
     w = _whiten(winv, resid)
     chi2 = float(np.sum(w ** 2))
@@ -408,7 +457,8 @@ def fit_effects(data: EffectData, effects=(), *, extras=None, iterations: int = 
     cov = cov * max(1.0, chi2 / max(dof, 1))
     ccov = cov[g:, g:]
     std = np.sqrt(np.clip(np.diag(ccov), 0, None))
-    return EffectFit(models, robot, theta, coef, std, ex, resid, w, chi2, n_params, A, ccov)
+    held = None if basis is None else _whiten(winv, jac.parameters[:, :, free] @ basis.held_step).reshape(A.shape[0], -1)
+    return EffectFit(models, robot, theta, coef, std, ex, resid, w, chi2, n_params, A, ccov, basis, held)
 
 
 def fit_effect(data: EffectData, effect: str | Effect = "none", *, extra: float | None = None,
@@ -426,7 +476,11 @@ def fit_effect(data: EffectData, effect: str | Effect = "none", *, extra: float 
 class _Linear:
     """The joint fit linearised at the geometry-only solution: whitened residual ``b`` and
     effect columns with the geometry projected out, so that a subset's fit is one small
-    least-squares problem and its cross-validation closed form."""
+    least-squares problem and its cross-validation closed form. Every free geometric combination
+    is projected out, those a prior holds too: an effect earns its place only by what no
+    geometry explains (on a plane of poses the held combinations' columns are built of the
+    measured orientation, noise included, and would lend any effect that resembles them
+    evidence from the noise)."""
 
     def __init__(self, data: EffectData, geometry: EffectFit):
         robot = data.robot
@@ -436,7 +490,12 @@ class _Linear:
         self.dF_dq = jac.joints
         free = _free_indices(robot)
         G = _whiten(self.winv, jac.parameters[:, :, free]).reshape(-1, free.size)
+        self.basis = geometry.basis
         self.Qg = orthonormal_columns(G)
+        if self.basis is not None:  # for the separability screen: the determined combinations alone
+            self.Q_det = orthonormal_columns(G @ self.basis.step)
+            H = G @ self.basis.held_step
+            self.G_held = H - self.Q_det @ (self.Q_det.T @ H)
         self.b = self.perp(-_whiten(self.winv, robot.closure(self.theta, data.joints, data.measured)).ravel())
         self.n = self.b.size
         self.dof0 = self.n - self.Qg.shape[1]
@@ -454,6 +513,31 @@ class _Linear:
             X = closure_regressors(self.dF_dq, eff.joint_regressors(robot, self.theta, self.data, extra))
             self._cols[key] = self.perp(_whiten(self.winv, X).reshape(self.n, -1))
         return self._cols[key]
+
+    def unseparated(self, eff: Effect, extra) -> list[dict]:
+        """The coefficient combinations of ``eff`` the rows cannot separate from the geometry's
+        held combinations (:func:`calib.effects.separability.unseparated_combinations`), each
+        with the geometric combination that mimics it: ``[{"combination", "ratio", "geometry"}]``
+        (empty without a held combination)."""
+        if self.basis is None:
+            return []
+        robot = self.data.robot
+        X = _whiten(self.winv, closure_regressors(self.dF_dq, eff.joint_regressors(robot, self.theta, self.data, extra)))
+        X = X.reshape(self.n, -1)
+        held = X - self.Q_det @ (self.Q_det.T @ X)
+        found = unseparated_combinations(held, self.perp(X))
+        if not found:
+            return []
+        coef_names = [c.name for c in eff.coefficients(robot)]
+        free_names = [robot.table.names[i] for i in self.basis.free]
+        out = []
+        for v, ratio in found:
+            w, *_ = np.linalg.lstsq(self.G_held, held @ v, rcond=None)  # held combinations mimicking it
+            u = self.basis.held @ w
+            out.append({"combination": describe_combination(v, coef_names),
+                        "ratio": ratio,
+                        "geometry": describe_combination(u / np.linalg.norm(u), free_names) if np.any(u) else ""})
+        return out
 
     def chi2(self, blocks: list) -> float:
         if not blocks:
@@ -613,8 +697,11 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
     Nested effects (:attr:`Effect.generalises`) are one family: at most one of a family is in
     the model, the simplest unless a more general one gains :data:`MIN_NESTED_DELTA_BIC` over it
     (:func:`_simplest`), and after each step the family's member in the model is reviewed with
-    the other effects fitted (a warm-up's curvature can show only once another effect is in)."""
+    the other effects fitted (a warm-up's curvature can show only once another effect is in).
+    A form the rows cannot separate from the geometry's held combinations (:meth:`_Linear.unseparated`)
+    is no candidate; it is returned under ``"unseparated"``."""
     log_n = np.log(lin.n)
+    unseparated: dict = {}
     family, nested = _relations(models)
     chosen: dict = {}  # name -> {"extra", "X", "k"}
     excluded: set = set()
@@ -627,7 +714,15 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
         for name, eff in models.items():
             if name in chosen or name in excluded or (family[name] - {name}) & set(chosen):
                 continue
-            trials[name] = _trial(lin, eff, blocks, chi2_cur, p_cur, log_n)
+            if eff.searched is None and unseparated.get(name):
+                continue
+            t = _trial(lin, eff, blocks, chi2_cur, p_cur, log_n)
+            if eff.searched is not None or name not in unseparated:
+                unseparated[name] = lin.unseparated(eff, t["extra"])
+            if unseparated[name]:
+                unseparated[name] = {"extra": t["extra"], "combinations": unseparated[name]}
+                continue
+            trials[name] = t
         if first is None:
             first = {n: {"chi2": t["chi2"], "delta_bic_vs_none": t["delta_bic"], "n_params": t["k"],
                          "extra": t["extra"],
@@ -663,7 +758,7 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
             blocks_rest = [c["X"] for c in rest.values()]
             chi2_rest, p_rest = lin.chi2(blocks_rest), p_cur - chosen[name]["k"]
             review = {f: _trial(lin, models[f], blocks_rest, chi2_rest, p_rest, log_n)
-                      for f in family[name] if f not in excluded}
+                      for f in family[name] if f not in excluded and not unseparated.get(f)}
             better = _simplest(review, review, nested)
             if better != name:
                 r = review[better]
@@ -685,7 +780,8 @@ def _select(lin: _Linear, models: dict, max_effects: int, min_delta_bic: float, 
                 cv_cur = lin.cv_rms(rest, folds, seed)
                 step["dropped"].append(name)
     return {"chosen": {n: c["extra"] for n, c in chosen.items()}, "steps": steps, "rivals": rivals,
-            "single": first or {}, "cv_geometry": lin.cv_rms([], folds, seed), "cv_chosen": cv_cur}
+            "single": first or {}, "cv_geometry": lin.cv_rms([], folds, seed), "cv_chosen": cv_cur,
+            "unseparated": {n: u for n, u in unseparated.items() if u}}
 
 
 # ----------------------------------------------------------------------------- the remainder
@@ -695,8 +791,10 @@ def _rms(v: np.ndarray, axis=None):
     return np.sqrt(np.mean(v ** 2, axis=axis))
 
 
-def _features(data: EffectData) -> list[tuple[str, str, np.ndarray]]:
-    """``(quantity, kind, values (N, C))``: what a remainder is tested against."""
+def _features(data: EffectData, flat=()) -> list[tuple[str, str, np.ndarray]]:
+    """``(quantity, kind, values (N, C))``: what a remainder is tested against (not the pose
+    coordinates ``flat``, which the poses did not vary: their recorded values are their noise,
+    which the residuals carry too)."""
     robot = data.robot
     n, c = data.n, robot.n_chains
     out = [("time", "ordered", np.broadcast_to(data.t_s[:, None], (n, c))),
@@ -715,7 +813,8 @@ def _features(data: EffectData) -> list[tuple[str, str, np.ndarray]]:
             u = u * data.payload_kg[:, None]
         out.append(("load", "ordered", u))
     for k, name in enumerate(robot.pose_names):
-        out.append((f"position {name}", "ordered", np.broadcast_to(data.measured[:, k:k + 1], (n, c))))
+        if name not in flat:
+            out.append((f"position {name}", "ordered", np.broadcast_to(data.measured[:, k:k + 1], (n, c))))
     return out
 
 
@@ -756,13 +855,18 @@ class _Remainder:
     winv: np.ndarray
     Q: np.ndarray
     w: np.ndarray
+    Q_det: np.ndarray | None = None
 
     def f_test(self, X):
         """F test of the whitened remainder on columns ``X`` (the model's columns projected out):
-        ``(p, beta, cov, keep)``."""
+        ``(p, beta, cov, keep)``. Columns the rows cannot separate from the geometry's held
+        combinations (:func:`calib.effects.separability.unseparated_combinations`) are not tested
+        (p = 1): what is left of them is the measured orientation's noise in the held columns."""
         from scipy.stats import f as f_dist
 
         fit, Q = self.fit, self.Q
+        if self.Q_det is not None and unseparated_combinations(X - self.Q_det @ (self.Q_det.T @ X), X - Q @ (Q.T @ X)):
+            return 1.0, None, None, np.zeros(X.shape[1], dtype=bool)  # the held geometry absorbs it: untestable here
         X = X - Q @ (Q.T @ X)
         keep = np.linalg.norm(X, axis=0) > 1e-9 * max(np.linalg.norm(X), 1e-300)
         X = X[:, keep]
@@ -833,7 +937,7 @@ def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -
     robot = data.robot
     C = robot.n_chains
     R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if data.n > 2 else np.eye(C)
-    feats = _features(data)
+    feats = _features(data, flat_coordinates(data) if rem.Q_det is not None else ())
     n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
     # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth;
     # the measured pose drifting with time
@@ -934,7 +1038,8 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     # The generic effects' columns in the fitted model's whitened space.
     jac = robot.closure_jacobians(fit.theta, data.joints + fit.joint_displacement(data), data.measured)
     winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
-    rem = _Remainder(fit, jac, winv, orthonormal_columns(fit.design), fit.whitened.ravel())
+    rem = _Remainder(fit, jac, winv, orthonormal_columns(fit.span), fit.whitened.ravel(),
+                     None if fit.basis is None else orthonormal_columns(fit.design))
     structure, t_pose, pose_best = _structure(data, rem, z, alpha)
     remaining = _remaining(robot, fit, std, z, noise, structure, t_pose, pose_best, alpha)
     return {"explained": not remaining["present"], "noise": noise, "structure": structure, "remaining": remaining}
@@ -1050,7 +1155,7 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
         ``model_wrong`` (bool).
     """
     n, C = data.n, data.robot.n_chains
-    Q = orthonormal_columns(fit.design)
+    Q = orthonormal_columns(fit.span)
     w = fit.whitened
     stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
     scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))
@@ -1125,6 +1230,10 @@ class Discovery:
         located: where the geometry-only residuals concentrate (:func:`locate_mismatch`).
         proposed_law: where the library leaves a remainder, the law over joint-space terms that
             explains it (:func:`propose_law`), or None (explained, none found, or not searched).
+        separation: with a prior that the rows leave combinations to (:func:`separation`): the
+            geometric combinations held at the prior mean, the candidate forms that cannot be
+            separated from them on this pose set (never named), and the poses that would
+            separate them; empty otherwise.
     """
 
     effects: tuple
@@ -1141,6 +1250,7 @@ class Discovery:
     kept: np.ndarray
     located: dict
     proposed_law: ProposedLaw | None = None
+    separation: dict = field(default_factory=dict)
 
     @property
     def effect(self) -> str:
@@ -1166,7 +1276,7 @@ def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, s
     log_n = np.log(lin.n)
     family, nested = _relations(models)
     for name in list(chosen):
-        fam = [f for f in models if f in family[name]]
+        fam = [f for f in models if f in family[name] and f not in sel["unseparated"]]
         if len(fam) < 2:
             continue
         others = {n: e for n, e in chosen.items() if n != name}
@@ -1265,6 +1375,7 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
     tests = remainder_tests(sub, fit, alpha=alpha)
     explained = tests["explained"]
+    separated = separation(sub, fit, models, sel["unseparated"])
     aliases = [{"named": models[a].name, "rival": b, "delta_bic": gap, "correlation": corr, "nested": nested}
                for a, b, gap, corr, nested in sel["rivals"]
                if models[a] in fit.models and (nested or models[b].name not in fit.effects)]
@@ -1276,12 +1387,98 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
                          f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
     law = None
     if laws and not explained:
-        law = propose_law(sub, fit, channels=None if channels is None else
-                          {k: np.asarray(v)[kept] for k, v in channels.items()}, folds=folds, seed=seed)
+        try:
+            law = propose_law(sub, fit, channels=None if channels is None else
+                              {k: np.asarray(v)[kept] for k, v in channels.items()}, folds=folds, seed=seed)
+        except np.linalg.LinAlgError:
+            if fit.basis is None:
+                raise
+            # With combinations held at the prior a law's terms can resemble them; its exact fit
+            # then runs away along them: no law proposed (the pose set cannot tell it from the geometry).
+            law = None
     return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
                      partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
                      tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
-                     located=locate_mismatch(sub, geo), proposed_law=law)
+                     located=locate_mismatch(sub, geo), proposed_law=law, separation=separated)
+
+
+def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict) -> dict:
+    """What the rows cannot separate, and the poses that would (:mod:`calib.effects.separability`).
+
+    Args:
+        data: the rows; fit: the chosen model's fit on them (its ``basis``).
+        models: the candidate forms (key -> effect); unseparated: ``{key: {"extra",
+            "combinations"}}`` of the forms the selection set aside (:meth:`_Linear.unseparated`).
+
+    Returns:
+        JSON-ready dict, empty when every geometric combination is determined:
+        ``left_to_prior`` (the held combinations in words, :meth:`GeometryBasis.combinations`),
+        ``determined`` and ``free`` (how many geometric combinations are fitted, of how many),
+        ``unseparated`` (per form: ``effect``, ``form``, ``combinations`` each with the geometric
+        combination that mimics it, ``separated_by`` the pose families that would separate it),
+        ``poses`` (per family of added poses, :func:`calib.effects.separability.pose_families`:
+        how many of the held combinations it would determine, the forms it would separate, the
+        poses reachable of those tried).
+    """
+    basis = fit.basis
+    if basis is None:
+        return {}
+    robot = data.robot
+    names = [robot.table.names[i] for i in basis.free]
+    out = {"determined": basis.size, "free": int(basis.free.size),
+           "left_to_prior": basis.combinations(names, robot.table.chains[basis.free]),
+           "unseparated": [{"effect": models[k].name, "form": k, "combinations": u["combinations"], "separated_by": []}
+                           for k, u in unseparated.items()],
+           "poses": {}}
+    families = pose_families(data.measured, robot.workspace_bounds(), robot.pose_names, robot.pose_units)
+    for family, poses in families.items():
+        joints, ok = np.full((len(poses), robot.n_chains), np.nan), np.zeros(len(poses), dtype=bool)
+        for k in range(len(poses)):
+            try:
+                joints[k] = robot.inverse_kinematics(fit.theta, poses[k:k + 1])[0]
+                check_joint_limits(robot, joints[k:k + 1])
+                ok[k] = True
+            except KinematicsError:
+                pass
+        if not ok.any():
+            out["poses"][family] = {"reachable": 0, "tried": len(poses), "determines": 0, "separates": []}
+            continue
+        added = EffectData(robot, data.theta, joints[ok], poses[ok], data.t_s[-1] + np.arange(1, ok.sum() + 1), data.noise,
+                           payload_kg=None if data.payload_kg is None else np.full(ok.sum(), data.payload_kg.mean()))
+        both = EffectData(robot, data.theta, np.vstack([data.joints, added.joints]),
+                          np.vstack([data.measured, added.measured]), np.concatenate([data.t_s, added.t_s]), data.noise,
+                          np.vstack([data.direction, added.direction]), np.vstack([data.last_move, added.last_move]),
+                          None if data.payload_kg is None else np.concatenate([data.payload_kg, added.payload_kg]),
+                          data.tolerance)
+        aug = _geometry(both)
+        info = basis.held.T @ (aug.information if aug is not None else _information(both, basis)) @ basis.held
+        determines = int(np.sum(np.linalg.eigvalsh(0.5 * (info + info.T)) > HELD_INFORMATION))
+        lin = _Linear(both, _Stub(fit.theta, aug))
+        separates = [u["form"] for u in out["unseparated"]
+                     if not lin.unseparated(models[u["form"]], unseparated[u["form"]]["extra"])]
+        for u in out["unseparated"]:
+            if u["form"] in separates:
+                u["separated_by"].append(family)
+        out["poses"][family] = {"reachable": int(ok.sum()), "tried": len(poses), "determines": determines,
+                                "separates": separates}
+    return out
+
+
+@dataclass(frozen=True)
+class _Stub:
+    """What :class:`_Linear` takes of a geometry fit."""
+
+    theta: np.ndarray
+    basis: GeometryBasis | None
+
+
+def _information(data: EffectData, basis: GeometryBasis) -> np.ndarray:
+    """(F, F) the rows' information on ``basis``'s free parameters, tolerance units."""
+    robot = data.robot
+    jac = robot.closure_jacobians(data.theta, data.joints, data.measured)
+    winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
+    G = _whiten(winv, jac.parameters[:, :, basis.free]).reshape(-1, basis.free.size) * basis.std
+    return G.T @ G
 
 
 def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = None, folds: int = 5,
@@ -1295,7 +1492,7 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
     def space(f: EffectFit) -> LawSpace:
         jac = data.robot.closure_jacobians(f.theta, data.joints + f.joint_displacement(data), data.measured)
         winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(data.robot, jac, data)))
-        return LawSpace(data, winv, jac.joints, f.design, f.whitened, dict(channels or {}))
+        return LawSpace(data, winv, jac.joints, f.span, f.whitened, dict(channels or {}))
 
     found = search_law(space(fit), folds=folds, seed=seed)
     if not found.terms:

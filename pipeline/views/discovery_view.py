@@ -23,7 +23,7 @@ from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, c
 #: Size of each residual chart, chart units (about pixels at 1600x900).
 CHART_W, CHART_H = 600.0, 160.0
 
-__all__ = ["model_words", "verdict_words", "law_lines", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
+__all__ = ["model_words", "verdict_words", "law_lines", "separation_lines", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
            "verdict_quantity", "discovery_markdown", "write_discovery_rrd"]
 
 
@@ -62,6 +62,31 @@ def law_lines(law: dict | None) -> list[str]:
         lines.append(f"  with the law in, the library's {', '.join(law['library_effects_dropped'])} no longer earns its "
                      f"place (re-examined: the BIC rises by less than an effect needs to enter); the law's model: "
                      f"{model}")
+    return lines
+
+
+def separation_lines(sep: dict | None, n_shown: int = 3) -> list[str]:
+    """What the poses cannot separate (the summary's ``separation``), in a few lines: the geometric
+    combinations left to the prior (the first ``n_shown``; all in the JSON), each effect that cannot
+    be separated from them with the combination that mimics it, and the poses that would separate
+    them."""
+    if not sep:
+        return []
+    left = sep["left_to_prior"]
+    shown = "; ".join(c["combination"] for c in left[:n_shown]) + ("; ..." if len(left) > n_shown else "")
+    lines = [f"Geometry: the rows determine {sep['determined']} of its {sep['free']} combinations; {len(left)} are left "
+             f"to the prior ({sep['prior_source']}) and held at their nominal values: {shown} (summary JSON: "
+             f"separation.left_to_prior)."]
+    for u in sep["unseparated"]:
+        c = u["combinations"][0]
+        more = f" and {len(u['combinations']) - 1} more combinations" if len(u["combinations"]) > 1 else ""
+        by = ", ".join(u["separated_by"]) or "none of the poses tried"
+        lines.append(f"Cannot be separated on this pose set: {u['effect']} ({u['form']}): {c['combination']}{more} acts "
+                     f"on these poses as the geometry's {c['geometry']}; not named. Poses that would separate it: {by}.")
+    for family, v in sep["poses"].items():
+        sep_words = f"; separates {', '.join(v['separates'])}" if v["separates"] else ""
+        lines.append(f"  poses with {family} ({v['reachable']} of {v['tried']} reachable): would determine "
+                     f"{v['determines']} of the {len(left)} combinations left to the prior{sep_words}")
     return lines
 
 
@@ -104,6 +129,9 @@ def report_lines(s: dict) -> list[str]:
             for k, v in params.items():
                 if k in ("significance", "granularity"):
                     continue
+                if k == "from_row":  # a step placed by row, never by a time the recording may not have
+                    lines.append(f"    from row {v['value']:.0f}" if np.isfinite(v["value"]) else "    after the last row")
+                    continue
                 unc = f" +- {v['std']:.2g}" if np.isfinite(v["std"]) else ""
                 lines.append(f"    {k} = {v['value']:.6g}{unc} {v['unit']}")
     for a in s["aliases"]:
@@ -114,6 +142,7 @@ def report_lines(s: dict) -> list[str]:
             continue
         lines.append(f"Cannot tell apart on this recording: {a['named']} and {a['rival']} (evidence within "
                      f"{a['delta_bic']:.1f} BIC, regressor correlation {a['correlation']:.2f}); {a['named']} fitted.")
+    lines += separation_lines(s.get("separation"))
     lines += law_lines(s.get("proposed_law"))
     lines.append(f"Held-out residual RMS: {1e3 * s['heldout_rms_before_mm']:.3f} um -> {1e3 * s['heldout_rms_after_mm']:.3f} um "
                  f"(noise floor {1e3 * s['noise_floor_mm']:.3f} um; {s['heldout_basis']}).")

@@ -237,8 +237,9 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
     if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
         cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
+    tolerance, tolerance_source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
-                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL))
+                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL), tolerance=tolerance.std)
     disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
                             channels={k: v[cal] for k, v in rec.extras.items()} or None)
     kept = cal[disc.kept]
@@ -274,12 +275,42 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
     }
     summary["implausible_parameters"] = implausibility(rec, disc)
+    summary["time"] = "row order" if row_order(rec) else "measured"
+    summary["effect_parameters"] = placed_by_row(summary["effect_parameters"], rec, disc.kept, row_order(rec))
+    summary["separation"] = dict(disc.separation, prior_source=tolerance_source) if disc.separation else {}
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resim:
         summary.update(resimulation_block(rec, disc, sysid, seed))
     summary["wall_time_s"] = time.perf_counter() - t0
     return DiscoveryReport(discovery=disc, summary=summary)
+
+
+def row_order(rec: Recording) -> bool:
+    """Whether the recording's time is only its rows' order (every session's ``time`` is ``"row
+    order"``: a lab export with ``[time] format = "none"``, ``t_s`` = 0, 1, 2, ...)."""
+    return all(rec.session_info.get(s, {}).get("time") == "row order" for s in rec.session_names)
+
+
+def placed_by_row(params: dict, rec: Recording, kept: np.ndarray, by_row: bool) -> dict:
+    """``effect_parameters`` with each step in time (a lost count's ``step_time``) placed by the
+    first row after it (``from_row``, 1-based data row); on a recording whose time is the rows'
+    order the step time itself is dropped (it is no time), and rates per second are per row."""
+    out = {}
+    for name, p in params.items():
+        p = dict(p)
+        if "step_time" in p:
+            t0 = p["step_time"]["value"]
+            after = kept[rec.t_s[kept] > t0]
+            p["from_row"] = {"value": float(after[0] + 1) if after.size else float("nan"), "std": float("nan"),
+                             "unit": "row"}
+            if by_row:
+                del p["step_time"]
+        if by_row:
+            p = {k: (dict(v, unit=v["unit"].replace("/s", "/row")) if isinstance(v, dict) and "unit" in v else v)
+                 for k, v in p.items()}
+        out[name] = p
+    return out
 
 
 def resimulation_block(rec: Recording, disc: Discovery, sysid: bool, seed: int) -> dict:
