@@ -9,7 +9,10 @@ format is one entry there.
 parameters (a HAL file), an INI fragment, one compensation file per joint holding the joint's
 offset and the effects a joint's table can hold, a ``NOTES.md`` naming what LinuxCNC cannot hold
 with the accuracy given up, and ``export.json`` with every figure (:mod:`calib.linuxcnc`,
-:mod:`pipeline.formats.linuxcnc`).
+:mod:`pipeline.formats.linuxcnc`). The hexapod: ``genhexkins`` with its identified joints
+(:data:`LINUXCNC_ROBOTS`). The Delta: ``rotarydeltakins`` fitted to the identified Delta
+(:func:`calib.linuxcnc.rotarydelta_fit`), the transform from the base frame to LinuxCNC's world
+and the projection's residual stated in NOTES.md, export.json and on stderr.
 """
 
 from __future__ import annotations
