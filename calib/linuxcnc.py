@@ -26,12 +26,22 @@ joint sit at ``q + dq(q)`` (the effects' displacement, :mod:`calib.compensation`
 motor's position LinuxCNC outputs is ``scale q + motor_offset``. For the hexapod (``genhexkins``:
 ``J`` is the leg's length ``|R P_i + t - B_i|``, the project's command ``q`` makes the leg ``q +
 dl_i`` long): ``scale = 1``, ``offset = dl_i``, ``motor_offset = 0``, so the table carries the
-leg's length offset as well (``trim = -dl_i - dq_i``).
+leg's length offset as well (``trim = -dl_i - dq_i``). For the Delta (``rotarydeltakins``: ``J``
+is the hip angle in degrees, 0 horizontal, positive down, as the project's arm angle ``q +
+alpha``): ``scale = 180/pi``, ``offset`` the joint's angle offset of the fit (degrees),
+``motor_offset = 0``, so the motor positions are the project's commands in degrees.
+
+A Delta's identified geometry (24 parameters, three chains each its own) is *projected* onto
+``rotarydeltakins`` (four lengths, three identical chains at 120 degrees):
+:func:`rotarydelta_fit` finds by least squares the lengths, each joint's angle offset and the
+rigid transform from the calibration's base frame to LinuxCNC's world that bring the identified
+machine, commanded through them, closest to its targets over the calibrated workspace;
+:func:`projection_errors` is what is left (what LinuxCNC, with its tables, will leave).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,13 +51,17 @@ from .effects.granularity import PerChainForm
 from .effects.laws import Law
 from .noise import SensorNoise
 from .robot import KinematicsError, Robot
+from .robots.delta import DeltaParams, canonical_params
+from .robots.delta import inverse_kinematics as delta_inverse
 from .rotation import rotation_matrix
 from .validation import as_array
 from .workspace import random_poses
 
 __all__ = ["COMP_TABLE_SIZE", "JOINT_TABLE_FOLLOWS", "JointMap", "CompTable", "GenhexGeometry", "LeftOut",
            "joint_table_effects", "joint_displacement", "comp_tables", "genhex_geometry", "genhex_joints",
-           "accuracy_given_up", "GivenUp", "workspace_sample", "WORKSPACE_SAMPLE", "FINE_FACTOR"]
+           "accuracy_given_up", "GivenUp", "workspace_sample", "WORKSPACE_SAMPLE", "FINE_FACTOR", "motor_positions",
+           "ROTARYDELTA_PARAMETERS", "ROTARYDELTA_HIP_AZIMUTH_DEG", "RotaryDeltaGeometry", "rotarydelta_fit",
+           "rotarydelta_joints", "projection_errors", "FIT_SAMPLE", "FIT_SEED"]
 
 #: Entries a LinuxCNC compensation table holds at most (``EMCMOT_COMP_SIZE``, motion.h).
 COMP_TABLE_SIZE = 256
@@ -277,6 +291,209 @@ def genhex_joints(geometry: GenhexGeometry, poses: np.ndarray) -> np.ndarray:
     R = rotation_matrix(poses[:, 3:6])
     legs = np.einsum("nij,lj->nli", R, geometry.platform) + poses[:, None, 0:3] - geometry.base[None]
     return np.linalg.norm(legs, axis=-1)
+
+
+def motor_positions(tables, joint_values: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(N, C) the motor positions LinuxCNC outputs for the joint values ``joint_values`` (N, C),
+    visited in order from ``start`` (C,) (LinuxCNC's joint unit; ``tables[c]`` serves column
+    ``c``): each joint value plus its table's trim (single-precision, linear between entries, the
+    end entries held beyond), the up column where the joint's commanded velocity is positive, the
+    down column where negative, the last one kept while the joint stands (up before any move)."""
+    J = np.asarray(joint_values, dtype=float)
+    step = np.sign(np.diff(np.vstack([np.asarray(start, dtype=float)[None], J]), axis=0))
+    out = np.empty_like(J)
+    for c, t in enumerate(tables):
+        direction, last = step[:, c].copy(), 1.0
+        for k in range(len(direction)):
+            last = direction[k] = direction[k] or last
+        up, down = (_interpolated(t.nominal, trims, J[:, c]) for trims in (t.trim_up, t.trim_down))
+        out[:, c] = J[:, c] + np.where(direction > 0, up, down)
+    return out
+
+
+# ----------------------------------------------------------------------------- rotarydeltakins
+
+#: rotarydeltakins' HAL pins of its four lengths (``rotarydeltakins.<name>``, mm), its order.
+ROTARYDELTA_PARAMETERS = ("platformradius", "thighlength", "shinlength", "footradius")
+#: The azimuths of rotarydeltakins' hips in its world (degrees from +x about +z), joints 0, 1, 2:
+#: joint 0's thigh swings in the YZ plane with its hip on -y; its inverse finds joint 1 by
+#: turning the point -120 degrees onto joint 0's plane, joint 2 by +120 degrees.
+ROTARYDELTA_HIP_AZIMUTH_DEG = (-90.0, 30.0, 150.0)
+#: How far (degrees) a chain's azimuth, turned with chain 1 onto joint 0, may lie from a hip of
+#: rotarydeltakins for the chain to be numbered as that joint.
+AZIMUTH_MATCH_DEG = 15.0
+#: Poses of the calibrated workspace the rotarydeltakins fit is made on, and their seed (the
+#: projection's residual is stated on the :data:`WORKSPACE_SAMPLE` poses of seed 0).
+FIT_SAMPLE, FIT_SEED = 400, 1
+#: The fit's stopping tolerances (scipy.optimize.least_squares' xtol, ftol, gtol).
+FIT_TOLERANCE = 1e-15
+
+
+@dataclass(frozen=True)
+class RotaryDeltaGeometry:
+    """``rotarydeltakins``' parameters of an identified Delta and where LinuxCNC's world lies.
+
+    rotarydeltakins' world: origin at the centre of the hips' plane, z up, joint 0's hip on -y,
+    joints 1 and 2 at +-120 degrees from it (:data:`ROTARYDELTA_HIP_AZIMUTH_DEG`); its joint value
+    is the hip angle in degrees, 0 with the thigh horizontal, positive turning the knee down.
+
+    Attributes:
+        platformradius, thighlength, shinlength, footradius: the HAL pins
+            ``rotarydeltakins.<name>``, mm (its kinematics depend on ``platformradius -
+            footradius`` only: ``footradius`` is the robot's plate radius ``rn_mm``).
+        rotation: (3, 3) LinuxCNC's world from the calibration's base frame: a pose's position
+            ``p`` (mm, base frame) is ``rotation @ p + translation`` in LinuxCNC's X Y Z.
+        translation: (3,) mm.
+        chain_of_joint: (3,) the calibration's chain (0-based) that LinuxCNC's joint N drives.
+        jmap: the chains' map to LinuxCNC's joint values (indexed by the calibration's chains):
+            ``scale`` 180/pi, ``offset`` each joint's angle offset (degrees), so ``J = degrees(q +
+            dq) + offset``.
+        fit_rms_mm, fit_max_mm: position error of the identified geometry commanded through
+            these over the fit's poses (exact offsets, no table), mm.
+        fit_poses: how many poses the fit was made on.
+    """
+
+    platformradius: float
+    thighlength: float
+    shinlength: float
+    footradius: float
+    rotation: np.ndarray
+    translation: np.ndarray
+    chain_of_joint: np.ndarray
+    jmap: JointMap
+    fit_rms_mm: float = float("nan")
+    fit_max_mm: float = float("nan")
+    fit_poses: int = 0
+
+    def values(self) -> dict:
+        """``{pin name: value}`` of :data:`ROTARYDELTA_PARAMETERS`, mm."""
+        return {name: float(getattr(self, name)) for name in ROTARYDELTA_PARAMETERS}
+
+    def world(self, positions: np.ndarray) -> np.ndarray:
+        """(N, 3) LinuxCNC's X Y Z (mm) of positions (N, 3) in the base frame."""
+        return np.asarray(positions, dtype=float) @ self.rotation.T + self.translation
+
+    def rotation_about_z_deg(self) -> float:
+        """The rotation's turn about z, degrees (the whole turn where it is about z alone)."""
+        return float(np.degrees(np.arctan2(self.rotation[1, 0], self.rotation[0, 0])))
+
+
+def _rotarydelta_model(reach: float, thigh: float, shin: float) -> DeltaParams:
+    """rotarydeltakins' machine in its own world as the project's Delta model (its joints in
+    LinuxCNC's order): hips ``reach = platformradius - footradius`` from the centre at the azimuths
+    of :data:`ROTARYDELTA_HIP_AZIMUTH_DEG`, arm ``thigh`` with no offset, forearm ``shin``."""
+    az = np.radians(ROTARYDELTA_HIP_AZIMUTH_DEG)
+    return DeltaParams(Dx=reach * np.cos(az), Dy=reach * np.sin(az), Dz=np.zeros(3), theta=az, alpha=np.zeros(3),
+                       Lax=np.full(3, thigh), Lay=np.zeros(3), Lb=np.full(3, shin))
+
+
+def rotarydelta_joints(geometry: RotaryDeltaGeometry, world: np.ndarray) -> np.ndarray:
+    """(N, 3) rotarydeltakins' joint values (hip angles, degrees, LinuxCNC's joint order) at the
+    points ``world`` (N, 3) of LinuxCNC's world (mm).
+
+    Raises:
+        ValueError: a point rotarydeltakins cannot reach (names it).
+    """
+    model = _rotarydelta_model(geometry.platformradius - geometry.footradius, geometry.thighlength,
+                               geometry.shinlength)
+    return np.degrees(delta_inverse(model, world))
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return np.angle(np.exp(1j * np.asarray(angle, dtype=float)))
+
+
+def _numbering(azimuth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(chain_of_joint, turn)``: the chain each of rotarydeltakins' joints drives (chain 1 is
+    joint 0) and the turns about z (rad, per joint) that bring each chain onto its hip."""
+    hips = np.radians(ROTARYDELTA_HIP_AZIMUTH_DEG)
+    turned = _wrap(azimuth + hips[0] - azimuth[0])
+    gap = np.abs(_wrap(turned[:, None] - hips[None, :]))  # [chain, joint]
+    joint_of_chain = np.argmin(gap, axis=1)
+    if sorted(joint_of_chain.tolist()) != [0, 1, 2] or np.any(gap.min(axis=1) > np.radians(AZIMUTH_MATCH_DEG)):
+        raise ValueError(f"the Delta's chains at {np.degrees(azimuth).round(3).tolist()} degrees are not three chains "
+                         "120 degrees apart: rotarydeltakins cannot hold them")
+    chain_of_joint = np.argsort(joint_of_chain)
+    return chain_of_joint, _wrap(hips - azimuth[chain_of_joint])
+
+
+def _fit_geometry(x: np.ndarray, rot0: np.ndarray, chain_of_joint, footradius: float) -> RotaryDeltaGeometry:
+    from scipy.spatial.transform import Rotation
+
+    reach, thigh, shin = x[0:3]
+    offset = np.empty(3)
+    offset[chain_of_joint] = np.degrees(x[3:6])
+    return RotaryDeltaGeometry(platformradius=float(reach + footradius), thighlength=float(thigh),
+                               shinlength=float(shin), footradius=footradius,
+                               rotation=Rotation.from_rotvec(x[6:9]).as_matrix() @ rot0, translation=x[9:12].copy(),
+                               chain_of_joint=np.asarray(chain_of_joint),
+                               jmap=JointMap(scale=np.full(3, 180.0 / np.pi), offset=offset, motor_offset=np.zeros(3)))
+
+
+def _geometry_errors(robot: Robot, theta: np.ndarray, geometry: RotaryDeltaGeometry, poses: np.ndarray) -> np.ndarray:
+    """(N, 3) where the identified geometry goes less ``poses`` (N, 3), commanded through
+    rotarydeltakins ``geometry`` with exact joint offsets, mm."""
+    J = rotarydelta_joints(geometry, geometry.world(poses))
+    q = np.empty_like(J)
+    q[:, geometry.chain_of_joint] = J
+    q = (q - geometry.jmap.offset) / geometry.jmap.scale
+    return robot.forward_kinematics(theta, q) - poses
+
+
+def rotarydelta_fit(robot: Robot, theta, poses) -> RotaryDeltaGeometry:
+    """rotarydeltakins fitted to the identified Delta ``theta`` over ``poses`` (N, 3) (base frame,
+    mm: the calibrated workspace, :func:`workspace_sample`).
+
+    Least squares (``scipy.optimize.least_squares``, Levenberg-Marquardt) over rotarydeltakins'
+    three lengths (its kinematics hold ``platformradius - footradius``, the thigh and the shin),
+    each joint's angle offset and the rigid transform from the base frame to LinuxCNC's world
+    (rotation and translation) of the position errors ``FK(theta, q) - p``, ``q`` the commands
+    rotarydeltakins with these gives for ``p``. It starts from the identified chains' means (the
+    centroid of the shoulders, their mean radius, arm and forearm, each joint's offset, the turn
+    bringing chain 1 onto joint 0's hip: -90 degrees for the project's Delta), exact for a Delta
+    of rotarydeltakins' shape. ``footradius`` is the robot's plate radius (``rn_mm``).
+
+    Raises:
+        ValueError: not a Delta, or chains not 120 degrees apart.
+    """
+    from scipy.optimize import least_squares  # imported here, as calib.engine does
+
+    if robot.name != "delta":
+        raise ValueError(f"rotarydeltakins is the Delta's kinematics, not the {robot.name}'s")
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    poses = as_array(poses, "poses", (-1, 3))
+    p = canonical_params(robot.params(theta))
+    chain_of_joint, turns = _numbering(p.theta)
+    centre = p.shoulders().mean(axis=0)
+    turn = float(np.angle(np.mean(np.exp(1j * turns))))
+    c, s = np.cos(turn), np.sin(turn)
+    rot0 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    reach = float(np.mean(np.linalg.norm((p.shoulders() - centre)[:, :2], axis=1)))
+    x0 = np.concatenate([[reach, np.mean(p.Lax), np.mean(p.Lb)], p.alpha[chain_of_joint], np.zeros(3), -rot0 @ centre])
+    footradius = float(robot.rn_mm)
+
+    def residual(x):
+        return _geometry_errors(robot, theta, _fit_geometry(x, rot0, chain_of_joint, footradius), poses).ravel()
+
+    sol = least_squares(residual, x0, method="lm", x_scale="jac", xtol=FIT_TOLERANCE, ftol=FIT_TOLERANCE,
+                        gtol=FIT_TOLERANCE)
+    x = sol.x if np.sum(sol.fun ** 2) <= np.sum(residual(x0) ** 2) else x0
+    geometry = _fit_geometry(x, rot0, chain_of_joint, footradius)
+    e = np.linalg.norm(_geometry_errors(robot, theta, geometry, poses), axis=1)
+    return replace(geometry, fit_rms_mm=float(np.sqrt(np.mean(e ** 2))), fit_max_mm=float(np.max(e)),
+                   fit_poses=len(poses))
+
+
+def projection_errors(robot: Robot, theta, held, geometry: RotaryDeltaGeometry, tables, poses, t_s) -> np.ndarray:
+    """(N,) position error (mm) of the identified Delta (geometry ``theta`` and the ``held``
+    effects) commanded as LinuxCNC will command it for ``poses`` (N, 3) visited in order from the
+    home pose at times ``t_s``: rotarydeltakins ``geometry`` (in its world) then the joints'
+    compensation ``tables`` (LinuxCNC's joint order, :func:`motor_positions`)."""
+    joints = rotarydelta_joints(geometry, geometry.world(poses))
+    start = rotarydelta_joints(geometry, geometry.world(robot.home_pose[None]))[0]
+    motor = np.empty_like(joints)
+    motor[:, geometry.chain_of_joint] = motor_positions(tables, joints, start)
+    return _position_errors(robot, theta, held, geometry.jmap.motor_to_command(motor), poses, t_s, None)
 
 
 # ----------------------------------------------------------------------------- what is left out

@@ -9,7 +9,7 @@ from .calibration_file import (CALIBRATION_FORMAT, CALIBRATION_SUFFIX, CALIBRATI
                                validity_domain, write_calibration)
 from .command_file import TIME_COLUMN, command_columns, command_csv, read_command_file, write_command_file
 from .linuxcnc import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, check_export_folder, comp_file_name, comp_text, genhex_hal_text, kins_ini_text,
-                       write_export_folder)
+                       rotarydelta_hal_text, write_export_folder)
 from .lab_export import LabExportError, LabMap, convert_lab_files, joint_readings, read_map, session_joint_mapping
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
                       one_line, output_folder, publish, remove_stale_temporaries, writing)
@@ -32,4 +32,4 @@ __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "
            "recording_source", "validity_domain", "CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX",
            "Targets", "TargetsError", "read_targets", "TIME_COLUMN",
            "HAL_NAME", "INI_NAME", "NOTES_NAME", "RECORD_NAME", "check_export_folder", "comp_file_name", "comp_text", "genhex_hal_text", "kins_ini_text",
-           "write_export_folder", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]
+           "rotarydelta_hal_text", "write_export_folder", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]

@@ -18,7 +18,8 @@ from calib.linuxcnc import COMP_TABLE_SIZE, CompTable
 
 from .outputs import ResultSet
 
-__all__ = ["HAL_NAME", "INI_NAME", "NOTES_NAME", "RECORD_NAME", "comp_file_name", "genhex_hal_text", "kins_ini_text",
+__all__ = ["HAL_NAME", "INI_NAME", "NOTES_NAME", "RECORD_NAME", "comp_file_name", "genhex_hal_text",
+           "rotarydelta_hal_text", "kins_ini_text",
            "comp_text", "check_export_folder", "write_export_folder", "AXES"]
 
 #: The files of an export folder.
@@ -48,13 +49,27 @@ def genhex_hal_text(base: np.ndarray, platform: np.ndarray, source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def kins_ini_text(kinematics: str, joint_type: str, tables: list[CompTable], source: str, joint_word: str) -> str:
-    """The INI fragment: ``[KINS]`` and one ``[JOINT_N]`` per joint naming its compensation file."""
+def rotarydelta_hal_text(values: dict, source: str, frame: str) -> str:
+    """``setp rotarydeltakins.<name> value`` lines of ``values`` (``{pin name: mm}``, the four
+    lengths of :data:`calib.linuxcnc.ROTARYDELTA_PARAMETERS`); ``frame`` says where LinuxCNC's world
+    lies (one comment line)."""
+    lines = [f"# rotarydeltakins parameters fitted to the identified Delta ({source}), mm.",
+             f"# {frame}",
+             "# The joints' angle offsets are in the joints' compensation files; the projection's residual in NOTES.md."]
+    lines += [f"setp rotarydeltakins.{name} {_number(v)}" for name, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def kins_ini_text(kinematics: str, joint_type: str, tables: list[CompTable], source: str, joint_word: str,
+                  chains=None) -> str:
+    """The INI fragment: ``[KINS]`` and one ``[JOINT_N]`` per joint naming its compensation file;
+    ``chains[N]``: the calibration's chain (0-based) joint N drives (default N)."""
     lines = [f"# LinuxCNC INI fragment of the calibration {source}: merge these keys into the machine's INI.",
              "# COMP_FILE is opened as written: relative to the folder LinuxCNC runs in (the INI's), or give a full "
              "path.", "", "[KINS]", f"KINEMATICS = {kinematics}", f"JOINTS = {len(tables)}"]
     for t in tables:
-        lines += ["", f"[JOINT_{t.joint}]", f"# {joint_word} {t.joint + 1} of the calibration", f"TYPE = {joint_type}",
+        chain = t.joint if chains is None else int(chains[t.joint])
+        lines += ["", f"[JOINT_{t.joint}]", f"# {joint_word} {chain + 1} of the calibration", f"TYPE = {joint_type}",
                   f"COMP_FILE = {comp_file_name(t.joint)}", "COMP_FILE_TYPE = 0"]
     return "\n".join(lines) + "\n"
 
