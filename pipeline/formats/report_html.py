@@ -114,12 +114,12 @@ def svg_dot_plot(series: list[tuple[str, str, list[float]]], *, y_label: str, x_
     out.append(f'<text x="{left + pw / 2}" y="{height - 8}" font-size="12" text-anchor="middle">{e(x_label)}</text>')
     out.append(f'<text x="14" y="{top + ph / 2}" font-size="12" text-anchor="middle" '
                f'transform="rotate(-90 14 {top + ph / 2})">{e(y_label)}{" (log)" if log else ""}</text>')
-    x = left + pw - 10
+    x = left + pw  # the legend right of the title, above the plot
     for name, colour, _ in reversed(series):
-        out.append(f'<text x="{x}" y="{top + 16}" font-size="12" text-anchor="end">{e(name)}</text>')
-        x -= 8 * len(name) + 8
-        out.append(f'<circle cx="{x + 2}" cy="{top + 12}" r="4" fill="{colour}"/>')
-        x -= 14
+        out.append(f'<text x="{x}" y="18" font-size="12" text-anchor="end">{e(name)}</text>')
+        x -= 7 * len(name) + 8
+        out.append(f'<circle cx="{x}" cy="14" r="4" fill="{colour}"/>')
+        x -= 16
     out.append("</svg>")
     return "".join(out)
 
@@ -167,7 +167,8 @@ def _verdict(r: Report) -> str:
     label = {("calibration", True): "CALIBRATED", ("calibration", False): "NOT A SUCCESS",
              ("discovery", True): "EXPLAINED", ("discovery", False): "NOT EXPLAINED"}[(r.kind, bool(ok))]
     cause = f" (cause: {r.verdict.cause})" if r.verdict.cause else ""
-    lead = "" if r.kind == "discovery" else f"{e(label)}: "  # discovery's words begin with it
+    said = r.verdict.words.lower().startswith(("calibrated", "not calibrated", "explained", "not explained"))
+    lead = "" if said else f"{e(label)}: "
     return (f'<div class="verdict {"ok" if ok else "bad"}" id="verdict">{lead}{e(r.verdict.words)}'
             f'{e(cause)}</div>')
 
