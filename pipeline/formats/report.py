@@ -365,7 +365,7 @@ def _discovery_heldout(s: dict) -> Heldout:
     per = s.get("heldout_per_row")
     per_pose = ()
     if per:
-        per_pose = (PerPose("closure residual RMS per row", "mm", tuple(per["before_mm"]), tuple(per["after_mm"]),
+        per_pose = (PerPose("closure residual RMS over the joints", "mm", tuple(per["before_mm"]), tuple(per["after_mm"]),
                             tuple(per["rows"])),)
         rows[0] = FigureRow(rows[0].label, "mm", Figures(before, per.get("before_mean_mm"), per.get("before_max_mm")),
                             Figures(after, per.get("after_mean_mm"), per.get("after_max_mm")))
