@@ -18,7 +18,7 @@ lazily_exported, __getattr__, __dir__ = lazy_exports(__name__, {
     "engine": ("IdentificationResult", "gauge_representative", "identify", "identify_chainwise",
                "identify_forward", "integrated_error", "noise_verdict"),
     "metrics": ("CompensationEvaluation", "ConsistencyCheck", "GainReport", "calibration_gain", "consistency_check",
-                "evaluate_compensation", "pose_error_norms"),
+                "evaluate_compensation", "pose_error_norms", "PoseRepeatability", "iso9283_position", "repeated_poses"),
     "noise": ("SensorNoise",),
     "outliers": ("OutlierReport", "find_outliers"),
     "robot": ("ClosureJacobians", "KinematicsError", "Parameter", "ParameterTable", "Robot"),

@@ -8,9 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .robot import Robot
+from .validation import as_array
 
 __all__ = ["CompensationEvaluation", "evaluate_compensation", "ConsistencyCheck", "consistency_check",
-           "GainReport", "calibration_gain", "pose_error_norms"]
+           "GainReport", "calibration_gain", "pose_error_norms", "PoseRepeatability", "iso9283_position",
+           "repeated_poses", "ISO9283_MIN_REPEATS", "REPEAT_JOINT_TOLERANCE"]
 
 
 def pose_error_norms(robot: Robot, dQ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,3 +162,92 @@ def calibration_gain(robot: Robot, true: np.ndarray, nominal: np.ndarray, calibr
     norm = 100.0 * (n0 - n1) / n0 if n0 > 0 else float("nan")
     mean = float(np.nanmean(per)) if np.any(np.isfinite(per)) else float("nan")
     return GainReport(names=names, per_parameter=per, mean=mean, norm=float(norm))
+
+
+#: Visits of one commanded pose needed for its ISO 9283 figures (a spread needs three to mean much).
+ISO9283_MIN_REPEATS = 3
+#: Rows whose joints agree within this (the robot's joint unit, mm or rad) plus five declared
+#: joint-noise standard deviations are visits of one commanded pose (:func:`repeated_poses`).
+REPEAT_JOINT_TOLERANCE = 1e-6
+
+
+def repeated_poses(joints: np.ndarray, joint_noise_std: float = 0.0) -> np.ndarray:
+    """Which rows visit the same commanded pose: (N,) int labels, rows sharing one label repeat a
+    pose (labels 0, 1, ... in the order of their first row).
+
+    Args:
+        joints: (N, C) joint commands or readings, the robot's joint unit.
+        joint_noise_std: the readings' noise (standard deviation, joint unit); rows whose every
+            joint agrees within :data:`REPEAT_JOINT_TOLERANCE` plus five of it with a group's first
+            row join that group.
+    """
+    joints = as_array(joints, "joints", (-1, -1))
+    tol = REPEAT_JOINT_TOLERANCE + 5.0 * float(joint_noise_std)
+    labels = np.full(len(joints), -1, dtype=int)
+    k = 0
+    for i in range(len(joints)):
+        if labels[i] >= 0:
+            continue
+        same = (labels < 0) & np.all(np.abs(joints - joints[i]) <= tol, axis=1)
+        labels[same] = k
+        k += 1
+    return labels
+
+
+@dataclass(frozen=True, eq=False)
+class PoseRepeatability:
+    """ISO 9283 positional accuracy and repeatability of each commanded pose visited at least
+    :data:`ISO9283_MIN_REPEATS` times.
+
+    Attributes:
+        rows: one (n_j,) int array per pose, the 0-based rows visiting it.
+        accuracy: (J,) mm, AP_j: distance from the barycentre of the attained positions to the
+            commanded position.
+        repeatability: (J,) mm, RP_j = l_bar + 3 S_l, l the distances of the attained positions
+            to their barycentre, S_l their sample standard deviation (n_j - 1).
+        barycentre_offset: (J, 3) mm, barycentre minus command (x, y, z).
+    """
+
+    rows: tuple
+    accuracy: np.ndarray
+    repeatability: np.ndarray
+    barycentre_offset: np.ndarray
+
+    def as_dict(self) -> dict:
+        """JSON-ready: per pose its rows (0-based), number of visits, AP and RP (mm)."""
+        return {"poses": [{"rows": [int(r) for r in rows], "repeats": int(len(rows)), "AP_mm": float(ap),
+                           "RP_mm": float(rp)} for rows, ap, rp in zip(self.rows, self.accuracy, self.repeatability)]}
+
+
+def iso9283_position(attained: np.ndarray, commanded: np.ndarray, groups: np.ndarray,
+                     min_repeats: int = ISO9283_MIN_REPEATS) -> PoseRepeatability:
+    """ISO 9283 (7.2.1, 7.2.2) positional accuracy AP and repeatability RP of repeated poses.
+
+    Args:
+        attained: (N, 3) mm, the positions reached (measured), any frame.
+        commanded: (N, 3) mm, the positions commanded, the same frame (one command per group: the
+            group's rows carry the same command; their mean is taken).
+        groups: (N,) int, rows sharing a label visit one commanded pose (:func:`repeated_poses`).
+        min_repeats: poses visited fewer times are left out.
+
+    Since only ``attained - commanded`` enters, errors (attained minus command) can be passed with
+    a zero command.
+    """
+    attained = as_array(attained, "attained", (-1, 3))
+    commanded = as_array(commanded, "commanded", (len(attained), 3))
+    groups = np.asarray(groups, dtype=int)
+    if groups.shape != (len(attained),):
+        raise ValueError(f"groups must have shape ({len(attained)},), got {groups.shape}")
+    rows, ap, rp, off = [], [], [], []
+    for g in np.unique(groups):
+        at = np.flatnonzero(groups == g)
+        if at.size < min_repeats:
+            continue
+        bary = attained[at].mean(axis=0)
+        l = np.linalg.norm(attained[at] - bary, axis=1)
+        offset = bary - commanded[at].mean(axis=0)
+        rows.append(at)
+        off.append(offset)
+        ap.append(float(np.linalg.norm(offset)))
+        rp.append(float(l.mean() + 3.0 * l.std(ddof=1)))
+    return PoseRepeatability(tuple(rows), np.array(ap), np.array(rp), np.array(off).reshape(-1, 3))

@@ -56,6 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None, help="base name of the .rrd (default <recording>_discover)")
     p.add_argument("--overwrite", action="store_true", help="allow replacing existing output files")
     p.add_argument("--summary-json", type=Path, default=None, help="write the summary as JSON")
+    p.add_argument("--report", type=Path, default=None, metavar="PATH.html",
+                   help="write the report a lab keeps: one self-contained HTML file (verdict, effects with their "
+                        "evidence, a proposed law, parameters with +-2 sigma and their tolerance verdicts, held-out "
+                        "errors plotted, the compensation table)")
     p.add_argument("--law", type=Path, default=None, metavar="FILE",
                    help="keep the proposed law (if one is proposed) in this JSON file, for --use-law on the next recording")
     p.add_argument("--use-law", type=Path, default=None, metavar="FILE",
@@ -73,7 +77,7 @@ def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
                              candidates=args.candidates, seed=args.seed,
                              resim=not args.no_resim, sysid=not args.no_sysid, out=args.out, name=args.name,
                              overwrite=args.overwrite, summary_json=args.summary_json, law_out=args.law,
-                             use_law=args.use_law, export_mjcf=args.export_mjcf)
+                             use_law=args.use_law, export_mjcf=args.export_mjcf, report=args.report)
 
 
 def run(argv: list[str] | None = None) -> DiscoveryReport:
@@ -100,6 +104,8 @@ def run(argv: list[str] | None = None) -> DiscoveryReport:
     print(f"wrote {report.summary['calibration']}")
     if report.summary.get("mjcf"):
         print(f"wrote {report.summary['mjcf']}")
+    if report.summary.get("report"):
+        print(f"wrote {report.summary['report']}")
     return report
 
 

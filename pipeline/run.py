@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--export-mjcf", type=Path, default=None, metavar="PATH",
                    help="also write the identified machine as a MuJoCo model (MJCF .xml) to this path "
                         "(docs/export_mjcf.md)")
+    p.add_argument("--report", type=Path, default=None, metavar="PATH.html",
+                   help="write the report a lab keeps: one self-contained HTML file (verdict, parameters with "
+                        "+-2 sigma and their tolerance verdicts, held-out errors plotted, ISO 9283 figures of repeated "
+                        "poses, flagged rows, instrument frames)")
     p.add_argument("--real", type=Path, default=None,
                    help="analyse this recording (.csv with its .json sidecar, any robot) instead of simulating")
     p.add_argument("--keep-outliers", action="store_true",
@@ -257,7 +261,7 @@ def print_summary(s: dict) -> None:
     for warning in s.get("warnings") or ():
         print(f"  warning: {warning}")
     print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")
-    for k in ("rrd", "csv", "json", "calibration", "mjcf", "summary_json"):
+    for k in ("rrd", "csv", "json", "calibration", "mjcf", "summary_json", "report"):
         if s.get(k):
             print(f"  wrote {s[k]}")
 

@@ -1,6 +1,6 @@
 """File formats: the recording (CSV + JSON sidecar), the checks a recording passes before
-anything is fitted to it, lab exports turned into recordings, command files, and safe writing of
-every output (atomic files, sets published together, locks on names)."""
+anything is fitted to it, lab exports turned into recordings, command files, the HTML report, and
+safe writing of every output (atomic files, sets published together, locks on names)."""
 
 from .checks import (JOINT_LIMIT_TOLERANCE, REFUSED_CONDITION, ROTATION_CONVENTION, WARNED_CONDITION,
                      RecordingChecks, plausibility, recording_checks)
@@ -14,6 +14,8 @@ from .lab_export import LabExportError, LabMap, convert_lab_files, joint_reading
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
                       one_line, output_folder, publish, remove_stale_temporaries, writing)
 from .targets import Targets, TargetsError, read_targets
+from .report import Report, build_report
+from .report_html import render_html, write_report
 from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SESSION_KEYS,
                         SESSION_TIMES, SETS, SIDECAR_FIELDS, Recording, RecordingError, columns, read_json_file,
                         read_recording,
@@ -30,6 +32,7 @@ __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "
            "SIDECAR_FIELDS", "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES",
            "Calibration", "CalibrationFileError", "read_calibration", "write_calibration", "calibration_text",
            "recording_source", "validity_domain", "CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX",
-           "Targets", "TargetsError", "read_targets", "TIME_COLUMN",
+           "Targets", "TargetsError", "read_targets", "TIME_COLUMN", "Report", "build_report", "render_html",
+           "write_report",
            "HAL_NAME", "INI_NAME", "NOTES_NAME", "RECORD_NAME", "check_export_folder", "comp_file_name", "comp_text", "genhex_hal_text", "kins_ini_text",
            "rotarydelta_hal_text", "write_export_folder", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "WARNED_CONDITION", "ROTATION_CONVENTION"]

@@ -22,7 +22,7 @@ from calib.evidence import ToleranceEstimate, tolerance_from_data
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
 from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
     measured_gauge_representative, measurement_residuals, measurement_settings
-from calib.metrics import calibration_gain, pose_error_norms
+from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
 from calib.robust import GROSS_ALPHA, find_gross_rows
@@ -32,8 +32,9 @@ from calib.prior import ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
-from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, NameReservation, Recording, command_columns, command_csv,
-                              output_folder, frame_session, row_message, session_measurement, validity_domain)
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, NameReservation, Recording, build_report, command_columns,
+                              command_csv, output_folder, frame_session, render_html, row_message, session_measurement,
+                              validity_domain)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
@@ -73,6 +74,7 @@ class RunSettings:
     name: str | None = None
     overwrite: bool = False
     summary_json: Path | None = None
+    report: Path | None = None
     keep_outliers: bool = False
     prior: bool = True
     tolerance: dict | None = None
@@ -362,7 +364,10 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             targets_out["summary_json"] = Path(settings.summary_json)
         if settings.export_mjcf is not None:
             targets_out["mjcf"] = Path(settings.export_mjcf)
-        flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf"}
+        if settings.report is not None:
+            targets_out["report"] = Path(settings.report)
+        flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf",
+                                                      "report": "--report"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
             summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis)
             suggestion = summary.pop("_suggested_poses", None)
@@ -398,6 +403,8 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
     calibration = summary.pop("_calibration")
     if "summary_json" in targets_out:
         outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
+    if "report" in targets_out:
+        outputs.temp("report").write_text(render_html(build_report(summary)))
     if recording is not None:
         csv_text, json_text = recording_texts(recording)
         outputs.temp("csv").write_text(csv_text)
@@ -939,6 +946,8 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
     }
     if held is not None and (instrument is None or instrument.targets is None):
         summary.update(_heldout_block(robot, *held))
+    if held is not None:
+        summary.update(heldout_detail(inp, *held))
     if instrument is not None:
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
         if inp.n_sessions > 1:
@@ -948,6 +957,43 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
+
+
+def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray) -> dict:
+    """Summary keys of each held-out pose: ``heldout_per_pose`` (the position error norms before
+    and after, mm, and the orientation's, rad; with target data one position per target and row;
+    ``rows``: the 1-based data rows of a recording, None for simulated held-out poses) and
+    ``iso9283`` where validation rows repeat a commanded pose (the same joints, within the declared
+    joint noise; :func:`calib.metrics.iso9283_position` on attained minus predicted positions, before
+    with the nominal model, after with the identified one; None otherwise)."""
+    robot = inp.robot
+    rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
+    if before.shape[1] != robot.pose_dim:  # target positions: one norm per target and row
+        b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
+        per = {"position_before_mm": b.tolist(), "position_after_mm": a.tolist(), "orientation_before_rad": None,
+               "orientation_after_rad": None, "rows": rows, "per": "target and row"}
+        return {"heldout_per_pose": per, "iso9283": None}
+    pb, ob = pose_error_norms(robot, before)
+    pa, oa = pose_error_norms(robot, after)
+    angles = robot.angle_pose_mask.any()
+    per = {"position_before_mm": pb.tolist(), "position_after_mm": pa.tolist(),
+           "orientation_before_rad": ob.tolist() if angles else None,
+           "orientation_after_rad": oa.tolist() if angles else None, "rows": rows, "per": "pose"}
+    iso = None
+    if inp.rec is not None:
+        groups = repeated_poses(inp.val_joints, inp.noise.joint_std)
+        position = ~robot.angle_pose_mask
+        zero = np.zeros((len(before), 3))
+        b, a = (iso9283_position(e[:, position], zero, groups) for e in (before, after))
+        if len(b.rows):
+            iso = {"standard": "ISO 9283: AP = distance from the barycentre of the attained positions to the command, "
+                               "RP = mean distance to the barycentre + 3 sample standard deviations",
+                   "basis": "validation rows repeating one joint command; the command's position is the model's "
+                            "prediction at it (before: nominal, after: identified)",
+                   "poses": [{"rows": [rows[i] for i in r], "repeats": int(len(r)), "AP_before_mm": float(apb),
+                              "AP_after_mm": float(apa), "RP_mm": float(rp)}
+                             for r, apb, apa, rp in zip(b.rows, b.accuracy, a.accuracy, a.repeatability)]}
+    return {"heldout_per_pose": per, "iso9283": iso}
 
 
 #: Folds of the cross-validation of an instrument-frame fit (each fold refits geometry and frame).

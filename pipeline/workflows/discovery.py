@@ -26,13 +26,14 @@ from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, 
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
 from calib.effects.base import PAYLOAD_CHANNEL
+from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from mjcf.simulator import SettleError
 from calib.effects.records import effect_record, fitted_effects
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
                               read_json_file, read_recording, recording_checks, recording_source, validity_domain,
-                              write_calibration)
+                              write_calibration, write_report)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.views import verdict_words, write_discovery_rrd
@@ -71,8 +72,13 @@ def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, trai
     floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
     rms_b = float(np.sqrt(np.mean(before ** 2)))
     rms_a = float(np.sqrt(np.mean(after ** 2)))
+    row_b, row_a = np.sqrt(np.mean(before ** 2, axis=1)), np.sqrt(np.mean(after ** 2, axis=1))
+    per_row = {"rows": [int(i) + 1 for i in heldout_rows], "before_mm": row_b.tolist(), "after_mm": row_a.tolist(),
+               "before_mean_mm": float(row_b.mean()), "before_max_mm": float(row_b.max()),
+               "after_mean_mm": float(row_a.mean()), "after_max_mm": float(row_a.max()),
+               "what": "closure residual RMS over the joints of each held-out row (1-based data rows)"}
     return {"heldout_rms_before_mm": rms_b, "heldout_rms_after_mm": rms_a, "noise_floor_mm": floor,
-            "after_over_floor": rms_a / floor, "heldout_rows": [int(i) for i in heldout_rows]}
+            "after_over_floor": rms_a / floor, "heldout_rows": [int(i) for i in heldout_rows], "per_row": per_row}
 
 
 def _with(settings: dict, section: str, field: str, value: float) -> dict:
@@ -262,6 +268,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "heldout_rms_after_mm": h["heldout_rms_after_mm"],
         "noise_floor_mm": h["noise_floor_mm"],
         "heldout_basis": basis,
+        "heldout_per_row": h["per_row"],
         "flagged_poses": [i + 1 for i in flagged],
         "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
                      "model_wrong": bool(scan["model_wrong"]),
@@ -270,6 +277,10 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "tests": {"noise": disc.tests["noise"], "structure": disc.tests["structure"]},
         "evidence": disc.evidence,
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
+        "identified_std": robot.table.to_dict(np.sqrt(np.clip(np.diag(disc.chosen.geometry_covariance()), 0.0, None))),
+        "parameter_units": dict(zip(robot.table.names, robot.table.units)),
+        "free_parameters": list(robot.free_default),
+        "declared_noise": rec.noise.to_dict(),
         "located": disc.located,
         "rows": int(rec.joints.shape[0]),
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
@@ -416,6 +427,7 @@ class DiscoverySettings:
         use_law: a kept law's file: one more candidate effect (:data:`KEPT_LAW_NAME`, refitted).
         export_mjcf: write the identified machine, with the effects MuJoCo can hold, as an MJCF file
             there (:func:`pipeline.simulation.mjcf_export.export_mjcf`).
+        report: write the report a lab keeps there (HTML, :func:`pipeline.formats.write_report`).
     """
 
     real: Path | None = None
@@ -434,6 +446,7 @@ class DiscoverySettings:
     law_out: Path | None = None
     use_law: Path | None = None
     export_mjcf: Path | None = None
+    report: Path | None = None
 
 
 def implausibility(rec: Recording, disc: Discovery) -> dict:
@@ -451,7 +464,8 @@ def implausibility(rec: Recording, disc: Discovery) -> dict:
     words = [f"{d['name']}: {d['error']:+.4g} {d['unit']} with the geometry alone, "
              f"{disc.chosen.errors[k[d['name']]]:+.4g} {d['unit']} with {', '.join(disc.effects) or 'no effect'}: back "
              f"within {IMPLAUSIBLE_TOLERANCES:g} tolerances ({d['tolerance']:.4g} {d['unit']})" for d in back]
-    return {"tolerance_source": source, "geometry_alone": alone, "with_effects": with_effects,
+    return {"tolerance_source": source, "tolerance": tolerance.tolerance_by_name(robot),
+            "geometry_alone": alone, "with_effects": with_effects,
             "back_within_tolerance": [d["name"] for d in back], "words": words}
 
 
@@ -548,7 +562,7 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     output_folder(out)
     check_outputs({"--out": rrd_path, "--out (calibration file)": calibration_path,
                    "--summary-json": settings.summary_json, "--law": settings.law_out,
-                   "--export-mjcf": settings.export_mjcf}, overwrite=settings.overwrite)
+                   "--export-mjcf": settings.export_mjcf, "--report": settings.report}, overwrite=settings.overwrite)
     if rec is None:
         rec = effect_recording(settings.scenario, settings.scenario_seed, robot=robot_name,
                                granularity=settings.scenario_granularity)
@@ -579,6 +593,43 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
                         overwrite=settings.overwrite)
         report.summary["law_kept"] = None if kept is None else str(kept)
+    report.summary["recording"] = str(settings.real) if settings.real is not None else source["simulated"]
+    if settings.report is not None:
+        report.summary["report"] = str(settings.report)
+        report.summary["compensation"] = compensation_table(rec, cal, report.summary)
     if settings.summary_json is not None:
         atomic_write(settings.summary_json, json.dumps(report.summary, indent=1), overwrite=settings.overwrite)
+    if settings.report is not None:
+        write_report(report.summary, settings.report, overwrite=settings.overwrite)
     return report
+
+
+#: Targets of the report's compensation table at most (the first held-out rows, in order).
+COMPENSATION_TARGETS = 20
+
+
+def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict | None:
+    """The summary's ``compensation`` (for the report): the commands ``pipeline.compensate`` gives
+    for the first :data:`COMPENSATION_TARGETS` held-out rows' measured poses as targets, commanded in
+    the recording's order at its times (:func:`calib.compensation.compensated_commands` with the
+    calibration's effects): per target its data row, the pose and each joint's physics correction
+    (command minus the geometry's joint, joint unit), what was compensated and what not (why).
+    None without an effect found, or where the identified machine cannot reach the targets."""
+    if not cal.records:
+        return None
+    robot = rec.robot
+    rows = np.asarray(summary["heldout_per_row"]["rows"][:COMPENSATION_TARGETS], dtype=int) - 1
+    channels = {k: v[rows] for k, v in rec.extras.items()}
+    try:
+        comp = compensated_commands(robot, cal.theta, rec.measured[rows], cal.effects(channels=channels),
+                                    t_s=rec.t_s[rows], channels=channels)
+    except ValueError:  # KinematicsError: a target out of reach of the identified machine
+        return None
+    correction = comp.commands - comp.geometric
+    unit = robot.joint_unit
+    return {"what": f"commands for the first {rows.size} held-out rows' measured poses as targets, in the recording's "
+                    f"order and times: each joint's correction for the physics found (command minus the identified "
+                    f"geometry's joint, {unit})",
+            "compensated": list(comp.compensated), "not_compensated": dict(comp.left_out),
+            "columns": ["row", *robot.pose_names[:3], *(f"{j} correction, {unit}" for j in robot.joint_names)],
+            "rows": [[int(r) + 1, *rec.measured[r, :3].tolist(), *correction[k].tolist()] for k, r in enumerate(rows)]}
