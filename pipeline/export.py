@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from pipeline.cli import ArgumentParser, cli_main
 from pipeline.workflows.export import EXPORTERS, ExportReport, ExportSettings, run_export
@@ -27,13 +28,20 @@ def build_parser() -> argparse.ArgumentParser:
                                                           "pipeline.run or pipeline.discover)")
     p.add_argument("--to", required=True, choices=list(EXPORTERS), help="the format to write")
     p.add_argument("--out", required=True, help="where to write (linuxcnc: a folder, created if missing; mjcf: the .xml file)")
+    p.add_argument("--summary", default=None, type=Path,
+                   help="report: the summary JSON of the run that wrote the calibration (--summary-json): its "
+                        "verdict, held-out figures and flagged rows join the report (default: the calibration file "
+                        "alone)")
     p.add_argument("--overwrite", action="store_true", help="allow replacing existing files")
     return p
 
 
 def settings_from_args(args: argparse.Namespace) -> ExportSettings:
     """The :class:`ExportSettings` of parsed flags."""
-    return ExportSettings(calibration=args.calibration, to=args.to, out=args.out, overwrite=args.overwrite)
+    if args.summary is not None and args.to != "report":
+        raise ValueError(f"--summary {args.summary}: only --to report reads a run's summary")
+    return ExportSettings(calibration=args.calibration, to=args.to, out=args.out, overwrite=args.overwrite,
+                          summary=args.summary)
 
 
 def run(argv: list[str] | None = None) -> ExportReport:

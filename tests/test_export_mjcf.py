@@ -232,3 +232,21 @@ def test_pipeline_discover_writes_the_machine_with_its_effects(tmp_path, capsys)
     assert discover_main(again) == 2  # the file exists: refused before the analysis, nothing written
     assert "--export-mjcf" in one_error_line(capsys)
     assert not list((tmp_path / "again").glob("*"))
+
+
+def test_pipeline_export_to_mjcf_writes_a_loadable_identified_machine(tmp_path, capsys):
+    """``pipeline.export --to mjcf`` from a run's calibration file: plain MuJoCo loads it, and it
+    is the file ``--export-mjcf`` writes for the same calibration."""
+    import mujoco
+
+    from pipeline.export import main as export_main
+    from pipeline.run import run as run_main
+
+    run_main(["--heldout", "0", "--out", str(tmp_path), "--quiet", "--export-mjcf", str(tmp_path / "run.xml")])
+    cal = tmp_path / "hexapod_paper.calibration.json"
+    assert export_main(["--calibration", str(cal), "--to", "mjcf", "--out", str(tmp_path / "export.xml")]) == 0
+    assert (tmp_path / "export.xml").read_text() == (tmp_path / "run.xml").read_text()
+    assert mujoco.MjModel.from_xml_path(str(tmp_path / "export.xml")).nu == 6
+    capsys.readouterr()
+    assert export_main(["--calibration", str(cal), "--to", "mjcf", "--out", str(tmp_path / "export.xml")]) == 2
+    assert "exists" in capsys.readouterr().err

@@ -262,3 +262,37 @@ def test_the_discovery_report_holds_the_effects_and_figures(discovery_run, tmp_p
     assert 'id="compensation"' in text
     dom = chromium_renders(out / "fr.html", tmp_path)
     assert "Effects found" in dom and "Compensation" in dom
+
+
+def test_pipeline_export_to_report_from_the_calibration_file_and_the_summary(real_run, tmp_path, capsys):
+    """``pipeline.export --to report``: of the calibration file alone its identified errors and
+    their 2 sigma (the file's numbers), said to be the file alone; with the run's ``--summary``
+    the same figures as the run's own report; a summary of another robot refused in one line."""
+    from pipeline.export import main as export_main
+    from pipeline.formats import read_calibration
+
+    out, _, s = real_run
+    cal_path = out / "lab_cal.calibration.json"
+    cal = read_calibration(cal_path)
+    assert export_main(["--calibration", str(cal_path), "--to", "report", "--out", str(tmp_path / "alone.html")]) == 0
+    alone = (tmp_path / "alone.html").read_text()
+    figs = figures_of(alone)
+    assert_no_network(alone, figs)
+    assert "from the calibration file alone" in alone
+    for name in cal.free:
+        k = cal.robot.table.index(name)
+        assert float(figs.figures[f"parameter/{name}/error"]) == pytest.approx(
+            cal.theta[k] - cal.robot.table.nominal[k], rel=DISPLAY_RTOL)
+        assert float(figs.figures[f"parameter/{name}/two_sigma"]) == pytest.approx(2 * cal.std[k], rel=DISPLAY_RTOL)
+    assert export_main(["--calibration", str(cal_path), "--to", "report", "--out", str(tmp_path / "run.html"),
+                        "--summary", str(out / "lab.summary.json")]) == 0
+    with_summary = figures_of((tmp_path / "run.html").read_text())
+    assert with_summary.figures == figures_of((out / "lab.html").read_text()).figures
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"robot": "delta"}))
+    capsys.readouterr()
+    assert export_main(["--calibration", str(cal_path), "--to", "report", "--out", str(tmp_path / "x.html"),
+                        "--summary", str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--summary" in err[0] and "hexapod" in err[0]
+    assert not (tmp_path / "x.html").exists()

@@ -237,9 +237,10 @@ def _machine(s: dict, kind: str) -> tuple[Fact, ...]:
     facts = [Fact("robot", s["robot"])]
     if kind == "calibration":
         facts.append(Fact("recording", s.get("scenario", "")))
-        facts.append(Fact("method", f"{s.get('method')} ({s.get('solver')}), {s.get('iterations')} iterations"))
-        facts.append(Fact("calibration rows", f"{s.get('calibration_poses')} ({s.get('calibration_poses_used')} used)"))
-        facts.append(Fact("held-out poses", str(s.get("heldout_poses", 0))))
+        if s.get("method") is not None:  # a summary of a run (a calibration file alone has none of these)
+            facts.append(Fact("method", f"{s.get('method')} ({s.get('solver')}), {s.get('iterations')} iterations"))
+            facts.append(Fact("calibration rows", f"{s.get('calibration_poses')} ({s.get('calibration_poses_used')} used)"))
+            facts.append(Fact("held-out poses", str(s.get("heldout_poses", 0))))
     else:
         facts.append(Fact("recording", str(s.get("recording") or "")))
         facts.append(Fact("rows", str(s.get("rows"))))
@@ -482,8 +483,9 @@ def build_report(summary: dict) -> Report:
     s, kind = summary, report_kind(summary)
     if kind == "calibration":
         v = s.get("verdict") or {}
-        verdict = Verdict(bool(s.get("success")), v.get("words") or ("converged" if s.get("success") else
-                                                                       "not a success"), v.get("cause"))
+        success = None if s.get("success") is None and "success" in s else bool(s.get("success"))
+        verdict = Verdict(success, v.get("words") or ("converged" if s.get("success") else
+                                                      "not a success"), v.get("cause"))
         title = f"Calibration of the {s['robot']}"
         parameters, heldout, effects = _calibration_parameters(s), _calibration_heldout(s), None
     else:

@@ -164,12 +164,13 @@ def svg_parameter_plot(rows, *, width: int = 1000) -> str:
 
 def _verdict(r: Report) -> str:
     ok = r.verdict.success
-    label = {("calibration", True): "CALIBRATED", ("calibration", False): "NOT A SUCCESS",
-             ("discovery", True): "EXPLAINED", ("discovery", False): "NOT EXPLAINED"}[(r.kind, bool(ok))]
+    label = "CALIBRATION FILE" if ok is None else {
+        ("calibration", True): "CALIBRATED", ("calibration", False): "NOT A SUCCESS",
+        ("discovery", True): "EXPLAINED", ("discovery", False): "NOT EXPLAINED"}[(r.kind, bool(ok))]
     cause = f" (cause: {r.verdict.cause})" if r.verdict.cause else ""
     said = r.verdict.words.lower().startswith(("calibrated", "not calibrated", "explained", "not explained"))
     lead = "" if said else f"{e(label)}: "
-    return (f'<div class="verdict {"ok" if ok else "bad"}" id="verdict">{lead}{e(r.verdict.words)}'
+    return (f'<div class="verdict {"ok" if ok else ("" if ok is None else "bad")}" id="verdict">{lead}{e(r.verdict.words)}'
             f'{e(cause)}</div>')
 
 

@@ -5,6 +5,9 @@
 (:data:`EXPORTERS`, one function per format: ``exporter(cal, settings) -> ExportReport``). A new
 format is one entry there.
 
+``report`` (:func:`export_report`): the HTML report a lab keeps, of the run's summary
+(``--summary``) or of the calibration file alone.
+
 ``mjcf`` (:func:`export_to_mjcf`): the identified machine as a MuJoCo model file
 (:mod:`pipeline.simulation.mjcf_export`).
 
@@ -31,9 +34,11 @@ from calib.linuxcnc import (COMP_TABLE_SIZE, FINE_FACTOR, FIT_SAMPLE, FIT_SEED,
                             accuracy_given_up, comp_tables, genhex_geometry, genhex_joints, joint_table_effects,
                             projection_errors, rotarydelta_fit, rotarydelta_joints, workspace_sample)
 from pipeline.formats import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, Calibration, check_export_folder, comp_file_name, comp_text, genhex_hal_text,
-                              kins_ini_text, read_calibration, rotarydelta_hal_text, write_export_folder)
+                              kins_ini_text, read_calibration, read_json_file, rotarydelta_hal_text, write_export_folder,
+                              write_report)
+from calib.measurement import frame_to_dict
 
-__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "export_to_mjcf", "EXPORTERS"]
+__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "export_to_mjcf", "export_report", "calibration_summary", "EXPORTERS"]
 
 #: Micrometres per millimetre (figures on stderr and in NOTES.md are in um).
 UM_PER_MM = 1000.0
@@ -51,12 +56,15 @@ class ExportSettings:
         to: the format (a key of :data:`EXPORTERS`).
         out: where to write (a folder for ``linuxcnc``).
         overwrite: allow replacing existing files.
+        summary: ``report``: the summary JSON of the run that wrote the calibration (its verdict,
+            held-out figures and flagged rows), or None (the calibration file alone).
     """
 
     calibration: Path
     to: str
     out: Path
     overwrite: bool = False
+    summary: Path | None = None
 
 
 @dataclass
@@ -310,9 +318,50 @@ def export_to_mjcf(cal: Calibration, settings: ExportSettings) -> ExportReport:
                         summary={"path": str(path), "held": list(machine.held), "not_held": dict(machine.not_held)})
 
 
+def calibration_summary(cal: Calibration) -> dict:
+    """The summary keys a report reads, from a calibration file alone: the machine, the recording,
+    every identified parameter with its standard uncertainty, the instrument frames, the declared
+    noise. The verdict says the rest (held-out figures, flagged rows) belongs to the run's summary."""
+    table = cal.robot.table
+    free = set(cal.free)
+    det = {n: {"value": float(cal.theta[k]), "error": float(cal.theta[k] - table.nominal[k]), "unit": table.units[k],
+               "posterior_std": float(cal.std[k]), "prior_std": None, "source": None if n in free else "held"}
+           for k, n in enumerate(table.names)}
+    summary = {"robot": cal.robot.name, "scenario": str(cal.recording.get("name") or cal.recording.get("simulated") or ""),
+               "success": None, "parameter_determination": det, "free_parameters": list(cal.free),
+               "declared_noise": cal.noise.to_dict(), "prior": {"source": "not stated in the calibration file"},
+               "verdict": {"words": "from the calibration file alone: its verdict, held-out figures and flagged rows "
+                                    "are in the summary of the run that wrote it (pipeline.export --summary S.json)"}}
+    if cal.frames:
+        summary["measurement_frames"] = {s: frame_to_dict(f) for s, f in cal.frames.items()}
+    return summary
+
+
+def export_report(cal: Calibration, settings: ExportSettings) -> ExportReport:
+    """The report a lab keeps, one HTML file at ``settings.out``
+    (:func:`pipeline.formats.write_report`), of the run's summary (``settings.summary``, which must
+    be of the calibration's robot) or of the calibration file alone (:func:`calibration_summary`).
+
+    Raises:
+        ValueError: a summary that cannot be read or is of another robot (the file named).
+        FileExistsError: the file exists and ``overwrite`` is off.
+    """
+    if settings.summary is None:
+        summary = calibration_summary(cal)
+    else:
+        summary = read_json_file(Path(settings.summary), "summary")
+        if not isinstance(summary, dict) or summary.get("robot") != cal.robot.name:
+            raise ValueError(f"--summary {settings.summary}: not the summary of a {cal.robot.name} run "
+                             f"(its robot: {summary.get('robot') if isinstance(summary, dict) else None!r})")
+    path = write_report(summary, Path(settings.out), overwrite=settings.overwrite)
+    return ExportReport(format="report", robot=cal.robot.name, paths={Path(path).name: str(path)}, messages=[],
+                        summary={"path": str(path)})
+
+
 EXPORTERS = {
     "linuxcnc": export_linuxcnc,
     "mjcf": export_to_mjcf,
+    "report": export_report,
 }
 
 
