@@ -85,6 +85,10 @@ def twin(tmp_path_factory):
                     meta={"simulation": {"injected_errors": robot.table.to_dict(errors)}})
     folder = tmp_path_factory.mktemp("hand_built")
     csv, _ = write_recording(folder / "hand.csv", rec)
+    k = slice(0, 100)
+    grid = Recording(robot=robot, noise=CAPTURE_NOISE, t_s=rec.t_s[k], joints=rec.joints[k], measured=rec.measured[k],
+                     sets=rec.sets[k], meta=rec.meta)
+    write_recording(folder / "grid.csv", grid)
     return csv, float(np.sqrt(np.mean(errors ** 2)))
 
 
@@ -156,3 +160,21 @@ def test_level_targets_inside_the_grid_are_inside_the_domain_with_a_tilted_captu
     far = run_compensation(CompensateSettings(calibration=tmp_path / "tilted.calibration.json",
                                               targets=tmp_path / "tilted.csv", out=tmp_path / "tilted_cmd.csv"))
     assert any("alpha" in w for w in far.warnings), far.warnings
+
+
+def test_discovery_runs_on_the_level_grid_with_the_defaults(twin, tmp_path):
+    """``pipeline.discover --real`` on the 100 level poses alone, no tolerance declared: exit 0
+    with its held-out figure, the geometry under the tolerance learnt from the rows, and what the
+    plane cannot separate named with the poses that would."""
+    from pipeline.discover import main as discover_main
+
+    csv, _ = twin
+    summary = tmp_path / "discovery.json"
+    assert discover_main(["--real", str(csv.parent / "grid.csv"), "--no-resim", "--out", str(tmp_path),
+                          "--summary-json", str(summary)]) == 0
+    s = json.loads(summary.read_text())
+    assert 0 < s["heldout_rms_after_mm"] < 3 * s["noise_floor_mm"], "the held-out figure, near the capture's noise"
+    sep = s["separation"]
+    assert sep["left_to_prior"], "a plane leaves heights and tilts to the prior, named"
+    assert sep["poses"], "with the poses that would determine them"
+    assert sep["prior_source"].startswith("tolerance estimated from the data")
