@@ -203,6 +203,12 @@ def _bar_extent(rows: _BarRows) -> float:
     return max((float(e.max()) for e in ext if e.size), default=0.0)
 
 
+#: Rows of a chart with names above their bars take this many row heights (name, gap, bars): a
+#: label keeps its size in screen pixels while a small view scales the chart down, so the name
+#: needs room of its own above the bars.
+NAMES_ABOVE_PITCH = 2.8
+
+
 def _bar_layout(rows: _BarRows, rows_per_column: int, name_px: float) -> _BarLayout:
     """The scale (a 1-2-5 step, the ends at whole steps) and the columns of a named bar chart."""
     vmax = _bar_extent(rows)
@@ -212,7 +218,7 @@ def _bar_layout(rows: _BarRows, rows_per_column: int, name_px: float) -> _BarLay
     name_px = 0.0 if rows.names_above else name_px
     col_w = CHART_PX / len(cols)
     half = (col_w - name_px - 16) / 2
-    n_rows = (max(len(c) for c in cols) * (1.9 if rows.names_above else 1.0)
+    n_rows = (max(len(c) for c in cols) * (NAMES_ABOVE_PITCH if rows.names_above else 1.0)
               + (len(set(rows.groups)) // len(cols) if rows.group_names is not None else 0) + 1)
     return _BarLayout(cols=cols, col_w=col_w, name_px=name_px, half=half, px=half / full, step=step, full=full,
                       n_rows=n_rows, thick=min(7.0, 0.75 * ROW_PX / len(rows.vals)))
@@ -224,8 +230,8 @@ def _draw_bar_row(m: _BarMarks, rows: _BarRows, lay: _BarLayout, i: int, x0: flo
     zx = x0 + lay.name_px + lay.half
     k = len(rows.vals)
     if rows.names_above:
-        m.name_xy.append((zx, y - 0.1 * ROW_PX))
-        y += 0.9 * ROW_PX
+        m.name_xy.append((zx, y - 0.3 * ROW_PX))
+        y += (NAMES_ABOVE_PITCH - 1.0) * ROW_PX  # the bars well below their name: labels keep their size on screen
     else:
         m.name_xy.append((x0 + lay.name_px / 2, y))
     m.name_lab.append(rows.names[i])

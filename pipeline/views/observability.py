@@ -142,6 +142,11 @@ def log_observability(rec: rr.RecordingStream, analysis: ObservabilityAnalysis, 
             static=True)
 
 
+#: Width kept left of the bars for a combination's name ("0.56 B3.z + 0.55 P3.z + 0.31 B2.z + ..."):
+#: names beside their bars, on their own row, never across another row's bar whatever the view's zoom.
+COMBINATION_NAME_PX = 250.0
+
+
 def log_combinations(rec: rr.RecordingStream, path: str, analysis: ObservabilityAnalysis, k: int = 6) -> None:
     """The ``k`` worst-determined combinations as bars named by the combination (std in um)."""
 
@@ -149,7 +154,7 @@ def log_combinations(rec: rr.RecordingStream, path: str, analysis: Observability
     names = [c["combination"] + ("" if c["determined"] else " (not identifiable)") for c in combos]
     std = np.array([c["std_mm"] * 1e3 if c["determined"] else np.nan for c in combos])
     log_named_bars(rec, path, names, [("std", std, (235, 205, 60))], unit="um",
-                   title="worst-determined combinations (std)", names_above=True, rows_per_column=k)
+                   title="worst-determined combinations (std)", name_px=COMBINATION_NAME_PX, rows_per_column=k)
 
 
 def observability_views(prefix: str = "observability", name: str = "Observability", *,

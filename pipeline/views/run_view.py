@@ -70,9 +70,11 @@ def _scene(robot: Robot, nominal, targets) -> np.ndarray:
 
 
 def blueprint(robot: Robot | None = None, *, eye: rrb.EyeControls3D | None = None, magnified: float = 1.0,
-              has_heldout: bool = True, history_label: str = "max dQint") -> rrb.Blueprint:
+              has_heldout: bool = True, history_label: str = "max dQint", has_truth: bool = True) -> rrb.Blueprint:
     """The run file's layout: machine | per-chain residuals, held-out, convergence | parameters |
-    summary, observability. Every view shows data on the ``pose`` timeline, active at open."""
+    summary, observability. Every view shows data on the ``pose`` timeline, active at open.
+    ``has_truth``: the injected errors are known (a simulated machine): the parameters' chart is
+    "identified vs injected"; on real data "identified (+-2 sigma)"."""
     word = robot.chain_word if robot is not None else "chain"
     angles = robot is None or bool(robot.angle_pose_mask.any())
     series = [
@@ -94,8 +96,9 @@ def blueprint(robot: Robot | None = None, *, eye: rrb.EyeControls3D | None = Non
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(machine, rrb.TextDocumentView(origin="key", name="Key"), row_shares=[5, 1]),
-            rrb.Vertical(*series),
-            chart_view("parameters/chart", "Parameter errors: identified vs injected"),
+            rrb.Vertical(*series, row_shares=[3.0] + [2.0] * (len(series) - 2) + [1.5]),  # room for each leg's legend
+            chart_view("parameters/chart", "Parameter errors: identified vs injected" if has_truth else
+                       "Parameter errors: identified (+-2 sigma)"),
             rrb.Vertical(
                 rrb.TextDocumentView(origin="summary", name="Summary"),
                 observability_views("observability", "Observability"),

@@ -1328,7 +1328,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
                             magnified=magnified)
 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
-                   has_heldout=heldout_before is not None, history_label=history_label)
+                   has_heldout=heldout_before is not None, history_label=history_label, has_truth=inp.actual is not None)
     save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
 
 
