@@ -54,7 +54,8 @@ from .rotation import euler_from_matrix, rotation_matrix
 
 __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
-           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit"]
+           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
+           "SAME_POSE_STDS", "SAME_POSE_FRACTION"]
 
 #: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
 #: ``1 - FIT_ALPHA`` quantile.
@@ -89,6 +90,39 @@ CAUSES = ("none", "conversion", "unmeasured column", "gross rows", "left-out phy
 def chi2_limit(dof: int, alpha: float = FIT_ALPHA) -> float:
     """The chi-square(dof) ``1 - alpha`` quantile (inf for dof <= 0: nothing can be judged)."""
     return float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha)) if dof > 0 else float("inf")
+
+
+# --------------------------------------------------------------------------- motion
+
+#: Two rows are at the same pose when every joint reading differs by at most this many joint-noise
+#: standard deviations ...
+SAME_POSE_STDS = 5.0
+#: ... or by this fraction of the joint's range (noise-free joints).
+SAME_POSE_FRACTION = 1e-6
+
+
+def same_pose_rows(robot: Robot, joints, joint_std: float = 0.0) -> np.ndarray:
+    """0-based rows of the largest group of ``joints`` (N, C, joint unit) at one pose: readings
+    on one cell of a grid :data:`SAME_POSE_STDS` times ``joint_std`` (the declared joint noise)
+    wide, at least :data:`SAME_POSE_FRACTION` of each joint's range."""
+    q = np.asarray(joints, dtype=float)
+    if len(q) == 0:
+        return np.zeros(0, dtype=int)
+    limits = robot.joint_limits()
+    cell = np.maximum(SAME_POSE_FRACTION * np.maximum(limits[:, 1] - limits[:, 0], 1e-12), SAME_POSE_STDS * joint_std)
+    _, inverse, counts = np.unique(np.round(q / cell), axis=0, return_inverse=True, return_counts=True)
+    return np.flatnonzero(inverse.ravel() == int(np.argmax(counts)))
+
+
+def no_motion_words(robot: Robot, joints, joint_std: float = 0.0) -> str | None:
+    """``"the calibration rows do not move the machine: 40 of 40 rows are the same pose ..."``
+    where every row of ``joints`` (N, C), N >= 2, is at one pose (:func:`same_pose_rows`); None
+    otherwise."""
+    n = len(joints)
+    if n < 2 or len(same_pose_rows(robot, joints, joint_std)) < n:
+        return None
+    return (f"the calibration rows do not move the machine: {n} of {n} rows are the same pose (the same joint "
+            f"readings), so they say nothing of the {robot.name}'s geometry; measure poses spread over the workspace")
 
 
 # --------------------------------------------------------------------------- conversions

@@ -984,6 +984,10 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
                 "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
                 "predictions": check}
     block = {"diagnosis": None if diagnosis is None else diagnosis_summary(diagnosis, inp)}
+    uninformed = information_verdict(inp, ident)
+    if uninformed is not None:
+        cause, words = uninformed
+        return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
     if success:
         words = "calibrated: the rows fit to the declared noise" + (
             f" and the {check['what']} are predicted to it" if check else "")
@@ -993,6 +997,37 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
     else:
         cause, words = likely_cause(inp, ident, evidence)
     return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
+
+
+def information_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
+    """``(cause, words)`` of a fit that learnt nothing from its rows, else None: rows that do not
+    move the machine (every calibration row used at one pose, :func:`calib.diagnosis.no_motion_words`:
+    ``"no_motion"``), or, with the tolerances as a prior, no parameter determined by the data
+    (:meth:`calib.engine.IdentificationResult.parameter_sources`: none whose posterior standard
+    deviation fell below half the prior's, none moved beyond 3 prior standard deviations:
+    ``"no_information"``). Such a fit is never a success, however well the rows fit."""
+    from calib.diagnosis import no_motion_words, same_pose_rows
+
+    robot, result = inp.robot, ident.result
+    joints = inp.joints[ident.used]
+    still = no_motion_words(robot, joints, inp.noise.joint_std)
+    if still is not None:
+        return "no_motion", f"not calibrated: {still}"
+    sources = result.parameter_sources()
+    if result.prior is None or any(v == "data" for v in sources.values()):
+        return None
+    free = [n for n, v in sources.items() if v != "held"]
+    same = len(same_pose_rows(robot, joints, inp.noise.joint_std))
+    rows = f"; {same} of {len(joints)} rows are the same pose" if same > 1 else ""
+    noise = inp.noise.pose_std(robot.pose_units)
+    idx = robot.table.indices(free)
+    units = np.array(robot.table.units)[idx]
+    tolerance = ", ".join(f"{np.median(result.prior.std[idx][units == u]):.3g} {u}" for u in dict.fromkeys(units))
+    return "no_information", (
+        f"not calibrated: the rows determine nothing beyond the tolerance: of the {len(free)} parameters none has "
+        f"its standard deviation below half its tolerance and none moved beyond 3 tolerances (noise standard deviation "
+        f"{noise[0]:.3g} {robot.pose_units[0]} against a tolerance of {tolerance}{rows}): the geometry reported "
+        "is the prior's, not a measurement; measure more poses, spread over the workspace, or with less noise")
 
 
 def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
