@@ -893,6 +893,12 @@ def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: R
     ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS, mean,
     max) and ``crossvalidation``."""
     rows = ident.used
+    if rows.size < 2:  # nothing to predict a row from: said in words, not as the folds' bounds
+        total = len(inp.rec.sets)
+        what = "the recording holds one data row" if total == 1 else \
+            f"of its {total} rows one calibration row is left to fit once the gross rows are out"
+        raise ValueError(f"{inp.where}: {what}: a calibration is judged by predicting rows it did not use, and one "
+                         "row leaves none (add validation rows, or measure more poses spread over the workspace)")
     if ident.instrument is not None:
         several = inp.n_sessions > 1
         cv = crossvalidate(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, method="forward",
