@@ -136,18 +136,12 @@ def _check_joint_range(rec: Recording, path: Path) -> str | None:
             raise RecordingError(f"{path}: columns {', '.join(joint_cols)}: the joint values seem to be in "
                                  f"{other} ({far_rows.size} of {len(q)} rows are outside the range, e.g. row {r + 1}, "
                                  f"{joint_cols[c]} = {q[r, c]:.6g}), a recording holds {unit}")
-        past = np.maximum(limits[:, 0] - q, q - limits[:, 1])
-        r, c = np.unravel_index(np.argmax(np.where(far, past, -np.inf)), q.shape)
-        if far_rows.size == 1:
-            raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
-                                 f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} {source} by "
-                                 f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it")
-        cols = [joint_cols[j] for j in np.flatnonzero(far.any(axis=0))]
-        raise RecordingError(f"{path}: rows {_rows_in_words(far_rows)}, column(s) {', '.join(cols)}: joint readings "
-                             f"out of range, by up to {past[r, c]:.3g} {unit} (row {r + 1}, {joint_cols[c]} = "
-                             f"{q[r, c]:.6g} {unit}, range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} {source}), "
-                             f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach them "
-                             f"({far_rows.size} of {len(q)} rows)")
+        r, c = np.argwhere(far)[0]
+        others = "" if far_rows.size == 1 else \
+            f"; out of range too: rows {_rows_in_words(far_rows[1:])} ({far_rows.size} of {len(q)} rows)"
+        raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
+                             f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} {source} by "
+                             f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it{others}")
     past = np.maximum(limits[:, 0] - q, q - limits[:, 1])
     r, c = np.unravel_index(np.argmax(np.where(out, past, -np.inf)), q.shape)
     cols = [joint_cols[j] for j in np.flatnonzero(out.any(axis=0))]
