@@ -24,7 +24,10 @@ the rows, :data:`SCREEN_ROWS_FACTOR` times the fewest rows that identify the unk
 (Levenberg-Marquardt, :data:`FULL_ITERATIONS`) for the best :data:`SCREEN_KEEP` of those within
 :data:`MIN_IMPROVEMENT` times the best screened chi-square per degree of freedom. Where several conversions fit (with a frame estimated every mirror image of a
 translating platform's positions is another: x flipped, y flipped, x and y swapped), the one that
-needs no instrument frame is named, then the smallest chi-square; the others are listed.
+needs no instrument frame is named, then the one whose frame turns least (the others add a half turn
+to it), then the smallest chi-square; the others are listed. The screen hands the full fit its
+candidates in that order too: their screened chi-squares differ by the frame's degrees of freedom
+alone, so the flipped axis itself would otherwise lose its place to a mirror image.
 
 No conversion: a column holding one value on every row while the nominal model moves the
 platform along it by more than :data:`CONSTANT_COLUMN_STDS` noise standard deviations is a column
@@ -308,6 +311,16 @@ class FitFigures:
     fit: object = field(default=None, repr=False)
 
     @property
+    def frame_turn(self) -> float:
+        """The estimated instrument frame's rotation angle (rad; 0 without a frame): of several
+        mirror images that fit with a frame, the one needing the least turn is the file's mistake
+        (the others add a half turn to it)."""
+        if not self.frame_estimated or self.fit is None:
+            return 0.0
+        R = rotation_matrix(np.asarray(self.fit.frame, dtype=float)[3:6][None])[0]
+        return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+    @property
     def chi2_dof(self) -> float:
         """Chi-square per degree of freedom (inf when nothing can be judged)."""
         return self.chi2 / self.dof if self.dof > 0 else float("inf")
@@ -458,6 +471,16 @@ def _named(written: FitFigures, converted: FitFigures) -> bool:
     return not written.plausible
 
 
+#: Frame turns (rad) closer than this count as equal when conversions are ranked.
+TURN_RESOLUTION = 0.05
+
+
+def _preference(figures: FitFigures) -> tuple:
+    """How a conversion that fits ranks: no instrument frame first, then the least turned frame
+    (to :data:`TURN_RESOLUTION`), then the smaller chi-square per degree of freedom."""
+    return (figures.frame_estimated, round(figures.frame_turn / TURN_RESOLUTION), figures.chi2_dof)
+
+
 def _conversions(problem: _Problem, joints, measured, written: FitFigures, counter: list) -> dict:
     """Screen every conversion on a subset of rows; fit on all rows the best :data:`SCREEN_KEEP`
     of those within :data:`MIN_IMPROVEMENT` times the smaller of the best screened chi-square per
@@ -473,14 +496,18 @@ def _conversions(problem: _Problem, joints, measured, written: FitFigures, count
     screened.sort(key=lambda cf: cf[1].chi2_dof)
     best = screened[0][1].chi2_dof if screened else float("inf")
     window = MIN_IMPROVEMENT * max(1.0, min(written.chi2_dof, best))
+    # Of those within the window, the ones that fit as they are (no frame, or the least turned)
+    # first: with a frame every mirror image of positions fits, and the screen's chi-squares
+    # differ by the frame's degrees of freedom alone.
+    within = sorted([cf for cf in screened if cf[1].chi2_dof <= window], key=lambda cf: _preference(cf[1]))
     named = []
-    for conv, _ in [cf for cf in screened if cf[1].chi2_dof <= window][:SCREEN_KEEP]:
+    for conv, _ in within[:SCREEN_KEEP]:
         q, m = conv.apply(joints, measured)
         figures = _figures(problem, q, m)
         counter[0] += 1
         if _named(written, figures):
             named.append((conv, figures))
-    named.sort(key=lambda cf: (cf[1].frame_estimated, cf[1].chi2_dof))
+    named.sort(key=lambda cf: _preference(cf[1]))
     return {"screened": tuple((c.name, f.chi2_dof) for c, f in screened), "named": named}
 
 
