@@ -42,6 +42,7 @@ turned by the tilt).
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -58,7 +59,8 @@ from .rotation import euler_from_matrix, rotation_matrix
 __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
            "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
-           "SAME_POSE_STDS", "SAME_POSE_FRACTION"]
+           "SAME_POSE_STDS", "SAME_POSE_FRACTION", "TURN_RESOLUTION",
+           "description_pattern", "PATTERN_FIT"]
 
 #: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
 #: ``1 - FIT_ALPHA`` quantile.
@@ -126,6 +128,68 @@ def no_motion_words(robot: Robot, joints, joint_std: float = 0.0) -> str | None:
         return None
     return (f"the calibration rows do not move the machine: {n} of {n} rows are the same pose (the same joint "
             f"readings), so they say nothing of the {robot.name}'s geometry; measure poses spread over the workspace")
+
+
+# --------------------------------------------------------------------------- the description
+
+#: The fitted errors of a group of length parameters are a scale of the description when the
+#: scale explains them to this fraction of their norm (the rest's norm over theirs).
+PATTERN_FIT = 0.2
+
+
+def _group(name: str) -> str:
+    """A parameter's group: the letters before its chain number (``B1.x`` -> ``B``, ``dl3`` -> ``dl``)."""
+    head = re.match(r"[A-Za-z_]+?(?=\d)", name)
+    return head.group(0) if head else name
+
+
+def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dict]:
+    """Groups of length parameters whose fitted errors are a scale of their nominal values: the
+    nominal geometry described is another machine's (or this one's scaled), not physics.
+
+    A group (the parameters sharing the letters before the chain number: every base joint
+    coordinate ``B1.x ... B6.z``) is named when the errors ``e`` (of ``names``, default the free
+    ones) are the nominal values ``n`` times one factor ``s`` (least squares) to
+    :data:`PATTERN_FIT` of their norm, some error is beyond :data:`PLAUSIBLE_TOLERANCES`
+    tolerances, and the nominal values differ (a scale of equal values is a common offset).
+
+    Args:
+        errors: (P,) fitted errors from nominal, parameter units.
+        tolerance: (P,) each parameter's tolerance (one standard deviation).
+
+    Returns:
+        ``{"group", "names", "scale", "factor", "residual", "unit", "words"}`` each, where ``scale``
+        is ``s`` and ``factor`` the description over the fitted value (``1 / (1 + s)``); largest
+        movement first.
+    """
+    errors, tolerance = np.asarray(errors, dtype=float), np.asarray(tolerance, dtype=float)
+    table = robot.table
+    names = list(names if names is not None else robot.free_default)
+    groups: dict[str, list[int]] = {}
+    for name in names:
+        k = table.index(name)
+        if table.units[k] == "mm":
+            groups.setdefault(_group(name), []).append(k)
+    out = []
+    for group, idx in groups.items():
+        n, e = table.nominal[idx], errors[idx]
+        varied = np.std(n) > 0.25 * np.sqrt(np.mean(n ** 2))  # equal values: a scale is a common offset
+        if len(idx) < 3 or not varied or not np.any(np.abs(e) > PLAUSIBLE_TOLERANCES * tolerance[idx]):
+            continue
+        scale = float(n @ e / (n @ n))
+        rest = e - scale * n
+        if np.linalg.norm(rest) > PATTERN_FIT * np.linalg.norm(e) or scale <= -1.0:
+            continue
+        factor = 1.0 / (1.0 + scale)
+        members = [table.names[k] for k in idx]
+        words = (f"the fitted errors of {members[0]} ... {members[-1]} ({len(members)} parameters, up to "
+                 f"{np.max(np.abs(e)):.3g} mm) are {100 * scale:+.3g}% of their nominal values, to "
+                 f"{np.sqrt(np.mean(rest ** 2)):.2g} mm RMS: the description's {group} coordinates are "
+                 f"{factor:.4g} times this machine's (a scale of the description)")
+        out.append({"group": group, "names": members, "scale": scale, "factor": factor,
+                    "residual": float(np.sqrt(np.mean(rest ** 2))), "unit": "mm", "words": words,
+                    "largest": float(np.max(np.abs(e) / tolerance[idx]))})
+    return sorted(out, key=lambda d: -d["largest"])
 
 
 # --------------------------------------------------------------------------- conversions
@@ -565,9 +629,14 @@ def _unexplained(problem: _Problem, joints, measured, written: FitFigures, scree
                         "out, or noise declared too small")}
 
 
-def _fit_words(robot: Robot, written: FitFigures) -> str:
+def _fit_words(robot: Robot, written: FitFigures, tolerance: np.ndarray) -> str:
     if written.plausible:
         return f"the data fit the {robot.name} at the declared noise ({written.words()}): nothing wrong"
+    pattern = [] if written.fit is None else description_pattern(robot, written.fit.result.errors, tolerance)
+    if pattern:
+        return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()}, and "
+                f"the fitted errors are a pattern of the description, not physics: {pattern[0]['words']}: the "
+                "nominal geometry described seems to be another machine's")
     return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()} "
             f"(chi-square {written.chi2_dof:.3g} per degree of freedom) and no conversion "
             "of the file fits better: an offset the geometry absorbs (a capture body mounted turned on the "
@@ -602,7 +671,7 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
     counter = [1]
     written = _figures(problem, joints, measured)
     if written.fits and written.plausible:
-        return Diagnosis("none", _fit_words(robot, written), written, fits=1, seconds=time.perf_counter() - t0)
+        return Diagnosis("none", _fit_words(robot, written, problem.tolerance), written, fits=1, seconds=time.perf_counter() - t0)
     found = _conversions(problem, joints, measured, written, counter)
     if found["named"]:
         conv, figures = found["named"][0]
@@ -612,7 +681,7 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
         return Diagnosis("conversion", message, written, conv, figures, tuple(c.name for c, _ in found["named"][1:]),
                          screened=found["screened"], fits=counter[0], seconds=time.perf_counter() - t0)
     if written.fits:
-        return Diagnosis("none", _fit_words(robot, written), written, screened=found["screened"], fits=counter[0],
+        return Diagnosis("none", _fit_words(robot, written, problem.tolerance), written, screened=found["screened"], fits=counter[0],
                          seconds=time.perf_counter() - t0)
     verdict = _unexplained(problem, joints, measured, written, found["screened"], counter, gross)
     return Diagnosis(written=written, screened=found["screened"], fits=counter[0],

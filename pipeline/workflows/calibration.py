@@ -990,7 +990,7 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
                 "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
                 "predictions": check}
     block = {"diagnosis": None if diagnosis is None else diagnosis_summary(diagnosis, inp)}
-    uninformed = information_verdict(inp, ident)
+    uninformed = information_verdict(inp, ident) or description_verdict(inp, ident)
     if uninformed is not None:
         cause, words = uninformed
         return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
@@ -1034,6 +1034,24 @@ def information_verdict(inp: CalibrationInput, ident: Identification) -> tuple[s
         f"its standard deviation below half its tolerance and none moved beyond 3 tolerances (noise standard deviation "
         f"{noise[0]:.3g} {robot.pose_units[0]} against a tolerance of {tolerance}{rows}): the geometry reported "
         "is the prior's, not a measurement; measure more poses, spread over the workspace, or with less noise")
+
+
+def description_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
+    """``("description", words)`` where the fitted errors are a scale of the nominal geometry
+    described (:func:`calib.diagnosis.description_pattern`, against the declared tolerance or the
+    robot's default, not one learnt from these rows: the learnt one grows to hold the pattern):
+    the sidecar describes another machine; else None."""
+    from calib.diagnosis import description_pattern
+
+    robot, result = inp.robot, ident.result
+    reference = inp.tolerance if inp.tolerance_declared and inp.tolerance is not None else ParameterPrior.default(robot)
+    pattern = description_pattern(robot, result.errors, reference.std, result.free_names)
+    if not pattern:
+        return None
+    where = f" in {sidecar_name(inp.where)}" if inp.rec is not None else ""
+    return "description", (f"not calibrated: the fitted errors are a pattern of the description, not physics: "
+                           f"{'; '.join(p['words'] for p in pattern)}: the nominal geometry{where} seems to be another "
+                           "machine's; give this machine's nominal geometry")
 
 
 def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
