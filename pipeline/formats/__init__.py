@@ -10,7 +10,9 @@ from .calibration_file import (CALIBRATION_FORMAT, CALIBRATION_SUFFIX, CALIBRATI
 from .command_file import TIME_COLUMN, command_columns, command_csv, read_command_file, write_command_file
 from .lab_export import LabExportError, LabMap, convert_lab_files, read_map
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
-                      one_line, output_folder, publish, remove_stale_temporaries, writing)
+                      forget_created_folders, make_folder, one_line, output_folder, publish,
+                      remove_dead_writers_temporaries, remove_stale_temporaries, take_back_created_folders,
+                      temporary_file, writing)
 from .targets import Targets, TargetsError, read_targets
 from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_MM, READABLE_VERSIONS, SESSION_KEYS,
                         SESSION_TIMES, SETS, SIDECAR_FIELDS, Recording, RecordingError, columns, read_json_file,
@@ -22,7 +24,8 @@ __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "
            "sidecar_path", "read_json_file", "session_measurement", "row_words", "row_message", "plausibility", "recording_checks", "RecordingChecks",
            "LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv",
            "read_command_file", "write_command_file", "check_outputs", "one_line", "FileLock", "LockHeld",
-           "NameReservation", "remove_stale_temporaries", "OutputError", "ResultSet", "atomic_write",
+           "NameReservation", "remove_stale_temporaries", "remove_dead_writers_temporaries", "temporary_file",
+           "make_folder", "forget_created_folders", "take_back_created_folders", "OutputError", "ResultSet", "atomic_write",
            "output_folder", "publish", "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS",
            "SIDECAR_FIELDS", "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES",
            "Calibration", "CalibrationFileError", "read_calibration", "write_calibration", "calibration_text",
