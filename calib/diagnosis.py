@@ -185,7 +185,7 @@ def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dic
         words = (f"the fitted errors of {members[0]} ... {members[-1]} ({len(members)} parameters, up to "
                  f"{np.max(np.abs(e)):.3g} mm) are {100 * scale:+.3g}% of their nominal values, to "
                  f"{np.sqrt(np.mean(rest ** 2)):.2g} mm RMS: the description's {group} coordinates are "
-                 f"{factor:.4g} times this machine's (a scale of the description)")
+                 f"{factor:.3g} times this machine's (a scale of the description)")
         out.append({"group": group, "names": members, "scale": scale, "factor": factor,
                     "residual": float(np.sqrt(np.mean(rest ** 2))), "unit": "mm", "words": words,
                     "largest": float(np.max(np.abs(e) / tolerance[idx]))})
