@@ -24,7 +24,10 @@ the rows, :data:`SCREEN_ROWS_FACTOR` times the fewest rows that identify the unk
 (Levenberg-Marquardt, :data:`FULL_ITERATIONS`) for the best :data:`SCREEN_KEEP` of those within
 :data:`MIN_IMPROVEMENT` times the best screened chi-square per degree of freedom. Where several conversions fit (with a frame estimated every mirror image of a
 translating platform's positions is another: x flipped, y flipped, x and y swapped), the one that
-needs no instrument frame is named, then the smallest chi-square; the others are listed.
+needs no instrument frame is named, then the one whose frame turns least (the others add a half turn
+to it), then the smallest chi-square; the others are listed. The screen hands the full fit its
+candidates in that order too: their screened chi-squares differ by the frame's degrees of freedom
+alone, so the flipped axis itself would otherwise lose its place to a mirror image.
 
 No conversion: a column holding one value on every row while the nominal model moves the
 platform along it by more than :data:`CONSTANT_COLUMN_STDS` noise standard deviations is a column
@@ -39,6 +42,7 @@ turned by the tilt).
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -54,7 +58,9 @@ from .rotation import euler_from_matrix, rotation_matrix
 
 __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
-           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit"]
+           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
+           "SAME_POSE_STDS", "SAME_POSE_FRACTION", "TURN_RESOLUTION",
+           "description_pattern", "PATTERN_FIT"]
 
 #: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
 #: ``1 - FIT_ALPHA`` quantile.
@@ -89,6 +95,101 @@ CAUSES = ("none", "conversion", "unmeasured column", "gross rows", "left-out phy
 def chi2_limit(dof: int, alpha: float = FIT_ALPHA) -> float:
     """The chi-square(dof) ``1 - alpha`` quantile (inf for dof <= 0: nothing can be judged)."""
     return float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha)) if dof > 0 else float("inf")
+
+
+# --------------------------------------------------------------------------- motion
+
+#: Two rows are at the same pose when every joint reading differs by at most this many joint-noise
+#: standard deviations ...
+SAME_POSE_STDS = 5.0
+#: ... or by this fraction of the joint's range (noise-free joints).
+SAME_POSE_FRACTION = 1e-6
+
+
+def same_pose_rows(robot: Robot, joints, joint_std: float = 0.0) -> np.ndarray:
+    """0-based rows of the largest group of ``joints`` (N, C, joint unit) at one pose: readings
+    on one cell of a grid :data:`SAME_POSE_STDS` times ``joint_std`` (the declared joint noise)
+    wide, at least :data:`SAME_POSE_FRACTION` of each joint's range."""
+    q = np.asarray(joints, dtype=float)
+    if len(q) == 0:
+        return np.zeros(0, dtype=int)
+    limits = robot.joint_limits()
+    cell = np.maximum(SAME_POSE_FRACTION * np.maximum(limits[:, 1] - limits[:, 0], 1e-12), SAME_POSE_STDS * joint_std)
+    _, inverse, counts = np.unique(np.round(q / cell), axis=0, return_inverse=True, return_counts=True)
+    return np.flatnonzero(inverse.ravel() == int(np.argmax(counts)))
+
+
+def no_motion_words(robot: Robot, joints, joint_std: float = 0.0) -> str | None:
+    """``"the calibration rows do not move the machine: 40 of 40 rows are the same pose ..."``
+    where every row of ``joints`` (N, C), N >= 2, is at one pose (:func:`same_pose_rows`); None
+    otherwise."""
+    n = len(joints)
+    if n < 2 or len(same_pose_rows(robot, joints, joint_std)) < n:
+        return None
+    return (f"the calibration rows do not move the machine: {n} of {n} rows are the same pose (the same joint "
+            f"readings), so they say nothing of the {robot.name}'s geometry; measure poses spread over the workspace")
+
+
+# --------------------------------------------------------------------------- the description
+
+#: The fitted errors of a group of length parameters are a scale of the description when the
+#: scale explains them to this fraction of their norm (the rest's norm over theirs).
+PATTERN_FIT = 0.2
+
+
+def _group(name: str) -> str:
+    """A parameter's group: the letters before its chain number (``B1.x`` -> ``B``, ``dl3`` -> ``dl``)."""
+    head = re.match(r"[A-Za-z_]+?(?=\d)", name)
+    return head.group(0) if head else name
+
+
+def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dict]:
+    """Groups of length parameters whose fitted errors are a scale of their nominal values: the
+    nominal geometry described is another machine's (or this one's scaled), not physics.
+
+    A group (the parameters sharing the letters before the chain number: every base joint
+    coordinate ``B1.x ... B6.z``) is named when the errors ``e`` (of ``names``, default the free
+    ones) are the nominal values ``n`` times one factor ``s`` (least squares) to
+    :data:`PATTERN_FIT` of their norm, some error is beyond :data:`PLAUSIBLE_TOLERANCES`
+    tolerances, and the nominal values differ (a scale of equal values is a common offset).
+
+    Args:
+        errors: (P,) fitted errors from nominal, parameter units.
+        tolerance: (P,) each parameter's tolerance (one standard deviation).
+
+    Returns:
+        ``{"group", "names", "scale", "factor", "residual", "unit", "words"}`` each, where ``scale``
+        is ``s`` and ``factor`` the description over the fitted value (``1 / (1 + s)``); largest
+        movement first.
+    """
+    errors, tolerance = np.asarray(errors, dtype=float), np.asarray(tolerance, dtype=float)
+    table = robot.table
+    names = list(names if names is not None else robot.free_default)
+    groups: dict[str, list[int]] = {}
+    for name in names:
+        k = table.index(name)
+        if table.units[k] == "mm":
+            groups.setdefault(_group(name), []).append(k)
+    out = []
+    for group, idx in groups.items():
+        n, e = table.nominal[idx], errors[idx]
+        varied = np.std(n) > 0.25 * np.sqrt(np.mean(n ** 2))  # equal values: a scale is a common offset
+        if len(idx) < 3 or not varied or not np.any(np.abs(e) > PLAUSIBLE_TOLERANCES * tolerance[idx]):
+            continue
+        scale = float(n @ e / (n @ n))
+        rest = e - scale * n
+        if np.linalg.norm(rest) > PATTERN_FIT * np.linalg.norm(e) or scale <= -1.0:
+            continue
+        factor = 1.0 / (1.0 + scale)
+        members = [table.names[k] for k in idx]
+        words = (f"the fitted errors of {members[0]} ... {members[-1]} ({len(members)} parameters, up to "
+                 f"{np.max(np.abs(e)):.3g} mm) are {100 * scale:+.3g}% of their nominal values, to "
+                 f"{np.sqrt(np.mean(rest ** 2)):.2g} mm RMS: the description's {group} coordinates are "
+                 f"{factor:.3g} times this machine's (a scale of the description)")
+        out.append({"group": group, "names": members, "scale": scale, "factor": factor,
+                    "residual": float(np.sqrt(np.mean(rest ** 2))), "unit": "mm", "words": words,
+                    "largest": float(np.max(np.abs(e) / tolerance[idx]))})
+    return sorted(out, key=lambda d: -d["largest"])
 
 
 # --------------------------------------------------------------------------- conversions
@@ -274,6 +375,16 @@ class FitFigures:
     fit: object = field(default=None, repr=False)
 
     @property
+    def frame_turn(self) -> float:
+        """The estimated instrument frame's rotation angle (rad; 0 without a frame): of several
+        mirror images that fit with a frame, the one needing the least turn is the file's mistake
+        (the others add a half turn to it)."""
+        if not self.frame_estimated or self.fit is None:
+            return 0.0
+        R = rotation_matrix(np.asarray(self.fit.frame, dtype=float)[3:6][None])[0]
+        return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+    @property
     def chi2_dof(self) -> float:
         """Chi-square per degree of freedom (inf when nothing can be judged)."""
         return self.chi2 / self.dof if self.dof > 0 else float("inf")
@@ -424,6 +535,16 @@ def _named(written: FitFigures, converted: FitFigures) -> bool:
     return not written.plausible
 
 
+#: Frame turns (rad) closer than this count as equal when conversions are ranked.
+TURN_RESOLUTION = 0.05
+
+
+def _preference(figures: FitFigures) -> tuple:
+    """How a conversion that fits ranks: no instrument frame first, then the least turned frame
+    (to :data:`TURN_RESOLUTION`), then the smaller chi-square per degree of freedom."""
+    return (figures.frame_estimated, round(figures.frame_turn / TURN_RESOLUTION), figures.chi2_dof)
+
+
 def _conversions(problem: _Problem, joints, measured, written: FitFigures, counter: list) -> dict:
     """Screen every conversion on a subset of rows; fit on all rows the best :data:`SCREEN_KEEP`
     of those within :data:`MIN_IMPROVEMENT` times the smaller of the best screened chi-square per
@@ -439,14 +560,18 @@ def _conversions(problem: _Problem, joints, measured, written: FitFigures, count
     screened.sort(key=lambda cf: cf[1].chi2_dof)
     best = screened[0][1].chi2_dof if screened else float("inf")
     window = MIN_IMPROVEMENT * max(1.0, min(written.chi2_dof, best))
+    # Of those within the window, the ones that fit as they are (no frame, or the least turned)
+    # first: with a frame every mirror image of positions fits, and the screen's chi-squares
+    # differ by the frame's degrees of freedom alone.
+    within = sorted([cf for cf in screened if cf[1].chi2_dof <= window], key=lambda cf: _preference(cf[1]))
     named = []
-    for conv, _ in [cf for cf in screened if cf[1].chi2_dof <= window][:SCREEN_KEEP]:
+    for conv, _ in within[:SCREEN_KEEP]:
         q, m = conv.apply(joints, measured)
         figures = _figures(problem, q, m)
         counter[0] += 1
         if _named(written, figures):
             named.append((conv, figures))
-    named.sort(key=lambda cf: (cf[1].frame_estimated, cf[1].chi2_dof))
+    named.sort(key=lambda cf: _preference(cf[1]))
     return {"screened": tuple((c.name, f.chi2_dof) for c, f in screened), "named": named}
 
 
@@ -504,9 +629,14 @@ def _unexplained(problem: _Problem, joints, measured, written: FitFigures, scree
                         "out, or noise declared too small")}
 
 
-def _fit_words(robot: Robot, written: FitFigures) -> str:
+def _fit_words(robot: Robot, written: FitFigures, tolerance: np.ndarray) -> str:
     if written.plausible:
         return f"the data fit the {robot.name} at the declared noise ({written.words()}): nothing wrong"
+    pattern = [] if written.fit is None else description_pattern(robot, written.fit.result.errors, tolerance)
+    if pattern:
+        return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()}, and "
+                f"the fitted errors are a pattern of the description, not physics: {pattern[0]['words']}: the "
+                "nominal geometry described seems to be another machine's")
     return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()} "
             f"(chi-square {written.chi2_dof:.3g} per degree of freedom) and no conversion "
             "of the file fits better: an offset the geometry absorbs (a capture body mounted turned on the "
@@ -541,7 +671,7 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
     counter = [1]
     written = _figures(problem, joints, measured)
     if written.fits and written.plausible:
-        return Diagnosis("none", _fit_words(robot, written), written, fits=1, seconds=time.perf_counter() - t0)
+        return Diagnosis("none", _fit_words(robot, written, problem.tolerance), written, fits=1, seconds=time.perf_counter() - t0)
     found = _conversions(problem, joints, measured, written, counter)
     if found["named"]:
         conv, figures = found["named"][0]
@@ -551,7 +681,7 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
         return Diagnosis("conversion", message, written, conv, figures, tuple(c.name for c, _ in found["named"][1:]),
                          screened=found["screened"], fits=counter[0], seconds=time.perf_counter() - t0)
     if written.fits:
-        return Diagnosis("none", _fit_words(robot, written), written, screened=found["screened"], fits=counter[0],
+        return Diagnosis("none", _fit_words(robot, written, problem.tolerance), written, screened=found["screened"], fits=counter[0],
                          seconds=time.perf_counter() - t0)
     verdict = _unexplained(problem, joints, measured, written, found["screened"], counter, gross)
     return Diagnosis(written=written, screened=found["screened"], fits=counter[0],

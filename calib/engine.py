@@ -144,6 +144,16 @@ class IdentificationResult:
         out.update({self.robot.table.names[i]: str(v) for i, v in zip(idx, src)})
         return out
 
+    def directions_determined(self) -> float | None:
+        """How many of the free parameters' directions the rows determine, singly or in
+        combinations: MacKay's effective number of parameters ``trace(I - S^-1 Sigma_post)``
+        (``S`` the prior's covariance, ``Sigma_post`` the posterior's), between 0 (the prior
+        alone) and the number of free parameters. None without a prior."""
+        if self.prior is None:
+            return None
+        idx = self.free_indices
+        return float(np.sum(1.0 - np.diag(self.covariance)[idx] / self.prior.std[idx] ** 2))
+
     def determination(self) -> dict[str, dict]:
         """JSON-ready, per parameter: ``{name: {"value", "error", "posterior_std", "prior_std",
         "source", "unit"}}`` (parameter units; ``prior_std`` None without a prior, both stds 0 for a

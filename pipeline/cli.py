@@ -11,7 +11,7 @@ import argparse
 import sys
 
 from calib.noise import SensorNoise
-from pipeline.formats import one_line
+from pipeline.formats import forget_created_folders, one_line, take_back_created_folders
 
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
            "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments",
@@ -28,20 +28,26 @@ class UsageError(ValueError):
 
 
 def cli_main(run, argv: list[str] | None = None) -> int:
-    """``run(argv)``, with refusals turned into one line on stderr and exit status 2."""
+    """``run(argv)``, with refusals turned into one line on stderr and exit status 2; a refused or
+    interrupted command leaves no output folder it created (those still empty are removed)."""
+    forget_created_folders()
     try:
         run(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2, already printed)
+        take_back_created_folders()
         if isinstance(exc.code, str):
             print(f"error: {' '.join(exc.code.split())}", file=sys.stderr)
             return EXIT_USAGE
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
     except KeyboardInterrupt:
+        take_back_created_folders()
         print("error: interrupted; nothing was written", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (ValueError, KeyError, FileExistsError, OSError) as exc:
+        take_back_created_folders()
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
+    forget_created_folders()
     return 0
 
 

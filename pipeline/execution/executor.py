@@ -43,7 +43,8 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 
 __all__ = ["BLAS_ENV", "THREADS_VAR", "WORKER_ENV", "dask_client", "run_tasks", "default_workers", "worker_count",
-           "runs_here", "ProgressDisplay", "available_cores", "interrupts_ignored"]
+           "runs_here", "ProgressDisplay", "available_cores", "interrupts_ignored", "quiet_shutdown",
+           "SHUTDOWN_LOGGERS"]
 
 logger = logging.getLogger(__name__)
 
@@ -96,8 +97,11 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
             client = Client(scheduler)
         except (OSError, ValueError) as exc:  # unreachable (a timeout is an OSError), or not an address
             raise ValueError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler: {exc}") from None
-        with client:
+        try:
             yield client
+        finally:
+            with quiet_shutdown():
+                client.close()
         return
     workers = worker_count(workers)
     saved = dict(os.environ)
@@ -106,12 +110,61 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         with dask.config.set(environ), interrupts_ignored():
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
-        with cluster, Client(cluster) as client:
+        try:
+            client = Client(cluster)
+        except BaseException:
+            with quiet_shutdown():
+                cluster.close()
+            raise
+        try:
             yield client
+        finally:
+            with quiet_shutdown():
+                client.close()
+                cluster.close()
     finally:
         for k in set(os.environ) - set(saved):
             os.environ.pop(k, None)
         os.environ.update(saved)
+
+
+def _comm_closed(record: logging.LogRecord) -> bool:
+    """The record tells of a connection closed under a closing cluster (distributed's ``CommClosedError``)."""
+    exc = record.exc_info[1] if record.exc_info else None
+    return type(exc).__name__ == "CommClosedError" or "CommClosedError" in record.getMessage()
+
+
+class _DropCommClosed(logging.Filter):
+    """Drops :func:`_comm_closed` records (asyncio's "Task exception was never retrieved", tornado's
+    "Exception in callback"): they come after a finished job's cluster closed, and say nothing."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not _comm_closed(record)
+
+
+#: The loggers whose own records may carry a closed connection's traceback after the cluster closed.
+SHUTDOWN_LOGGERS = ("asyncio", "tornado.application", "distributed")
+
+
+@contextlib.contextmanager
+def quiet_shutdown():
+    """Close a finished job's cluster without a traceback: errors logged while the block runs are
+    not shown (a connection closed under the closing cluster, ``CommClosedError``, once in a while
+    under load), nor, afterwards, a late report of one (:class:`_DropCommClosed` stays on
+    :data:`SHUTDOWN_LOGGERS`); a ``CommClosedError`` raised by the closing is swallowed."""
+    for name in SHUTDOWN_LOGGERS:
+        log = logging.getLogger(name)
+        if not any(isinstance(f, _DropCommClosed) for f in log.filters):
+            log.addFilter(_DropCommClosed())
+    previous = logging.root.manager.disable
+    logging.disable(logging.ERROR)
+    try:
+        yield
+    except Exception as exc:  # noqa: BLE001 - only a closed connection is swallowed
+        if type(exc).__name__ != "CommClosedError":
+            raise
+    finally:
+        logging.disable(previous)
 
 
 @contextlib.contextmanager

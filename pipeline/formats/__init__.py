@@ -12,7 +12,9 @@ from .linuxcnc import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, check_export
                        rotarydelta_hal_text, write_export_folder)
 from .lab_export import LabExportError, LabMap, convert_lab_files, joint_readings, read_map, session_joint_mapping
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
-                      one_line, output_folder, publish, remove_stale_temporaries, writing)
+                      forget_created_folders, make_folder, one_line, output_folder, publish,
+                      remove_dead_writers_temporaries, remove_stale_temporaries, take_back_created_folders,
+                      temporary_file, writing)
 from .targets import Targets, TargetsError, read_targets
 from .report import Report, build_report
 from .report_html import render_html, write_report
@@ -27,7 +29,8 @@ __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "
            "session_joint_mapping", "row_words", "row_message", "plausibility", "recording_checks", "RecordingChecks",
            "LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv",
            "read_command_file", "write_command_file", "check_outputs", "one_line", "FileLock", "LockHeld",
-           "NameReservation", "remove_stale_temporaries", "OutputError", "ResultSet", "atomic_write",
+           "NameReservation", "remove_stale_temporaries", "remove_dead_writers_temporaries", "temporary_file",
+           "make_folder", "forget_created_folders", "take_back_created_folders", "OutputError", "ResultSet", "atomic_write",
            "output_folder", "publish", "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS",
            "SIDECAR_FIELDS", "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES",
            "Calibration", "CalibrationFileError", "read_calibration", "write_calibration", "calibration_text",

@@ -128,13 +128,20 @@ def _check_joint_range(rec: Recording, path: Path) -> str | None:
     if far.any():
         other = "metres" if unit == "mm" else "degrees"
         scaled = q * 1000.0 if unit == "mm" else np.deg2rad(q)
-        if out.all(axis=1).any() and not ((scaled < limits[:, 0]) | (scaled > limits[:, 1])).any():
+        far_rows = np.flatnonzero(far.any(axis=1))
+        # Another unit only where most rows are out and every value fits the range once converted;
+        # a few rows far out are those rows' readings, named with them.
+        if 2 * far_rows.size > len(q) and not ((scaled < limits[:, 0]) | (scaled > limits[:, 1])).any():
+            r, c = np.argwhere(far)[0]
             raise RecordingError(f"{path}: columns {', '.join(joint_cols)}: the joint values seem to be in "
-                                 f"{other} (e.g. {q[0, 0]:.6g}), a recording holds {unit}")
+                                 f"{other} ({far_rows.size} of {len(q)} rows are outside the range, e.g. row {r + 1}, "
+                                 f"{joint_cols[c]} = {q[r, c]:.6g}), a recording holds {unit}")
         r, c = np.argwhere(far)[0]
+        others = "" if far_rows.size == 1 else \
+            f"; out of range too: rows {_rows_in_words(far_rows[1:])} ({far_rows.size} of {len(q)} rows)"
         raise RecordingError(f"{_row(path, r)}, column {joint_cols[c]!r}: {q[r, c]:.6g} {unit} is outside the "
                              f"range [{limits[c, 0]:.6g}, {limits[c, 1]:.6g}] {unit} {source} by "
-                             f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it")
+                             f"more than the tolerance {tol[c]:.3g} {unit}: the machine cannot reach it{others}")
     past = np.maximum(limits[:, 0] - q, q - limits[:, 1])
     r, c = np.unravel_index(np.argmax(np.where(out, past, -np.inf)), q.shape)
     cols = [joint_cols[j] for j in np.flatnonzero(out.any(axis=0))]

@@ -7,12 +7,101 @@ complete; an existing file is never replaced unless asked to (``--overwrite``).
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
+import re
 import tempfile
 from pathlib import Path
 
 __all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line",
-           "FileLock", "LockHeld", "remove_stale_temporaries", "NameReservation"]
+           "FileLock", "LockHeld", "remove_stale_temporaries", "remove_dead_writers_temporaries", "temporary_file",
+           "make_folder", "forget_created_folders", "take_back_created_folders", "NameReservation"]
+
+
+#: Folders this process created for its outputs since :func:`forget_created_folders`, outermost
+#: first: a refused command takes them back (:func:`take_back_created_folders`).
+CREATED_FOLDERS: list[Path] = []
+
+
+def make_folder(folder: str | Path) -> Path:
+    """``folder`` created with its missing parents, each one created noted in
+    :data:`CREATED_FOLDERS` (for a refused command to take back).
+
+    Raises:
+        OSError: it cannot be created.
+    """
+    folder = Path(folder)
+    missing = []
+    f = folder
+    while not f.exists() and f != f.parent:
+        missing.append(f)
+        f = f.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    CREATED_FOLDERS.extend(reversed(missing))
+    return folder
+
+
+def forget_created_folders() -> None:
+    """Start noting the folders created anew (a command's start, or its success)."""
+    CREATED_FOLDERS.clear()
+
+
+def take_back_created_folders() -> list[Path]:
+    """Remove the folders noted in :data:`CREATED_FOLDERS` that are still empty, innermost
+    first (a refused or interrupted command leaves no folder it created); returns those removed."""
+    removed = []
+    for folder in reversed(CREATED_FOLDERS):
+        try:
+            folder.rmdir()
+        except OSError:  # not empty (or gone): it stays
+            continue
+        removed.append(folder)
+    CREATED_FOLDERS.clear()
+    return removed
+
+
+def temporary_file(path: str | Path, suffix: str = ".tmp") -> Path:
+    """A new hidden temporary file beside ``path``, named ``.{name}.{pid}-XXXXXXXX{suffix}``: the
+    writer's process id in the name lets a later writer of ``path`` remove what a killed one left
+    (:func:`remove_dead_writers_temporaries`). Temporaries of writers no longer running are removed first."""
+    path = Path(path)
+    remove_dead_writers_temporaries(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}-", suffix=suffix)
+    os.close(fd)
+    return Path(tmp)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process, or signals not allowed: it runs
+        return True
+    return True
+
+
+def remove_dead_writers_temporaries(path: str | Path) -> list[Path]:
+    """Remove the hidden temporaries of ``path`` (:func:`temporary_file`'s ``.{name}.{pid}-*.tmp``
+    and ``.bak``) whose writer is no longer running (a killed command's); those of a running
+    writer stay. Returns those removed."""
+    path = Path(path)
+    pattern = re.compile(rf"\.{re.escape(path.name)}\.(\d+)-[^.]*\.(tmp|bak)")
+    removed = []
+    try:
+        entries = list(path.parent.glob(f".{glob.escape(path.name)}.*"))
+    except OSError:
+        return removed
+    for entry in entries:
+        found = pattern.fullmatch(entry.name)
+        if found is None or int(found.group(1)) == os.getpid() or _running(int(found.group(1))):
+            continue
+        try:
+            entry.unlink()
+        except OSError:
+            continue
+        removed.append(entry)
+    return removed
 
 
 def _exists_message(path: Path) -> str:
@@ -59,9 +148,8 @@ def writing(path: str | Path, *, overwrite: bool = False):
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(_exists_message(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
+    make_folder(path.parent)
+    tmp = temporary_file(path)
     try:
         yield Path(tmp)
         publish(tmp, path, overwrite=overwrite)
@@ -95,7 +183,7 @@ def output_folder(out: str | Path) -> Path:
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out}: is a file, not a folder")
     try:
-        out.mkdir(parents=True, exist_ok=True)
+        make_folder(out)
     except OSError as exc:
         raise OutputError(f"--out {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out
@@ -122,6 +210,7 @@ class ResultSet:
         self.paths = {k: Path(v) for k, v in paths.items()}
         self.overwrite = overwrite
         self._tmp: dict[str, Path] = {}
+        self._withdrawn: list[Path] = []  # dropped outputs whose earlier files publish removes (overwrite)
         try:
             self._check(flags or {}, create_folders)
         except BaseException:
@@ -139,18 +228,16 @@ class ResultSet:
             folder = path.parent
             if create_folders and not folder.exists():
                 try:
-                    folder.mkdir(parents=True, exist_ok=True)
+                    make_folder(folder)
                 except OSError as exc:
                     raise OutputError(f"{who}: cannot create the folder {folder}: {exc.strerror or exc}") from None
             if not folder.is_dir():
                 raise OutputError(f"{who}: the folder {folder} does not exist" if not folder.exists() else
                                   f"{who}: {folder} is not a folder")
             try:  # the real test of writability (permissions, read-only file systems)
-                fd, probe = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+                self._tmp[key] = temporary_file(path)
             except OSError as exc:
                 raise OutputError(f"{who}: cannot write in the folder {folder}: {exc.strerror or exc}") from None
-            os.close(fd)
-            self._tmp[key] = Path(probe)
 
     def temp(self, key: str) -> Path:
         """The temporary file that becomes ``paths[key]`` on :meth:`publish`."""
@@ -160,13 +247,16 @@ class ResultSet:
         """Move every temporary file into place, all or none."""
         done: list[tuple[Path, Path | None]] = []
         try:
+            for path in self._withdrawn:  # an earlier run's file of an output this one does not write
+                if path.exists():
+                    backup = temporary_file(path, ".bak")
+                    os.replace(path, backup)
+                    done.append((path, backup))
             for key, path in self.paths.items():
                 backup = None
                 if self.overwrite and path.exists():
-                    fd, b = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".bak")
-                    os.close(fd)
-                    os.replace(path, b)
-                    backup = Path(b)
+                    backup = temporary_file(path, ".bak")
+                    os.replace(path, backup)
                 try:
                     publish(self._tmp[key], path, overwrite=self.overwrite)
                 except BaseException:
@@ -187,10 +277,14 @@ class ResultSet:
 
     def drop(self, key: str) -> None:
         """Leave ``paths[key]`` out of this set (an optional output not needed after all): its
-        temporary file is removed and :meth:`publish` skips it."""
+        temporary file is removed and :meth:`publish` skips it; with ``overwrite`` an earlier file
+        there is removed when the set is published (the outputs of a name are replaced together:
+        no earlier run's file is left beside the new ones), restored if publishing fails."""
         tmp = self._tmp.pop(key)
-        self.paths.pop(key)
+        path = self.paths.pop(key)
         tmp.unlink(missing_ok=True)
+        if self.overwrite:
+            self._withdrawn.append(path)
 
     def discard(self) -> None:
         """Remove the temporary files that were not published."""

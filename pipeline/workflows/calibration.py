@@ -18,7 +18,7 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from calib import paper
-from calib.evidence import ToleranceEstimate, tolerance_from_data
+from calib.evidence import MIN_DETERMINED, ToleranceEstimate, tolerance_from_data
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
 from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
     measured_gauge_representative, measurement_residuals, measurement_settings
@@ -1008,6 +1008,12 @@ def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: R
     ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS, mean,
     max) and ``crossvalidation``."""
     rows = ident.used
+    if rows.size < 2:  # nothing to predict a row from: said in words, not as the folds' bounds
+        total = len(inp.rec.sets)
+        what = "the recording holds one data row" if total == 1 else \
+            f"of its {total} rows one calibration row is left to fit once the gross rows are out"
+        raise ValueError(f"{inp.where}: {what}: a calibration is judged by predicting rows it did not use, and one "
+                         "row leaves none (add validation rows, or measure more poses spread over the workspace)")
     if ident.instrument is not None:
         several = inp.n_sessions > 1
         cv = crossvalidate(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, method="forward",
@@ -1104,6 +1110,10 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
                 "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
                 "predictions": check}
     block = {"diagnosis": None if diagnosis is None else diagnosis_summary(diagnosis, inp)}
+    uninformed = information_verdict(inp, ident) or description_verdict(inp, ident)
+    if uninformed is not None:
+        cause, words = uninformed
+        return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
     if success:
         words = "calibrated: the rows fit to the declared noise" + (
             f" and the {check['what']} are predicted to it" if check else "")
@@ -1113,6 +1123,59 @@ def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagno
     else:
         cause, words = likely_cause(inp, ident, evidence)
     return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
+
+
+def information_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
+    """``(cause, words)`` of a fit that learnt nothing from its rows, else None: rows that do not
+    move the machine (every calibration row used at one pose, :func:`calib.diagnosis.no_motion_words`:
+    ``"no_motion"``), or, with the tolerances as a prior, no parameter determined by the data
+    (:meth:`calib.engine.IdentificationResult.parameter_sources`: none whose posterior standard
+    deviation fell below half the prior's, none moved beyond 3 prior standard deviations:
+    ``"no_information"``), and fewer than one direction determined singly or in combinations
+    (:meth:`calib.engine.IdentificationResult.directions_determined`: a plane of poses determines
+    combinations, not single parameters). Such a fit is never a success, however well the rows fit."""
+    from calib.diagnosis import no_motion_words, same_pose_rows
+
+    robot, result = inp.robot, ident.result
+    joints = inp.joints[ident.used]
+    still = no_motion_words(robot, joints, inp.noise.joint_std)
+    if still is not None:
+        return "no_motion", f"not calibrated: {still}"
+    sources = result.parameter_sources()
+    seen = result.directions_determined()
+    if seen is None or seen >= MIN_DETERMINED or any(v == "data" for v in sources.values()):
+        return None
+    free = [n for n, v in sources.items() if v != "held"]
+    same = len(same_pose_rows(robot, joints, inp.noise.joint_std))
+    rows = f"; {same} of {len(joints)} rows are the same pose" if same > 1 else ""
+    noise = inp.noise.pose_std(robot.pose_units)
+    idx = robot.table.indices(free)
+    units = np.array(robot.table.units)[idx]
+    tolerance = ", ".join(f"{np.median(result.prior.std[idx][units == u]):.3g} {u}" for u in dict.fromkeys(units))
+    return "no_information", (
+        f"not calibrated: the rows determine nothing beyond the tolerance: of the {len(free)} parameters none has "
+        f"its standard deviation below half its tolerance, none moved beyond 3 tolerances, and all together they "
+        f"determine {seen:.2g} of the {len(free)} directions (noise standard deviation "
+        f"{noise[0]:.3g} {robot.pose_units[0]} against a tolerance of {tolerance}{rows}): the geometry reported "
+        "is the prior's, not a measurement; measure more poses, spread over the workspace, or with less noise")
+
+
+def description_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
+    """``("description", words)`` where the fitted errors are a scale of the nominal geometry
+    described (:func:`calib.diagnosis.description_pattern`, against the declared tolerance or the
+    robot's default, not one learnt from these rows: the learnt one grows to hold the pattern):
+    the sidecar describes another machine; else None."""
+    from calib.diagnosis import description_pattern
+
+    robot, result = inp.robot, ident.result
+    reference = inp.tolerance if inp.tolerance_declared and inp.tolerance is not None else ParameterPrior.default(robot)
+    pattern = description_pattern(robot, result.errors, reference.std, result.free_names)
+    if not pattern:
+        return None
+    where = f" in {sidecar_name(inp.where)}" if inp.rec is not None else ""
+    return "description", (f"not calibrated: the fitted errors are a pattern of the description, not physics: "
+                           f"{'; '.join(p['words'] for p in pattern)}: the nominal geometry{where} seems to be another "
+                           "machine's; give this machine's nominal geometry")
 
 
 def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
@@ -1223,10 +1286,7 @@ def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
             + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
     sources = result.parameter_sources()
     est = inp.tolerance_estimate
-    idx = result.free_indices
-    # MacKay's effective number of parameters: trace(I - S^-1 Sigma_post), how many of the free
-    # directions the rows determine (the rest the prior holds), parameter by parameter or in combinations.
-    seen = None if inp.prior is None else float(np.sum(1.0 - np.diag(result.covariance)[idx] / inp.prior.std[idx] ** 2))
+    seen = result.directions_determined()
     return {"prior": {"used": inp.prior is not None, "source": inp.prior_source,
                       "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot),
                       "declared": inp.tolerance_declared,

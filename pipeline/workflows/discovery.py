@@ -28,6 +28,7 @@ from calib.effects.discovery import MIN_ROWS
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
+from calib.diagnosis import no_motion_words
 from mjcf.simulator import SettleError
 from calib.effects.records import effect_record, fitted_effects
 from calib.measurement import frame_from_dict
@@ -243,6 +244,9 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
     if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
         cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
+    still = no_motion_words(robot, rec.joints[cal], rec.noise.joint_std)
+    if still is not None:
+        raise ValueError(f"{still}: nothing to discover")
     tolerance, tolerance_source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
                       payload_kg=rec.extras.get(PAYLOAD_CHANNEL), tolerance=tolerance.std)
@@ -552,6 +556,9 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         rec = read_recording(settings.real)
         stem = Path(settings.real).stem
         warnings = recording_checks(rec, settings.real).warnings  # the checks every command reading a recording makes
+        still = no_motion_words(rec.robot, rec.joints, rec.noise.joint_std)
+        if still is not None:  # no geometry, so no physics, to tell from one pose
+            raise ValueError(f"{settings.real}: {still.replace('calibration rows', 'rows')}: nothing to discover")
     else:
         robot_name = settings.robot or DEFAULT_SCENARIO_ROBOT
         stem = f"{robot_name}_{'+'.join(settings.scenario)}_{settings.scenario_seed}"
