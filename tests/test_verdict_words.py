@@ -1,0 +1,71 @@
+"""The verdict agrees with its numbers (issue 37, point 2): each message form of a run on a machine
+whose errors the default tolerance cannot hold.
+
+- a parameter the fit moved far beyond its prior counts as determined by the data;
+- "the model misfits most rows" only when most rows are beyond the noise;
+- the diagnosis says a parameter's movement in its unit;
+- implausible parameters are a headline and a few lines on the terminal, the full list in the JSON.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures
+from calib.prior import MOVED_BY_DATA, parameter_sources
+from pipeline.run import IMPLAUSIBLE_LINES, print_implausible
+from pipeline.workflows.calibration import likely_cause
+
+
+def test_a_parameter_moved_far_beyond_its_prior_is_the_datas():
+    """Posterior as wide as the prior (a tight prior the rows overrule) but the estimate 28 prior
+    standard deviations away: the data's; an estimate within the bound stays the prior's; a
+    narrow posterior is the data's whatever it moved."""
+    prior = np.full(3, 0.1)
+    post = np.array([0.099, 0.099, 0.01])
+    moved = np.array([2.8, MOVED_BY_DATA * 0.1 * 0.9, 0.0])
+    assert parameter_sources(post, prior, moved).tolist() == ["data", "prior", "data"]
+    assert parameter_sources(post, prior).tolist() == ["prior", "prior", "data"]
+
+
+def _search(statistic, cutoff=22.5, message="the search's own reason"):
+    return SimpleNamespace(success=False, statistic=np.asarray(statistic, float), cutoff=cutoff, message=message)
+
+
+@pytest.mark.parametrize("beyond, cause", [(0, "gross_search_failed"), (30, "gross_search_failed"),
+                                           (61, "model_misfit"), (100, "model_misfit")])
+def test_misfits_most_rows_only_when_most_rows_misfit(beyond, cause):
+    n = 100
+    stat = np.r_[np.full(beyond, 100.0), np.full(n - beyond, 1.0)]
+    ident = SimpleNamespace(gross=_search(stat), result=SimpleNamespace(message=""))
+    inp = SimpleNamespace(where="rec.csv")
+    evidence = {"converged": True, "fit_at_noise": False, "fit_ratio": 7.5, "predictions": None}
+    got, words = likely_cause(inp, ident, evidence)
+    assert got == cause
+    if cause == "model_misfit":
+        assert f"({beyond} of {n} beyond" in words and "misfits most rows" in words
+    else:
+        assert "misfits most rows" not in words and "the search's own reason" in words and "7.5 times" in words
+
+
+def test_the_diagnosis_says_a_movement_in_its_unit():
+    figures = FitFigures(chi2=90.0, dof=100, limit=130.0, worst_parameter="P5.x",
+                         worst_tolerances=2.9 / 0.1, worst_offset=2.9, worst_unit="mm", worst_tolerance=0.1)
+    assert not figures.plausible and figures.worst_tolerances > PLAUSIBLE_TOLERANCES
+    words = figures.words()
+    assert "P5.x moved 2.9 mm from nominal (tolerance 0.1 mm)" in words
+    assert "tolerances" not in words.replace("(tolerance", "")
+
+
+def test_implausible_parameters_are_a_headline_and_a_few_lines(capsys):
+    items = [{"name": f"B{k}.y", "words": f"B{k}.y = +2 mm from nominal, 20 times its tolerance 0.1 mm"}
+             for k in range(37)]
+    print_implausible(items)
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 + IMPLAUSIBLE_LINES + 1
+    assert out[0].lstrip().startswith("implausible: 37 parameters") and "pipeline.discover" in out[0]
+    assert "34 more in the summary JSON" in out[-1]
+    assert sum("pipeline.discover" in line for line in out) == 1
