@@ -1,84 +1,21 @@
 """Writing outputs safely: atomic files, sets of files published together, the output folder.
 
 Every file is written to a temporary file beside its destination and moved into place when
-complete; an existing file is never replaced unless asked to (``--overwrite``).
+complete; an existing file is never replaced unless asked to (``--overwrite``). The single file's
+atomic write (:func:`atomic_write`, :func:`writing`, :func:`publish`) is :mod:`calib.files`' (the
+calibration file is written at calib's edge), exported here beside the rest.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
 import tempfile
 from pathlib import Path
 
+from calib.files import atomic_write, publish, writing
+
 __all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line",
            "FileLock", "LockHeld", "remove_stale_temporaries", "NameReservation"]
-
-
-def _exists_message(path: Path) -> str:
-    return f"{path} exists; pass --overwrite to replace it (refusing to overwrite it silently)"
-
-
-def publish(tmp: str | Path, path: str | Path, *, overwrite: bool = False) -> None:
-    """Move a finished temporary file into place with ordinary permissions.
-
-    Without ``overwrite`` the move is a hard link, which fails if ``path`` appeared in the
-    meantime: an existing file is never silently replaced.
-
-    Raises:
-        FileExistsError: ``path`` exists and ``overwrite`` is False.
-    """
-    path = Path(path)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
-    if overwrite:
-        os.replace(tmp, path)
-        return
-    try:
-        os.link(tmp, path)
-    except FileExistsError:
-        raise FileExistsError(_exists_message(path)) from None
-    except OSError:  # a file system without hard links
-        if path.exists():
-            raise FileExistsError(_exists_message(path)) from None
-        os.replace(tmp, path)
-    else:
-        os.unlink(tmp)
-
-
-@contextlib.contextmanager
-def writing(path: str | Path, *, overwrite: bool = False):
-    """Yield a temporary path beside ``path``; when the block succeeds, :func:`publish` it there.
-
-    Nothing is left behind on failure, and an existing file is refused up front.
-
-    Raises:
-        FileExistsError: ``path`` exists and ``overwrite`` is False.
-    """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(_exists_message(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        publish(tmp, path, overwrite=overwrite)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def atomic_write(path: str | Path, data: str | bytes, *, overwrite: bool = False) -> Path:
-    """Write text or bytes to ``path`` atomically (see :func:`writing`).
-
-    Raises:
-        FileExistsError: ``path`` exists and ``overwrite`` is False.
-    """
-    with writing(path, overwrite=overwrite) as tmp:
-        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-    return Path(path)
 
 
 class OutputError(ValueError):
