@@ -105,6 +105,20 @@ def effect_displacement(robot: Robot, theta: np.ndarray, effects, joints: np.nda
     return sum(fe.effect.joint_regressors(robot, theta, data, fe.extra) @ fe.coefficients for fe in effects)
 
 
+def _history(robot: Robot, theta, previous) -> np.ndarray | None:
+    """(2, C) commands with the history of ``previous`` (M, C), or None: the last command, after
+    a unit step in each joint's direction of its last move (no step for a joint that never moved
+    from home). What the effects follow of the past is the last command and each joint's direction
+    (:func:`calib.effects.base.motion_history`), so a long past costs two rows."""
+    if previous is None:
+        return None
+    previous = as_array(previous, "previous", (-1, robot.n_chains))
+    if len(previous) == 0:
+        return None
+    direction, _ = motion_history(robot.inverse_kinematics(theta, robot.home_pose[None])[0], previous)
+    return np.vstack([previous[-1] - direction[-1], previous[-1]])
+
+
 def _compensable(effects, t_s, channels: dict) -> tuple[list, dict]:
     """``(the effects the commands invert, {name: why not} of the others)``."""
     used, left = [], {}
@@ -143,7 +157,7 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
     n = targets.shape[0]
     times = None if t_s is None else as_array(t_s, "t_s", (n,))
     channels = dict(channels or {})
-    previous = None if previous is None else as_array(previous, "previous", (-1, robot.n_chains))
+    previous = _history(robot, theta, previous)
     used, left = _compensable(effects, times, channels)
     geometric = robot.inverse_kinematics(theta, targets)
     clock = np.zeros(n) if times is None else times  # no effect used follows it when it is None
@@ -188,7 +202,7 @@ def machine_poses(robot: Robot, theta, joints, effects=(), *, t_s=None, channels
     n = joints.shape[0]
     times = None if t_s is None else as_array(t_s, "t_s", (n,))
     channels = dict(channels or {})
-    previous = None if previous is None else as_array(previous, "previous", (-1, robot.n_chains))
+    previous = _history(robot, theta, previous)
     used, _ = _compensable(effects, times, channels)
     poses = robot.forward_kinematics(theta, joints)
     if not used or n == 0:

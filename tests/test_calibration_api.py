@@ -186,6 +186,8 @@ def test_predict_applies_a_dead_band_as_worked_out_here():
         last = q
     want = robot.forward_kinematics(cal.theta, np.array(sitting))
     np.testing.assert_allclose(cal.predict(joints), want, rtol=0, atol=1e-9)
+    # After commands already given, ending on an unchanged one: the direction carries over.
+    np.testing.assert_allclose(cal.predict(joints[5:], previous=joints[:5]), want[5:], rtol=0, atol=1e-9)
     assert np.max(np.abs(robot.forward_kinematics(cal.theta, joints) - want)) > 1e-3
 
 
