@@ -31,7 +31,7 @@ from ..noise import SensorNoise
 from ..robot import Robot
 
 __all__ = ["FOLLOWED_QUANTITIES", "PAYLOAD_CHANNEL", "SPREAD_RANGE", "orthonormal_columns", "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
-           "EffectData", "Effect", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
+           "EffectData", "Effect", "motion_history", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
 #: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
 #: time, the direction and size of each joint's last move, each joint's stroke from the centre
@@ -144,6 +144,27 @@ class EffectScenario:
     context: MachineContext
 
 
+def motion_history(start: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(direction, last_move)`` of a command sequence: each joint's direction of motion (+1
+    increasing, -1 decreasing; a command unchanged keeps the last direction, 0 before the first
+    move) and its signed change in the move that ended at each row.
+
+    Args:
+        start: (C,) the joints before the first row (the machine's home), joint unit.
+        joints: (N, C) the commands in the order taken, joint unit.
+
+    Returns:
+        (N, C) direction and (N, C) last move, joint unit.
+    """
+    q = np.asarray(joints, dtype=float)
+    last_move = q - np.vstack([np.asarray(start, dtype=float)[None], q[:-1]])
+    step = np.sign(last_move)
+    rows = np.arange(q.shape[0])[:, None]
+    moved = np.maximum.accumulate(np.where(step != 0, rows, -1), axis=0)  # the last row each joint moved
+    direction = np.where(moved >= 0, np.take_along_axis(step, np.maximum(moved, 0), axis=0), 0.0)
+    return direction, last_move
+
+
 @dataclass(frozen=True, eq=False)
 class EffectData:
     """The measurements an effect analysis works on.
@@ -210,19 +231,13 @@ class EffectData:
             object.__setattr__(self, "tolerance", tol)
         start = None
         if self.direction is None or self.last_move is None:
-            start = r.inverse_kinematics(theta, r.home_pose[None])[0]
+            direction, last_move = motion_history(r.inverse_kinematics(theta, r.home_pose[None])[0], q)
         if self.last_move is None:
-            object.__setattr__(self, "last_move", q - np.vstack([start, q[:-1]]))
+            object.__setattr__(self, "last_move", last_move)
         else:
             object.__setattr__(self, "last_move", as_array(self.last_move, "last_move", q.shape))
         if self.direction is None:
-            step = np.sign(q - np.vstack([start, q[:-1]]))
-            d = np.zeros_like(q)
-            last = np.zeros(r.n_chains)
-            for j in range(q.shape[0]):
-                last = np.where(step[j] != 0, step[j], last)  # an unchanged command keeps the last direction
-                d[j] = last
-            object.__setattr__(self, "direction", d)
+            object.__setattr__(self, "direction", direction)
         else:
             object.__setattr__(self, "direction", as_array(self.direction, "direction", q.shape))
 

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.files import read_json_file, read_text_file
 from calib.measurement import FRAME_MODES, MeasurementSettings, frame_from_dict, measurement_settings, target_names
 from calib.noise import SensorNoise
 from calib.robot import Robot
@@ -303,37 +304,6 @@ READABLE_VERSIONS = (1, FORMAT_VERSION)
 MIN_ROBOT_SIZE_MM = 5.0
 
 
-def read_text_file(path: Path, what: str, error: type[Exception] = None) -> str:
-    """The text of ``path`` (UTF-8, a byte-order mark accepted), or a one-line ``error``
-    (default :class:`RecordingError`) naming it."""
-    error = error or RecordingError
-    if path.is_dir():
-        raise error(f"{path}: is a folder, not a {what}")
-    if not path.exists():
-        raise error(f"{path}: {what} not found")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise error(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
-    if b"\0" in data:
-        raise error(f"{path}: not a text file (it holds NUL bytes): expected a {what}")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise error(f"{path}: not UTF-8 text (byte {exc.start}): expected a {what}") from None
-
-
-def read_json_file(path: Path, what: str, error: type[Exception] = None):
-    """The JSON value of ``path`` (:func:`read_text_file`), or a one-line ``error`` (default
-    :class:`RecordingError`) naming the file and the line where it is not JSON."""
-    error = error or RecordingError
-    text = read_text_file(path, what, error)
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise error(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg}): expected a {what}") from None
-
-
 def _describes(robot_name: str, description: dict) -> bool:
     """Whether ``description`` reads as a ``robot_name`` geometry."""
     try:
@@ -348,7 +318,7 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
     by :func:`_sidecar_layout`)."""
     if not json_path.exists() and not json_path.is_dir():
         raise RecordingError(f"{json_path}: sidecar not found (a recording is a CSV plus a JSON with the same stem)")
-    side = read_json_file(json_path, "JSON sidecar")
+    side = read_json_file(json_path, "JSON sidecar", RecordingError)
     _object_of_known_keys(side, SIDECAR_FIELDS, f"{json_path}: top level", f"{json_path}: unknown field(s)",
                           "the fields are")
     for key in ("format", "version", "robot", "units", "nominal_geometry", "declared_noise"):
@@ -600,7 +570,7 @@ def read_recording(csv_path: str | Path) -> Recording:
         raise RecordingError(f"{csv_path}: is a folder, not a CSV recording")
     if not csv_path.exists():
         raise RecordingError(f"{csv_path}: file not found")
-    text = read_text_file(csv_path, "CSV recording")
+    text = read_text_file(csv_path, "CSV recording", RecordingError)
     json_path = sidecar_path(csv_path)
     robot, noise, meta, side = _read_sidecar(json_path)
     joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)

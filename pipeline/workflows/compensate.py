@@ -1,16 +1,16 @@
 """Compensated commands from a calibration file, as a library function.
 
 :func:`run_compensation` does what ``python -m pipeline.compensate`` does: read the calibration
-file (:mod:`pipeline.formats.calibration_file`) and the targets (:mod:`pipeline.formats.targets`),
+file (:meth:`calib.calibration.Calibration.read`) and the targets (:mod:`pipeline.formats.targets`),
 take the targets out of the instrument's frame when asked, compute the commands
-(:func:`calib.compensation.compensated_commands`: the identified geometry, and every found effect
-the command sequence lets it invert) and write them as a command file (the targets in the base
-frame, the commands, ``t_s`` when the targets have it; with a lab's mapping file the commands
-again in its joint readings, revolutions or counts, ``reading = (joint / unit - zero) / scale`` by
-the map's ``[joints]`` (or a session's ``[sessions.NAME.joints]``); a JSON sidecar saying what was
-compensated and what not, and why). Targets outside the domain the calibration saw (the box of
-its platform poses in the base frame, and its joints' ranges) are named in warnings: the commands
-are extrapolations there.
+(:meth:`calib.calibration.Calibration.compensation`, whose commands ``Calibration.commands`` gives:
+the identified geometry, and every found effect the command sequence lets it invert) and write
+them as a command file (the targets in the base frame, the commands, ``t_s`` when the targets
+have it; with a lab's mapping file the commands again in its joint readings, revolutions or
+counts, ``reading = (joint / unit - zero) / scale`` by the map's ``[joints]`` (or a session's
+``[sessions.NAME.joints]``); a JSON sidecar saying what was compensated and what not, and why).
+Targets outside the domain the calibration saw (the box of its platform poses in the base frame,
+and its joints' ranges) are named in warnings: the commands are extrapolations there.
 """
 
 from __future__ import annotations
@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.calibration import Calibration
 from calib.compensation import Compensation, compensated_commands
 from calib.measurement import compose, invert_frame
 from calib.robot import KinematicsError
 
-from pipeline.formats import (TIME_COLUMN, Calibration, ResultSet, Targets, check_outputs, command_columns, command_csv,
-                              joint_readings, read_calibration, read_map, read_targets, row_message,
-                              session_joint_mapping, sidecar_path)
+from pipeline.formats import (TIME_COLUMN, ResultSet, Targets, check_outputs, command_columns, command_csv,
+                              joint_readings, read_map, read_targets, row_message, session_joint_mapping, sidecar_path)
 
 __all__ = ["TARGET_FRAMES", "CompensateSettings", "CompensationReport", "run_compensation", "domain_warnings",
            "controller_readings", "proof_in_the_testbed"]
@@ -177,7 +177,7 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
             (the message names the file, the key, or the row and column).
         FileExistsError: the command file exists and ``overwrite`` is off.
     """
-    cal = read_calibration(settings.calibration)
+    cal = Calibration.read(settings.calibration)
     readings, readings_about = controller_readings(cal, settings)
     out = Path(settings.out)
     if out.suffix.lower() == ".json":
@@ -185,9 +185,8 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
     check_outputs({"--out": out, "--out (sidecar)": sidecar_path(out)}, overwrite=settings.overwrite)
     tg = read_targets(settings.targets, cal.robot)
     poses, frame_words = _base_poses(cal, settings, tg.poses)
-    effects = [] if settings.geometry_only else cal.effects(channels=tg.channels)
     try:
-        comp = compensated_commands(cal.robot, cal.theta, poses, effects, t_s=tg.t_s, channels=tg.channels)
+        comp = cal.compensation(poses, tg.t_s, channels=tg.channels, geometry_only=settings.geometry_only)
     except KinematicsError as exc:
         raise ValueError(f"{row_message(exc, settings.targets, np.arange(len(poses)))}: the identified machine "
                          "cannot reach it") from None
@@ -229,7 +228,7 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     Returns:
         ``nominal``, ``geometry``, ``physics``: mean position error of the settled poses (noise-free),
         mm; ``floor``: the discovery's noise floor, mm; ``summary``: the discovery's summary;
-        ``calibration``: the :class:`pipeline.formats.Calibration` it gives;
+        ``calibration``: the :class:`calib.calibration.Calibration` it gives;
         ``compensation``: the :class:`calib.compensation.Compensation` with physics.
     """
     from pipeline.simulation import command_scenario_machine, heldout_payloads, heldout_targets
@@ -247,7 +246,7 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
         reached = command_scenario_machine(rec, commands, t_s, channels)
         return float(np.mean(np.linalg.norm((reached - targets)[:, position], axis=1)))
 
-    physics = compensated_commands(robot, cal.theta, targets, cal.effects(channels), t_s=t_s, channels=channels)
+    physics = cal.compensation(targets, t_s, channels=channels)
     geometry = compensated_commands(robot, report.discovery.geometry.theta, targets, [], t_s=t_s)
     return {"nominal": error(robot.inverse_kinematics(robot.table.nominal, targets)), "geometry": error(geometry.commands),
             "physics": error(physics.commands), "floor": report.summary["noise_floor_mm"], "summary": report.summary,

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.calibration import register_delivery
 from calib.linuxcnc import (COMP_TABLE_SIZE, FINE_FACTOR, FIT_SAMPLE, FIT_SEED,
                             accuracy_given_up, comp_tables, genhex_geometry, genhex_joints, joint_table_effects,
                             projection_errors, rotarydelta_fit, rotarydelta_joints, workspace_sample)
@@ -38,7 +39,8 @@ from pipeline.formats import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, Calib
                               write_report)
 from calib.measurement import frame_to_dict
 
-__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "export_to_mjcf", "export_report", "calibration_summary", "EXPORTERS"]
+__all__ = ["ExportSettings", "ExportReport", "run_export", "export_linuxcnc", "export_to_mjcf", "export_report",
+           "calibration_summary", "EXPORTERS", "delivery_of", "deliver_linuxcnc", "deliver_mjcf", "deliver_report"]
 
 #: Micrometres per millimetre (figures on stderr and in NOTES.md are in um).
 UM_PER_MM = 1000.0
@@ -363,6 +365,37 @@ EXPORTERS = {
     "mjcf": export_to_mjcf,
     "report": export_report,
 }
+
+
+def delivery_of(to: str):
+    """The exporter of format ``to`` as a delivery of :mod:`calib.calibration`'s registry
+    (``cal.deliver(to, out)``, ``cal.to_linuxcnc(folder)``): ``deliver(cal, out, *,
+    overwrite=False) -> ExportReport``, the files ``python -m pipeline.export --calibration
+    cal.source --to TO --out OUT`` writes.
+
+    Raises (when called):
+        ValueError: ``to`` is not a format of :data:`EXPORTERS`; for ``linuxcnc``, a
+            calibration made in memory (its export names the file it came from: write it first).
+    """
+    def deliver(cal: Calibration, out, *, overwrite: bool = False) -> ExportReport:
+        if to not in EXPORTERS:
+            raise ValueError(f"delivery {to!r}: pipeline.export has no such format ({', '.join(EXPORTERS)})")
+        if cal.source is None and to == "linuxcnc":
+            raise ValueError("--to linuxcnc: the calibration was made in memory; its export names and hashes the "
+                             "calibration file: write it (cal.write(path)) and read it back (Calibration.read(path))")
+        settings = ExportSettings(calibration=cal.source, to=to, out=Path(out), overwrite=overwrite)
+        return EXPORTERS[to](cal, settings)
+
+    deliver.__name__ = deliver.__qualname__ = f"deliver_{to}"
+    return deliver
+
+
+#: The deliveries of the entry points ``parallel_calib.deliveries`` (pyproject.toml).
+deliver_linuxcnc = delivery_of("linuxcnc")
+deliver_mjcf = delivery_of("mjcf")
+deliver_report = delivery_of("report")
+for _to in EXPORTERS:  # every format a delivery when this module is imported
+    register_delivery(_to, delivery_of(_to))
 
 
 def run_export(settings: ExportSettings) -> ExportReport:
