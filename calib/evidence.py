@@ -57,6 +57,8 @@ CONTRADICTION_FACTOR = 3.0
 #: A parameter the rows determine counts as far from nominal, in the reference tolerance's
 #: terms, beyond this many reference standard deviations.
 FAR_TOLERANCES = 3.0
+#: Smallest posterior variance, relative to the prior's, read back from a fit's covariance.
+POSTERIOR_FLOOR = 1e-12
 #: Fixed-point steps: at most this many, stopping when no factor's square moves by a relative
 #: :data:`STEP_RTOL` (the evidence is flat near its maximum: a tolerance right to a part in a
 #: million is far more than the prior needs).
@@ -221,13 +223,16 @@ def _data_information(cov0: np.ndarray, prior_std: np.ndarray, m0: np.ndarray) -
     """``(H, b)``: the data's information (K, K) and vector (K,) behind a posterior of covariance
     ``cov0`` and mean ``m0`` under the prior N(0, diag(prior_std^2)). Computed in the prior's
     scale (``C = D^-1 cov0 D^-1``, ``D = diag(prior_std)``: a well-conditioned matrix whose
-    eigenvalues lie in (0, 1]); eigenvalues of the scaled information below zero by rounding are
-    set to zero."""
+    eigenvalues lie in (0, 1], floored at :data:`POSTERIOR_FLOOR`); eigenvalues of the scaled
+    information below zero by rounding are set to zero."""
     D = prior_std
     C = cov0 / np.outer(D, D)
     C = 0.5 * (C + C.T)
     w, V = np.linalg.eigh(C)
-    w = np.clip(w, np.finfo(float).tiny, None)
+    # A direction the rows pin far below the prior (a fit declaring angles exact; a covariance
+    # whose pseudo-inverse dropped it) has a scaled variance at or near zero: it is held at
+    # POSTERIOR_FLOOR, a millionth of the prior's standard deviation, as good as exact here.
+    w = np.clip(w, POSTERIOR_FLOOR, None)
     Ps = (V / w) @ V.T                                  # scaled precision D P0 D
     Hs = Ps - np.eye(len(D))                            # scaled information D H D
     hw, hV = np.linalg.eigh(0.5 * (Hs + Hs.T))

@@ -143,3 +143,22 @@ def test_learnt_from_a_nonlinear_fit_matches_the_spread_of_the_injected_errors(n
         rms = float(np.sqrt(np.mean(errors[k] ** 2)))
         assert rms / 1.5 < tol < 1.5 * rms, (u, tol, rms)
     assert est.contradicted
+
+
+def test_a_direction_pinned_to_zero_variance_is_read_as_exact():
+    """A fit whose covariance lost a direction (the rows pin it far below the prior: angles declared
+    exact, a pseudo-inverse dropping it): the estimate stays finite and equals the one where that
+    direction is pinned at a millionth of the prior's standard deviation."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(9)
+    p = robot.n_parameters
+    J = rng.normal(size=(200, p)) * 10.0
+    J[:, 0] *= 1e9  # one direction known to 1e-10 of the prior
+    y = J @ (2.0 * rng.normal(size=p)) + rng.normal(size=200)
+    res = _linear_result(robot, J, y, np.full(p, 0.1))
+    est = tolerance_from_data(res)
+    pinned = res.covariance.copy()
+    pinned[0, :] = pinned[:, 0] = 0.0
+    res.covariance = pinned
+    est0 = tolerance_from_data(res)
+    assert np.isfinite(est0.tolerance["mm"]) and est0.tolerance["mm"] == pytest.approx(est.tolerance["mm"], rel=1e-3)
