@@ -754,7 +754,8 @@ def learn_tolerance(inp: CalibrationInput, fit) -> bool:
         return False
     try:
         estimate = tolerance_from_data(result, reference=inp.prior)
-    except (ValueError, np.linalg.LinAlgError):
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        inp.prior_source += f" (no tolerance could be learnt from the rows: {exc})"
         return False
     inp.tolerance_estimate = estimate
     if inp.tolerance_declared:
