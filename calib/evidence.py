@@ -93,6 +93,10 @@ class ToleranceEstimate:
         error: ``{name: estimated error}`` of the free parameters at the estimate (linearised MAP,
             parameter units).
         prior_units: (P,) the unit of every parameter of the robot's table.
+        noise_scale: the rows' scatter about the linearised model, in declared noise standard
+            deviations, estimated with the scale (``1 / sqrt(beta)``): about 1 when the declared
+            noise is right and the geometry explains the rows; well above 1 when physics the
+            geometry leaves out adds to the scatter (it then does not inflate the tolerance).
     """
 
     prior: ParameterPrior
@@ -106,6 +110,7 @@ class ToleranceEstimate:
     unit_of: dict = field(default_factory=dict)
     error: dict = field(default_factory=dict)
     prior_units: tuple = ()
+    noise_scale: float = 1.0
 
     @property
     def contradicted(self) -> bool:
@@ -162,7 +167,7 @@ class ToleranceEstimate:
         return {"tolerance": dict(self.tolerance), "reference_tolerance": dict(self.reference_tolerance),
                 "factor": dict(self.factor), "determined_parameters": dict(self.determined),
                 "log_evidence_gain_nats": float(self.log_evidence_gain), "contradicted": self.contradicted,
-                "wider_than_reference": list(self.wider),
+                "wider_than_reference": list(self.wider), "noise_scale": float(self.noise_scale),
                 "far_from_nominal": [{"name": n, "reference_tolerances": float(z)} for n, z in self.far],
                 "method": "empirical Bayes: the prior's scale per unit maximising the marginal likelihood of "
                           "the rows (MacKay's fixed point, the fit linearised at its solution)"}
@@ -193,13 +198,15 @@ def tolerance_from_data(result, reference: ParameterPrior | None = None) -> Tole
     sigma = np.asarray(reference.std, dtype=float)[idx]
     m0 = np.asarray(result.theta, dtype=float)[idx] - np.asarray(result.prior.mean, dtype=float)[idx]
     H, b = _data_information(cov0, fit_std, m0)
+    rows = _Rows(H=H, b=b, **_scatter(result, b, m0, fit_std))
     units = np.array([str(u) for u in robot.table.units], dtype=object)[idx]
     names = [robot.table.names[i] for i in idx]
     present = [u for u in dict.fromkeys(units)]
-    factor = _fixed_point(H, b, sigma, units, present)
-    gain = _log_evidence(H, b, sigma * _per_parameter(factor, units)) - _log_evidence(H, b, sigma)
-    m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
-    gamma = 1.0 - post_var / (sigma * _per_parameter(factor, units)) ** 2
+    factor, beta = _fixed_point(rows, sigma, units, present)
+    std_at = sigma * _per_parameter(factor, units)
+    gain = _log_evidence(rows, std_at, beta) - _log_evidence(rows, sigma, _noise_fixed_point(rows, sigma))
+    m, post_var = _posterior(rows, std_at, beta)
+    gamma = 1.0 - post_var / std_at ** 2
     determined = {u: float(np.sum(gamma[units == u])) for u in present}
     z = np.abs(m) / sigma
     seen = np.abs(m) > FAR_TOLERANCES * np.sqrt(post_var)  # the rows place it away from nominal
@@ -216,7 +223,8 @@ def tolerance_from_data(result, reference: ParameterPrior | None = None) -> Tole
                              reference_tolerance=typical, determined=determined, log_evidence_gain=float(gain),
                              far=tuple(far), unit_of=dict(zip(names, [str(u) for u in units])),
                              error=dict(zip(names, m.tolist())),
-                             prior_units=tuple(str(u) for u in robot.table.units))
+                             prior_units=tuple(str(u) for u in robot.table.units),
+                             noise_scale=float(1.0 / np.sqrt(beta)))
 
 
 def _data_information(cov0: np.ndarray, prior_std: np.ndarray, m0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -246,71 +254,107 @@ def _per_parameter(factor: dict, units: np.ndarray) -> np.ndarray:
     return np.array([factor[u] for u in units])
 
 
-def _posterior(H: np.ndarray, b: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(m, diag(A^-1))`` under the prior N(0, diag(std^2)): mean (K,) and variances (K,)."""
-    Bm = std[:, None] * H * std[None, :] + np.eye(len(std))
+@dataclass(frozen=True)
+class _Rows:
+    """The rows as the evidence sees them: the data's information ``H`` (K, K) and vector ``b``
+    (K,), ``y^T y`` of the whitened rows and their number ``n`` (less the nuisance unknowns), or
+    ``yty`` None where the fit does not say (the noise scale is then the declared one)."""
+
+    H: np.ndarray
+    b: np.ndarray
+    yty: float | None
+    n: float
+
+
+def _scatter(result, b: np.ndarray, m0: np.ndarray, fit_std: np.ndarray) -> dict:
+    """``{"yty", "n"}`` of the whitened rows behind ``result``: its chi-square holds the rows' and
+    the prior's (``|r|^2 + |m0 / sigma0|^2``); at the MAP ``y^T y = |r|^2 + b^T m0 + m0^T S0^-1 m0``."""
+    prior_term = float(np.sum((m0 / fit_std) ** 2))
+    chi2, n = float(getattr(result, "chi2", np.nan)), float(getattr(result, "dof", 0))
+    rows_chi2 = chi2 - prior_term
+    if not (np.isfinite(rows_chi2) and rows_chi2 >= 0 and n > m0.size):
+        return {"yty": None, "n": n}
+    return {"yty": rows_chi2 + float(b @ m0) + prior_term, "n": n}
+
+
+def _factor(rows: _Rows, std: np.ndarray, beta: float):
+    """``(L, Binv_scaled)``: the Cholesky factor of ``B = beta S^1/2 H S^1/2 + I`` and ``B^-1``."""
+    Bm = beta * std[:, None] * rows.H * std[None, :] + np.eye(len(std))
     L = np.linalg.cholesky(Bm)
     Linv = np.linalg.solve(L, np.eye(len(std)))
-    Binv = Linv.T @ Linv
-    m = std * (Binv @ (std * b))
+    return L, Linv.T @ Linv
+
+
+def _posterior(rows: _Rows, std: np.ndarray, beta: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(m, diag(A^-1))``, ``A = beta H + S^-1``, under the prior N(0, diag(std^2)): mean (K,)
+    and variances (K,)."""
+    _, Binv = _factor(rows, std, beta)
+    m = beta * std * (Binv @ (std * rows.b))
     return m, std ** 2 * np.diag(Binv)
 
 
-def _log_evidence(H: np.ndarray, b: np.ndarray, std: np.ndarray) -> float:
-    """``1/2 b^T A^-1 b - 1/2 log det(I + S^1/2 H S^1/2)``, the log evidence up to a constant."""
-    Bm = std[:, None] * H * std[None, :] + np.eye(len(std))
-    L = np.linalg.cholesky(Bm)
-    v = np.linalg.solve(L, std * b)
-    return float(0.5 * v @ v - np.sum(np.log(np.diag(L))))
+def _residual(rows: _Rows, m: np.ndarray) -> float:
+    """``|y - J m|^2 = y^T y - 2 b^T m + m^T H m``."""
+    return float(rows.yty - 2.0 * rows.b @ m + m @ rows.H @ m)
 
 
-def _one_unit_fixed_point(H, b, sigma) -> float:
-    """MacKay's fixed point with a single factor ``s``: in the eigenbasis of the scaled information
-    ``D H D = V diag(l) V^T`` (``c = V^T D b``) each step is ``gamma = sum s^2 l / (s^2 l + 1)``,
-    ``s^2 = s^4 sum c^2 / (s^2 l + 1)^2 / gamma``: O(K) a step after one eigendecomposition."""
-    lam, V = np.linalg.eigh(sigma[:, None] * H * sigma[None, :])
-    lam = np.clip(lam, 0.0, None)
-    c2 = (V.T @ (sigma * b)) ** 2
-    s2, (lo, hi) = 1.0, SCALE_BOUNDS
+def _log_evidence(rows: _Rows, std: np.ndarray, beta: float = 1.0) -> float:
+    """``n/2 log beta - beta/2 y^T y + beta/2 b^T m - 1/2 log det(I + beta S^1/2 H S^1/2)``, the
+    log evidence up to a constant (without ``y^T y``, at ``beta = 1``, the terms that do not
+    depend on the prior)."""
+    L, Binv = _factor(rows, std, beta)
+    m = beta * std * (Binv @ (std * rows.b))
+    out = 0.5 * beta * float(rows.b @ m) - float(np.sum(np.log(np.diag(L))))
+    if rows.yty is not None:
+        out += 0.5 * rows.n * np.log(beta) - 0.5 * beta * rows.yty
+    return float(out)
+
+
+def _beta_update(rows: _Rows, m: np.ndarray, gamma: float) -> float:
+    """MacKay's noise update ``beta = (n - gamma) / |y - J m|^2`` (1 without ``y^T y``)."""
+    if rows.yty is None:
+        return 1.0
+    res = _residual(rows, m)
+    return float(np.clip((rows.n - gamma) / res, 1e-8, 1e8)) if res > 0 else 1.0
+
+
+def _noise_fixed_point(rows: _Rows, std: np.ndarray) -> float:
+    """The noise scale ``beta`` that maximises the evidence under the prior ``std`` (fixed)."""
+    beta = 1.0
     for _ in range(MAX_STEPS):
-        shrink = 1.0 / (s2 * lam + 1.0)
-        gamma = float(np.sum(s2 * lam * shrink))
-        if gamma < MIN_DETERMINED:
-            return 1.0
-        new = float(np.clip(s2 * s2 * np.sum(c2 * shrink ** 2) / gamma, lo * lo, hi * hi))
-        moved = abs(new / s2 - 1.0)
-        s2 = new
+        m, post_var = _posterior(rows, std, beta)
+        new = _beta_update(rows, m, float(np.sum(1.0 - post_var / std ** 2)))
+        moved, beta = abs(new / beta - 1.0), new
         if moved < STEP_RTOL:
             break
-    return float(np.sqrt(s2))
+    return beta
 
 
-def _fixed_point(H, b, sigma, units, present) -> dict:
-    """MacKay's fixed point for one factor per unit (see the module's docstring)."""
-    if len(present) == 1:
-        return {present[0]: _one_unit_fixed_point(H, b, sigma)}
-    factor = dict.fromkeys(present, 1.0)
+def _fixed_point(rows: _Rows, sigma, units, present) -> tuple[dict, float]:
+    """MacKay's fixed point for one factor per unit and the noise scale ``beta`` (see the
+    module's docstring): ``(factor, beta)``."""
+    factor, beta = dict.fromkeys(present, 1.0), 1.0
     lo, hi = SCALE_BOUNDS
     for _ in range(MAX_STEPS):
-        m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
-        prior_var = (sigma * _per_parameter(factor, units)) ** 2
-        gamma = 1.0 - post_var / prior_var
+        std = sigma * _per_parameter(factor, units)
+        m, post_var = _posterior(rows, std, beta)
+        gamma = 1.0 - post_var / std ** 2
         new = {}
         for u in present:
             k = units == u
             g = float(np.sum(gamma[k]))
-            if g < MIN_DETERMINED:
-                new[u] = 1.0 if factor[u] == 1.0 else factor[u]
-                continue
-            new[u] = float(np.clip(np.sqrt(np.sum((m[k] / sigma[k]) ** 2) / g), lo, hi))
-        moved = max(abs(new[u] / factor[u] - 1.0) for u in present)
-        factor = new
+            new[u] = factor[u] if g < MIN_DETERMINED else float(np.clip(np.sqrt(np.sum((m[k] / sigma[k]) ** 2) / g),
+                                                                        lo, hi))
+        new_beta = _beta_update(rows, m, float(np.sum(gamma)))
+        moved = max([abs(new[u] / factor[u] - 1.0) for u in present] + [abs(new_beta / beta - 1.0)])
+        factor, beta = new, new_beta
         if moved < STEP_RTOL:
             break
     # A unit the rows leave undetermined at the estimate keeps the reference's scale.
-    m, post_var = _posterior(H, b, sigma * _per_parameter(factor, units))
-    gamma = 1.0 - post_var / (sigma * _per_parameter(factor, units)) ** 2
+    std = sigma * _per_parameter(factor, units)
+    _, post_var = _posterior(rows, std, beta)
+    gamma = 1.0 - post_var / std ** 2
     for u in present:
         if float(np.sum(gamma[units == u])) < MIN_DETERMINED:
             factor[u] = 1.0
-    return factor
+    return factor, beta

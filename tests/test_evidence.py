@@ -162,3 +162,30 @@ def test_a_direction_pinned_to_zero_variance_is_read_as_exact():
     res.covariance = pinned
     est0 = tolerance_from_data(res)
     assert np.isfinite(est0.tolerance["mm"]) and est0.tolerance["mm"] == pytest.approx(est.tolerance["mm"], rel=1e-3)
+
+
+def test_noise_wider_than_declared_goes_to_the_noise_scale_not_the_tolerance():
+    """Rows whose scatter is 4 times the declared noise (physics left out, or noise declared too
+    small): the scale and the noise are estimated together, each at the exact evidence's maximum
+    over a grid of both (the rows' space, written here)."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(21)
+    p, n = robot.n_parameters, 300
+    J = rng.normal(size=(n, p)) * 3.0
+    y = J @ (0.5 * rng.normal(size=p)) + 4.0 * rng.normal(size=n)
+    res = _linear_result(robot, J, y, np.full(p, 0.1))
+    d = res.theta - res.prior.mean
+    res.chi2 = float(np.sum((y - J @ d) ** 2) + np.sum((d / 0.1) ** 2))  # the rows' and the prior's, as a fit's
+    res.dof = n
+    est = tolerance_from_data(res)
+
+    def exact(tau, noise_sd):
+        C = noise_sd ** 2 * np.eye(n) + tau ** 2 * J @ J.T
+        return -0.5 * (y @ np.linalg.solve(C, y) + np.linalg.slogdet(C)[1])
+
+    taus, sds = np.linspace(0.3, 0.8, 26), np.linspace(3.0, 5.0, 21)
+    grid = np.array([[exact(t, sd) for sd in sds] for t in taus])
+    i, j = np.unravel_index(np.argmax(grid), grid.shape)
+    assert est.tolerance["mm"] == pytest.approx(taus[i], abs=0.02)   # the grid's step
+    assert est.noise_scale == pytest.approx(sds[j], abs=0.1)
+    assert 3.5 < est.noise_scale < 4.5
