@@ -11,6 +11,7 @@ from .command_file import TIME_COLUMN, command_columns, command_csv, read_comman
 from .linuxcnc import (HAL_NAME, INI_NAME, NOTES_NAME, RECORD_NAME, check_export_folder, comp_file_name, comp_text, genhex_hal_text, kins_ini_text,
                        rotarydelta_hal_text, write_export_folder)
 from .lab_export import LabExportError, LabMap, convert_lab_files, joint_readings, read_map, session_joint_mapping
+from .lab_checks import MapReading, lab_checks, map_readings
 from .outputs import (FileLock, LockHeld, NameReservation, OutputError, ResultSet, atomic_write, check_outputs,
                       one_line, output_folder, publish, remove_stale_temporaries, writing)
 from .targets import Targets, TargetsError, read_targets
@@ -25,7 +26,7 @@ from .recording import (DEFAULT_SESSION, FORMAT, FORMAT_VERSION, MIN_ROBOT_SIZE_
 __all__ = ["Recording", "RecordingError", "read_recording", "write_recording", "recording_texts", "columns",
            "sidecar_path", "read_json_file", "session_measurement", "frame_session", "joint_readings",
            "session_joint_mapping", "row_words", "row_message", "plausibility", "recording_checks", "RecordingChecks",
-           "LabExportError", "LabMap", "convert_lab_files", "read_map", "command_columns", "command_csv",
+           "LabExportError", "LabMap", "convert_lab_files", "read_map", "lab_checks", "map_readings", "MapReading", "command_columns", "command_csv",
            "read_command_file", "write_command_file", "check_outputs", "one_line", "FileLock", "LockHeld",
            "NameReservation", "remove_stale_temporaries", "OutputError", "ResultSet", "atomic_write",
            "output_folder", "publish", "writing", "FORMAT", "FORMAT_VERSION", "READABLE_VERSIONS", "SETS",
