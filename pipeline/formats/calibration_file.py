@@ -44,7 +44,8 @@ from .outputs import atomic_write
 from .recording import read_json_file, sidecar_path
 
 __all__ = ["CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX", "Calibration", "CalibrationFileError",
-           "write_calibration", "read_calibration", "calibration_text", "recording_source", "validity_domain"]
+           "write_calibration", "read_calibration", "calibration_text", "recording_source", "validity_domain",
+           "check_plausible_parameters", "ABSURD_TOLERANCES"]
 
 #: The format's name, written and checked.
 CALIBRATION_FORMAT = "parallel-calib calibration"
@@ -52,6 +53,12 @@ CALIBRATION_FORMAT = "parallel-calib calibration"
 CALIBRATION_VERSION = 1
 #: A calibration file's name is the run's name with this suffix.
 CALIBRATION_SUFFIX = ".calibration.json"
+#: An identified parameter further from nominal than this many of the robot's manufacturing
+#: tolerances (``default_parameter_tolerance``), or than the robot's size (``length_scale_mm``;
+#: pi for an angle), is absurd: no calibration of a machine of this description gives it (a
+#: capture body mounted 2 degrees off moves the platform joints 50 tolerances; a 6-RUS motor read
+#: backwards turns its axis by pi, 600).
+ABSURD_TOLERANCES = 1000.0
 #: The keys every calibration file has.
 KEYS = ("format", "version", "robot", "nominal_geometry", "produced_by", "recording", "declared_noise", "parameters",
         "measurement_frames", "targets", "effects", "validity")
@@ -310,3 +317,34 @@ def _validity(cal: Calibration, path: Path) -> None:
     for key, n in (("pose_min", r.pose_dim), ("pose_max", r.pose_dim), ("joint_min", r.n_chains),
                    ("joint_max", r.n_chains), ("t_s", 2)):
         _numbers(_key(v, key, f"{path}: key 'validity'"), (n,), f"{path}: key 'validity.{key}'")
+
+
+def check_plausible_parameters(cal: Calibration, path) -> None:
+    """Refuse a calibration whose identified parameter is absurdly far from nominal: beyond
+    :data:`ABSURD_TOLERANCES` of the robot's manufacturing tolerance, or beyond the robot's size
+    (``length_scale_mm``; pi for an angle), whatever its standard deviation in the file.
+
+    Raises:
+        CalibrationFileError: naming the file, the parameter, its offset, its std and the limit.
+    """
+    from calib.prior import ParameterPrior
+
+    robot = cal.robot
+    table = robot.table
+    tol = ParameterPrior.from_tolerance(robot).std
+    offset = np.abs(cal.theta - table.nominal)
+    angle = np.array([u == "rad" for u in table.units])
+    size = np.where(angle, np.pi, robot.length_scale_mm)
+    limit = np.minimum(ABSURD_TOLERANCES * tol, size)
+    bad = ~(offset <= limit)
+    if not bad.any():
+        return
+    k = int(np.argmax(np.where(bad, offset / limit, -np.inf)))
+    unit, name = table.units[k], table.names[k]
+    beyond = (f"{ABSURD_TOLERANCES:.0f} tolerances ({limit[k]:.4g} {unit})" if limit[k] < size[k] else
+              ("pi rad" if angle[k] else f"the {robot.name}'s own size ({size[k]:.4g} mm)"))
+    raise CalibrationFileError(
+        f"{path}: parameter {name}: identified {cal.theta[k]:.6g} {unit}, {cal.theta[k] - table.nominal[k]:+.4g} "
+        f"{unit} from nominal ({offset[k] / tol[k]:.3g} times the {robot.name}'s tolerance {tol[k]:.3g} {unit}; its "
+        f"std in the file {cal.std[k]:.3g} {unit}): beyond {beyond}, no machine of this description: the "
+        "calibration file's parameter is implausible (recalibrate, or check the recording it came from)")

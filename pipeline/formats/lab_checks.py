@@ -36,7 +36,10 @@ from .lab_export import (ANGLE_UNITS, LENGTH_UNITS, ROTATION_DIRECTIONS, LabExpo
                          convert_lab_files)
 from .recording import Recording, frame_session, session_measurement
 
-__all__ = ["MapReading", "map_readings", "lab_checks"]
+__all__ = ["MapReading", "map_readings", "lab_checks", "TOO_FEW_ROWS"]
+
+#: How :func:`calib.measurement.identify_measured` says rows are too few to identify the unknowns.
+TOO_FEW_ROWS = "rows to identify"
 
 
 @dataclass(frozen=True, eq=False)
@@ -245,8 +248,8 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
     """
     from calib.diagnosis import compare_readings
 
-    if len(rec.t_s) < 2:
-        return []
+    robot = rec.robot
+    sessions, frame = _sessions(rec)
     readings, alternatives = {}, {}
     for reading in map_readings(lab_map):
         try:
@@ -257,10 +260,13 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
             continue
         readings[reading.name] = (other.joints, other.measured)
         alternatives[reading.name] = reading
-    sessions, frame = _sessions(rec)
     c = compare_readings(rec.robot, rec.joints, rec.measured, rec.noise, readings, frame=frame, sessions=sessions,
                          tolerance=rec.meta.get("parameter_tolerance"))
-    robot, path, written = rec.robot, lab_map.path, c.written
+    path, written = lab_map.path, c.written
+    if TOO_FEW_ROWS in written.error or (not written.error and written.dof <= 0):
+        few = written.words() if written.error else "a fit of the geometry leaves no degree of freedom"
+        return [f"{path}: {len(rec.t_s)} rows ({len(rec.t_s) * robot.pose_dim} pose values) are too few to check the "
+                f"map's units and conventions against the {robot.name} ({few}): converted as written, unchecked"]
     as_read = written.words() if written.error else f"{_residual_words(robot, written)}; {written.words()}"
     if c.named:
         r, f = alternatives[c.named[0]], c.figures[c.named[0]]
