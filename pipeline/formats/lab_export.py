@@ -20,8 +20,9 @@ The map says which lab column is which joint and pose coordinate and how to conv
 * ``[orientation]`` (robots whose pose has angles) ``kind`` ``"quaternion"`` (``scalar``
   ``"first"`` | ``"last"``) | ``"matrix"`` (9 columns, ``order`` ``"row"`` (R11 R12 R13 R21 ...) |
   ``"column"``) | ``"euler"`` (``sequence``: SciPy's, lowercase = fixed axes, uppercase = moving
-  axes; the project's own is ``"xyz"``; ``unit`` ``"rad"`` | ``"deg"``), ``columns``; the rotation
-  maps platform-frame vectors to the instrument's frame;
+  axes; the project's own is ``"xyz"``; ``unit`` ``"rad"`` | ``"deg"``), ``columns``; ``rotation``
+  ``"platform_to_instrument"`` (default: the rotation maps platform-frame vectors to the
+  instrument's frame) | ``"instrument_to_platform"`` (the inverse: a quaternion's conjugate);
 * ``[joints]`` ``columns`` (one per chain), ``reading`` ``"value"`` | ``"counts"`` |
   ``"revolutions"``, ``unit`` (of ``scale`` and ``zero``, or of the value: a length unit for
   length joints, ``"rad"`` | ``"deg"`` for angle joints; default the robot's), ``scale`` (per count
@@ -43,7 +44,9 @@ The map says which lab column is which joint and pose coordinate and how to conv
   ``scale``, ``zero``) that differ for that session's file, each overriding ``[joints]``'s.
 
 Every key is checked (an unknown one is named); every fault of a lab file names the file, the
-row (1-based data row and its line) and the column.
+row (1-based data row and its line) and the column. The converted data are then checked on
+evidence against the nominal machine, with one key changed at a time
+(:mod:`pipeline.formats.lab_checks`): a unit or convention key the data prove wrong is named.
 """
 
 from __future__ import annotations
