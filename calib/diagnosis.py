@@ -60,7 +60,7 @@ __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diag
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
            "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
            "SAME_POSE_STDS", "SAME_POSE_FRACTION", "TURN_RESOLUTION",
-           "description_pattern", "PATTERN_FIT"]
+           "description_pattern", "PATTERN_FIT", "Comparison", "compare_readings"]
 
 #: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
 #: ``1 - FIT_ALPHA`` quantile.
@@ -435,6 +435,7 @@ class _Problem:
     estimate_targets: bool | None
     tolerance: np.ndarray
     free: np.ndarray
+    sessions: np.ndarray | None = None
 
 
 def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFigures:
@@ -445,7 +446,7 @@ def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFi
            {"max_iter": FULL_ITERATIONS})
     try:
         fit = identify_measured(robot, joints, measured, problem.noise, frame=problem.frame, targets=problem.targets,
-                                estimate_targets=problem.estimate_targets, **how)
+                                estimate_targets=problem.estimate_targets, sessions=problem.sessions, **how)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # KinematicsError is a ValueError
         return FitFigures(float("inf"), 0, float("inf"), error=str(exc).split("\n")[0])
     r = fit.result
@@ -686,3 +687,79 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
     verdict = _unexplained(problem, joints, measured, written, found["screened"], counter, gross)
     return Diagnosis(written=written, screened=found["screened"], fits=counter[0],
                      seconds=time.perf_counter() - t0, **verdict)
+
+
+# --------------------------------------------------------------------------- other readings of a file
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """The data as read beside other readings of the same file (a lab's mapping with one key
+    changed: another unit, the quaternion's scalar at the other end...), judged as
+    :func:`diagnose` judges its conversions.
+
+    Attributes:
+        written: the fit of the data as read.
+        figures: ``{name: FitFigures}`` of the readings given the full fit (the best
+            :data:`SCREEN_KEEP` screened within :data:`MIN_IMPROVEMENT` times the smaller of the best
+            screened chi-square per degree of freedom and the data's as read, at least 1).
+        screened: ``((name, chi-square per degree of freedom), ...)`` of every reading's screening
+            fit, best first.
+        named: the readings the evidence names over the data as read (:func:`diagnose`'s rule:
+            they fit plausibly, and as read the data misfit by at least :data:`MIN_IMPROVEMENT`
+            times their chi-square per degree of freedom, or fit only implausibly), best first
+            (no instrument frame first, then the smallest chi-square).
+        also_fit: readings that fit plausibly while the data as read fit plausibly too: the rows
+            cannot tell them apart (weak evidence), best first.
+        fits, seconds: fits run; wall time.
+    """
+
+    written: FitFigures
+    figures: dict
+    screened: tuple
+    named: tuple
+    also_fit: tuple
+    fits: int = 0
+    seconds: float = 0.0
+
+
+def compare_readings(robot: Robot, joints, measured, noise: SensorNoise, readings: dict, *, frame="auto",
+                     sessions=None, targets=None, estimate_targets: bool | None = None,
+                     tolerance=None) -> Comparison:
+    """Judge the data as read (``joints``, ``measured``) against other readings of the same file
+    with :func:`diagnose`'s fits and rule (module doc): a screen of every reading, full fits of
+    the best, a reading named only on evidence.
+
+    Args:
+        robot, joints, measured, noise, targets, estimate_targets, tolerance: as :func:`diagnose`.
+        readings: ``{name: (joints (N, C), measured (N, D))}``, the same rows read otherwise.
+        frame: instrument frame mode, or one per session (:func:`calib.measurement.identify_measured`).
+        sessions: (N,) int, each row's session (its own instrument frame), or None: one.
+
+    Returns:
+        A :class:`Comparison`; never raises on data that cannot be fitted (their fit says why).
+    """
+    t0 = time.perf_counter()
+    joints, measured = np.array(joints, dtype=float), np.array(measured, dtype=float)
+    sessions = None if sessions is None else np.asarray(sessions, dtype=int)
+    problem = _Problem(robot, noise, frame, None if targets is None else np.asarray(targets, dtype=float),
+                       estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
+                       np.sort(robot.table.indices(robot.free_default)), sessions)
+    written = _figures(problem, joints, measured)
+    rows = _screen_rows(problem, *measured.shape)
+    if sessions is not None and len(np.unique(sessions[rows])) < len(np.unique(sessions)):
+        rows = np.arange(len(measured))  # every session keeps rows in the screen
+    sub = _Problem(robot, noise, frame, problem.targets, estimate_targets, problem.tolerance, problem.free,
+                   None if sessions is None else np.unique(sessions[rows], return_inverse=True)[1])
+    screened = sorted(((name, _figures(sub, np.asarray(q, float)[rows], np.asarray(m, float)[rows], screen=True))
+                       for name, (q, m) in readings.items()), key=lambda nf: nf[1].chi2_dof)
+    best = screened[0][1].chi2_dof if screened else float("inf")
+    window = MIN_IMPROVEMENT * max(1.0, min(written.chi2_dof, best))
+    figures = {name: _figures(problem, *(np.asarray(a, float) for a in readings[name]))
+               for name, f in [nf for nf in screened if nf[1].chi2_dof <= window][:SCREEN_KEEP]}
+    order = sorted(figures, key=lambda n: (figures[n].frame_estimated, figures[n].chi2_dof))
+    good = written.fits and written.plausible
+    return Comparison(written, figures, tuple((n, f.chi2_dof) for n, f in screened),
+                      tuple(n for n in order if _named(written, figures[n])),
+                      tuple(n for n in order if good and figures[n].fits and figures[n].plausible),
+                      fits=1 + len(screened) + len(figures), seconds=time.perf_counter() - t0)

@@ -9,6 +9,7 @@ output: exit 2 and one line naming the file and the key, or the row and column.
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pipeline.cli import ArgumentParser, cli_main
 from pipeline.workflows.convert import ConvertResult, ConvertSettings, run_convert
@@ -36,6 +37,8 @@ def run(argv: list[str] | None = None) -> ConvertResult:
     """Parse ``argv``, convert, print what was written; raises on bad input (see :func:`main`)."""
     result = run_convert(settings_from_args(build_parser().parse_args(argv)))
     rec = result.recording
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     extras = f"; extra channels {', '.join(rec.extras)}" if rec.extras else ""
     print(f"wrote {result.csv_path} and {result.json_path}: {rec.robot.name}, {len(rec.t_s)} rows in "
           f"{len(result.sessions)} session(s){extras}")

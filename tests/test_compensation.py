@@ -263,3 +263,111 @@ def test_a_compliance_found_at_two_payloads_is_compensated_at_each_targets_paylo
     targets = rec.measured[:5]
     c = compensated_commands(rec.robot, cal.theta, targets, cal.effects())
     assert "payload_kg" in c.left_out["compliance"] and c.compensated == ()
+
+
+# ----------------------------------------------------------------------------- inputs checked on evidence
+
+
+@pytest.fixture(scope="module")
+def robot_runs(tmp_path_factory):
+    """A default run of each robot: its calibration file, and targets inside what it saw (each
+    calibration row's pose pulled halfway to the middle of the box of its poses)."""
+    from pipeline.formats import read_recording
+    from pipeline.run import main as run_main
+
+    out = {}
+    for name in sorted(ROBOTS):
+        folder = tmp_path_factory.mktemp(name)
+        assert run_main(["--robot", name, "--out", str(folder), "--name", "r", "--quiet"]) == 0
+        rec = read_recording(folder / "r.csv")
+        v = read_calibration(folder / "r.calibration.json").validity
+        middle = (np.array(v["pose_min"]) + np.array(v["pose_max"])) / 2
+        out[name] = (folder, 0.5 * (rec.measured[rec.sets == "calibration"][:6] + middle))
+    return out
+
+
+def _targets_file(path, robot, poses, names=None):
+    from pipeline.formats import columns
+
+    names = list(names or columns(robot)[1])
+    path.write_text(",".join(names) + "\n" + "".join(",".join(repr(float(v)) for v in p) + "\n" for p in poses))
+    return path
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_right_targets_of_a_right_calibration_pass_without_a_warning(name, robot_runs, tmp_path, capsys):
+    folder, poses = robot_runs[name]
+    targets = _targets_file(tmp_path / "t.csv", default_robot(name), poses)
+    assert compensate_main(["--calibration", str(folder / "r.calibration.json"), "--targets", str(targets),
+                            "--out", str(tmp_path / "c.csv")]) == 0
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_an_absurd_parameter_is_named_as_the_calibration_files(name, robot_runs, tmp_path, capsys):
+    """dl1 (or the robot's first length parameter) 1000 mm off: refused naming the file and the
+    parameter, not a row of the targets."""
+    folder, poses = robot_runs[name]
+    robot = default_robot(name)
+    d = json.loads((folder / "r.calibration.json").read_text())
+    k = next(n for n, u in zip(robot.table.names, robot.table.units) if u == "mm" and n in d["parameters"]["free"])
+    d["parameters"]["by_name"][k]["identified"] += 1000.0
+    path = tmp_path / "off.calibration.json"
+    path.write_text(json.dumps(d))
+    targets = _targets_file(tmp_path / "t.csv", robot, poses)
+    assert compensate_main(["--calibration", str(path), "--targets", str(targets), "--out", str(tmp_path / "c.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    offset = d["parameters"]["by_name"][k]["identified"] - d["parameters"]["by_name"][k]["nominal"]
+    for needle in (f"{path}: parameter {k}: identified", f"{offset:+.4g} mm from nominal", "calibration file's "
+                   "parameter is implausible", "beyond"):
+        assert needle in err, (needle, err)
+    assert "t.csv" not in err and not (tmp_path / "c.csv").exists()
+
+
+TARGET_MISTAKES = {  # case: (change of the right targets, the robots, the column named, the unit it seems to be)
+    "angles in degrees": (lambda p: np.hstack([p[:, :3], np.rad2deg(p[:, 3:])]), "angles", "rad", "degrees",
+                          "times pi / 180"),
+    "positions in metres": (lambda p: np.hstack([p[:, :3] / 1000.0, p[:, 3:]]), "all", "mm", "metres", "times 1000"),
+}
+
+
+@pytest.mark.parametrize("case,name", [(c, n) for c in TARGET_MISTAKES for n in sorted(ROBOTS)
+                                       if TARGET_MISTAKES[c][1] == "all" or default_robot(n).angle_pose_mask.any()])
+def test_targets_in_the_wrong_unit_are_named_by_column_with_the_conversion(case, name, robot_runs, tmp_path, capsys):
+    folder, poses = robot_runs[name]
+    change, _, unit, seems, fix = TARGET_MISTAKES[case]
+    robot = default_robot(name)
+    wrong = change(poses)
+    targets = _targets_file(tmp_path / "t.csv", robot, wrong)
+    assert compensate_main(["--calibration", str(folder / "r.calibration.json"), "--targets", str(targets),
+                            "--out", str(tmp_path / "c.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    mask = robot.angle_pose_mask if unit == "rad" else ~robot.angle_pose_mask
+    k = int(np.argmax(np.where(mask, np.abs(wrong).max(axis=0), -np.inf)))
+    column = f"{robot.pose_names[k]}_{unit}"
+    for needle in (f"{targets}, column {column}: values up to {np.abs(wrong[:, k]).max():.4g} look like {seems}",
+                   f"as {seems} ({fix}) every target is reachable", "unreachable as written"):
+        assert needle in err, (needle, err)
+    assert not (tmp_path / "c.csv").exists()
+
+
+@pytest.mark.parametrize("name,other", [(n, o) for n in sorted(ROBOTS) for o in sorted(ROBOTS) if o != n])
+def test_targets_of_another_robot_are_refused_by_column(name, other, robot_runs, tmp_path, capsys):
+    """A calibration of one robot given another's targets: a column of the other's (its pose or
+    joint columns beyond this robot's pose columns) is refused by name, not taken as a channel."""
+    from pipeline.formats import columns
+
+    folder, poses = robot_runs[name]
+    robot = default_robot(name)
+    own = columns(robot)[1]
+    joints, theirs = columns(default_robot(other))
+    extra = [c for c in theirs if c not in own] or [joints[0]]
+    targets = _targets_file(tmp_path / "t.csv", robot, np.hstack([poses, np.zeros((len(poses), len(extra)))]),
+                            list(own) + extra)
+    assert compensate_main(["--calibration", str(folder / "r.calibration.json"), "--targets", str(targets),
+                            "--out", str(tmp_path / "c.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"column {extra[0]!r}" in err and f"the {robot.name} ({', '.join(own)})" in err, err
+    assert not (tmp_path / "c.csv").exists()

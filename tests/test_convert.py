@@ -269,6 +269,7 @@ def export_and_convert(robot, style, tmp_path):
         (tmp_path / name).write_text(text)
     result = run_convert(ConvertSettings(files=tuple(str(tmp_path / n) for n in files), map=str(tmp_path / "map.toml"),
                                          out=str(tmp_path / "out" / "converted")))
+    assert result.warnings == (), result.warnings  # a right map is not suspected: nothing refused that fits
     return rec, result.recording, bounds
 
 
@@ -750,3 +751,87 @@ def test_compensate_writes_the_commands_in_each_days_revolutions(tmp_path, capsy
     assert compensate_main(base + ["--out", str(tmp_path / "c.csv"), "--session", "march"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--session march" in err and "not a session" in err, err
+
+
+# --------------------------------------------------------------------------- the map checked on evidence
+
+#: A map key written wrong for the lab's file: (lab style, the key as the style writes it (right),
+#: as a lab might write it (wrong), the key, its wrong value, the value that fits, which robots).
+MAP_MISTAKES = {
+    "positions in mm declared m": (style_mm_degrees_euler, 'unit = "mm"', 'unit = "m"', "position.unit", "m", "mm",
+                                   "all"),
+    "positions in m declared mm": (style_metres_quaternion_revolutions, 'unit = "m"', 'unit = "mm"', "position.unit",
+                                   "mm", "m", "all"),
+    "positions in inches declared mm": (style_inches_matrix_counts_iso, 'unit = "in"', 'unit = "mm"',
+                                        "position.unit", "mm", "in", "all"),
+    "leg lengths in m declared mm": (style_inches_matrix_counts_iso, 'reading = "counts"\nunit = "m"',
+                                     'reading = "counts"\nunit = "mm"', "joints.unit", "mm", "m", "length joints"),
+    "motor angles in deg declared rad": (style_inches_matrix_counts_iso, 'reading = "counts"\nunit = "deg"',
+                                         'reading = "counts"\nunit = "rad"', "joints.unit", "rad", "deg",
+                                         "angle joints"),
+    "Euler angles in deg declared rad": (style_mm_degrees_euler, 'unit = "deg"\ncolumns', 'unit = "rad"\ncolumns',
+                                         "orientation.unit", "rad", "deg", "angles"),
+    "quaternion scalar last declared first": (style_metres_quaternion_revolutions, 'scalar = "last"',
+                                              'scalar = "first"', "orientation.scalar", "first", "last", "angles"),
+    "quaternion conjugate": (style_metres_quaternion_revolutions, 'scalar = "last"',
+                             'scalar = "last"\nrotation = "instrument_to_platform"', "orientation.rotation",
+                             "instrument_to_platform", "platform_to_instrument", "angles"),
+    "quaternion columns x and y swapped": (style_metres_quaternion_revolutions, '["QX", "QY", "QZ", "QW"]',
+                                           '["QY", "QX", "QZ", "QW"]', "orientation.columns",
+                                           ["QY", "QX", "QZ", "QW"], ["QX", "QY", "QZ", "QW"], "angles"),
+}
+
+
+def _applies(robot, which: str) -> bool:
+    return {"all": True, "angles": has_angles(robot), "length joints": robot.joint_unit == "mm",
+            "angle joints": robot.joint_unit == "rad"}[which]
+
+
+@pytest.mark.parametrize("case,name", [(c, n) for c in MAP_MISTAKES for n in sorted(ROBOTS)
+                                       if _applies(default_robot(n), MAP_MISTAKES[c][-1])])
+def test_a_map_key_the_data_prove_wrong_is_refused_by_name(case, name, tmp_path, capsys):
+    """The lab's files written independently (SciPy's rotations, units by definition), the map
+    with one key wrong: exit 2, one line naming the map, the key as written, the value that fits
+    and both fits' figures; nothing written."""
+    style, right, wrong, key, as_written, fits, _ = MAP_MISTAKES[case]
+    _, mapping, files, _ = style(default_robot(name), tmp_path)
+    assert right in mapping
+    (tmp_path / "map.toml").write_text(mapping.replace(right, wrong, 1))
+    for n, text in files.items():
+        (tmp_path / n).write_text(text)
+    code = main([str(tmp_path / n) for n in files] + ["--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    for needle in (f"{tmp_path / 'map.toml'}: key {key} = {as_written!r}", "as the map reads them the data",
+                   f"as {fits!r} they fit to RMS", "chi-square", f"did you mean {key} = {fits!r}?"):
+        assert needle in err, (needle, err)
+    assert not (tmp_path / "r.csv").exists() and not (tmp_path / "r.json").exists()
+
+
+def test_a_unit_key_is_named_with_where_it_puts_the_platform(tmp_path, capsys):
+    """The issue's case: mm declared as metres puts the hexapod's platform some 200 m from the
+    base, 1000 times where its joints put it."""
+    _, mapping, files, _ = style_mm_degrees_euler(default_robot("hexapod"), tmp_path)
+    (tmp_path / "map.toml").write_text(mapping.replace('unit = "mm"', 'unit = "m"', 1))
+    (tmp_path / "lab.csv").write_text(files["lab.csv"])
+    assert main([str(tmp_path / "lab.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    median = float(err.split("puts the platform a median ")[1].split(" m from the base")[0])
+    near = float(err.split("(the joints put it ")[1].split(" mm)")[0])
+    assert median == pytest.approx(near, rel=1e-2) and 100 < median < 1000, err
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_too_few_rows_to_judge_the_map_are_converted_with_a_warning(name, tmp_path, capsys):
+    """Rows too few for a fit of the geometry and frame: the evidence is weak, the map's units are
+    not refused (nothing that may fit is), the warning gives the figures."""
+    robot = default_robot(name)
+    _, mapping, files, _ = style_mm_degrees_euler(robot, tmp_path)
+    keep = len(robot.free_default) // robot.pose_dim - 1  # fewer pose values than the geometry's unknowns
+    lines = files["lab.csv"].splitlines(keepends=True)
+    (tmp_path / "map.toml").write_text(mapping)
+    (tmp_path / "lab.csv").write_text("".join(lines[:3 + keep]))  # preamble, header, rows
+    assert main([str(tmp_path / "lab.csv"), "--map", str(tmp_path / "map.toml"), "--out", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{keep} rows ({keep * robot.pose_dim} pose values) are too few" in err, err
+    assert "rows to identify" in err and "converted as written" in err and (tmp_path / "r.csv").exists()

@@ -20,8 +20,9 @@ The map says which lab column is which joint and pose coordinate and how to conv
 * ``[orientation]`` (robots whose pose has angles) ``kind`` ``"quaternion"`` (``scalar``
   ``"first"`` | ``"last"``) | ``"matrix"`` (9 columns, ``order`` ``"row"`` (R11 R12 R13 R21 ...) |
   ``"column"``) | ``"euler"`` (``sequence``: SciPy's, lowercase = fixed axes, uppercase = moving
-  axes; the project's own is ``"xyz"``; ``unit`` ``"rad"`` | ``"deg"``), ``columns``; the rotation
-  maps platform-frame vectors to the instrument's frame;
+  axes; the project's own is ``"xyz"``; ``unit`` ``"rad"`` | ``"deg"``), ``columns``; ``rotation``
+  ``"platform_to_instrument"`` (default: the rotation maps platform-frame vectors to the
+  instrument's frame) | ``"instrument_to_platform"`` (the inverse: a quaternion's conjugate);
 * ``[joints]`` ``columns`` (one per chain), ``reading`` ``"value"`` | ``"counts"`` |
   ``"revolutions"``, ``unit`` (of ``scale`` and ``zero``, or of the value: a length unit for
   length joints, ``"rad"`` | ``"deg"`` for angle joints; default the robot's), ``scale`` (per count
@@ -43,7 +44,9 @@ The map says which lab column is which joint and pose coordinate and how to conv
   ``scale``, ``zero``) that differ for that session's file, each overriding ``[joints]``'s.
 
 Every key is checked (an unknown one is named); every fault of a lab file names the file, the
-row (1-based data row and its line) and the column.
+row (1-based data row and its line) and the column. The converted data are then checked on
+evidence against the nominal machine, with one key changed at a time
+(:mod:`pipeline.formats.lab_checks`): a unit or convention key the data prove wrong is named.
 """
 
 from __future__ import annotations
@@ -77,7 +80,7 @@ else:  # pragma: no cover - Python 3.10 (pyproject installs tomli there)
 
 __all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "session_joint_mapping", "joint_readings",
            "LENGTH_UNITS", "ANGLE_UNITS", "TIME_UNITS", "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS",
-           "MAP_SCHEMA", "SESSION_JOINT_KEYS"]
+           "MAP_SCHEMA", "SESSION_JOINT_KEYS", "ROTATION_DIRECTIONS"]
 
 #: mm per unit of length.
 LENGTH_UNITS = {"mm": 1.0, "m": 1.0 / M_PER_MM, "in": 25.4}
@@ -89,6 +92,10 @@ TIME_FORMATS = ("seconds", "iso", "none")
 #: Orientation kinds and their number of columns.
 ORIENTATION_COLUMNS = {"quaternion": 4, "matrix": 9, "euler": 3}
 JOINT_READINGS = ("value", "counts", "revolutions")
+#: What the orientation columns' rotation maps (``[orientation] rotation``): platform-frame vectors
+#: to the instrument's frame (the default), or the inverse (a quaternion's conjugate, a matrix's
+#: transpose).
+ROTATION_DIRECTIONS = ("platform_to_instrument", "instrument_to_platform")
 #: A quaternion whose norm is further than this from 1, or a matrix further than this (largest
 #: entry of R R^T - I) from a rotation, is refused: the columns are not an orientation, or not in
 #: the declared order. Generous to a lab's rounding (4 decimals give ~1e-4).
@@ -103,7 +110,7 @@ MAP_SCHEMA = {
     "time": (True, {"format": True, "column": False, "unit": False, "origin": False}),
     "position": (True, {"columns": True, "unit": True, "offset": False}),
     "orientation": (False, {"kind": True, "columns": True, "scalar": False, "order": False, "sequence": False,
-                            "unit": False}),
+                            "unit": False, "rotation": False}),
     "joints": (True, {"columns": True, "reading": True, "unit": False, "scale": False, "zero": False}),
     "rows": (False, {"first": False, "last": False, "drop": False, "keep_column": False}),
     "set": (False, {"column": True, "calibration": True, "validation": True}),
@@ -283,6 +290,7 @@ def _check_orientation(path: Path, robot: Robot, t: dict) -> None:
         raise _fail(path, "orientation", f"the {robot.name}'s pose has no angles ({', '.join(robot.pose_names)}); "
                                          "remove [orientation]")
     kind = _choice(path, "orientation.kind", t["kind"], tuple(ORIENTATION_COLUMNS))
+    _choice(path, "orientation.rotation", t.setdefault("rotation", ROTATION_DIRECTIONS[0]), ROTATION_DIRECTIONS)
     t["columns"] = _column_names(path, "orientation.columns", t["columns"], ORIENTATION_COLUMNS[kind])
     allowed = {"quaternion": ("scalar",), "matrix": ("order",), "euler": ("sequence", "unit")}[kind]
     extra = [k for k in ("scalar", "order", "sequence", "unit") if k in t and k not in allowed]
@@ -608,13 +616,17 @@ def _times(table: LabTable, kept: np.ndarray, spec: dict) -> tuple[np.ndarray, d
 
 
 def _orientation(table: LabTable, kept: np.ndarray, spec: dict) -> np.ndarray:
-    """(N, 3) the angles ``[alpha, beta, gamma]`` of the orientation columns, rad."""
+    """(N, 3) the angles ``[alpha, beta, gamma]`` of the orientation columns, rad (of the inverse
+    rotation with ``rotation = "instrument_to_platform"``: the quaternion's conjugate, the
+    matrix's transpose)."""
     names, kind = spec["columns"], spec["kind"]
+    inverse = spec["rotation"] != ROTATION_DIRECTIONS[0]
     raw = table.numbers(kept, names, "orientation.columns")
     if kind == "euler":
         from scipy.spatial.transform import Rotation
 
-        return euler_from_matrix(Rotation.from_euler(spec["sequence"], raw * ANGLE_UNITS[spec["unit"]]).as_matrix())
+        R = Rotation.from_euler(spec["sequence"], raw * ANGLE_UNITS[spec["unit"]]).as_matrix()
+        return euler_from_matrix(np.swapaxes(R, 1, 2) if inverse else R)
     if kind == "quaternion":
         q = raw if spec["scalar"] == "first" else raw[:, [3, 0, 1, 2]]
         off = np.abs(np.linalg.norm(q, axis=1) - 1.0)
@@ -631,7 +643,9 @@ def _orientation(table: LabTable, kept: np.ndarray, spec: dict) -> np.ndarray:
                              det=np.linalg.det(R[k]) if kind == "matrix" else 0.0)
         raise LabExportError(f"{table.where(kept[k])}, columns {', '.join(names)}: {detail}; the columns must be "
                              f"the orientation (key orientation.columns) in the declared order")
-    return euler_from_quaternion(q) if kind == "quaternion" else euler_from_matrix(R)
+    if kind == "quaternion":
+        return euler_from_quaternion(q * np.array([1.0, -1.0, -1.0, -1.0]) if inverse else q)
+    return euler_from_matrix(np.swapaxes(R, 1, 2) if inverse else R)
 
 
 def joint_readings(spec: dict, robot: Robot, joints) -> np.ndarray:

@@ -9,11 +9,9 @@ calibration file is written at calib's edge), exported here beside the rest.
 from __future__ import annotations
 
 import os
-import re
-import tempfile
 from pathlib import Path
 
-from calib.files import (CREATED_FOLDERS, atomic_write, forget_created_folders, make_folder, publish,
+from calib.files import (atomic_write, forget_created_folders, make_folder, publish,
                          remove_dead_writers_temporaries, take_back_created_folders, temporary_file, writing)
 
 __all__ = ["OutputError", "output_folder", "publish", "writing", "atomic_write", "ResultSet", "check_outputs", "one_line",

@@ -3,8 +3,9 @@
 A CSV with the robot's pose columns (``x_mm, y_mm, z_mm, alpha_rad, beta_rad, gamma_rad`` for the
 hexapod: the recording's pose columns), optionally ``t_s`` (the time of each target since the
 machine started, as in a recording: what drift and warm-up compensation follow) and other numeric
-columns (recorded channels, such as ``temperature_C``, that a kept law follows). Rows are the order
-in which the targets are commanded.
+columns (recorded channels, such as ``temperature_C``, that a kept law follows; a pose or joint
+column of another robot's recordings is refused by name: targets of another machine). Rows are
+the order in which the targets are commanded.
 """
 
 from __future__ import annotations
@@ -40,6 +41,24 @@ class Targets:
     channels: dict = field(default_factory=dict)
 
 
+def _not_another_robots(path: Path, name: str, robot: Robot) -> None:
+    """Refuse column ``name`` when it is a pose or joint column of a registered robot's recordings
+    and not a pose column of ``robot``'s (targets of another machine)."""
+    from calib.robots import ROBOTS, default_robot
+
+    own = columns(robot)[1]
+    for other in sorted(ROBOTS):
+        if other == robot.name:
+            continue
+        joints, poses = columns(default_robot(other))
+        if name in poses:
+            raise TargetsError(f"{path}: line 1: column {name!r} is not a pose coordinate of the {robot.name} "
+                               f"({', '.join(own)}): it is the {other}'s; are these targets for another machine?")
+        if name in joints:
+            raise TargetsError(f"{path}: line 1: column {name!r} is a joint column (the {other}'s), not a pose "
+                               f"coordinate of the {robot.name} ({', '.join(own)}): a target file holds poses")
+
+
 def read_targets(path, robot: Robot) -> Targets:
     """Read a target file of ``robot`` (see the module docstring).
 
@@ -52,6 +71,7 @@ def read_targets(path, robot: Robot) -> Targets:
     header = header_names(path, rows[0], pose_cols, f"the {robot.name}'s pose columns", TargetsError)
     others = [h for h in header if h not in pose_cols and h != "t_s"]
     for h in others:
+        _not_another_robots(path, h, robot)
         try:
             check_channel_name(h, columns(robot))
         except ValueError as exc:

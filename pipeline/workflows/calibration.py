@@ -21,7 +21,7 @@ from calib import paper
 from calib.evidence import MIN_DETERMINED, ToleranceEstimate, tolerance_from_data
 from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
 from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
-    measured_gauge_representative, measurement_residuals, measurement_settings
+    measured_gauge_representative, measurement_residuals
 from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers

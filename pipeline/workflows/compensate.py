@@ -27,11 +27,12 @@ from calib.compensation import Compensation, compensated_commands
 from calib.measurement import compose, invert_frame
 from calib.robot import KinematicsError
 
-from pipeline.formats import (TIME_COLUMN, ResultSet, Targets, check_outputs, command_columns, command_csv,
-                              joint_readings, read_map, read_targets, row_message, session_joint_mapping, sidecar_path)
+from pipeline.formats import (TIME_COLUMN, ResultSet, Targets, TargetsError, check_outputs, check_plausible_parameters,
+                              columns, command_columns, command_csv, joint_readings, read_map, read_targets,
+                              row_message, session_joint_mapping, sidecar_path)
 
 __all__ = ["TARGET_FRAMES", "CompensateSettings", "CompensationReport", "run_compensation", "domain_warnings",
-           "controller_readings", "proof_in_the_testbed"]
+           "controller_readings", "proof_in_the_testbed", "reachable_targets", "check_target_units", "TARGET_UNITS"]
 
 #: The frames a target file may be in: the robot's base, or an instrument frame the calibration found.
 TARGET_FRAMES = ("base", "instrument")
@@ -165,6 +166,75 @@ def controller_readings(cal: Calibration, settings: CompensateSettings) -> tuple
     return (lambda commands: dict(zip(spec["columns"], joint_readings(spec, cal.robot, commands).T))), about
 
 
+#: The unit mistakes a target file is checked for: (name, the columns' kind, factor to the
+#: file's declared unit, what the columns then seem to hold).
+TARGET_UNITS = (("degrees", "angles", np.pi / 180.0, "times pi / 180"),
+                ("metres", "positions", 1000.0, "times 1000"))
+
+
+def reachable_targets(robot, theta, poses: np.ndarray) -> np.ndarray:
+    """(N,) bool: the targets (base frame) the machine ``theta`` reaches with every joint inside
+    its range."""
+    limits = robot.joint_limits()
+
+    def ok(q):
+        return np.all(np.isfinite(q) & (q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+    try:
+        return ok(robot.inverse_kinematics(theta, poses))
+    except KinematicsError:
+        out = np.zeros(len(poses), dtype=bool)
+        for k in range(len(poses)):
+            try:
+                out[k] = ok(robot.inverse_kinematics(theta, poses[k:k + 1]))[0]
+            except KinematicsError:
+                pass
+        return out
+
+
+def check_target_units(cal: Calibration, settings: CompensateSettings, written: np.ndarray,
+                       poses: np.ndarray) -> None:
+    """Refuse targets in the wrong unit, diagnosed as a recording's are: some targets (``poses``,
+    base frame, of ``written`` in the file's frame) the identified machine cannot reach, and
+    every one reachable once the angle columns are read as degrees, or the position columns as
+    metres (:data:`TARGET_UNITS`, each alone or both). Nothing is refused that is reachable as
+    written, nor where no conversion makes every target reachable (the row is named then).
+
+    Raises:
+        TargetsError: naming the target file, the column of the largest value, the conversion and
+            the counts of reachable targets.
+    """
+    robot = cal.robot
+    if len(poses) == 0:
+        return
+    as_written = reachable_targets(robot, cal.theta, poses)
+    if as_written.all():
+        return
+    angle = robot.angle_pose_mask
+    names = columns(robot)[1]
+    units = [u for u in TARGET_UNITS if u[1] == "positions" or angle.any()]
+    for chosen in [[u] for u in units] + ([units] if len(units) > 1 else []):
+        converted = np.array(written, dtype=float)
+        for _, kind, factor, _ in chosen:
+            mask = angle if kind == "angles" else ~angle
+            converted[:, mask] *= factor
+        base, _ = _base_poses(cal, settings, converted)
+        if not reachable_targets(robot, cal.theta, base).all():
+            continue
+        words = []
+        for name, kind, factor, fix in chosen:
+            mask = angle if kind == "angles" else ~angle
+            cols = [c for c, m in zip(names, mask) if m]
+            k = int(np.argmax(np.where(mask, np.abs(written).max(axis=0), -np.inf)))
+            value = float(np.abs(written[:, k]).max())
+            unit = robot.pose_units[k]
+            words.append(f"column {names[k]}: values up to {value:.4g} look like {name} (as {unit}, "
+                         f"{value:.4g} {unit}; the columns {', '.join(cols)} hold {unit})")
+        fixes = " and ".join(f"{c[0]} ({c[3]})" for c in chosen)
+        raise TargetsError(f"{settings.targets}, {'; '.join(words)}: {int((~as_written).sum())} of {len(poses)} targets "
+                           f"are unreachable as written (first row {int(np.argmin(as_written)) + 1}), and as {fixes} "
+                           f"every target is reachable by the calibrated {robot.name}")
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -178,6 +248,7 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
         FileExistsError: the command file exists and ``overwrite`` is off.
     """
     cal = Calibration.read(settings.calibration)
+    check_plausible_parameters(cal, settings.calibration)  # an absurd parameter is the calibration file's
     readings, readings_about = controller_readings(cal, settings)
     out = Path(settings.out)
     if out.suffix.lower() == ".json":
@@ -185,6 +256,7 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
     check_outputs({"--out": out, "--out (sidecar)": sidecar_path(out)}, overwrite=settings.overwrite)
     tg = read_targets(settings.targets, cal.robot)
     poses, frame_words = _base_poses(cal, settings, tg.poses)
+    check_target_units(cal, settings, tg.poses, poses)
     try:
         comp = cal.compensation(poses, tg.t_s, channels=tg.channels, geometry_only=settings.geometry_only)
     except KinematicsError as exc:

@@ -5,7 +5,9 @@ The mapping file (TOML, :mod:`pipeline.formats.lab_export`, ``docs/importer.md``
 column is which joint and pose coordinate and in which units and conventions; each input file
 becomes one session of the recording. Written: ``NAME.csv`` and ``NAME.json`` (the recording
 format, :mod:`pipeline.formats.recording`), both or neither, never over an existing file unless
-``overwrite``; the outputs are checked before any file is read.
+``overwrite``; the outputs are checked before any file is read. The converted data are checked
+on evidence against the nominal machine (:func:`pipeline.formats.lab_checks`): a map key the
+data prove wrong (another unit, the quaternion's scalar at the other end...) is refused by name.
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.formats import (Recording, ResultSet, convert_lab_files, read_map, read_recording, sidecar_path,
-                              write_recording)
+from pipeline.formats import (Recording, ResultSet, convert_lab_files, lab_checks, read_map, read_recording,
+                              sidecar_path, write_recording)
 
 __all__ = ["ConvertSettings", "ConvertResult", "run_convert", "output_paths"]
 
@@ -44,12 +46,15 @@ class ConvertResult:
         csv_path, json_path: the files written.
         recording: the recording, as read back from them.
         sessions: per session (in order) ``{"session", "file", "data_rows", "kept_rows"}``.
+        warnings: what the checks on evidence suspect of the map (:func:`pipeline.formats.lab_checks`),
+            one line each.
     """
 
     csv_path: Path
     json_path: Path
     recording: Recording
     sessions: tuple[dict, ...]
+    warnings: tuple[str, ...] = ()
 
 
 def output_paths(out: str | Path) -> tuple[Path, Path]:
@@ -64,7 +69,7 @@ def run_convert(settings: ConvertSettings) -> ConvertResult:
 
     Raises:
         LabExportError: a bad map or lab file (one line naming the file and the key, or the row
-            and column).
+            and column), or a map key the converted data prove wrong (:func:`pipeline.formats.lab_checks`).
         FileExistsError, OutputError: the outputs cannot be written (checked before any work).
     """
     csv_path, json_path = output_paths(settings.out)
@@ -74,8 +79,10 @@ def run_convert(settings: ConvertSettings) -> ConvertResult:
     with ResultSet({"csv": csv_path, "json": json_path}, overwrite=settings.overwrite,
                    flags={"csv": "--out", "json": "--out"}, create_folders=True):
         pass
-    rec = convert_lab_files(read_map(settings.map), settings.files)
+    lab_map = read_map(settings.map)
+    rec = convert_lab_files(lab_map, settings.files)
+    warnings = lab_checks(lab_map, settings.files, rec)  # refuses a map key the data prove wrong
     write_recording(csv_path, rec, overwrite=settings.overwrite)
     back = read_recording(csv_path)
     return ConvertResult(csv_path=csv_path, json_path=json_path, recording=back,
-                         sessions=tuple(back.meta["imported"]["files"]))
+                         sessions=tuple(back.meta["imported"]["files"]), warnings=tuple(warnings))
