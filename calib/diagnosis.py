@@ -455,7 +455,10 @@ def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFi
     # A movement counts where the rows place it (beyond SIGNIFICANT standard deviations): a plain
     # fit of poses that leave a combination undetermined (one plane) moves it anywhere, and that is
     # no evidence of a mistake in the file.
-    moved = np.where(offset > SIGNIFICANT * r.std[problem.free], offset / problem.tolerance[problem.free], 0.0)
+    # And only where the rows determine the parameter within the plausibility bound: an uncertainty
+    # itself beyond PLAUSIBLE_TOLERANCES tolerances cannot make a movement implausible.
+    std, tol = r.std[problem.free], problem.tolerance[problem.free]
+    moved = np.where((offset > SIGNIFICANT * std) & (std < PLAUSIBLE_TOLERANCES * tol), offset / tol, 0.0)
     worst = int(np.argmax(moved)) if moved.size else 0
     k = problem.free[worst] if moved.size else 0
     return FitFigures(chi2, int(r.dof), chi2_limit(int(r.dof)), bool(fit.frame_estimated),
