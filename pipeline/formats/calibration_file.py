@@ -30,10 +30,10 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from calib.effects.records import FittedEffect, effect_from_record
 from calib.measurement import frame_from_dict, frame_to_dict
 from calib.noise import SensorNoise
 from calib.robot import Robot
@@ -41,6 +41,9 @@ from calib.robots import ROBOTS, robot_from_description
 
 from .outputs import atomic_write
 from .recording import read_json_file, sidecar_path
+
+if TYPE_CHECKING:
+    from calib.effects.records import FittedEffect
 
 __all__ = ["CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX", "Calibration", "CalibrationFileError",
            "write_calibration", "read_calibration", "calibration_text", "recording_source", "validity_domain"]
@@ -97,6 +100,9 @@ class Calibration:
 
     def effects(self, channels: dict | None = None, where: str = "effects") -> list[FittedEffect]:
         """The effects found, rebuilt (a law's recorded ``channels`` one value per row acted on)."""
+        # Imported here: the effects' registry is for a file that has effects, not for writing one.
+        from calib.effects.records import effect_from_record
+
         return [effect_from_record(d, self.robot, channels=channels, where=f"{where}[{k}]")
                 for k, d in enumerate(self.records)]
 
