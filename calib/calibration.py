@@ -50,8 +50,9 @@ from typing import Callable
 
 import numpy as np
 
-from .compensation import Compensation, compensated_commands, machine_poses
-from .effects.records import FittedEffect, effect_from_record
+# calib.compensation and calib.effects.records (the effects' registry, SciPy's statistics behind
+# discovery) are imported where a calibration's effects are rebuilt or its commands computed:
+# writing a calibration file loads neither.
 from .files import atomic_write, read_json_file
 from .measurement import frame_from_dict, frame_to_dict
 from .noise import SensorNoise
@@ -187,8 +188,10 @@ class Calibration:
         """
         return write_calibration(path, self, overwrite=overwrite)
 
-    def effects(self, channels: dict | None = None, where: str = "effects") -> list[FittedEffect]:
+    def effects(self, channels: dict | None = None, where: str = "effects") -> list:
         """The effects found, rebuilt (a law's recorded ``channels`` one value per row acted on)."""
+        from .effects.records import effect_from_record
+
         return [effect_from_record(d, self.robot, channels=channels, where=f"{where}[{k}]")
                 for k, d in enumerate(self.records)]
 
@@ -214,7 +217,7 @@ class Calibration:
     # ------------------------------------------------------------------ the machine
 
     def compensation(self, targets, t_s=None, previous=None, *, channels: dict | None = None,
-                     geometry_only: bool = False) -> Compensation:
+                     geometry_only: bool = False):
         """The compensation of ``targets`` (:func:`calib.compensation.compensated_commands`: the
         identified geometry and every effect found that the command sequence lets it invert),
         with what was compensated and what not, and why. :meth:`commands` is its commands.
@@ -232,6 +235,8 @@ class Calibration:
         """
         channels = dict(channels or {})
         effects = [] if geometry_only else self.effects(channels=channels)
+        from .compensation import compensated_commands
+
         return compensated_commands(self.robot, self.theta, targets, effects, t_s=t_s, channels=channels,
                                     previous=previous)
 
@@ -277,6 +282,8 @@ class Calibration:
             ValueError: arrays of the wrong shape.
         """
         channels = dict(channels)
+        from .compensation import machine_poses
+
         return machine_poses(self.robot, self.theta, joints, self.effects(channels=channels), t_s=t_s,
                              channels=channels, previous=previous)
 

@@ -246,6 +246,7 @@ def test_a_run_calibration_file_reads_back_as_the_run_found_it(calibrated):
         read_calibration(calibrated / "r.calibration.json", "delta")
 
 
+@pytest.mark.slow
 def test_a_compliance_found_at_two_payloads_is_compensated_at_each_targets_payload():
     """A Delta recorded at two payloads (its compliance separates from its geometry only so): the
     calibration keeps the compliance with its payload terms and the payload they stand for (the

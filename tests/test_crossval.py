@@ -71,6 +71,7 @@ def _rms(v) -> float:
     return float(np.sqrt(np.mean(np.asarray(v) ** 2)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", NAMES)
 def test_the_crossvalidated_error_is_the_heldout_error(name, method):
@@ -295,6 +296,7 @@ def _two_session_recording(robot, seed: int):
     return [tuple(np.concatenate(part) for part in zip(*rows)) for rows in (cal, held)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_two_sessions_crossvalidated_error_is_the_heldout_error(name):
     """Two sessions, each its own instrument frame, no validation rows: the 10-fold cross-validated

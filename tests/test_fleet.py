@@ -51,6 +51,7 @@ def fleet_folder(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_folder, tmp_path, dask_two_workers,
                                                                           capsys):
     out = tmp_path / "out"
@@ -249,6 +250,7 @@ def test_a_lock_file_left_by_a_killed_fleet_blocks_nothing(fleet_folder, tmp_pat
     assert [r["status"] for r in rep.rows] == ["calibrated"] and not (out / ".fleet.lock").exists()
 
 
+@pytest.mark.slow
 def test_fleet_says_which_machines_the_model_explains(tmp_path, capsys):
     """``explained``: effect discovery on each calibrated machine, against what was injected: an
     effect of the library (named), none (geometry alone), a distortion outside the library (not

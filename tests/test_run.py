@@ -2,7 +2,10 @@
 (What every robot must do through it is in tests/test_robot_contract.py.)"""
 
 import json
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +23,48 @@ EXPECTED_ENTITIES = {
     "/parameters/chart/bars/injected", "/parameters/chart/bars/identified", "/summary", "/key",
     "/observability/singular_values", "/observability/crb_std_mm", "/observability/combinations/names",
 }
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: Modules the default run has no use for. Before issue 40 it loaded each of them (the calibration
+#: file's writer imported the effects' records, they the registry and discovery, discovery
+#: scipy.stats and with it scipy.optimize; pipeline.formats imported the lab exports' reader):
+#: 0.6 s of its 2 s.
+NOT_FOR_THE_DEFAULT_RUN = ("scipy.stats", "scipy.optimize", "calib.effects", "calib.effects.discovery",
+                           "calib.effects.records", "pipeline.formats.lab_export")
+#: ``--help`` parses no recording and runs nothing: no SciPy, MuJoCo, Rerun or calibration workflow.
+NOT_FOR_HELP = ("scipy", "mujoco", "rerun", "pipeline.workflows.calibration", "pipeline.formats.recording")
+
+
+def modules_loaded(statements: str, names, *args: str) -> dict[str, bool]:
+    """Which of the modules ``names`` a fresh Python process (this tree first on its path) has
+    loaded after running ``statements`` (``sys.argv[1:]`` = ``args``)."""
+    code = f"{statements}\nimport json\nprint(json.dumps({{n: n in sys.modules for n in {list(names)!r}}}))"
+    res = subprocess.run([sys.executable, "-c", "import sys\n" + code, *args], cwd=ROOT, capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_the_default_run_loads_no_discovery_scipy_stats_or_lab_export_reader(tmp_path):
+    loaded = modules_loaded("import pipeline.run\nassert pipeline.run.main(['--out', sys.argv[1], '--quiet']) == 0",
+                            NOT_FOR_THE_DEFAULT_RUN, str(tmp_path))
+    assert not any(loaded.values()), [n for n, yes in loaded.items() if yes]
+    assert (tmp_path / "hexapod_paper.calibration.json").exists()  # written without the effects' registry
+
+
+def test_help_loads_neither_scipy_mujoco_nor_rerun():
+    loaded = modules_loaded("import pipeline.run\ntry:\n    pipeline.run.main(['--help'])\nexcept SystemExit:\n    pass",
+                            NOT_FOR_HELP)
+    assert not any(loaded.values()), [n for n, yes in loaded.items() if yes]
+
+
+def test_the_deferred_names_still_load_their_modules():
+    """The probe sees a module loaded, and the names made lazy still resolve: reading one loads it."""
+    loaded = modules_loaded("from calib.effects import discover_effects\nfrom pipeline.formats import read_map",
+                            NOT_FOR_THE_DEFAULT_RUN[:4] + ("pipeline.formats.lab_export",))
+    assert all(loaded.values()), loaded
 
 
 @pytest.fixture(scope="module")

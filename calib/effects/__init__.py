@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 
+from ..lazy import lazy_exports
 from ..robot import Robot
 from .base import (FOLLOWED_QUANTITIES, Coefficient, Effect, EffectData, EffectScenario, MachineContext, PhysicalParameter,
                    SearchedParameter)
@@ -80,8 +81,11 @@ def effect_family(name: str | Effect) -> tuple[str, ...]:
     return tuple(([] if first.name in EFFECTS else [first.name]) + [n for n in EFFECTS if n in family])
 
 
-from .discovery import (MAX_EFFECTS, MIN_DELTA_BIC, Discovery, EffectFit, candidate_forms,  # noqa: E402
-                        closure_noise_std, discover_effect, discover_effects, fit_effect, fit_effects, locate_mismatch,
-                        outlier_scan, propose_law, regressor_correlation, remainder_tests)
+# Discovery's names are imported from it when first read: it loads scipy.stats (half a second), which
+# a command that only reads or writes found effects (the calibration file) does not need.
+_discovery_names, __getattr__, __dir__ = lazy_exports(__name__, {"discovery": (
+    "MAX_EFFECTS", "MIN_DELTA_BIC", "Discovery", "EffectFit", "candidate_forms", "closure_noise_std", "discover_effect",
+    "discover_effects", "fit_effect", "fit_effects", "locate_mismatch", "outlier_scan", "propose_law",
+    "regressor_correlation", "remainder_tests")})
 from .laws import LAW_WORDS, Law, ProposedLaw, law_effect, law_from_dict, law_to_dict, search_law  # noqa: E402
 from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form  # noqa: E402

@@ -32,7 +32,6 @@ and write to stdout, where the commands print their results).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import math
@@ -431,6 +430,8 @@ class _SchedulerProgress:
 
     @classmethod
     def start(cls, client, futures, display: ProgressDisplay) -> "_SchedulerProgress":
+        import asyncio  # imported here: every command imports this module (BLAS_ENV), few run Dask
+
         watch = cls(client, futures, display)
         display.update(0, watch.total)
         watch.future = asyncio.run_coroutine_threadsafe(watch._listen(), watch.loop)
