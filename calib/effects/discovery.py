@@ -51,7 +51,7 @@ from scipy.stats import chi2 as chi2_dist, norm
 
 from ..observability import describe_combination
 from ..robot import KinematicsError, Robot, check_joint_limits
-from . import EFFECTS, effect as registered, effect_family, effects_for, nested_in
+from .registry import EFFECTS, effect as registered, effect_family, effects_for, nested_in
 from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
 from .compliance import for_payload, payload_varies

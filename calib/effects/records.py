@@ -128,7 +128,7 @@ def effect_from_record(d: dict, robot: Robot, *, channels: dict | None = None,
         ValueError: naming ``where`` and the key: not a record, an unknown effect or granularity,
             coefficients other than the effect's, a value that is not a finite number.
     """
-    from . import EFFECTS
+    from .registry import EFFECTS
 
     if not isinstance(d, dict):
         raise ValueError(f"{where}: expected an object with keys {', '.join(RECORD_KEYS)}")
