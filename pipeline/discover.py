@@ -12,7 +12,7 @@ from pathlib import Path
 from calib.effects import EFFECTS
 from calib.robots import ROBOTS
 from pipeline.cli import ArgumentParser, cli_main, nonnegative_int
-from pipeline.views import report_lines
+from pipeline.formats.discovery_words import report_lines
 from pipeline.workflows.discovery import DiscoveryReport, DiscoverySettings, run_discovery
 
 __all__ = ["build_parser", "settings_from_args", "run", "main"]

@@ -124,3 +124,15 @@ def test_every_room_exports_what_it_names(package):
     mod = importlib.import_module(package)
     for name in mod.__all__:
         assert getattr(mod, name) is not None, f"{package}.{name}"
+
+
+def test_the_words_of_a_verdict_load_no_rerun():
+    """The discovery's and the fleet's workflows word their verdicts without Rerun (a fleet's Dask
+    workers load none): Rerun is imported only where a .rrd file is written."""
+    import subprocess
+    import sys
+
+    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.discovery_words; "
+            "print('rerun' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "False"

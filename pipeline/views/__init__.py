@@ -11,7 +11,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "run_view": ("log_calibration_run", "blueprint", "summary_markdown", "run_eye", "run_magnification"),
     "observability": ("log_observability", "log_bars", "bar_values", "log_combinations", "observability_markdown",
                       "observability_views"),
-    "discovery_view": ("model_words", "verdict_words", "report_lines", "PLOTTED_QUANTITIES", "quantity_values",
+    "discovery_view": ("PLOTTED_QUANTITIES", "quantity_values",
                        "verdict_quantity", "discovery_markdown", "write_discovery_rrd"),
     "headless": ("snapshot", "renderer_available", "viewer_executable", "SnapshotError"),
     "design_view": ("write_design_rrd", "position_columns"),

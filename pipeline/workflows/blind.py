@@ -77,7 +77,7 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.views import report_lines
+    from pipeline.formats.discovery_words import report_lines
     from pipeline.workflows.discovery import discover
 
     rep = discover(rec, seed=seed, resim=False, candidates=candidates)

@@ -37,7 +37,7 @@ from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic
                               write_calibration, write_report)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
-from pipeline.views import verdict_words, write_discovery_rrd
+from pipeline.formats.discovery_words import verdict_words
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
@@ -587,6 +587,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         report.summary["warnings"] = warnings
         if not np.any(rec.sets == "validation"):
             report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
+    from pipeline.views import write_discovery_rrd  # Rerun for the file alone: the analysis and its words load none
+
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
     source = recording_source(settings.real) if settings.real is not None else \
