@@ -73,6 +73,8 @@ PLAUSIBLE_TOLERANCES = 10.0
 #: A parameter's movement counts for the plausibility only beyond this many of its standard
 #: deviations in the fit (the rows place it there).
 SIGNIFICANT = 3.0
+#: The data as written are blamed on a movement only beyond this many of its standard deviations.
+DECISIVE = 10.0
 #: Conversions given the full fit after the screen.
 SCREEN_KEEP = 3
 #: The screen fits this many times the fewest rows that identify the unknowns (all rows if fewer).
@@ -438,7 +440,7 @@ class _Problem:
     sessions: np.ndarray | None = None
 
 
-def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFigures:
+def _figures(problem: _Problem, joints, measured, screen: bool = False, as_written: bool = False) -> FitFigures:
     """Fit the geometry (and frame) to ``(joints, measured)`` (``screen``: the cheap fit of
     :data:`SCREEN_ITERATIONS`); its figures, also on failure."""
     robot = problem.robot
@@ -455,10 +457,14 @@ def _figures(problem: _Problem, joints, measured, screen: bool = False) -> FitFi
     # A movement counts where the rows place it (beyond SIGNIFICANT standard deviations): a plain
     # fit of poses that leave a combination undetermined (one plane) moves it anywhere, and that is
     # no evidence of a mistake in the file.
-    # And only where the rows determine the parameter within the plausibility bound: an uncertainty
-    # itself beyond PLAUSIBLE_TOLERANCES tolerances cannot make a movement implausible.
+    # The data as written (``as_written``) are blamed only on a decisive movement, beyond DECISIVE of
+    # its standard deviations: a level grid leaves combinations nearly free and a plain fit drifts
+    # them a metre at 6 standard deviations (no evidence against the file), where a file in the
+    # wrong unit moves the geometry tens of them. A conversion, to be named, must be plausible
+    # without that benefit of the doubt.
     std, tol = r.std[problem.free], problem.tolerance[problem.free]
-    moved = np.where((offset > SIGNIFICANT * std) & (std < PLAUSIBLE_TOLERANCES * tol), offset / tol, 0.0)
+    counted = offset > (DECISIVE if as_written else SIGNIFICANT) * std
+    moved = np.where(counted, offset / tol, 0.0)
     worst = int(np.argmax(moved)) if moved.size else 0
     k = problem.free[worst] if moved.size else 0
     return FitFigures(chi2, int(r.dof), chi2_limit(int(r.dof)), bool(fit.frame_estimated),
@@ -673,7 +679,7 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
                        estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
                        np.sort(robot.table.indices(robot.free_default)))
     counter = [1]
-    written = _figures(problem, joints, measured)
+    written = _figures(problem, joints, measured, as_written=True)
     if written.fits and written.plausible:
         return Diagnosis("none", _fit_words(robot, written, problem.tolerance), written, fits=1, seconds=time.perf_counter() - t0)
     found = _conversions(problem, joints, measured, written, counter)
@@ -748,7 +754,7 @@ def compare_readings(robot: Robot, joints, measured, noise: SensorNoise, reading
     problem = _Problem(robot, noise, frame, None if targets is None else np.asarray(targets, dtype=float),
                        estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
                        np.sort(robot.table.indices(robot.free_default)), sessions)
-    written = _figures(problem, joints, measured)
+    written = _figures(problem, joints, measured, as_written=True)
     rows = _screen_rows(problem, *measured.shape)
     if sessions is not None and len(np.unique(sessions[rows])) < len(np.unique(sessions)):
         rows = np.arange(len(measured))  # every session keeps rows in the screen
