@@ -628,24 +628,35 @@ def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray 
     return None if np.any(parameters[:, :, idx][:, others]) else owners
 
 
-def _whitened_jacobian_rows(columns: np.ndarray, parameters: np.ndarray, idx: np.ndarray,
-                            owners: np.ndarray | None) -> np.ndarray:
-    """(K, D B) the transposed whitened forward Jacobian ``W M dF/dtheta`` of a block of B rows
-    (its rows in the order (pose coordinate, row)): ``columns`` (C, D, B) the whitened inverse
-    pose Jacobians column by column (``columns[c, :, n]`` column c of ``W_n M_n``),
-    ``parameters`` (B, C, P) ``dF/dtheta``. With ``owners`` (:func:`_chain_owners`) parameter k
-    moves closure ``owners[k]`` alone, so its column is that column of ``W M`` times one entry
-    (a gather and a product, no 6 x 6 by 6 x K products); None: the dense sum over the chains."""
+def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np.ndarray, idx: np.ndarray,
+                              owners: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(J^T J (K, K), J^T e (K,))`` of a block of B rows of the whitened forward residual, its
+    Jacobian ``J = W M dF/dtheta`` not formed: ``columns`` (C, D, B) the whitened inverse pose
+    Jacobians column by column (``columns[c, :, n]`` column c of ``W_n M_n``), ``parameters``
+    (B, C, P) ``dF/dtheta``, ``e`` (B, D) the whitened residual.
+
+    With ``owners`` (:func:`_chain_owners`) parameter k moves closure ``owners[k]`` alone, by
+    ``v[n, k]``: row n's share of ``J^T J`` is ``(v v^T) * S[owners][:, owners]`` with ``S =
+    (W M)^T (W M)`` (C, C), so ``J^T J`` is, chain by chain, ``V_a^T (S[a, owners] * V)`` (one (7,
+    B) by (B, K) product per chain: a third of the (D B, K) Gram product's work), and ``J^T e``
+    is ``v`` times ``(W M)^T e`` (C,) at the owner. None: the (D B, K) Jacobian of the block,
+    formed densely."""
     k = idx.size
     if owners is None:
-        jt = np.einsum("cin,nck->kin", columns, parameters[:, :, idx])
-    else:
-        jt = np.take(columns, owners, axis=0)  # (K, D, B)
-        jt *= parameters[:, owners, idx].T[:, None, :]
-    return np.ascontiguousarray(jt).reshape(k, -1)
+        jt = np.einsum("cin,nck->kin", columns, parameters[:, :, idx]).reshape(k, -1)
+        return jt @ jt.T, jt @ e.T.ravel()
+    vt = np.ascontiguousarray(parameters[:, owners, idx].T)  # (K, B)
+    S = np.einsum("ain,bin->abn", columns, columns)  # (C, C, B)
+    g = np.einsum("cin,ni->cn", columns, e)  # (C, B): (W M)^T e
+    gram = np.empty((k, k))
+    for a in np.unique(owners):
+        mine = owners == a
+        gram[mine] = vt[mine] @ (S[a][owners] * vt).T
+    return gram, np.einsum("kn,kn->k", vt, g[owners])
 
 
-def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, predict):
+def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
+                 predict):
     """One evaluation of :func:`_simultaneous_newton` at ``theta``, block by block over the rows
     (:data:`FIT_BLOCK_ROWS`), from the poses ``p`` (N, D): with ``predict``, first a Newton step
     of the poses at ``theta`` (the closure and the pose Jacobian alone; ``p`` is overwritten
@@ -653,8 +664,8 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
     factored once (:class:`~calib.batched_lu.BatchedLU`, ``M = (dF/dpose)^-1``) and a Newton
     step, written to ``newton`` (N, D). Returns ``(J^T J (K, K), J^T e (K,), |e|^2, largest,
     regular)``: the normal equations of the whitened residual ``e`` of the ``newton`` poses and
-    its Jacobian ``J = W M dF/dtheta`` at ``p`` (:func:`_whitened_jacobian_rows`, block by
-    block; never held whole), the largest closure residual at ``p`` (mm, before the Newton step),
+    its Jacobian ``J = W M dF/dtheta`` at ``p`` (:func:`_forward_normal_equations`, block by
+    block; never formed), the largest closure residual at ``p`` (mm, before the Newton step),
     and whether every pose Jacobian's Frobenius condition bound is below
     :data:`SINGULAR_CONDITION`.
     ``structure``: a list, empty on the first pass of a fit (then the first block's
@@ -663,11 +674,11 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
     column_scale = 1.0 / robot.pose_scale()
     gram, gradient = np.zeros((k, k)), np.zeros(k)
     squares, largest, regular = 0.0, 0.0, True
-    for rows in _row_blocks(p.shape[0]):
+    for block, rows in enumerate(_row_blocks(p.shape[0])):
         q = joints[rows]
-        if predict:
-            r, jac_pose = robot.closure_and_pose_jacobian(theta, q, p[rows])
-            p[rows] -= BatchedLU(jac_pose).solve(r)
+        if predict:  # a chord step at theta with the last pass's inverse pose Jacobians
+            r = robot.closure(theta, q, p[rows])
+            p[rows] -= np.einsum("cin,nc->ni", inverses[block], r)
         r, jac = robot.closure_with_jacobians(theta, q, p[rows])
         if not structure:
             structure.append(_chain_owners(robot, jac.parameters, idx))
@@ -676,14 +687,19 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
         largest = max(largest, float(np.max(np.abs(r))))
         e = white(measured[rows] - newton[rows], rows)  # (B, D)
         inverse = factors.inverse_columns()  # (C, D, B): inverse[c, i] entry (i, c) of each M
+        if block < len(inverses):
+            inverses[block] = inverse
+        else:
+            inverses.append(inverse)
         scaled = jac.pose * column_scale
         scaled_inverse = inverse / column_scale[None, :, None]
         condition_bound = np.sqrt(np.einsum("nij,nij->n", scaled, scaled)
                                   * np.einsum("jin,jin->n", scaled_inverse, scaled_inverse))  # >= cond_2
         regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
-        jt = _whitened_jacobian_rows(white_columns(inverse, rows), jac.parameters, idx, structure[0])
-        gram += jt @ jt.T
-        gradient += jt @ e.T.ravel()
+        block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac.parameters, e,
+                                                               idx, structure[0])
+        gram += block_gram
+        gradient += block_gradient
         squares += float(np.vdot(e, e))
     return gram, gradient, squares, largest, regular
 
@@ -722,6 +738,7 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_colu
     theta, p = theta0.copy(), np.array(poses0, dtype=float)
     newton = np.empty_like(p)
     structure: list = []  # the parameters' chains, from the first block (_chain_owners)
+    inverses: list = []  # the last pass's inverse pose Jacobians, block by block ((C, D, B) each)
     # The cost's rounding level: each whitened residual is a difference of poses of the size of
     # the measured ones, so it carries an error of about eps |measured| w; a rise below this is no rise.
     rounding = 0.5 * measured.size * (np.finfo(float).eps * float(np.max(np.abs(white(np.abs(measured)))))) ** 2
@@ -731,7 +748,7 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_colu
         for it in range(SIMULTANEOUS_NEWTON_STEPS + 1):
             try:
                 gram, gradient, squares, largest, regular = _newton_pass(
-                    robot, theta, joints, measured, p, idx, white, white_columns, newton, structure,
+                    robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
                     converged or POSE_PREDICTION_STEP < relative < np.inf)
             except (KinematicsError, np.linalg.LinAlgError) as exc:
                 return f"a singular or impossible configuration at iteration {it}: {exc}"
@@ -856,9 +873,8 @@ def _forward_whitening(robot, theta0, joints, measured, noise):
         return jw.reshape(-1, jp.shape[2])
 
     def white_columns(x, rows=slice(None)):  # (K, D, N) columns of (D, K) matrices of the rows ``rows``
-        if diagonal:  # -> whitened (W x; x overwritten where W is diagonal)
-            x *= w[None, :, None]
-            return x
+        if diagonal:  # -> whitened, W x
+            return x * w[None, :, None]
         return np.einsum("nil,kln->kin", winv[rows], x)
 
     return white, white_jac, white_columns, start_poses
