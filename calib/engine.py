@@ -616,6 +616,11 @@ POSE_PREDICTION_STEP = 1e-7
 SIMULTANEOUS_NEWTON_STEPS = 12
 
 
+#: Rows of the first block on which :func:`_chain_owners` looks for a closure moved by another
+#: chain's parameter (a structural dependence shows at any generic configuration).
+OWNERS_CHECK_ROWS = 256
+
+
 def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray | None:
     """(K,) the chain each free parameter ``idx`` belongs to (``robot.table.chains``), where the
     parameter Jacobian ``parameters`` (B, C, P) of some rows shows each chain's closure moved by
@@ -625,7 +630,8 @@ def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray 
     owners = np.asarray(robot.table.chains)[idx]
     others = np.ones((parameters.shape[1], idx.size), dtype=bool)
     others[owners, np.arange(idx.size)] = False
-    return None if np.any(parameters[:, :, idx][:, others]) else owners
+    chains, columns = np.nonzero(others)
+    return None if np.any(parameters[:OWNERS_CHECK_ROWS, chains, idx[columns]]) else owners
 
 
 def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np.ndarray, idx: np.ndarray,
@@ -649,9 +655,12 @@ def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np
     S = np.einsum("ain,bin->abn", columns, columns)  # (C, C, B)
     g = np.einsum("cin,ni->cn", columns, e)  # (C, B): (W M)^T e
     gram = np.empty((k, k))
+    scaled = np.empty_like(vt)
     for a in np.unique(owners):
         mine = owners == a
-        gram[mine] = vt[mine] @ (S[a][owners] * vt).T
+        np.take(S[a], owners, axis=0, out=scaled, mode="clip")  # owners are in range: no buffered copy
+        scaled *= vt
+        gram[mine] = vt[mine] @ scaled.T
     return gram, np.einsum("kn,kn->k", vt, g[owners])
 
 
@@ -691,10 +700,8 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
             inverses[block] = inverse
         else:
             inverses.append(inverse)
-        scaled = jac.pose * column_scale
-        scaled_inverse = inverse / column_scale[None, :, None]
-        condition_bound = np.sqrt(np.einsum("nij,nij->n", scaled, scaled)
-                                  * np.einsum("jin,jin->n", scaled_inverse, scaled_inverse))  # >= cond_2
+        condition_bound = np.sqrt(np.einsum("nij,nij,j->n", jac.pose, jac.pose, column_scale ** 2)
+                                  * np.einsum("jin,jin,i->n", inverse, inverse, column_scale ** -2))  # >= cond_2
         regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
         block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac.parameters, e,
                                                                idx, structure[0])
@@ -1262,7 +1269,7 @@ def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
     F``: the measured poses minus the corrected ones, exact to ``|dQ|^2 / machine size``
     (``inf`` where the pose Jacobian is singular)."""
     try:
-        return np.linalg.solve(jac.pose, r[..., None])[..., 0]
+        return BatchedLU(jac.pose).solve(r)
     except np.linalg.LinAlgError:
         return np.full(r.shape[:1] + jac.pose.shape[2:], np.inf)
 
