@@ -634,6 +634,11 @@ def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray 
     return None if np.any(parameters[:OWNERS_CHECK_ROWS, chains, idx[columns]]) else owners
 
 
+#: Rows of a block from which :func:`_forward_normal_equations` takes the chain-by-chain products
+#: (fewer calls pay below it: the (D B, K) rows of the block and one Gram product).
+CHAIN_PRODUCT_ROWS = 512
+
+
 def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np.ndarray, idx: np.ndarray,
                               owners: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """``(J^T J (K, K), J^T e (K,))`` of a block of B rows of the whitened forward residual, its
@@ -645,13 +650,19 @@ def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np
     ``v[n, k]``: row n's share of ``J^T J`` is ``(v v^T) * S[owners][:, owners]`` with ``S =
     (W M)^T (W M)`` (C, C), so ``J^T J`` is, chain by chain, ``V_a^T (S[a, owners] * V)`` (one (7,
     B) by (B, K) product per chain: a third of the (D B, K) Gram product's work), and ``J^T e``
-    is ``v`` times ``(W M)^T e`` (C,) at the owner. None: the (D B, K) Jacobian of the block,
-    formed densely."""
+    is ``v`` times ``(W M)^T e`` (C,) at the owner (blocks of :data:`CHAIN_PRODUCT_ROWS` rows
+    or more; a smaller one forms its (D B, K) rows, one gathered column of ``W M`` times ``v``
+    each). None: the (D B, K) Jacobian of the block, formed densely."""
     k = idx.size
     if owners is None:
         jt = np.einsum("cin,nck->kin", columns, parameters[:, :, idx]).reshape(k, -1)
         return jt @ jt.T, jt @ e.T.ravel()
     vt = np.ascontiguousarray(parameters[:, owners, idx].T)  # (K, B)
+    if columns.shape[2] < CHAIN_PRODUCT_ROWS:  # few rows: the Jacobian's rows, three calls
+        jt = np.take(columns, owners, axis=0)  # (K, D, B)
+        jt *= vt[:, None, :]
+        jt = jt.reshape(k, -1)
+        return jt @ jt.T, jt @ e.T.ravel()
     S = np.einsum("ain,bin->abn", columns, columns)  # (C, C, B)
     g = np.einsum("cin,ni->cn", columns, e)  # (C, B): (W M)^T e
     gram = np.empty((k, k))
@@ -665,7 +676,7 @@ def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np
 
 
 def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
-                 predict):
+                 predict, final):
     """One evaluation of :func:`_simultaneous_newton` at ``theta``, block by block over the rows
     (:data:`FIT_BLOCK_ROWS`), from the poses ``p`` (N, D): with ``predict``, first a Newton step
     of the poses at ``theta`` (the closure and the pose Jacobian alone; ``p`` is overwritten
@@ -676,7 +687,8 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
     its Jacobian ``J = W M dF/dtheta`` at ``p`` (:func:`_forward_normal_equations`, block by
     block; never formed), the largest closure residual at ``p`` (mm, before the Newton step),
     and whether every pose Jacobian's Frobenius condition bound is below
-    :data:`SINGULAR_CONDITION`.
+    :data:`SINGULAR_CONDITION` (looked at only where ``final``, the pass where the fit may stop;
+    else True).
     ``structure``: a list, empty on the first pass of a fit (then the first block's
     :func:`_chain_owners` is put in it)."""
     k = idx.size
@@ -700,9 +712,10 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
             inverses[block] = inverse
         else:
             inverses.append(inverse)
-        condition_bound = np.sqrt(np.einsum("nij,nij,j->n", jac.pose, jac.pose, column_scale ** 2)
-                                  * np.einsum("jin,jin,i->n", inverse, inverse, column_scale ** -2))  # >= cond_2
-        regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
+        if final:
+            condition_bound = np.sqrt(np.einsum("nij,nij,j->n", jac.pose, jac.pose, column_scale ** 2)
+                                      * np.einsum("jin,jin,i->n", inverse, inverse, column_scale ** -2))  # >= cond_2
+            regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
         block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac.parameters, e,
                                                                idx, structure[0])
         gram += block_gram
@@ -756,7 +769,7 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_colu
             try:
                 gram, gradient, squares, largest, regular = _newton_pass(
                     robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
-                    converged or POSE_PREDICTION_STEP < relative < np.inf)
+                    converged or POSE_PREDICTION_STEP < relative < np.inf, converged)
             except (KinematicsError, np.linalg.LinAlgError) as exc:
                 return f"a singular or impossible configuration at iteration {it}: {exc}"
             cost = 0.5 * squares

@@ -131,3 +131,46 @@ def test_chainwise_least_squares_fallback_on_block_factors_is_the_normal_equatio
         ix = np.intersect1d(robot.table.chain_indices(c), idx)
         tol = gram_inverse_tolerance(normal.condition_numbers[c], ix.size)
         assert _scaled_gap(fallback.theta[ix], normal.theta[ix], column_norms(P[:, c, ix])) <= tol
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("joint", [0.0, 1e-3])
+def test_forward_normal_equations_three_ways_are_one_fit(monkeypatch, name, joint):
+    """The forward fit's normal equations per block from the chains' ownership of their parameters
+    (chain by chain products, CHAIN_PRODUCT_ROWS 0), from the block's gathered Jacobian rows
+    (CHAIN_PRODUCT_ROWS above every block) and from the dense product (no ownership assumed):
+    the same iterations, theta and covariance to K eps cond^2 (they sum the same products in
+    another order)."""
+    robot, joints, measured, noise = _data(name, joint=joint)
+    monkeypatch.setattr(engine, "FIT_BLOCK_ROWS", 50)
+    monkeypatch.setattr(engine, "CHAIN_PRODUCT_ROWS", 0)
+    chains = identify_forward(robot, joints, measured, noise)
+    monkeypatch.setattr(engine, "CHAIN_PRODUCT_ROWS", WHOLE)
+    rows = identify_forward(robot, joints, measured, noise)
+    monkeypatch.setattr(engine, "_chain_owners", lambda *args: None)
+    dense = identify_forward(robot, joints, measured, noise)
+    assert chains.message.startswith("converged")
+    idx = robot.table.indices(chains.free_names)
+    J = identification_jacobian(robot, chains.theta, measured - chains.pose_residuals, noise, joints=joints)
+    norms = column_norms(J.reshape(-1, J.shape[-1]))
+    tol = gram_inverse_tolerance(chains.condition_numbers[0], idx.size)
+    for other in (rows, dense):
+        assert other.iterations == chains.iterations and other.message.startswith("converged")
+        assert _scaled_gap(other.theta[idx], chains.theta[idx], norms) <= tol
+        assert scaled_relative_gap(other.covariance[np.ix_(idx, idx)], chains.covariance[np.ix_(idx, idx)],
+                                   norms) <= tol
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_chain_owners_are_the_parameter_tables_chains(name):
+    """Every robot's closure of chain c moves with chain c's parameters alone (what the chain-wise
+    fit and the forward fit's chain products assume): the owners are the table's chains; a
+    parameter Jacobian with one entry of another chain's parameter set gives None."""
+    robot, joints, measured, _ = _data(name, n=30)
+    idx = np.arange(robot.n_parameters)
+    P = robot.closure_jacobians(robot.table.nominal, joints, measured).parameters
+    np.testing.assert_array_equal(engine._chain_owners(robot, P, idx), robot.table.chains)
+    other = (int(robot.table.chains[0]) + 1) % robot.n_chains
+    P = P.copy()
+    P[3, other, 0] = 1e-300
+    assert engine._chain_owners(robot, P, idx) is None
