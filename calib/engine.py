@@ -237,8 +237,9 @@ def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
     """(N, C) standard deviation of each closure residual from the declared noise, given the
     closure's :class:`~calib.robot.ClosureJacobians` at the residuals' configurations."""
     std = noise.pose_std(robot.pose_units)
-    var = np.einsum("ncd,d->nc", jac.pose ** 2, std ** 2)
-    var += noise.joint_std ** 2 * np.einsum("ncq->nc", jac.joints ** 2)
+    var = np.einsum("ncd,ncd,d->nc", jac.pose, jac.pose, std ** 2)
+    if noise.joint_std > 0:
+        var += noise.joint_std ** 2 * np.einsum("ncq,ncq->nc", jac.joints, jac.joints)
     return np.sqrt(var)
 
 
