@@ -835,7 +835,8 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         free: names to identify; default ``robot.free_default``.
         start: (P,) start vector; default the nominal one. Fixed parameters keep its values.
         solver: ``"lm"``: Gauss-Newton with the forward kinematics solved along
-            (:func:`_simultaneous_newton`: one closure-and-Jacobians call an iteration), and
+            (:func:`_simultaneous_newton`: one closure-and-Jacobians call an iteration, and the
+            closure alone where it predicts the poses), and
             where it cannot vouch for its answer (a step that raises the cost, a singular
             configuration, no convergence; ``message`` says so) Levenberg-Marquardt through the
             forward kinematics (Marquardt's scaling, MINPACK's rules); ``"gn"``: Gauss-Newton
