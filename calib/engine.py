@@ -604,9 +604,9 @@ def _start_poses(robot, theta0, joints, measured) -> np.ndarray:
 
 
 #: Relative scaled parameter step (as :data:`_CONVERGED_STEP` measures it) above which the next
-#: iteration of :func:`_simultaneous_newton` first predicts its poses at the new parameters (one
-#: Newton step from the poses the last Jacobian was taken at: the pose Jacobian and the closure
-#: again, the parameter Jacobian not). Below it the last iteration's poses are as good a start:
+#: iteration of :func:`_simultaneous_newton` first predicts its poses at the new parameters (a
+#: chord step from the poses the last Jacobian was taken at, with that iteration's inverse pose
+#: Jacobians: the closure alone is evaluated again). Below it the last iteration's poses are as good a start:
 #: they are off by the step's effect, about this fraction, and so is a Jacobian taken there.
 #: Measured (hexapod, Delta, 6-RUS at 100 to 10,000 poses, with and without joint noise): the
 #: iteration counts of the Gauss-Newton that stored its Jacobian and predicted the poses to first
@@ -679,11 +679,12 @@ def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np
 def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
                  predict, final):
     """One evaluation of :func:`_simultaneous_newton` at ``theta``, block by block over the rows
-    (:data:`FIT_BLOCK_ROWS`), from the poses ``p`` (N, D): with ``predict``, first a Newton step
-    of the poses at ``theta`` (the closure and the pose Jacobian alone; ``p`` is overwritten
-    with its result); then the closure and its Jacobians at ``p`` (one call), the pose Jacobians
-    factored once (:class:`~calib.batched_lu.BatchedLU`, ``M = (dF/dpose)^-1``) and a Newton
-    step, written to ``newton`` (N, D). Returns ``(J^T J (K, K), J^T e (K,), |e|^2, largest,
+    (:data:`FIT_BLOCK_ROWS`), from the poses ``p`` (N, D): with ``predict``, first a chord step
+    of the poses at ``theta`` (the closure alone, with the last pass's inverse pose Jacobians
+    ``inverses``; ``p`` is overwritten with its result); then the closure and its Jacobians at
+    ``p`` (one call), the pose Jacobians factored once (:class:`~calib.batched_lu.BatchedLU`,
+    ``M = (dF/dpose)^-1``) and a Newton step, written to ``newton`` (N, D); ``inverses`` (a
+    list, one (C, D, B) array a block) then holds this pass's ``M``. Returns ``(J^T J (K, K), J^T e (K,), |e|^2, largest,
     regular)``: the normal equations of the whitened residual ``e`` of the ``newton`` poses and
     its Jacobian ``J = W M dF/dtheta`` at ``p`` (:func:`_forward_normal_equations`, block by
     block; never formed), the largest closure residual at ``p`` (mm, before the Newton step),
@@ -735,9 +736,10 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_colu
     linearisation (the residual of the Newton poses ``p - M F``, the Jacobian ``-M dF/dtheta``),
     and the next poses are that prediction. The prediction is not taken from a stored Jacobian
     (it would be the whole (N D, K) one): after a step above :data:`POSE_PREDICTION_STEP` the
-    next iteration re-evaluates it, a Newton step at the new parameters from the same ``p``
-    (``p - M' F(theta + dtheta, p)``, the same to first order); after a smaller one it starts
-    from the Newton poses, except where it may stop (the last step at most ``1e-9`` of the
+    next iteration re-evaluates it, a chord step at the new parameters from the same ``p`` with
+    the same ``M`` (``p - M F(theta + dtheta, p)``, the same to first order; the (N, C, D)
+    inverses are kept from pass to pass, a seventh of the Jacobian); after a smaller one it
+    starts from the Newton poses, except where it may stop (the last step at most ``1e-9`` of the
     scaled parameters): it predicts them then too, so that its Jacobian and normal equations
     are those at the forward kinematics to second order. Each iteration is one pass over the
     rows (:func:`_newton_pass`, block by block: the normal equations ``J^T J``, ``J^T e`` are
