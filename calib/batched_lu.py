@@ -40,21 +40,29 @@ class BatchedLU:
     Args:
         A: (M, n, n) float64 matrices, any strides (not modified; kept by reference for the
             matrices solved by LAPACK).
+        inverse: the caller will ask for :meth:`inverse_columns` too. A stack of fewer than
+            :data:`SMALLEST_BATCH_ENTRIES` entries is then inverted by LAPACK once
+            (``numpy.linalg.inv``) and :meth:`solve` multiplies by that inverse (one LAPACK
+            call for the stack, not one per solve: a small stack's cost is the calls').
 
     Attributes:
         fallback: (M,) bool, the matrices that ``solve`` hands to ``numpy.linalg.solve``
             (multipliers above :data:`LARGEST_MULTIPLIER` in the shared row order, or a zero
-            pivot; all of them in a stack of fewer than :data:`SMALLEST_BATCH_ENTRIES` entries).
+            pivot; all of them in a stack of fewer than :data:`SMALLEST_BATCH_ENTRIES` entries,
+            where they are multiplied by their inverse instead if ``inverse``).
     """
 
-    def __init__(self, A: np.ndarray):
+    def __init__(self, A: np.ndarray, inverse: bool = False):
         m, n, n2 = A.shape
         if n != n2:
             raise ValueError(f"A must be a stack of square matrices, got shape {A.shape}")
         self._A = A
+        self._inverse = None
         if m * n * n < SMALLEST_BATCH_ENTRIES:
             self.fallback = np.ones(m, dtype=bool)
             self._lu = None
+            if inverse:
+                self._inverse = np.linalg.inv(A)
             return
         order = _pivot_order(A[0])
         self._order = order
@@ -78,6 +86,8 @@ class BatchedLU:
         Raises:
             numpy.linalg.LinAlgError: a matrix is singular.
         """
+        if self._inverse is not None:
+            return np.einsum("mij,mj->mi", self._inverse, b)
         if self._lu is None:
             return np.linalg.solve(self._A, b[..., None])[..., 0]
         lu, n = self._lu, self._lu.shape[0]
@@ -94,6 +104,38 @@ class BatchedLU:
             rows = self.fallback
             x[rows] = np.linalg.solve(self._A[rows], b[rows][..., None])[..., 0]
         return x
+
+    def inverse_columns(self) -> np.ndarray:
+        """(n, n, M) the inverse of every matrix (a new array), column-major and structure-of-arrays:
+        ``X[j, i]`` (M,) holds entry ``(i, j)`` of each inverse (``X[j]`` the solutions of
+        ``A x = e_j``), each a contiguous row of M values.
+
+        The n right-hand sides ``e_j`` are solved together with the kept factors (the inverse to
+        the same backward error as :meth:`solve`); the fallback matrices by
+        ``numpy.linalg.inv``.
+
+        Raises:
+            numpy.linalg.LinAlgError: a matrix is singular.
+        """
+        m, n = self._A.shape[0], self._A.shape[1]
+        if self._lu is None:
+            inverse = np.linalg.inv(self._A) if self._inverse is None else self._inverse
+            return np.ascontiguousarray(inverse.transpose(2, 1, 0))
+        lu = self._lu
+        # y[j] = P e_j for every matrix: (n, n, M), y[j, i] = 1 where order[i] == j
+        y = np.zeros((n, n, m))
+        y[self._order, np.arange(n)] = 1.0
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for k in range(n - 1):  # L y = P e_j (unit diagonal), every j at once
+                y[:, k + 1:] -= lu[None, k + 1:, k] * y[:, k, None]
+            for k in range(n - 1, -1, -1):  # U x = y
+                y[:, k] *= self._inverse_diagonal[k]
+                if k:
+                    y[:, :k] -= lu[None, :k, k] * y[:, k, None]
+        if self.fallback.any():
+            rows = self.fallback
+            y[:, :, rows] = np.linalg.inv(self._A[rows]).transpose(2, 1, 0)
+        return y
 
 
 def _pivot_order(a: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .batched_lu import BatchedLU
 from .validation import as_array
 from .noise import SensorNoise
 from .prior import ParameterPrior, parameter_sources
@@ -246,8 +247,9 @@ def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
     """(N, C) standard deviation of each closure residual from the declared noise, given the
     closure's :class:`~calib.robot.ClosureJacobians` at the residuals' configurations."""
     std = noise.pose_std(robot.pose_units)
-    var = np.einsum("ncd,d->nc", jac.pose ** 2, std ** 2)
-    var += noise.joint_std ** 2 * np.einsum("ncq->nc", jac.joints ** 2)
+    var = np.einsum("ncd,ncd,d->nc", jac.pose, jac.pose, std ** 2)
+    if noise.joint_std > 0:
+        var += noise.joint_std ** 2 * np.einsum("ncq,ncq->nc", jac.joints, jac.joints)
     return np.sqrt(var)
 
 
@@ -257,7 +259,7 @@ def _closure_std(robot: Robot, jac, noise: SensorNoise) -> np.ndarray:
 GRAM_CONDITION_FLOOR = 1e-10
 
 
-def _covariance_and_conditions(A: np.ndarray, gram: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _covariance_and_conditions(A, gram: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(pinv(A^T A), cond(A scaled))`` of each matrix of a stack ``A`` (M, N, K): (M, K, K) and (M,).
 
     The column-scaled Gram matrix ``Gs = D^-1 A^T A D^-1`` (``D`` the column norms; ``gram``
@@ -266,8 +268,13 @@ def _covariance_and_conditions(A: np.ndarray, gram: np.ndarray | None = None) ->
     with eigenvalues below ``1e-15`` of the largest dropped, as ``numpy.linalg.pinv(hermitian=True)``
     does (the plain inverse where none is: the same matrix, without the eigenvectors). The SVD
     of ``A D^-1`` only where the eigenvalue ratio is beyond :data:`GRAM_CONDITION_FLOOR`. A zero
-    column: condition number inf, variance 0 for its parameter."""
-    m, n, k = A.shape
+    column: condition number inf, variance 0 for its parameter.
+
+    With ``gram`` given, ``A`` may instead be a callable that takes a boolean mask (M,) and returns
+    those matrices of the stack, or any (m, N', K) stack with the same Gram matrices (their
+    triangular factors, :func:`_triangular_update`): it is called only where the SVD is needed, so
+    a fit that accumulated its normal equations block by block never forms the whole ``A``."""
+    m, n, k = (gram.shape[0], None, gram.shape[-1]) if callable(A) else A.shape
     if n == 0 or k == 0:
         return np.zeros((m, k, k)), np.full(m, np.inf)
     norms = np.sqrt(np.einsum("mnk,mnk->mk", A, A) if gram is None else np.diagonal(gram, axis1=1, axis2=2))
@@ -296,8 +303,33 @@ def _covariance_and_conditions(A: np.ndarray, gram: np.ndarray | None = None) ->
         cond = np.sqrt(top / lam[:, 0])
     exact = ~(lam[:, 0] > GRAM_CONDITION_FLOOR * top) & ~zero
     if np.any(exact):
-        cond[exact] = np.linalg.cond(A[exact] / s[exact][:, None, :])
+        B = A(exact) if callable(A) else A[exact]
+        cond[exact] = np.linalg.cond(B / s[exact][:, None, :])
     return cov, np.where(zero, np.inf, cond)
+
+
+#: Rows (poses) the identification evaluates at a time. Each Gauss-Newton evaluation runs over
+#: the rows block by block: the closure and its Jacobians of one block, its whitened Jacobian and
+#: that block's share of the normal equations ``J^T J`` and ``J^T r``, then the next block. The
+#: whole Jacobian ((N D, K) for the forward fit, 2 GB at a million hexapod poses) is never held,
+#: and a block's temporaries (about 3 MB for the hexapod) stay in cache and in memory already
+#: paged in. The results do not depend on it beyond rounding (sums taken in another order).
+FIT_BLOCK_ROWS = 2048
+
+
+def _row_blocks(n: int) -> list[slice]:
+    """Slices of :data:`FIT_BLOCK_ROWS` consecutive rows (the last one shorter) covering N rows."""
+    step = max(1, int(FIT_BLOCK_ROWS))
+    return [slice(a, min(a + step, n)) for a in range(0, n, step)]
+
+
+def _triangular_update(R: np.ndarray | None, A: np.ndarray) -> np.ndarray:
+    """The triangular factor (..., min(m, K), K) of the rows of ``R`` (None: none yet) stacked
+    above those of ``A`` (..., m, K): ``R^T R`` is the Gram matrix of every row seen, so the
+    factor of a tall system accumulated block by block (TSQR) gives its singular values and its
+    least-squares solutions from a K-row matrix, without the squared condition number of the
+    normal equations."""
+    return np.linalg.qr(A if R is None else np.concatenate([R, A], axis=-2), mode="r")
 
 
 def _chain_groups(robot: Robot, idx: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -328,36 +360,85 @@ def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: n
 NORMAL_EQUATIONS_CONDITION = 1e6
 
 
-def _chain_steps(A: np.ndarray, b: np.ndarray, prior=None) -> tuple[np.ndarray, np.ndarray]:
-    """(M, K) least-squares steps ``argmin |A_m x + b_m|`` of a stack of chain systems (``A``
-    (M, N, K), ``b`` (M, N)), and the Gram matrices ``A^T A`` (M, K, K) they were solved with
-    (the covariance of a fit that stops at these systems reuses them), in one batched solve of
-    the column-scaled normal equations; a
-    stack with a chain whose (Cholesky-estimated) column-scaled condition number exceeds
-    :data:`NORMAL_EQUATIONS_CONDITION` (or is rank deficient) is solved chain by chain by
-    ``numpy.linalg.lstsq`` instead (the normal equations square the condition number).
+def _chain_steps(gram: np.ndarray, g: np.ndarray, prior=None, factors=None) -> np.ndarray:
+    """(M, K) least-squares steps ``argmin |A_m x + b_m|`` of a stack of chain systems, from their
+    normal equations (``gram`` (M, K, K) ``A^T A`` and ``g`` (M, K) ``A^T b``, accumulated over the
+    rows), in one batched solve of the column-scaled normal equations; a stack with a chain whose
+    (Cholesky-estimated) column-scaled condition number exceeds :data:`NORMAL_EQUATIONS_CONDITION`
+    (or is rank deficient) is solved chain by chain by ``numpy.linalg.lstsq`` instead (the normal
+    equations square the condition number), on the triangular factors ``factors()`` returns
+    ((M, *, K + 1): of each ``[A | b]``, :func:`_chain_factors`; the same least-squares
+    solutions, minimum norm on a rank-deficient chain).
 
     ``prior``: ``(inv_std (M, K), e (M, K))``, each chain's prior rows ``diag(inv_std) x + e``
-    appended to its system (``e`` the whitened prior residual at the current vector), or None;
-    the Gram matrices returned are then still those of the measurement rows alone."""
-    gram = np.swapaxes(A, 1, 2) @ A
+    appended to its system (``e`` the whitened prior residual at the current vector), or None."""
     normal = gram if prior is None else gram + _diagonal_stack(prior[0] ** 2)
     norms = np.sqrt(np.diagonal(normal, axis1=1, axis2=2))
     if np.all(norms > 0):
         G = normal / (norms[:, :, None] * norms[:, None, :])
-        g = np.einsum("mnk,mn->mk", A, b)
         if prior is not None:
             g = g + prior[0] * prior[1]
         g = g / norms
         try:
             d = np.diagonal(np.linalg.cholesky(G), axis1=1, axis2=2)
             if np.all(d.max(axis=1) <= NORMAL_EQUATIONS_CONDITION * d.min(axis=1)):
-                return -np.linalg.solve(G, g[..., None])[..., 0] / norms, gram
+                return -np.linalg.solve(G, g[..., None])[..., 0] / norms
         except np.linalg.LinAlgError:
             pass
+    R = factors()
+    A, b = R[..., :-1], R[..., -1]
     if prior is not None:
         A, b = _with_prior_rows(A, prior[0]), np.concatenate([b, prior[1]], axis=1)
-    return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])]), gram
+    return np.array([np.linalg.lstsq(A[k], -b[k], rcond=None)[0] for k in range(A.shape[0])])
+
+
+@dataclass
+class _ChainEvaluation:
+    """The chain-wise fit at one vector, evaluated block by block over the rows: the closure ``r``
+    (N, C) at the measured poses, ``offset`` (N, D) one Newton step of the forward kinematics
+    from them (:func:`_newton_offset`), ``systems`` per chain group ``(A^T A (M, K, K), A^T b (M,
+    K))`` of the (weighted) chain systems (:func:`_chain_systems`), and ``std`` (N, C) the
+    closure residuals' standard deviations from the declared noise (None: none asked for)."""
+
+    r: np.ndarray
+    offset: np.ndarray
+    systems: list
+    std: np.ndarray | None
+
+
+def _chain_evaluation(robot, theta, joints, measured, groups, w, noise=None) -> _ChainEvaluation:
+    """The :class:`_ChainEvaluation` at ``theta``: one closure-and-Jacobians call per block of
+    :data:`FIT_BLOCK_ROWS` rows, the blocks' chain systems summed into their normal equations.
+    ``w`` (N, C) weights or None; ``noise`` the declared noise whose closure std to keep, or None."""
+    n, c = joints.shape
+    r, offset = np.empty((n, c)), np.empty(measured.shape)
+    std = None if noise is None else np.empty((n, c))
+    systems = [(np.zeros((len(chains), params.shape[1], params.shape[1])), np.zeros(params.shape))
+               for chains, params in groups]
+    for rows in _row_blocks(n):
+        rb, jac = robot.closure_with_jacobians(theta, joints[rows], measured[rows])
+        r[rows] = rb
+        offset[rows] = _newton_offset(jac, rb)
+        if std is not None:
+            std[rows] = _closure_std(robot, jac, noise)
+        for (chains, params), (gram, g) in zip(groups, systems):
+            A, b = _chain_systems(jac.parameters, rb, None if w is None else w[rows], chains, params)
+            gram += np.swapaxes(A, 1, 2) @ A
+            g += np.einsum("mnk,mn->mk", A, b)
+    return _ChainEvaluation(r, offset, systems, std)
+
+
+def _chain_factors(robot, theta, joints, measured, chains, params, w) -> np.ndarray:
+    """(M, K + 1, K + 1) (fewer rows when N <= K) triangular factors of each chain's ``[A | b]``
+    of one group at ``theta``, accumulated block by block (:func:`_triangular_update`): what the
+    least-squares fallback of :func:`_chain_steps` and the exact condition numbers of an
+    ill-conditioned chain need, without the (N, K) systems."""
+    R = None
+    for rows in _row_blocks(joints.shape[0]):
+        rb, jac = robot.closure_with_jacobians(theta, joints[rows], measured[rows])
+        A, b = _chain_systems(jac.parameters, rb, None if w is None else w[rows], chains, params)
+        R = _triangular_update(R, np.concatenate([A, b[:, :, None]], axis=2))
+    return R
 
 
 def _diagonal_stack(d: np.ndarray) -> np.ndarray:
@@ -532,68 +613,188 @@ def _start_poses(robot, theta0, joints, measured) -> np.ndarray:
         raise ValueError(f"joints: the start model cannot reach row {exc.index}: {exc}") from None
 
 
+#: Relative scaled parameter step (as :data:`_CONVERGED_STEP` measures it) above which the next
+#: iteration of :func:`_simultaneous_newton` first predicts its poses at the new parameters (a
+#: chord step from the poses the last Jacobian was taken at, with that iteration's inverse pose
+#: Jacobians: the closure alone is evaluated again). Below it the last iteration's poses are as good a start:
+#: they are off by the step's effect, about this fraction, and so is a Jacobian taken there.
+#: Measured (hexapod, Delta, 6-RUS at 100 to 10,000 poses, with and without joint noise): the
+#: iteration counts of the Gauss-Newton that stored its Jacobian and predicted the poses to first
+#: order from it; at 1e-5, one more iteration in a few of those fits.
+POSE_PREDICTION_STEP = 1e-7
+
 #: Steps of :func:`_simultaneous_newton` before it gives the fit over to Levenberg-Marquardt.
 SIMULTANEOUS_NEWTON_STEPS = 12
 
 
-def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac, poses0, prior_rows=None):
-    """Gauss-Newton on the parameters with the forward kinematics solved along, one Newton step of
-    the poses per iteration (the fast path of :func:`identify_forward`).
+#: Rows of the first block on which :func:`_chain_owners` looks for a closure moved by another
+#: chain's parameter (a structural dependence shows at any generic configuration).
+OWNERS_CHECK_ROWS = 256
+
+
+def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray | None:
+    """(K,) the chain each free parameter ``idx`` belongs to (``robot.table.chains``), where the
+    parameter Jacobian ``parameters`` (B, C, P) of some rows shows each chain's closure moved by
+    its own parameters alone (every other entry exactly zero: what the chain-wise fit assumes);
+    else None (a robot whose closures share parameters: the forward fit then takes the dense
+    product)."""
+    owners = np.asarray(robot.table.chains)[idx]
+    others = np.ones((parameters.shape[1], idx.size), dtype=bool)
+    others[owners, np.arange(idx.size)] = False
+    chains, columns = np.nonzero(others)
+    return None if np.any(parameters[:OWNERS_CHECK_ROWS, chains, idx[columns]]) else owners
+
+
+#: Rows of a block from which :func:`_forward_normal_equations` takes the chain-by-chain products
+#: (fewer calls pay below it: the (D B, K) rows of the block and one Gram product).
+CHAIN_PRODUCT_ROWS = 512
+
+
+def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np.ndarray, idx: np.ndarray,
+                              owners: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(J^T J (K, K), J^T e (K,))`` of a block of B rows of the whitened forward residual, its
+    Jacobian ``J = W M dF/dtheta`` not formed: ``columns`` (C, D, B) the whitened inverse pose
+    Jacobians column by column (``columns[c, :, n]`` column c of ``W_n M_n``), ``parameters``
+    (B, C, P) ``dF/dtheta``, ``e`` (B, D) the whitened residual.
+
+    With ``owners`` (:func:`_chain_owners`) parameter k moves closure ``owners[k]`` alone, by
+    ``v[n, k]``: row n's share of ``J^T J`` is ``(v v^T) * S[owners][:, owners]`` with ``S =
+    (W M)^T (W M)`` (C, C), so ``J^T J`` is, chain by chain, ``V_a^T (S[a, owners] * V)`` (one (7,
+    B) by (B, K) product per chain: a third of the (D B, K) Gram product's work), and ``J^T e``
+    is ``v`` times ``(W M)^T e`` (C,) at the owner (blocks of :data:`CHAIN_PRODUCT_ROWS` rows
+    or more; a smaller one forms its (D B, K) rows, one gathered column of ``W M`` times ``v``
+    each). None: the (D B, K) Jacobian of the block, formed densely."""
+    k = idx.size
+    if owners is None:
+        jt = np.einsum("cin,nck->kin", columns, parameters[:, :, idx]).reshape(k, -1)
+        return jt @ jt.T, jt @ e.T.ravel()
+    vt = np.ascontiguousarray(parameters[:, owners, idx].T)  # (K, B)
+    if columns.shape[2] < CHAIN_PRODUCT_ROWS:  # few rows: the Jacobian's rows, three calls
+        jt = np.take(columns, owners, axis=0)  # (K, D, B)
+        jt *= vt[:, None, :]
+        jt = jt.reshape(k, -1)
+        return jt @ jt.T, jt @ e.T.ravel()
+    S = np.einsum("ain,bin->abn", columns, columns)  # (C, C, B)
+    g = np.einsum("cin,ni->cn", columns, e)  # (C, B): (W M)^T e
+    gram = np.empty((k, k))
+    scaled = np.empty_like(vt)
+    for a in np.unique(owners):
+        mine = owners == a
+        np.take(S[a], owners, axis=0, out=scaled, mode="clip")  # owners are in range: no buffered copy
+        scaled *= vt
+        gram[mine] = vt[mine] @ scaled.T
+    return gram, np.einsum("kn,kn->k", vt, g[owners])
+
+
+def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
+                 predict, final):
+    """One evaluation of :func:`_simultaneous_newton` at ``theta``, block by block over the rows
+    (:data:`FIT_BLOCK_ROWS`), from the poses ``p`` (N, D): with ``predict``, first a chord step
+    of the poses at ``theta`` (the closure alone, with the last pass's inverse pose Jacobians
+    ``inverses``; ``p`` is overwritten with its result); then the closure and its Jacobians at
+    ``p`` (one call), the pose Jacobians factored once (:class:`~calib.batched_lu.BatchedLU`,
+    ``M = (dF/dpose)^-1``) and a Newton step, written to ``newton`` (N, D); ``inverses`` (a
+    list, one (C, D, B) array a block) then holds this pass's ``M``. Returns ``(J^T J (K, K), J^T e (K,), |e|^2, largest,
+    regular)``: the normal equations of the whitened residual ``e`` of the ``newton`` poses and
+    its Jacobian ``J = W M dF/dtheta`` at ``p`` (:func:`_forward_normal_equations`, block by
+    block; never formed), the largest closure residual at ``p`` (mm, before the Newton step),
+    and whether every pose Jacobian's Frobenius condition bound is below
+    :data:`SINGULAR_CONDITION` (looked at only where ``final``, the pass where the fit may stop;
+    else True).
+    ``structure``: a list, empty on the first pass of a fit (then the first block's
+    :func:`_chain_owners` is put in it)."""
+    k = idx.size
+    column_scale = 1.0 / robot.pose_scale()
+    gram, gradient = np.zeros((k, k)), np.zeros(k)
+    squares, largest, regular = 0.0, 0.0, True
+    for block, rows in enumerate(_row_blocks(p.shape[0])):
+        q = joints[rows]
+        if predict:  # a chord step at theta with the last pass's inverse pose Jacobians
+            r = robot.closure(theta, q, p[rows])
+            p[rows] -= np.einsum("cin,nc->ni", inverses[block], r)
+        r, jac = robot.closure_with_jacobians(theta, q, p[rows])
+        if not structure:
+            structure.append(_chain_owners(robot, jac.parameters, idx))
+        factors = BatchedLU(jac.pose, inverse=True)
+        np.subtract(p[rows], factors.solve(r), out=newton[rows])
+        largest = max(largest, float(np.max(np.abs(r))))
+        e = white(measured[rows] - newton[rows], rows)  # (B, D)
+        inverse = factors.inverse_columns()  # (C, D, B): inverse[c, i] entry (i, c) of each M
+        if block < len(inverses):
+            inverses[block] = inverse
+        else:
+            inverses.append(inverse)
+        if final:
+            condition_bound = np.sqrt(np.einsum("nij,nij,j->n", jac.pose, jac.pose, column_scale ** 2)
+                                      * np.einsum("jin,jin,i->n", inverse, inverse, column_scale ** -2))  # >= cond_2
+            regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
+        block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac.parameters, e,
+                                                               idx, structure[0])
+        gram += block_gram
+        gradient += block_gradient
+        squares += float(np.vdot(e, e))
+    return gram, gradient, squares, largest, regular
+
+
+def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_columns, poses0, prior_rows=None):
+    """Gauss-Newton on the parameters with the forward kinematics solved along (the fast path of
+    :func:`identify_forward`).
 
     At ``(theta, p)`` one call gives the closure ``F`` and its Jacobians; with ``M = (dF/dpose)^-1``
     the poses the model reaches are, to first order in the closure and the parameter step,
     ``p - M F - M (dF/dtheta) dtheta``: the Gauss-Newton step of the forward residual takes that
-    linearisation, and the next poses are that prediction. Both converge quadratically, so the
-    fit costs one closure-and-Jacobians call an iteration instead of a forward kinematics and a
-    Jacobian. Stopped when the scaled step is at most ``1e-9`` of the scaled parameters and,
-    at the point it leads to, every closure residual is at most :data:`FORWARD_KINEMATICS_TOL_MM`
-    (the poses are then the forward kinematics to its own tolerance) and the pose Jacobian is
-    well conditioned (Frobenius bound below :data:`SINGULAR_CONDITION`). ``prior_rows``
-    (:func:`_prior_rows`, or None) adds the prior's rows to the cost and the normal equations.
+    linearisation (the residual of the Newton poses ``p - M F``, the Jacobian ``-M dF/dtheta``),
+    and the next poses are that prediction. The prediction is not taken from a stored Jacobian
+    (it would be the whole (N D, K) one): after a step above :data:`POSE_PREDICTION_STEP` the
+    next iteration re-evaluates it, a chord step at the new parameters from the same ``p`` with
+    the same ``M`` (``p - M F(theta + dtheta, p)``, the same to first order; the (N, C, D)
+    inverses are kept from pass to pass, a seventh of the Jacobian); after a smaller one it
+    starts from the Newton poses, except where it may stop (the last step at most ``1e-9`` of the
+    scaled parameters): it predicts them then too, so that its Jacobian and normal equations
+    are those at the forward kinematics to second order. Each iteration is one pass over the
+    rows (:func:`_newton_pass`, block by block: the normal equations ``J^T J``, ``J^T e`` are
+    accumulated, the (N D, K) Jacobian is never held). It stops where the last step taken was at
+    most ``1e-9`` of the scaled parameters, every closure residual at the predicted poses is at
+    most :data:`FORWARD_KINEMATICS_TOL_MM` (the Newton poses are then the forward kinematics to
+    its own tolerance) and the pose Jacobians are well conditioned (Frobenius bound below
+    :data:`SINGULAR_CONDITION`); the step it computed there is not taken.
+    ``prior_rows`` (:func:`_prior_rows`, or None) adds the prior's rows to the cost and the
+    normal equations.
 
-    Returns ``(theta (P,), poses (N, D), J (N D, K) whitened residual Jacobian at them, J^T J
-    (of the measurement rows alone),
-    iterations, costs (0.5 |whitened residual of the Newton-corrected poses|^2 per iteration),
-    message)``, or, where it cannot vouch for the answer (a step that raised the cost, a singular
-    or non-finite evaluation, no convergence in :data:`SIMULTANEOUS_NEWTON_STEPS`), why, in words:
-    the caller then runs Levenberg-Marquardt through the forward kinematics.
+    Returns ``(theta (P,), poses (N, D), J^T J (K, K) of the whitened residual Jacobian at them
+    (measurement rows alone), iterations, costs (0.5 |whitened residual of the Newton-corrected
+    poses|^2 per iteration), message)``, or, where it cannot vouch for the answer (a step that
+    raised the cost, a singular or non-finite evaluation, no convergence in
+    :data:`SIMULTANEOUS_NEWTON_STEPS`), why, in words: the caller then runs Levenberg-Marquardt
+    through the forward kinematics.
     """
-    whole = idx.size == theta0.size and np.array_equal(idx, np.arange(theta0.size))
     theta, p = theta0.copy(), np.array(poses0, dtype=float)
-    column_scale = 1.0 / robot.pose_scale()
+    newton = np.empty_like(p)
+    structure: list = []  # the parameters' chains, from the first block (_chain_owners)
+    inverses: list = []  # the last pass's inverse pose Jacobians, block by block ((C, D, B) each)
+    # The cost's rounding level: each whitened residual is a difference of poses of the size of
+    # the measured ones, so it carries an error of about eps |measured| w; a rise below this is no rise.
+    rounding = 0.5 * measured.size * (np.finfo(float).eps * float(np.max(np.abs(white(np.abs(measured)))))) ** 2
     history: list[float] = []
     converged, relative = False, np.inf
     with np.errstate(all="ignore"):
         for it in range(SIMULTANEOUS_NEWTON_STEPS + 1):
             try:
-                r, jac = robot.closure_with_jacobians(theta, joints, p)
-                M = np.linalg.inv(jac.pose)
+                gram, gradient, squares, largest, regular = _newton_pass(
+                    robot, theta, joints, measured, p, idx, white, white_columns, newton, structure, inverses,
+                    converged or POSE_PREDICTION_STEP < relative < np.inf, converged)
             except (KinematicsError, np.linalg.LinAlgError) as exc:
                 return f"a singular or impossible configuration at iteration {it}: {exc}"
-            H = M @ (jac.parameters if whole else jac.parameters[:, :, idx])  # -d poses / d theta_free
-            newton = p - np.einsum("nij,nj->ni", M, r)  # the poses after one Newton step
-            e = white(measured - newton).ravel()
-            J = white_jac(H)
-            cost = 0.5 * float(e @ e)
+            cost = 0.5 * squares
             if prior_rows is not None:
                 e_prior = (theta[idx] - prior_rows[0]) * prior_rows[1]
                 cost += 0.5 * float(e_prior @ e_prior)
             if not np.isfinite(cost):
                 return f"a non-finite residual at iteration {it}"
-            if history and cost > history[-1] * (1.0 + 1e-8):
+            if history and cost > history[-1] * (1.0 + 1e-8) + rounding:
                 return f"the step of iteration {it} raised the cost"
             history.append(cost)
-            gram = J.T @ J
-            if converged and np.max(np.abs(r)) <= FORWARD_KINEMATICS_TOL_MM:
-                scaled, inverse = jac.pose * column_scale, M / column_scale[:, None]
-                condition_bound = np.sqrt(np.einsum("nij,nij->n", scaled, scaled)
-                                          * np.einsum("nij,nij->n", inverse, inverse))  # >= cond_2
-                if not np.all(condition_bound < SINGULAR_CONDITION):
-                    return "a near-singular configuration at the solution"
-                return theta, p, J, gram, it, history, f"converged: the last step was {relative:.1e} relative"
-            if it == SIMULTANEOUS_NEWTON_STEPS:
-                return f"no convergence in {it} iterations"
-            normal, gradient = gram, J.T @ e
+            normal = gram
             if prior_rows is not None:
                 normal = gram + np.diag(prior_rows[1] ** 2)
                 gradient = gradient + prior_rows[1] * e_prior
@@ -603,11 +804,29 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
                 dx = -np.linalg.solve(normal / scale / scale[:, None], gradient / scale) / scale
             except np.linalg.LinAlgError:
                 return "singular normal equations"
+            if converged and largest <= FORWARD_KINEMATICS_TOL_MM:
+                if not regular:
+                    return "a near-singular configuration at the solution"
+                return theta, newton, gram, it, history, f"converged: the last step was {relative:.1e} relative"
+            if it == SIMULTANEOUS_NEWTON_STEPS:
+                return f"no convergence in {it} iterations"
             theta[idx] += dx
-            p = newton - H @ dx
             relative = float(np.linalg.norm(scale * dx) / np.linalg.norm(scale * theta[idx]))
+            if not POSE_PREDICTION_STEP < relative:  # else the next pass predicts from p
+                p, newton = newton, p  # the next iteration starts from this one's Newton poses
             converged = relative <= _CONVERGED_STEP
     return "no convergence"
+
+
+def _forward_factor(robot, theta, joints, poses, idx, white_jac) -> np.ndarray:
+    """(K, K) triangular factor of the whitened forward residual Jacobian at ``(theta, poses)``
+    (poses the model reaches), accumulated block by block (:func:`_triangular_update`): for the
+    exact condition number of an ill-conditioned fit without the (N D, K) Jacobian."""
+    R = None
+    for rows in _row_blocks(poses.shape[0]):
+        jac = robot.closure_jacobians(theta, joints[rows], poses[rows])
+        R = _triangular_update(R, white_jac(np.linalg.solve(jac.pose, jac.parameters[:, :, idx]), rows))
+    return R
 
 
 def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free=None, start=None,
@@ -628,7 +847,8 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
         free: names to identify; default ``robot.free_default``.
         start: (P,) start vector; default the nominal one. Fixed parameters keep its values.
         solver: ``"lm"``: Gauss-Newton with the forward kinematics solved along
-            (:func:`_simultaneous_newton`: one closure-and-Jacobians call an iteration), and
+            (:func:`_simultaneous_newton`: one closure-and-Jacobians call an iteration, and the
+            closure alone where it predicts the poses), and
             where it cannot vouch for its answer (a step that raises the cost, a singular
             configuration, no convergence; ``message`` says so) Levenberg-Marquardt through the
             forward kinematics (Marquardt's scaling, MINPACK's rules); ``"gn"``: Gauss-Newton
@@ -646,20 +866,22 @@ def identify_forward(robot: Robot, joints, measured, noise: SensorNoise, *, free
     elif n * d < idx.size:
         raise ValueError(f"measured must have at least {-(-idx.size // d)} rows to identify "
                          f"{idx.size} parameters, got {n}")
-    white, white_jac, start_poses = _forward_whitening(robot, theta0, joints, measured, noise)
-    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_jac,
+    white, white_jac, white_columns, start_poses = _forward_whitening(robot, theta0, joints, measured, noise)
+    simultaneous = _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_columns,
                                         measured if start_poses is None else start_poses, prior_rows) \
         if solver == "lm" else "not asked for"
     if not isinstance(simultaneous, str):
-        theta, predicted, J, gram, iters, history, msg = simultaneous
-        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram,
+        theta, predicted, gram, iters, history, msg = simultaneous
+        factor = lambda: _forward_factor(robot, theta, joints, predicted, idx, white_jac)  # noqa: E731
+        return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, factor, gram,
                                iters, history, True, msg, prior)
     if start_poses is None:
         start_poses = _start_poses(robot, theta0, joints, measured)
     theta, predicted, J, iters, history, ok, msg = _forward_through_kinematics(
         robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver, max_iter, xtol, ftol,
         simultaneous, prior_rows)
-    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, None, iters,
+    return _forward_result(robot, free, idx, theta0, theta, measured, predicted, white,
+                           None if J is None else (lambda: J), None if J is None else J.T @ J, iters,
                            history, ok, msg, prior)
 
 
@@ -677,14 +899,19 @@ def _forward_whitening(robot, theta0, joints, measured, noise):
     diagonal = not noise.joint_std > 0
     w = 1.0 / noise.pose_std(robot.pose_units)
 
-    def white(v):  # (N, D) -> whitened
-        return v * w if diagonal else np.einsum("nij,nj->ni", winv, v)
+    def white(v, rows=slice(None)):  # (N, D) -> whitened (v of the rows ``rows``)
+        return v * w if diagonal else np.einsum("nij,nj->ni", winv[rows], v)
 
-    def white_jac(jp):  # (N, D, K) -> whitened, flattened to (N D, K)
-        jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv, jp)
-        return jw.reshape(n * d, jp.shape[2])
+    def white_jac(jp, rows=slice(None)):  # (N, D, K) -> whitened, flattened to (N D, K)
+        jw = jp * w[:, None] if diagonal else np.einsum("nij,njk->nik", winv[rows], jp)
+        return jw.reshape(-1, jp.shape[2])
 
-    return white, white_jac, start_poses
+    def white_columns(x, rows=slice(None)):  # (K, D, N) columns of (D, K) matrices of the rows ``rows``
+        if diagonal:  # -> whitened, W x
+            return x * w[None, :, None]
+        return np.einsum("nil,kln->kin", winv[rows], x)
+
+    return white, white_jac, white_columns, start_poses
 
 
 def _forward_through_kinematics(robot, joints, measured, theta0, idx, white, white_jac, start_poses, solver,
@@ -759,24 +986,27 @@ def _forward_through_kinematics(robot, joints, measured, theta0, idx, white, whi
     return theta, predicted, J, iters, history, ok, msg
 
 
-def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, J, gram, iterations,
+def _forward_result(robot, free, idx, theta0, theta, measured, predicted, white, factor, gram, iterations,
                     history, success, message, prior=None) -> IdentificationResult:
     """The forward identification's result at ``theta``: ``predicted`` (N, D) its forward
-    kinematics (NaN where it failed), ``J`` (N D, K) the whitened residual Jacobian there (None
-    if it failed) and ``gram`` its ``J^T J`` when already formed (else None); with a ``prior``
-    its rows join the covariance (posterior) and the chi-square."""
+    kinematics (NaN where it failed), ``gram`` (K, K) the ``J^T J`` of the whitened residual
+    Jacobian there and ``factor`` a callable returning ``J`` or any matrix with that Gram matrix
+    (its triangular factor), called only where the exact condition number is needed (both None
+    if the forward kinematics failed); with a ``prior`` its rows join the covariance (posterior)
+    and the chi-square."""
     n, d = measured.shape
     res = measured - predicted
     cov = np.zeros((robot.n_parameters,) * 2)
     dof = n * d - idx.size if prior is None else n * d  # the prior rows count as observations
-    if J is not None and np.all(np.isfinite(res)):
+    if gram is not None and np.all(np.isfinite(res)):
         r = white(res).ravel()
+        rows = factor
         if prior is not None:
             mean, inv_std = _prior_rows(robot, prior, idx)
             r = np.concatenate([r, (theta[idx] - mean) * inv_std])
-            gram = (J.T @ J if gram is None else gram) + np.diag(inv_std ** 2)
-            J = np.vstack([J, np.diag(inv_std)])
-        block, cond = _covariance_and_conditions(J[None], None if gram is None else gram[None])
+            gram = gram + np.diag(inv_std ** 2)
+            rows = lambda: np.vstack([factor(), np.diag(inv_std)])  # noqa: E731
+        block, cond = _covariance_and_conditions(lambda mask: rows()[None], gram[None])
         chi2 = float(r @ r)
         cov[np.ix_(idx, idx)] = block[0]
     else:
@@ -850,7 +1080,9 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
         raise ValueError(f"measured must have at least {most} rows ({most} unknowns in one "
                          f"{robot.chain_word}), got {n}")
     if weighted:
-        sigma = _closure_std(robot, robot.closure_jacobians(theta0, joints, measured), noise)
+        sigma = np.empty((n, robot.n_chains))
+        for rows in _row_blocks(n):
+            sigma[rows] = _closure_std(robot, robot.closure_jacobians(theta0, joints[rows], measured[rows]), noise)
         w = 1.0 / np.maximum(sigma, 1e-12)
     else:
         w = None  # unit weights, not multiplied in
@@ -859,30 +1091,27 @@ def identify_chainwise(robot: Robot, joints, measured, noise: SensorNoise | None
     if prior is not None:
         chain_prior = (np.zeros(robot.n_parameters), np.zeros(robot.n_parameters))
         chain_prior[0][idx], chain_prior[1][idx] = prior_rows
+    judged = noise if noise_given else None
     if solver == "gn":
         fit = _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol, max_iter,
-                                      chain_prior)
+                                      chain_prior, judged)
     else:
         fit = _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol, ftol,
-                                             chain_prior)
-    return _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise if noise_given else None, fit,
-                             prior, chain_prior)
+                                             chain_prior, judged)
+    return _chainwise_result(robot, free, idx, theta0, joints, measured, groups, w, judged, fit, prior,
+                             chain_prior)
 
 
 @dataclass
 class _ChainwiseFit:
-    """Where a chain-wise solver stopped: ``theta`` (P,), the closure ``r`` (N, C) and its
-    Jacobians ``jac`` at the measured poses for it, the ``corrected`` (N, D) poses (its forward
-    kinematics, NaN where it failed), the Gauss-Newton step's last ``systems`` (per group ``(A,
-    A^T A)``) and the Jacobians ``systems_jac`` they are from (None for Levenberg-Marquardt),
-    ``history``, ``iterations``, ``success`` and ``message``."""
+    """Where a chain-wise solver stopped: ``theta`` (P,), its :class:`_ChainEvaluation` at the
+    measured poses ``evaluation`` (closure, normal equations of its chain systems, closure std),
+    the ``corrected`` (N, D) poses (its forward kinematics, NaN where it failed), ``history``,
+    ``iterations``, ``success`` and ``message``."""
 
     theta: np.ndarray
-    r: np.ndarray
-    jac: ClosureJacobians
+    evaluation: _ChainEvaluation
     corrected: np.ndarray
-    systems: list | None
-    systems_jac: ClosureJacobians | None
     history: list
     iterations: int
     success: bool
@@ -890,52 +1119,50 @@ class _ChainwiseFit:
 
 
 def _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon, step_tol,
-                            max_iter, chain_prior=None) -> _ChainwiseFit:
+                            max_iter, chain_prior=None, noise=None) -> _ChainwiseFit:
     """The hexapod paper's iteration (see :func:`identify_chainwise`): a Gauss-Newton step per
     chain, the integrated error of the corrected model after each, judged on the exact forward
     kinematics where a stopping rule holds (:func:`_chainwise_stop`). ``chain_prior``: ``(mean
-    (P,), 1 / std (P,))`` whose entries at each chain's parameters join its system, or None."""
+    (P,), 1 / std (P,))`` whose entries at each chain's parameters join its system, or None;
+    ``noise``: the declared noise whose closure std the evaluations keep (for the result), or None."""
     theta = theta0.copy()
     history: list[float] = []
     iterations, success = 0, False
     message = f"no stopping rule met in {max_iter} iterations"
-    systems = systems_jac = None  # the Gauss-Newton step's last systems and the Jacobians they are from
-    # The closure and its Jacobians at the measured poses, for the current vector: computed
-    # once per vector, they serve its Gauss-Newton step, the integrated error of the
-    # corrected model and, for the final vector, the result.
-    r, jac = robot.closure_with_jacobians(theta, joints, measured)
+    # The closure, its chain systems' normal equations and one Newton step of the forward
+    # kinematics at the measured poses, for the current vector: evaluated once per vector, block
+    # by block, they serve its Gauss-Newton step, the integrated error of the corrected model
+    # and, for the final vector, the result.
+    ev = _chain_evaluation(robot, theta, joints, measured, groups, w, noise)
     dQ = None  # the corrected poses' offset from the measured ones, to second order
     corrected = None
     for it in range(1, max_iter + 1):
-        J = jac.parameters
         step = np.zeros_like(theta)
-        systems, systems_jac = [], jac  # each group's (A, A^T A) at jac's vector
-        for chains, params in groups:
-            A, b = _chain_systems(J, r, w, chains, params)
+        for (chains, params), (gram, g) in zip(groups, ev.systems):
             rows = None
             if chain_prior is not None:
                 inv_std = chain_prior[1][params]
                 rows = (inv_std, (theta[params] - chain_prior[0][params]) * inv_std)
-            step[params], gram = _chain_steps(A, b, rows)
-            systems.append((A, gram))
+            step[params] = _chain_steps(gram, g, rows, lambda th=theta, c=chains, p=params: _chain_factors(
+                robot, th, joints, measured, c, p, w))
         update = float(np.max(np.abs(step)))
         small_step = update <= step_tol
         if not small_step:
             try:  # a step may leave the robot's parameter domain (a Delta forearm of negative length)
-                r_new, jac_new = robot.closure_with_jacobians(theta + step, joints, measured)
+                ev_new = _chain_evaluation(robot, theta + step, joints, measured, groups, w, noise)
             except KinematicsError as exc:
                 message = f"the Gauss-Newton step left the workspace at iteration {it}: {exc}"
                 break
-            theta, r, jac = theta + step, r_new, jac_new
+            theta, ev = theta + step, ev_new
             iterations = it
-            dQ = _newton_offset(jac, r)
+            dQ = ev.offset
             history.append(float(integrated_error(robot, dQ)[2].max()) if np.all(np.isfinite(dQ)) else np.inf)
             if not history[-1] <= epsilon:
                 continue
         # A stopping rule holds (the paper's to second order, or the next update is negligible
         # and not taken): decide on the exact forward kinematics.
         if dQ is None:  # the start is the answer
-            dQ = _newton_offset(jac, r)
+            dQ = ev.offset
         corrected, stop = _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon,
                                           update if small_step else None, step_tol)
         if stop is not None:
@@ -943,7 +1170,7 @@ def _chainwise_gauss_newton(robot, joints, measured, theta0, groups, w, epsilon,
             break
     if corrected is None:
         corrected = _predicted(robot, theta, joints, measured)
-    return _ChainwiseFit(theta, r, jac, corrected, systems, systems_jac, history, iterations, success, message)
+    return _ChainwiseFit(theta, ev, corrected, history, iterations, success, message)
 
 
 def _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon, update, step_tol):
@@ -972,9 +1199,9 @@ def _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon, update
 
 
 def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol,
-                                   ftol, chain_prior=None) -> _ChainwiseFit:
+                                   ftol, chain_prior=None, noise=None) -> _ChainwiseFit:
     """Each chain fitted to convergence by Levenberg-Marquardt (the Delta paper's IKM), in chain
-    order; ``chain_prior`` as :func:`_chainwise_gauss_newton`'s."""
+    order; ``chain_prior`` and ``noise`` as :func:`_chainwise_gauss_newton`'s."""
     theta = theta0.copy()
     history: list[float] = []
     iterations = 0
@@ -1011,30 +1238,34 @@ def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, m
         oks.append(ok)
         messages.append(f"{robot.chain_word} {c + 1}: {msg}")
     corrected = _predicted(robot, theta, joints, measured)
-    r, jac = robot.closure_with_jacobians(theta, joints, measured)
-    return _ChainwiseFit(theta, r, jac, corrected, None, None, history, iterations, all(oks), "; ".join(messages))
+    ev = _chain_evaluation(robot, theta, joints, measured, groups, w, noise)
+    return _ChainwiseFit(theta, ev, corrected, history, iterations, all(oks), "; ".join(messages))
 
 
-def _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise, fit: _ChainwiseFit, prior=None,
-                      chain_prior=None) -> IdentificationResult:
-    """The chain-wise identification's result: per-chain covariances and condition numbers
-    (from the fit's last Gauss-Newton systems where they are the returned vector's), chi-square
-    against ``noise`` (None: none declared, no judgement); with a ``prior`` (``chain_prior`` its
-    rows as :func:`_chainwise_gauss_newton` takes them) the posterior covariance and its rows
-    in the chi-square."""
+def _chainwise_result(robot, free, idx, theta0, joints, measured, groups, w, noise, fit: _ChainwiseFit,
+                      prior=None, chain_prior=None) -> IdentificationResult:
+    """The chain-wise identification's result: per-chain covariances and condition numbers from
+    the normal equations of the fit's evaluation at the returned vector (the exact condition
+    number of an ill-conditioned chain from its triangular factor, one more pass over the rows),
+    chi-square against ``noise`` (None: none declared, no judgement); with a ``prior``
+    (``chain_prior`` its rows as :func:`_chainwise_gauss_newton` takes them) the posterior
+    covariance and its rows in the chi-square."""
     n = measured.shape[0]
-    r, jac = fit.r, fit.jac
+    ev = fit.evaluation
+    r = ev.r
     cond = np.full(robot.n_chains, np.nan)
     cov = np.zeros((robot.n_parameters,) * 2)
     for k, (chains, params) in enumerate(groups):
-        # The systems of the step not taken (the noisy stop) are those of the returned vector.
-        A, gram = fit.systems[k] if fit.systems_jac is jac else \
-            (_chain_systems(jac.parameters, r, w, chains, params)[0], None)
-        if chain_prior is not None:
-            inv_std = chain_prior[1][params]
-            gram = None if gram is None else gram + _diagonal_stack(inv_std ** 2)
-            A = _with_prior_rows(A, inv_std)
-        block, cond[chains] = _covariance_and_conditions(A, gram)  # (M, K, K) and (M,), per chain
+        gram = ev.systems[k][0]
+        inv_std = None if chain_prior is None else chain_prior[1][params]
+
+        def factors(mask, chains=chains, params=params, inv_std=inv_std):
+            R = _chain_factors(robot, fit.theta, joints, measured, chains[mask], params[mask], w)[..., :-1]
+            return R if inv_std is None else _with_prior_rows(R, inv_std[mask])
+
+        if inv_std is not None:
+            gram = gram + _diagonal_stack(inv_std ** 2)
+        block, cond[chains] = _covariance_and_conditions(factors, gram)  # (M, K, K) and (M,), per chain
         dof = n - params.shape[1]
         if w is None:  # the residuals' own variance, s^2 = |r_c|^2 / dof, per chain
             rc = r[:, chains]
@@ -1043,7 +1274,7 @@ def _chainwise_result(robot, free, idx, theta0, measured, groups, w, noise, fit:
         cov[params[:, :, None], params[:, None, :]] = block
     message = fit.message
     if noise is not None:
-        white = r / np.maximum(_closure_std(robot, jac, noise), 1e-12)
+        white = r / np.maximum(ev.std, 1e-12)
         chi2 = float(np.sum(white ** 2))
         if chain_prior is not None:
             e_prior = (fit.theta[idx] - chain_prior[0][idx]) * chain_prior[1][idx]
@@ -1065,7 +1296,7 @@ def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
     F``: the measured poses minus the corrected ones, exact to ``|dQ|^2 / machine size``
     (``inf`` where the pose Jacobian is singular)."""
     try:
-        return np.linalg.solve(jac.pose, r[..., None])[..., 0]
+        return BatchedLU(jac.pose).solve(r)
     except np.linalg.LinAlgError:
         return np.full(r.shape[:1] + jac.pose.shape[2:], np.inf)
 

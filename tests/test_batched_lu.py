@@ -100,3 +100,27 @@ def test_pose_jacobians_of_every_robot(name):
     r, J = robot.closure_and_pose_jacobian(theta, joints, poses)
     b = np.random.default_rng(6).normal(size=r.shape)
     assert relative_error(BatchedLU(J).solve(b), lapack(J, b)) < 1e-10
+
+
+@pytest.mark.parametrize("n", [3, 6])
+def test_inverse_columns_are_lapacks_inverse(n):
+    """The inverse column by column, structure-of-arrays (X[j, i] = inv(A)[i, j]), against
+    numpy.linalg.inv: a batched stack with some matrices handed to LAPACK, a small stack, and a
+    small stack asked for its inverse up front (whose solve then multiplies by it)."""
+    rng = np.random.default_rng(10 + n)
+    m = 2 * SMALLEST_BATCH_ENTRIES // n ** 2
+    A = rng.normal(size=(m, n, n)) + 2.0 * n * np.eye(n)
+    order_row = int(np.argmax(np.abs(A[0, :, 0])))
+    A[1::5, order_row, 0] = 1e-14  # unpivoted elimination in the shared order would fail these
+    factors = BatchedLU(A)
+    assert factors.fallback[1::5].all() and not factors.fallback.all()
+    reference = np.linalg.inv(A)
+    X = factors.inverse_columns()
+    assert X.shape == (n, n, m)
+    scale = np.abs(reference).max(axis=(1, 2))
+    assert np.max(np.abs(X.transpose(2, 1, 0) - reference).max(axis=(1, 2)) / scale) < 1e-11
+    small = A[:10]
+    for f in (BatchedLU(small), BatchedLU(small, inverse=True)):
+        np.testing.assert_array_equal(f.inverse_columns().transpose(2, 1, 0), np.linalg.inv(small))
+    b = rng.normal(size=(10, n))
+    assert relative_error(BatchedLU(small, inverse=True).solve(b), lapack(small, b)) < 1e-11

@@ -1,0 +1,176 @@
+"""calib.engine: the fits evaluated block by block over the rows (FIT_BLOCK_ROWS) give the answers
+of one pass over all rows, to what the conditioning allows; the triangular factors accumulated
+block by block (the least-squares fallback, the exact condition numbers) are those of the whole
+system. Parametrised over the robot registry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import calib.engine as engine
+from calib.engine import identify_chainwise, identify_forward
+from calib.noise import SensorNoise
+from calib.observability import identification_jacobian
+from calib.robots import ROBOTS, default_robot, uniform_errors
+from calib.workspace import reachable_poses
+
+from linalg_tolerance import EPS, column_norms, gram_inverse_tolerance, scaled_relative_gap
+
+NAMES = sorted(ROBOTS)
+#: Rows of a block in the tests: a prime, so that the last block is a short one.
+SMALL_BLOCK = 7
+#: A block holding every row: the unblocked computation.
+WHOLE = 10 ** 9
+
+
+def _data(name: str, n: int = 120, joint: float = 0.0):
+    robot = default_robot(name)
+    theta = robot.table.nominal + uniform_errors(robot, 1, 0.5, np.deg2rad(0.5))
+    poses = reachable_poses(robot, n, np.random.default_rng(3), theta=theta)
+    noise = SensorNoise(1e-3, 1e-6, joint=joint)
+    joints = robot.inverse_kinematics(theta, poses) + noise.sample_joints(n, robot.n_chains, 4)
+    measured = poses + noise.sample(n, 5, robot.pose_units)
+    return robot, joints, measured, noise
+
+
+def _fit(monkeypatch, rows: int, fit, *args, **kwargs):
+    monkeypatch.setattr(engine, "FIT_BLOCK_ROWS", rows)
+    return fit(*args, **kwargs)
+
+
+def _scaled_gap(a: np.ndarray, b: np.ndarray, norms: np.ndarray) -> float:
+    """``|D (a - b)| / |D b|``: the difference of two parameter vectors in the coordinates of the
+    column-scaled system (``D`` its column norms), where K eps cond^2 bounds what rounding does."""
+    return float(np.linalg.norm(norms * (a - b)) / np.linalg.norm(norms * b))
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("joint", [0.0, 1e-3])
+def test_forward_fit_in_blocks_is_the_fit_in_one_pass(monkeypatch, name, joint):
+    """Blocks of 7 rows and one block of all rows: the same iterations, theta, covariance, chi2 and
+    predicted poses, to K eps cond^2 (tests/linalg_tolerance.py; cond of the column-scaled
+    whitened Jacobian): the two sum the normal equations in another order, nothing else."""
+    robot, joints, measured, noise = _data(name, joint=joint)
+    one = _fit(monkeypatch, WHOLE, identify_forward, robot, joints, measured, noise)
+    blocks = _fit(monkeypatch, SMALL_BLOCK, identify_forward, robot, joints, measured, noise)
+    assert one.success and blocks.success and one.message.startswith("converged")
+    assert blocks.iterations == one.iterations
+    idx = robot.table.indices(one.free_names)
+    J = identification_jacobian(robot, one.theta, measured - one.pose_residuals, noise, joints=joints)
+    J = J.reshape(-1, J.shape[-1])
+    norms = column_norms(J)
+    tol = gram_inverse_tolerance(one.condition_numbers[0], idx.size)
+    assert _scaled_gap(blocks.theta[idx], one.theta[idx], norms) <= tol
+    assert scaled_relative_gap(blocks.covariance[np.ix_(idx, idx)], one.covariance[np.ix_(idx, idx)], norms) <= tol
+    assert blocks.condition_numbers[0] == pytest.approx(one.condition_numbers[0], rel=tol)
+    # chi2 ~ N D at the minimum is first-order insensitive to theta; the two stop within their
+    # last steps (at most 1e-9 relative) of it, as in test_robot_contract's comparison of two fits
+    assert blocks.chi2 == pytest.approx(one.chi2, rel=1e-9)
+    assert np.max(np.abs(blocks.pose_residuals - one.pose_residuals)) <= 1e-9  # the poses' Newton tolerance
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("solver,weighted", [("gn", False), ("gn", True), ("lm", True)])
+def test_chainwise_fit_in_blocks_is_the_fit_in_one_pass(monkeypatch, name, solver, weighted):
+    """The chain-wise fit, blocks of 7 rows against one block: the same theta and covariance chain
+    by chain, to K eps cond^2 of that chain's column-scaled system."""
+    robot, joints, measured, noise = _data(name, joint=1e-3 if weighted else 0.0)
+    kw = dict(solver=solver, weighted=weighted)
+    one = _fit(monkeypatch, WHOLE, identify_chainwise, robot, joints, measured, noise, **kw)
+    blocks = _fit(monkeypatch, SMALL_BLOCK, identify_chainwise, robot, joints, measured, noise, **kw)
+    assert one.success and blocks.success
+    idx = robot.table.indices(one.free_names)
+    P = robot.closure_jacobians(one.theta, joints, measured).parameters
+    for c in range(robot.n_chains):
+        ix = np.intersect1d(robot.table.chain_indices(c), idx)
+        norms = column_norms(P[:, c, ix])
+        tol = gram_inverse_tolerance(one.condition_numbers[c], ix.size)
+        assert _scaled_gap(blocks.theta[ix], one.theta[ix], norms) <= tol
+        assert scaled_relative_gap(blocks.covariance[np.ix_(ix, ix)], one.covariance[np.ix_(ix, ix)], norms) <= tol
+    np.testing.assert_allclose(blocks.residuals, one.residuals, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_condition_numbers_from_block_factors_are_the_svds(monkeypatch, name):
+    """Every condition number taken the exact way (GRAM_CONDITION_FLOOR raised to 1: the SVD of the
+    triangular factor accumulated over blocks of 7 rows): that of the whole column-scaled system
+    by numpy's SVD, to m K eps cond (m rows, K columns: Householder QR's backward error, gamma_{mK}
+    (Higham Thm 19.4), which a singular value's relative error amplifies by at most cond; the
+    factor's SVD does not square it as the Gram matrix's eigenvalues would)."""
+    monkeypatch.setattr(engine, "GRAM_CONDITION_FLOOR", 1.0)
+    robot, joints, measured, noise = _data(name)
+    fwd = _fit(monkeypatch, SMALL_BLOCK, identify_forward, robot, joints, measured, noise)
+    idx = robot.table.indices(fwd.free_names)
+    J = identification_jacobian(robot, fwd.theta, measured - fwd.pose_residuals, noise, joints=joints)
+    J = J.reshape(-1, J.shape[-1])
+    cond = np.linalg.cond(J / column_norms(J))
+    assert fwd.condition_numbers[0] == pytest.approx(cond, rel=idx.size * EPS * cond * len(J))
+    chain = _fit(monkeypatch, SMALL_BLOCK, identify_chainwise, robot, joints, measured, noise)
+    P = robot.closure_jacobians(chain.theta, joints, measured).parameters
+    for c in range(robot.n_chains):
+        ix = np.intersect1d(robot.table.chain_indices(c), idx)
+        A = P[:, c, ix]
+        cond = np.linalg.cond(A / column_norms(A))
+        assert chain.condition_numbers[c] == pytest.approx(cond, rel=ix.size * EPS * cond * len(A))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_chainwise_least_squares_fallback_on_block_factors_is_the_normal_equations_step(monkeypatch, name):
+    """Every chain's step by the least-squares fallback (NORMAL_EQUATIONS_CONDITION 0: lstsq on the
+    triangular factors of [A | b] accumulated over blocks of 7 rows) reaches the theta the normal
+    equations reach, to K eps cond^2."""
+    robot, joints, measured, noise = _data(name)
+    normal = _fit(monkeypatch, WHOLE, identify_chainwise, robot, joints, measured, noise)
+    monkeypatch.setattr(engine, "NORMAL_EQUATIONS_CONDITION", 0.0)
+    fallback = _fit(monkeypatch, SMALL_BLOCK, identify_chainwise, robot, joints, measured, noise)
+    assert normal.success and fallback.success
+    idx = robot.table.indices(normal.free_names)
+    P = robot.closure_jacobians(normal.theta, joints, measured).parameters
+    for c in range(robot.n_chains):
+        ix = np.intersect1d(robot.table.chain_indices(c), idx)
+        tol = gram_inverse_tolerance(normal.condition_numbers[c], ix.size)
+        assert _scaled_gap(fallback.theta[ix], normal.theta[ix], column_norms(P[:, c, ix])) <= tol
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("joint", [0.0, 1e-3])
+def test_forward_normal_equations_three_ways_are_one_fit(monkeypatch, name, joint):
+    """The forward fit's normal equations per block from the chains' ownership of their parameters
+    (chain by chain products, CHAIN_PRODUCT_ROWS 0), from the block's gathered Jacobian rows
+    (CHAIN_PRODUCT_ROWS above every block) and from the dense product (no ownership assumed):
+    the same iterations, theta and covariance to K eps cond^2 (they sum the same products in
+    another order)."""
+    robot, joints, measured, noise = _data(name, joint=joint)
+    monkeypatch.setattr(engine, "FIT_BLOCK_ROWS", 50)
+    monkeypatch.setattr(engine, "CHAIN_PRODUCT_ROWS", 0)
+    chains = identify_forward(robot, joints, measured, noise)
+    monkeypatch.setattr(engine, "CHAIN_PRODUCT_ROWS", WHOLE)
+    rows = identify_forward(robot, joints, measured, noise)
+    monkeypatch.setattr(engine, "_chain_owners", lambda *args: None)
+    dense = identify_forward(robot, joints, measured, noise)
+    assert chains.message.startswith("converged")
+    idx = robot.table.indices(chains.free_names)
+    J = identification_jacobian(robot, chains.theta, measured - chains.pose_residuals, noise, joints=joints)
+    norms = column_norms(J.reshape(-1, J.shape[-1]))
+    tol = gram_inverse_tolerance(chains.condition_numbers[0], idx.size)
+    for other in (rows, dense):
+        assert other.iterations == chains.iterations and other.message.startswith("converged")
+        assert _scaled_gap(other.theta[idx], chains.theta[idx], norms) <= tol
+        assert scaled_relative_gap(other.covariance[np.ix_(idx, idx)], chains.covariance[np.ix_(idx, idx)],
+                                   norms) <= tol
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_chain_owners_are_the_parameter_tables_chains(name):
+    """Every robot's closure of chain c moves with chain c's parameters alone (what the chain-wise
+    fit and the forward fit's chain products assume): the owners are the table's chains; a
+    parameter Jacobian with one entry of another chain's parameter set gives None."""
+    robot, joints, measured, _ = _data(name, n=30)
+    idx = np.arange(robot.n_parameters)
+    P = robot.closure_jacobians(robot.table.nominal, joints, measured).parameters
+    np.testing.assert_array_equal(engine._chain_owners(robot, P, idx), robot.table.chains)
+    other = (int(robot.table.chains[0]) + 1) % robot.n_chains
+    P = P.copy()
+    P[3, other, 0] = 1e-300
+    assert engine._chain_owners(robot, P, idx) is None
