@@ -131,6 +131,18 @@ def _compensable(effects, t_s, channels: dict) -> tuple[list, dict]:
     return used, left
 
 
+def _inputs(robot: Robot, theta, rows, what: str, width: int, t_s, channels, previous, effects) -> tuple:
+    """The checked inputs of :func:`compensated_commands` and :func:`machine_poses`: ``(theta (P,),
+    rows (N, width), times (N,) or None, channels, the command history, the effects used, {name:
+    why not} of the others)``."""
+    theta = as_array(theta, "theta", (robot.n_parameters,))
+    rows = as_array(rows, what, (-1, width))
+    times = None if t_s is None else as_array(t_s, "t_s", (rows.shape[0],))
+    channels = dict(channels or {})
+    used, left = _compensable(effects, times, channels)
+    return theta, rows, times, channels, _history(robot, theta, previous), used, left
+
+
 def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, channels: dict | None = None,
                          previous=None, tolerance: float = COMPENSATION_TOLERANCE,
                          max_iterations: int = MAX_COMPENSATION_ITERATIONS) -> Compensation:
@@ -152,13 +164,9 @@ def compensated_commands(robot: Robot, theta, targets, effects=(), *, t_s=None, 
             joint's stroke (names the row).
         ValueError: arrays of the wrong shape.
     """
-    theta = as_array(theta, "theta", (robot.n_parameters,))
-    targets = as_array(targets, "targets", (-1, robot.pose_dim))
+    theta, targets, times, channels, previous, used, left = _inputs(robot, theta, targets, "targets", robot.pose_dim,
+                                                                    t_s, channels, previous, effects)
     n = targets.shape[0]
-    times = None if t_s is None else as_array(t_s, "t_s", (n,))
-    channels = dict(channels or {})
-    previous = _history(robot, theta, previous)
-    used, left = _compensable(effects, times, channels)
     geometric = robot.inverse_kinematics(theta, targets)
     clock = np.zeros(n) if times is None else times  # no effect used follows it when it is None
     travel = float(np.max(np.ptp(robot.joint_limits(), axis=1)))
@@ -197,13 +205,9 @@ def machine_poses(robot: Robot, theta, joints, effects=(), *, t_s=None, channels
         KinematicsError: joints the identified geometry cannot assemble at (names the row).
         ValueError: arrays of the wrong shape.
     """
-    theta = as_array(theta, "theta", (robot.n_parameters,))
-    joints = as_array(joints, "joints", (-1, robot.n_chains))
+    theta, joints, times, channels, previous, used, _ = _inputs(robot, theta, joints, "joints", robot.n_chains,
+                                                                 t_s, channels, previous, effects)
     n = joints.shape[0]
-    times = None if t_s is None else as_array(t_s, "t_s", (n,))
-    channels = dict(channels or {})
-    previous = _history(robot, theta, previous)
-    used, _ = _compensable(effects, times, channels)
     poses = robot.forward_kinematics(theta, joints)
     if not used or n == 0:
         return poses

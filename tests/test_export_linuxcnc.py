@@ -215,16 +215,21 @@ def delta_motor_commands(folder, targets, home):
 # ----------------------------------------------------------------------------- the proof
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
-    """The recording, pipeline.compensate's proof on it, its calibration file and the export."""
-    tmp = tmp_path_factory.mktemp("linuxcnc")
-    rec = effect_recording(EFFECTS, SEED, robot="hexapod", granularity="per_chain")
+def export_of(tmp, robot: str, effects) -> dict:
+    """A recording of ``robot`` with ``effects`` per joint, pipeline.compensate's proof on it, its
+    calibration file and its LinuxCNC export, in ``tmp``."""
+    rec = effect_recording(effects, SEED, robot=robot, granularity="per_chain")
     proof = proof_in_the_testbed(rec, TARGETS, TARGET_SEED)
-    path = tmp / "h.calibration.json"
+    path = tmp / f"{robot}.calibration.json"
     write_calibration(path, proof["calibration"])
     assert export_main(["--calibration", str(path), "--to", "linuxcnc", "--out", str(tmp / "dir")]) == 0
     return {"rec": rec, "proof": proof, "calibration": path, "dir": tmp / "dir", "tmp": tmp}
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """The recording, pipeline.compensate's proof on it, its calibration file and the export."""
+    return export_of(tmp_path_factory.mktemp("linuxcnc"), "hexapod", EFFECTS)
 
 
 def test_the_comp_files_obey_linuxcncs_rules(exported):
@@ -443,13 +448,7 @@ def test_a_delta_of_rotarydeltakins_shape_is_recovered_with_its_offsets_and_fram
 def delta_exported(tmp_path_factory):
     """The Delta's recording (geometry errors, per joint a dead band and an actuator scale),
     pipeline.compensate's proof on it, its calibration file and the export."""
-    tmp = tmp_path_factory.mktemp("linuxcnc_delta")
-    rec = effect_recording(DELTA_EFFECTS, SEED, robot="delta", granularity="per_chain")
-    proof = proof_in_the_testbed(rec, TARGETS, TARGET_SEED)
-    path = tmp / "d.calibration.json"
-    write_calibration(path, proof["calibration"])
-    assert export_main(["--calibration", str(path), "--to", "linuxcnc", "--out", str(tmp / "dir")]) == 0
-    return {"rec": rec, "proof": proof, "calibration": path, "dir": tmp / "dir", "tmp": tmp}
+    return export_of(tmp_path_factory.mktemp("linuxcnc_delta"), "delta", DELTA_EFFECTS)
 
 
 def test_the_delta_comp_files_obey_linuxcncs_rules(delta_exported):
