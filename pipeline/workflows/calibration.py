@@ -1090,7 +1090,10 @@ def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> 
         base = groups == BASE_FRAME  # in the base frame: the geometry's uncertainty alone
         if base.any():
             jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
-            cov[base] = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac)
+            # J Sigma J^T row by row: one (N D, P) x (P, P) product, then (D, P) x (P, D) per row
+            # (a three-operand einsum without a contraction order loops over N D P P D terms)
+            js = (jac.reshape(-1, jac.shape[2]) @ result.covariance).reshape(jac.shape)
+            cov[base] = js @ np.swapaxes(jac, 1, 2)
         if (~base).any():  # geometry and frames' uncertainty together
             cov[~base] = ident.instrument.prediction_covariance(
                 joints[~base], sessions=groups[~base] if inp.n_sessions > 1 else None)
@@ -1428,7 +1431,9 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         cv = crossvalidation_of(inp, ident, settings)
         summary.update(cv.summary())
         split["crossvalidation"] = time.perf_counter() - t_cv
+    t_v = time.perf_counter()
     summary.update(verdict_block(inp, ident, held, cv, diagnosis))
+    split["verdict"] = time.perf_counter() - t_v
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     summary["_calibration"] = calibration_of(inp, ident, summary.get("_recording"))
