@@ -324,7 +324,7 @@ def _null_combinations(robot: Robot, As: np.ndarray, idx: np.ndarray, names, sca
         cols = np.flatnonzero(robot.table.chains[idx] == c)
         if cols.size == 0:
             continue
-        _, s, vt = np.linalg.svd(As[:, cols], full_matrices=True)
+        _, s, vt = np.linalg.svd(As[:, cols], full_matrices=As.shape[0] < cols.size)  # every V; no N x N U
         s = np.r_[s, np.zeros(cols.size - s.size)]
         for v in vt[s <= tol]:
             full = np.zeros(len(names))

@@ -607,3 +607,21 @@ def test_the_testbed_steps_one_joint_and_warms_the_legs_up():
     warm = Testbed(robot, robot.table.nominal, effects=MachineEffects(joint_warmup_per_s=0.01, joint_warmup_tau_s=2.0))
     moved = warm.measure(q, times_s=times).settled_joints - plain
     np.testing.assert_allclose(moved, np.repeat((0.01 * 2.0 * (1 - np.exp(-times / 2.0)))[:, None], 6, axis=1), atol=1e-6)
+
+
+def test_large_folds_of_the_closed_form_crossvalidation_take_the_woodbury_form(monkeypatch):
+    """With calib.effects.discovery.DENSE_FOLD_MAX lowered to 0 every fold of the closed-form
+    cross-validation is solved through the Woodbury identity (a P x P system) instead of the
+    dense fold-sized one: the same effects are chosen and the same cross-validated figures to
+    rounding (the two forms are the same algebra; 1e-9 is far above the rounding of a fold's
+    systems and far below any difference between candidates)."""
+    import calib.effects.discovery
+
+    exact = discover_effects(two_effects())
+    monkeypatch.setattr(calib.effects.discovery, "DENSE_FOLD_MAX", 0)
+    woodbury = discover_effects(two_effects())
+    assert woodbury.effects == exact.effects
+    for key in ("cv_whitened_rms_chosen",):
+        assert woodbury.evidence[key] == pytest.approx(exact.evidence[key], rel=1e-9)
+    assert woodbury.evidence["none"]["cv_whitened_rms"] == pytest.approx(exact.evidence["none"]["cv_whitened_rms"],
+                                                                         rel=1e-9)
