@@ -625,3 +625,23 @@ def test_large_folds_of_the_closed_form_crossvalidation_take_the_woodbury_form(m
         assert woodbury.evidence[key] == pytest.approx(exact.evidence[key], rel=1e-9)
     assert woodbury.evidence["none"]["cv_whitened_rms"] == pytest.approx(exact.evidence["none"]["cv_whitened_rms"],
                                                                          rel=1e-9)
+
+
+@pytest.mark.parametrize("robot_name", list(ROBOTS))
+def test_a_long_step_time_grid_is_searched_coarse_to_fine_to_the_same_step(robot_name, monkeypatch):
+    """The lost count's step-time grid (one point per row and chain: 6 x 79 for the hexapod) is
+    longer than calib.effects.discovery.SEARCH_GRID_MAX lowered to 12: the coarse-to-fine search
+    finds the same joint and time as every point tried (the independent truth: the step made)."""
+    import calib.effects.discovery
+    from calib.effects.lost_count import JointStep
+
+    robot = default_robot(robot_name)
+    probe = synthetic(robot_name, "none", [], seed=11)
+    truth = JointStep(1, float((probe.t_s[44] + probe.t_s[45]) / 2))
+    step = [0.004 if robot.joint_unit == "mm" else 4e-5]
+    data = synthetic(robot_name, "lost_count", step, seed=11, extra=truth, noise=NOISE)
+    assert len(EFFECTS["lost_count"].search_grid(data)) > 12
+    monkeypatch.setattr(calib.effects.discovery, "SEARCH_GRID_MAX", 12)
+    d = discover_effects(data)
+    assert list(d.effects) == ["lost_count"] and d.explained, d.verdict
+    assert d.chosen.extra == truth
