@@ -7,10 +7,18 @@ compared with that prediction.
 * ``method="forward"`` (:func:`calib.engine.identify_forward`): leave-one-out by default, with
   exact refits (one fit per row, each as the full fit: same start, options and prior). A fit
   costs a few milliseconds (``benchmarks/crossval_speed.py``), so the closed-form one-step
-  approximation of :mod:`calib.outliers` (the hat matrix) is not needed.
+  approximation of :mod:`calib.outliers` (the hat matrix) is not needed. Above
+  :data:`LOO_MAX_ROWS` rows (N refits of N rows each: a cost growing as N squared) the default is
+  K-fold with :data:`DEFAULT_CHAINWISE_FOLDS` folds, and the scheme says why
+  (``"10-fold (5,000 rows > LOO_MAX_ROWS = 2000)"``).
 * ``method="chainwise"`` (:func:`calib.engine.identify_chainwise`): K-fold
   (:data:`DEFAULT_CHAINWISE_FOLDS` folds by default): the rows are split at random (seeded) into
   K folds of near-equal size; each fold is predicted by the model fitted to the other K - 1.
+
+Above :data:`FEW_FOLDS_MIN_ROWS` rows either method's default is :data:`FEW_FOLDS` folds: K fits
+of (K - 1) N / K rows each cost K - 1 full fits, and a model fitted to half of so many rows
+predicts as one fitted to nine tenths (its own error adds about P / (N / 2) of the noise's
+variance, P parameters: 0.1 % at 100,000 hexapod rows, below the figure's spread).
 
 The prediction of a left-out row is the forward kinematics of the fold's model at the row's
 joints, started from the measured pose (``robot.forward_kinematics(theta, joints,
@@ -50,10 +58,20 @@ from .robot import KinematicsError, Robot
 from .validation import frozen_array
 
 __all__ = ["CrossValidation", "crossvalidate", "crossvalidate_model", "FIT_FAILURES", "fold_assignment", "error_summary", "DEFAULT_CHAINWISE_FOLDS",
-           "SUMMARY_STATISTICS"]
+           "SUMMARY_STATISTICS", "LOO_MAX_ROWS", "FEW_FOLDS_MIN_ROWS", "FEW_FOLDS", "default_folds"]
 
 #: Folds of the chain-wise method's K-fold cross-validation when none are asked for.
 DEFAULT_CHAINWISE_FOLDS = 10
+#: Above this many rows the forward method's default is K-fold (:data:`DEFAULT_CHAINWISE_FOLDS`
+#: folds), not leave-one-out: N refits of N rows each grow as N squared (a few seconds at 2,000
+#: rows of the hexapod, ``benchmarks/crossval_speed.py``), and with so many rows a model fitted
+#: to nine tenths of them predicts as one fitted to all but one (its own error, of order P / N of
+#: the noise, is below the spread of the figure).
+LOO_MAX_ROWS = 2000
+#: Above this many rows the default cross-validation is :data:`FEW_FOLDS`-fold (module doc).
+FEW_FOLDS_MIN_ROWS = 20000
+#: The folds of a cross-validation of more than :data:`FEW_FOLDS_MIN_ROWS` rows.
+FEW_FOLDS = 2
 #: The statistics of a cross-validated error over the rows predicted, in the summary's order.
 SUMMARY_STATISTICS = ("rms", "mean", "max")
 #: What a fit may raise when the rows left to it cannot identify the model.
@@ -172,10 +190,12 @@ def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, m
                                    first.estimate_targets, fit_kwargs.get("free"), fit_kwargs.get("start"),
                                    sessions=sessions)
     n = data["joints"].shape[0]
+    why = ""
     if folds is None:
-        folds = n if method == "forward" else min(DEFAULT_CHAINWISE_FOLDS, n)
+        folds, why = default_folds(method, n)
     per = None if measurement is None else _session_settings(measurement, data["n_sessions"], sessions is not None)
-    return data["joints"], data["measured"], folds, fit_kwargs, per, None if sessions is None else data["sessions"]
+    return (data["joints"], data["measured"], folds, fit_kwargs, per, None if sessions is None else data["sessions"],
+            why)
 
 
 def _first_settings(measurement) -> MeasurementSettings:
@@ -286,6 +306,19 @@ def _row_errors(robot: Robot, residuals: np.ndarray, n_targets: int) -> tuple[np
     return position, orientation if robot.angle_pose_mask.any() else None
 
 
+def default_folds(method: str, n: int) -> tuple[int, str]:
+    """``(folds, why)`` of a cross-validation of ``n`` rows when none are asked for: leave-one-out
+    (``n``) for the forward method up to :data:`LOO_MAX_ROWS` rows, :data:`FEW_FOLDS` above
+    :data:`FEW_FOLDS_MIN_ROWS` rows, else :data:`DEFAULT_CHAINWISE_FOLDS` (at most ``n``);
+    ``why`` names the size switch made ("" where none was)."""
+    if n > FEW_FOLDS_MIN_ROWS:
+        return FEW_FOLDS, f"{n:,} rows > FEW_FOLDS_MIN_ROWS = {FEW_FOLDS_MIN_ROWS}"
+    if method == "forward":
+        return (n, "") if n <= LOO_MAX_ROWS else (min(DEFAULT_CHAINWISE_FOLDS, n),
+                                                   f"{n:,} rows > LOO_MAX_ROWS = {LOO_MAX_ROWS}")
+    return min(DEFAULT_CHAINWISE_FOLDS, n), ""
+
+
 def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method: str = "forward",
                   folds: int | None = None, prior: ParameterPrior | None = None, fit_kwargs: dict | None = None,
                   measurement=None, seed: int = 0, sessions=None) -> CrossValidation:
@@ -298,8 +331,10 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
             ``sessions`` each row in its session's instrument frame.
         noise: declared noise (the fits' weights and verdicts).
         method: ``"forward"`` or ``"chainwise"``.
-        folds: number of folds, 2 .. N; default N (leave-one-out) for the forward method,
-            :data:`DEFAULT_CHAINWISE_FOLDS` (at most N) for the chain-wise one.
+        folds: number of folds, 2 .. N; default (:func:`default_folds`) N (leave-one-out) for the
+            forward method up to :data:`LOO_MAX_ROWS` rows, :data:`FEW_FOLDS` above
+            :data:`FEW_FOLDS_MIN_ROWS`, else :data:`DEFAULT_CHAINWISE_FOLDS` (at most N); the
+            scheme names the switch where one was made.
         prior: a :class:`~calib.prior.ParameterPrior` given to every fit (maximum a posteriori), or None.
         fit_kwargs: options of every fit, as :func:`calib.engine.identify` (``free``, ``start``,
             ``solver``, ``weighted``, ``epsilon``, ...) or, with ``measurement``,
@@ -318,19 +353,19 @@ def crossvalidate(robot: Robot, joints, measured, noise: SensorNoise, *, method:
     Raises:
         TypeError, ValueError: bad arguments (naming them); not a fold that fails.
     """
-    joints, measured, folds, fit_kwargs, per, sessions = _checked(robot, joints, measured, noise, method, folds,
-                                                                  prior, fit_kwargs, measurement, sessions)
+    joints, measured, folds, fit_kwargs, per, sessions, why = _checked(robot, joints, measured, noise, method, folds,
+                                                                       prior, fit_kwargs, measurement, sessions)
 
     def fit_fold(train: np.ndarray):
         return _fold_model(robot, joints[train], measured[train], noise, method, prior, fit_kwargs, per,
                            None if sessions is None else sessions[train])
 
     return crossvalidate_model(robot, joints, measured, fit_fold, folds=folds, seed=seed, method=method,
-                               n_targets=0 if per is None else per[0].n_targets, sessions=sessions)
+                               n_targets=0 if per is None else per[0].n_targets, sessions=sessions, why=why)
 
 
 def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int, seed: int = 0,
-                        method: str = "model", n_targets: int = 0, sessions=None) -> CrossValidation:
+                        method: str = "model", n_targets: int = 0, sessions=None, why: str = "") -> CrossValidation:
     """Cross-validated prediction error of any model fitted to rows (what :func:`crossvalidate` runs
     for the engine's fits; a caller with another model, e.g. the geometry and the effects of
     :mod:`calib.effects.discovery`, passes its own ``fit_fold``).
@@ -350,6 +385,7 @@ def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int,
         sessions: (N,) int, each row's session (a model with a frame for each), or None. With
             them ``predict(joints, measured, sessions (M,))`` is given the rows' sessions, and only
             rows whose session kept training rows in their fold (the others: NaN, named).
+        why: why this scheme (a size switch), appended to ``scheme`` in parentheses; "" none.
     """
     joints, measured = np.asarray(joints, dtype=float), np.asarray(measured, dtype=float)
     n = joints.shape[0]
@@ -359,7 +395,7 @@ def crossvalidate_model(robot: Robot, joints, measured, fit_fold, *, folds: int,
     residuals, failed, unconverged = _run_folds(robot, joints, measured, fold_of_row, folds, fit_fold, n_targets,
                                                 sessions)
     position, orientation = _row_errors(robot, residuals, n_targets)
-    scheme = "leave-one-out" if folds == n else f"{folds}-fold"
+    scheme = ("leave-one-out" if folds == n else f"{folds}-fold") + (f" ({why})" if why else "")
     message = _message(method, scheme, folds, n, int(np.count_nonzero(np.isfinite(position))), seed, failed,
                        unconverged, 1 if sessions is None else int(np.unique(sessions).size))
     return CrossValidation(

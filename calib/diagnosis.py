@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import re
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -82,6 +82,11 @@ SCREEN_ROWS_FACTOR = 3
 #: Gauss-Newton iterations of a screening fit (from the nominal geometry, one gauge pass): enough
 #: to bring data that fit to near their minimum, never enough to drag wrong data there.
 SCREEN_ITERATIONS = 2
+#: Above this many rows the diagnosis judges a seeded subsample of this many rows (its fits, the
+#: conversions screened, its gross rows among them): the mistakes it names (a unit, a convention,
+#: an unmeasured column) are properties of the file, shown by a few thousand rows as by all; the
+#: run's own gross-row search still judges every row.
+DIAGNOSIS_MAX_ROWS = 2000
 #: Levenberg-Marquardt budget of a full fit, in Jacobians per unknown (``max_iter`` of
 #: :func:`calib.engine.minimise`: ``max_iter * (unknowns + 1)`` evaluations; a clean file
 #: converges within a tenth of it).
@@ -518,6 +523,7 @@ class Diagnosis:
     screened: tuple = ()
     fits: int = 0
     seconds: float = 0.0
+    rows: str = "every row"
 
     @property
     def success(self) -> bool:
@@ -531,7 +537,8 @@ class Diagnosis:
                 "conversion_fix": None if c is None else c.fix,
                 "converted": None if self.converted is None else self.converted.summary(),
                 "alternatives": list(self.alternatives), "column": self.column,
-                "gross_rows": [int(r) for r in self.gross_rows], "fits": self.fits, "seconds": self.seconds}
+                "gross_rows": [int(r) for r in self.gross_rows], "fits": self.fits, "seconds": self.seconds,
+                "rows": self.rows}
 
 
 def _named(written: FitFigures, converted: FitFigures) -> bool:
@@ -670,11 +677,26 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
             default the robot's.
         gross: look for gross rows (:func:`calib.robust.find_gross_rows`) when no conversion fits.
 
+    Above :data:`DIAGNOSIS_MAX_ROWS` rows a seeded subsample of that many rows is judged (its
+    ``rows`` says so; ``gross_rows`` are then rows of the subsample, numbered in the input).
+
     Returns:
         A :class:`Diagnosis`; never raises on data that cannot be fitted (their fit says why).
     """
-    t0 = time.perf_counter()
     joints, measured = np.array(joints, dtype=float), np.array(measured, dtype=float)
+    n = len(joints)
+    if n <= DIAGNOSIS_MAX_ROWS:
+        return _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross)
+    sub = np.sort(np.random.default_rng(n).choice(n, size=DIAGNOSIS_MAX_ROWS, replace=False))
+    found = _diagnose(robot, joints[sub], measured[sub], noise, frame, targets, estimate_targets, tolerance, gross)
+    return replace(found, gross_rows=tuple(int(sub[i]) for i in found.gross_rows),
+                   rows=f"a seeded subsample of {DIAGNOSIS_MAX_ROWS:,} of the {n:,} rows ({n:,} rows > "
+                        f"DIAGNOSIS_MAX_ROWS = {DIAGNOSIS_MAX_ROWS})")
+
+
+def _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross) -> Diagnosis:
+    """:func:`diagnose` of every row given."""
+    t0 = time.perf_counter()
     problem = _Problem(robot, noise, frame, None if targets is None else np.asarray(targets, dtype=float),
                        estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
                        np.sort(robot.table.indices(robot.free_default)))

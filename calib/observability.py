@@ -324,7 +324,7 @@ def _null_combinations(robot: Robot, As: np.ndarray, idx: np.ndarray, names, sca
         cols = np.flatnonzero(robot.table.chains[idx] == c)
         if cols.size == 0:
             continue
-        _, s, vt = np.linalg.svd(As[:, cols], full_matrices=True)
+        _, s, vt = np.linalg.svd(As[:, cols], full_matrices=As.shape[0] < cols.size)  # every V; no N x N U
         s = np.r_[s, np.zeros(cols.size - s.size)]
         for v in vt[s <= tol]:
             full = np.zeros(len(names))
@@ -334,7 +334,7 @@ def _null_combinations(robot: Robot, As: np.ndarray, idx: np.ndarray, names, sca
     basis = np.array(found).reshape(-1, len(names))[:null_dim]
     chains = chains[:null_dim]
     if len(chains) < null_dim:  # directions across chains: the rest of the null space
-        _, s, vt = np.linalg.svd(As, full_matrices=True)
+        _, s, vt = np.linalg.svd(As, full_matrices=As.shape[0] < As.shape[1])
         null = vt[np.r_[s, np.zeros(len(names) - s.size)] <= tol]
         if basis.size:
             q, _ = np.linalg.qr(basis.T)
@@ -355,6 +355,12 @@ def _null_combinations(robot: Robot, As: np.ndarray, idx: np.ndarray, names, sca
             "coefficients": {names[i]: float(natural[i]) for i in np.flatnonzero(keep)},
         })
     return basis, tuple(out)
+
+
+#: Above this many poses :func:`analyze_observability` takes its singular values from the
+#: triangle of a QR factorisation of the Jacobian (one pass over the N D rows, no N D x P factor
+#: formed) instead of from the Jacobian itself (two SVDs of it); the figures agree to rounding.
+QR_FIRST_ROWS = 2000
 
 
 def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joints=None, free=None,
@@ -388,9 +394,13 @@ def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joi
     scale = parameter_scale(robot)[idx]
     As = A / scale
     m = A.shape[0]
-    # A full SVD: with fewer rows than parameters the missing singular vectors are the
-    # combinations the poses do not see at all.
-    _, s_thin, Vt = np.linalg.svd(As, full_matrices=True)
+    # A full SVD where there are fewer rows than parameters: the missing singular vectors are the
+    # combinations the poses do not see at all (with more rows the thin one has every V: the full
+    # U of N rows would hold N^2 numbers).
+    # Above QR_FIRST_ROWS rows, the SVDs of the triangle R of As = Q R (the same singular values
+    # and right vectors; Q, N x P, never formed): A's column scalings are R's (An = As D, R D).
+    R = np.linalg.qr(As, mode="r") if poses.shape[0] > QR_FIRST_ROWS and m >= n_free else None
+    _, s_thin, Vt = np.linalg.svd(As if R is None else R, full_matrices=m < n_free)
     s = np.zeros(n_free)
     s[: s_thin.size] = s_thin
     tol = rank_rtol * s[0] if s[0] > 0 else 0.0
@@ -408,7 +418,7 @@ def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joi
         cond = float(s[0] / s[-1]) if s[-1] > tol else float("inf")
         norms = np.linalg.norm(A, axis=0)
         An = A / np.where(norms > 0, norms, 1.0)
-        ss = np.linalg.svd(An, compute_uv=False)
+        ss = np.linalg.svd(An if R is None else R * (scale / np.where(norms > 0, norms, 1.0)), compute_uv=False)
         scond = float(ss[0] / ss[-1]) if (ss.size == n_free and ss[-1] > rank_rtol * ss[0]) else float("inf")
         logs = np.log(np.where(s > 0, s, 1.0))
         o1 = float(np.exp(logs.mean()) / np.sqrt(m)) if rank == n_free else 0.0

@@ -63,7 +63,7 @@ from .noise import SensorNoise
 from .robot import KinematicsError, Robot
 
 __all__ = ["GrossRowResult", "find_gross_rows", "GROSS_ALPHA", "KEPT_FRACTION", "RANDOM_STARTS",
-           "SUBSET_FACTOR", "TRIAL_C_STEPS", "STEP_ITERATIONS", "SUBSET_CONDITION"]
+           "SUBSET_FACTOR", "TRIAL_C_STEPS", "STEP_ITERATIONS", "SUBSET_CONDITION", "SEARCH_MAX_ROWS"]
 
 #: False-alarm probability per consistent row: the cutoff is the chi-square(M) 0.999 quantile.
 GROSS_ALPHA = 1e-3
@@ -83,6 +83,11 @@ STEP_ITERATIONS = 3
 SUBSET_CONDITION = 1e8
 #: Extra subsets drawn, in all, to replace subsets whose fit fails.
 REDRAWS = 10
+#: Above this many rows the search (frame test, starts, C-steps, reweighting) runs on a seeded
+#: subsample of this many rows, and every row is then judged against the subsample's fit: each
+#: fit of the search costs in proportion to its rows, and a few thousand rows determine the
+#: geometry far beyond what a gross row (many times the noise) needs to stand out.
+SEARCH_MAX_ROWS = 1000
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +110,8 @@ class GrossRowResult:
         failed_subsets: subset fits that failed and were replaced.
         success: whether the search ended with a judgement of every row.
         message: the finding in words (no row numbers: the caller numbers rows for the user).
+        search: which form of the search ran, in words: ``"every row"``, or the subsample's size
+            with the constant it exceeds (:data:`SEARCH_MAX_ROWS`).
     """
 
     gross: tuple
@@ -120,6 +127,7 @@ class GrossRowResult:
     failed_subsets: int
     success: bool
     message: str
+    search: str = "every row"
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,6 +190,10 @@ def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame
         random_starts: seeded random subsets tried besides the deterministic start.
         seed: the random subsets' seed (the same seed gives the same result).
 
+    Above :data:`SEARCH_MAX_ROWS` rows the whole search runs on a seeded subsample of that many
+    rows, and every row is then judged against its final fit (leverage-corrected as a row in that
+    fit or left out of it); ``search`` says which form ran.
+
     Returns:
         A :class:`GrossRowResult`, also when the search fails (``success`` False, ``message``).
 
@@ -190,6 +202,14 @@ def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame
     """
     problem, mode = _problem(robot, joints, measured, noise, frame, targets, estimate_targets, free, start,
                              alpha, kept_fraction, random_starts)
+    n = len(problem.joints)
+    if n > SEARCH_MAX_ROWS:
+        return _subsampled(problem, mode, alpha, random_starts, seed)
+    return _search(problem, mode, alpha, random_starts, seed)
+
+
+def _search(problem: _Problem, mode: str, alpha: float, random_starts: int, seed: int) -> GrossRowResult:
+    """The search over every row of ``problem`` (module doc)."""
     m = problem.measured.shape[1]
     cutoff = float(2.0 * gammaincinv(m / 2.0, 1.0 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, m)
     counter = _Counter()
@@ -206,6 +226,64 @@ def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame
     except (_SearchFailed, ValueError, np.linalg.LinAlgError) as exc:  # KinematicsError is a ValueError
         return _failure(problem, cutoff, est_frame, None, None, counter, f"{words}{exc}")
     return _reweighted(problem, est_frame, best, cutoff, alpha, counter, words)
+
+
+def _subsampled(problem: _Problem, mode: str, alpha: float, random_starts: int, seed: int) -> GrossRowResult:
+    """The search on a seeded subsample of :data:`SEARCH_MAX_ROWS` rows, then every row judged
+    against its final fit (the count of consistent rows checked against ``h`` of every row)."""
+    n, size = len(problem.joints), SEARCH_MAX_ROWS
+    sub = np.sort(np.random.default_rng([int(seed), n]).choice(n, size=size, replace=False))
+    h_sub = min(size, max(math.ceil(problem.h / n * size), 2 * problem.min_rows))
+    part = _Problem(problem.robot, problem.joints[sub], problem.measured[sub], problem.noise, problem.targets,
+                    problem.estimate_targets, problem.free, problem.theta0, h_sub, problem.min_rows)
+    form = (f"least trimmed squares on a seeded subsample of {size:,} of the {n:,} rows ({n:,} rows > "
+            f"SEARCH_MAX_ROWS = {SEARCH_MAX_ROWS}), every row judged against its fit")
+    found = _search(part, mode, alpha, random_starts, seed)
+    if found.fit is None:
+        return _widened(found, n, sub, form)
+    counter = _Counter()
+    counter.fits, counter.failed = found.fits, found.failed_subsets
+    fit = found.fit
+    try:
+        white, poses = whitened_residuals(problem.robot, fit.result.theta, problem.joints, problem.measured,
+                                          problem.noise, frame=fit.frame, targets=fit.targets)
+    except (ValueError, np.linalg.LinAlgError) as exc:  # a row the subsample's model cannot reach
+        return _widened(found, n, sub, form, success=False,
+                        message=f"{found.message}; the rows outside the subsample could not be judged: {exc}")
+    stat = np.sum(white ** 2, axis=1)
+    state = _State(rows=sub[found.kept], fit=fit, white=white, stat=stat, poses=poses)
+    judged = _judged(problem, found.frame_estimated, state) if np.all(np.isfinite(stat)) else stat
+    kept = judged <= found.cutoff
+    trimmed = tuple(int(sub[i]) for i in found.trimmed_rows)
+    common = dict(statistic=judged, residuals=white, cutoff=found.cutoff, dof=found.dof, fit=fit,
+                  frame_estimated=found.frame_estimated, trimmed_rows=trimmed, fits=counter.fits,
+                  failed_subsets=counter.failed, search=form)
+    if not found.success or np.count_nonzero(kept) < problem.h:
+        reason = found.message if not found.success else (
+            f"model misfit, not gross rows: {n - np.count_nonzero(kept)} of {n} rows exceed the chi-square cutoff "
+            f"{found.cutoff:.3g} against the subsample's fit (more than {n - problem.h}): the geometric model does not "
+            "explain the data at the declared noise (an unmodelled effect, or noise declared too small); no row is named")
+        return GrossRowResult(gross=(), kept=np.ones(n, bool), success=False, message=reason, **common)
+    gross = tuple(int(i) for i in np.flatnonzero(~kept))
+    what = (f"{len(gross)} of {n} rows are gross errors" if gross else f"no gross row among the {n} rows")
+    message = (f"{what} (whitened residual above the chi-square({found.dof}) quantile {1 - alpha:g}, "
+               f"{found.cutoff:.3g}, against the fit of a least-trimmed-squares search on {size} rows drawn at random "
+               f"(seed {seed}); the search: {found.message})")
+    return GrossRowResult(gross=gross, kept=kept, success=True, message=message, **common)
+
+
+def _widened(found: GrossRowResult, n: int, sub: np.ndarray, form: str, *, success: bool | None = None,
+             message: str | None = None) -> GrossRowResult:
+    """A subsample's failed result over all ``n`` rows (no row named; figures NaN off the subsample)."""
+    stat = np.full(n, np.nan)
+    stat[sub] = found.statistic
+    res = np.full((n, found.residuals.shape[1]), np.nan)
+    res[sub] = found.residuals
+    return GrossRowResult(gross=(), kept=np.ones(n, bool), statistic=stat, residuals=res, cutoff=found.cutoff,
+                          dof=found.dof, fit=found.fit, frame_estimated=found.frame_estimated,
+                          trimmed_rows=tuple(int(sub[i]) for i in found.trimmed_rows), fits=found.fits,
+                          failed_subsets=found.failed_subsets, success=False if success is None else success,
+                          message=found.message if message is None else message, search=form)
 
 
 class _SearchFailed(Exception):

@@ -380,3 +380,37 @@ def test_session_arguments_are_checked():
         crossvalidate(robot, q, m, NOISE, measurement=estimate, fit_kwargs={"sessions": s})
     with pytest.raises(TypeError, match="measurement must be a calib.measurement.MeasurementSettings"):
         crossvalidate(robot, q, m, NOISE, measurement={"frame": "estimate"})
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_above_the_size_constants_the_default_switches_to_fewer_folds_and_says_why(name, monkeypatch):
+    """The forward method's leave-one-out becomes 10-fold above calib.crossval.LOO_MAX_ROWS
+    (lowered to 30, 40 rows), and the default becomes FEW_FOLDS-fold above FEW_FOLDS_MIN_ROWS
+    (lowered to 100, 200 rows): the scheme names the constant, every row is still predicted, and
+    the RMS position error agrees with the exact form's (leave-one-out; the chain-wise 10-fold)
+    within the figure's spread. 40 rows of 3 position coordinates know an RMS to
+    ~1/sqrt(2 * 40 * 3) = 9 %, 200 rows to 3.6 %, and the two figures share their rows and noise;
+    a model fitted to half of 200 rows adds at most P / (100 D) = 11 % (6-RUS: 66 parameters, 6
+    coordinates) to the error's variance, 5 % to its RMS: bands of 0.8 to 1.25."""
+    import calib.crossval
+
+    robot, joints, measured = _small_problem(name, 40)
+    exact = crossvalidate(robot, joints, measured, NOISE)
+    assert exact.scheme == "leave-one-out" and "LOO_MAX_ROWS" not in exact.message
+    monkeypatch.setattr(calib.crossval, "LOO_MAX_ROWS", 30)
+    ten = crossvalidate(robot, joints, measured, NOISE)
+    assert ten.scheme == "10-fold (40 rows > LOO_MAX_ROWS = 30)" and ten.fits == 10, ten.scheme
+    assert ten.summary()["crossvalidation"]["scheme"] == ten.scheme and ten.message.startswith(ten.scheme)
+    assert 0.8 <= ten.position_summary["rms"] / exact.position_summary["rms"] <= 1.25
+    assert crossvalidate(robot, joints, measured, NOISE, folds=5).scheme == "5-fold"  # asked: no switch
+
+    robot, joints, measured = _small_problem(name, 200)
+    exact = crossvalidate(robot, joints, measured, NOISE, method="chainwise")
+    assert exact.scheme == "10-fold"
+    monkeypatch.setattr(calib.crossval, "FEW_FOLDS_MIN_ROWS", 100)
+    for method in METHODS:
+        few = crossvalidate(robot, joints, measured, NOISE, method=method)
+        assert few.scheme == "2-fold (200 rows > FEW_FOLDS_MIN_ROWS = 100)" and few.fits == 2, few.scheme
+        assert few.success
+        ratio = few.position_summary["rms"] / exact.position_summary["rms"]
+        assert 0.8 <= ratio <= 1.25, (name, method, ratio)

@@ -169,3 +169,28 @@ def test_the_registry_undoes_each_mistake(name):
 
 def test_causes_are_the_documented_ones():
     assert CAUSES == ("none", "conversion", "unmeasured column", "gross rows", "left-out physics")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_above_the_diagnosis_size_a_subsample_is_judged_and_said(name, monkeypatch):
+    """With calib.diagnosis.DIAGNOSIS_MAX_ROWS lowered below the rows, a seeded subsample is
+    diagnosed and ``rows`` says so: honest data nothing wrong, a unit mistake the same conversion
+    as the exact diagnosis names, gross rows numbered in the input (those of the three the
+    subsample holds, all three when it holds them)."""
+    import calib.diagnosis
+
+    robot, joints, measured = honest(name, "clean")
+    mistake = mistaken(name, "positions in metres")
+    spoiled = measured.copy()
+    spoiled[[4, 17, 30], 0] += 1.0
+    exact = diagnose(*mistake[:1], *mistake[1:], NOISE)
+    assert exact.rows == "every row"
+    size = N_ROWS - 10
+    monkeypatch.setattr(calib.diagnosis, "DIAGNOSIS_MAX_ROWS", size)
+    said = f"a seeded subsample of {size} of the {N_ROWS} rows ({N_ROWS} rows > DIAGNOSIS_MAX_ROWS = {size})"
+    d = diagnose(robot, joints, measured, NOISE)
+    assert d.success and d.cause == "none" and d.rows == said and d.summary()["rows"] == said, d.message
+    d = diagnose(*mistake, NOISE)
+    assert d.cause == exact.cause == "conversion" and d.conversion.name == exact.conversion.name, d.message
+    d = diagnose(robot, joints, spoiled, NOISE)
+    assert d.cause == "gross rows" and set(d.gross_rows) <= {4, 17, 30} and d.gross_rows, d.message

@@ -362,3 +362,26 @@ DELTA = default_robot("delta")
 def test_validation(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_above_the_qr_size_the_figures_are_the_direct_ones(name, monkeypatch):
+    """With calib.observability.QR_FIRST_ROWS lowered below the poses, the singular values come
+    from the QR triangle: the same singular values (absolute error ~K eps s_1, both backward
+    stable), scaled condition number and bound (as the inverse of the Fisher matrix,
+    :func:`inversion_accuracy`) as the direct SVDs."""
+    import calib.observability
+
+    robot = default_robot(name)
+    poses = poses_of(robot, enough(robot, 30), 5)
+    exact = analyze_observability(robot, robot.table.nominal, poses, NOISE)
+    monkeypatch.setattr(calib.observability, "QR_FIRST_ROWS", 10)
+    qr = analyze_observability(robot, robot.table.nominal, poses, NOISE)
+    n = exact.singular_values.size
+    s0 = exact.singular_values[0]
+    np.testing.assert_allclose(qr.singular_values, exact.singular_values, rtol=0, atol=4 * n * EPS * s0)
+    assert qr.rank == exact.rank == n
+    tol = inversion_accuracy(exact.fisher)
+    np.testing.assert_allclose(qr.crb_std, exact.crb_std, rtol=tol)
+    assert qr.condition_number == pytest.approx(exact.condition_number, rel=tol)
+    assert qr.scaled_condition_number == pytest.approx(exact.scaled_condition_number, rel=tol)

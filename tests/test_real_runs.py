@@ -202,3 +202,50 @@ def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
                 "predictions": {"what": "validation rows", "agrees": False, "ratio": None, "rows": 0}}
     cause, words = likely_cause(inp, ident, evidence)
     assert cause == "unpredictable_rows" and "cannot predict the validation rows" in words
+
+
+def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monkeypatch):
+    """A hexapod recording of 80 calibration rows (kinematic model, a machine drawn from the
+    default prior, 1 um / 1 urad normal noise), 3 rows at z = 1000 mm, run as recorded and with
+    every size constant lowered below its rows: the summary names each scalable form (gross-row
+    search on a subsample, 2-fold cross-validation, the outlier search at once, the diagnosis on a
+    subsample, the 3D machines decimated), the same gross rows are named, and the cross-validated
+    RMS position error agrees with the exact run's (10-fold) within its spread: 77 rows know an
+    RMS to ~1/sqrt(2 * 77 * 3) = 5 %, and a fold model fitted to half of them adds at most
+    P / (38 * 6) of the noise's variance (the hexapod's free parameters): a band of 0.8 to 1.3."""
+    import calib.crossval
+    import calib.diagnosis
+    import calib.observability
+    import calib.outliers
+    import calib.robust
+    import pipeline.views.run_view
+    from benchmarks.big_recording import make_recording
+
+    path = make_recording(tmp_path / "rec.csv", 80, 0, seed=3)
+    rec = read_recording(path)
+    m = rec.measured.copy()
+    rows = np.array([6, 33, 70])
+    m[rows, 2] = 1000.0
+    write_recording(path, replace(rec, measured=m), overwrite=True)
+    exact = run(["--real", str(path), "--out", str(tmp_path), "--name", "exact", "--quiet"]).summary
+    assert exact["gross_rows"]["search"] == "every row" and exact["crossvalidation"]["scheme"] == "10-fold"
+    assert exact["outliers"]["search"] == "one row at a time"
+    assert exact["diagnosis"]["rows"] == "every row"
+    assert exact["rerun"]["machine_poses_drawn"] == 80
+    for module, name, value in ((calib.robust, "SEARCH_MAX_ROWS", 50), (calib.crossval, "FEW_FOLDS_MIN_ROWS", 40),
+                                (calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40),
+                                (calib.diagnosis, "DIAGNOSIS_MAX_ROWS", 50),
+                                (pipeline.views.run_view, "MAX_MACHINE_POSES", 30),
+                                (calib.observability, "QR_FIRST_ROWS", 40)):
+        monkeypatch.setattr(module, name, value)
+    s = run(["--real", str(path), "--out", str(tmp_path), "--name", "scaled", "--quiet"]).summary
+    assert s["gross_rows"]["rows"] == exact["gross_rows"]["rows"] == list(rows + 1)
+    assert "(80 rows > SEARCH_MAX_ROWS = 50)" in s["gross_rows"]["search"]
+    assert s["crossvalidation"]["scheme"] == "2-fold (77 rows > FEW_FOLDS_MIN_ROWS = 40)"
+    assert s["outliers"]["search"] == "every row above the threshold at once (77 rows > ONE_AT_A_TIME_MAX_ROWS = 40)"
+    assert "(80 rows > DIAGNOSIS_MAX_ROWS = 50)" in s["diagnosis"]["rows"]
+    assert s["rerun"]["machine_poses_drawn"] == 30 and "MAX_MACHINE_POSES = 30" in s["rerun"]["form"]
+    ratio = s["crossvalidated_position_error_mm"]["rms"] / exact["crossvalidated_position_error_mm"]["rms"]
+    assert 0.8 <= ratio <= 1.3, ratio
+    assert s["observability"]["condition_number"] == pytest.approx(exact["observability"]["condition_number"],
+                                                                   rel=1e-6)

@@ -166,3 +166,31 @@ def test_position_only_targets_in_a_far_frame():
     found = find_gross_rows(robot, q, data, NOISE, targets=np.zeros((3, 3)), seed=0)
     assert found.success and found.gross == FAR_ROWS and found.frame_estimated and found.dof == 9, found.message
     assert found.fit.targets_estimated
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("in_frame", [False, True], ids=["base_frame", "far_frame"])
+def test_above_the_search_size_a_subsample_is_searched_and_every_row_judged(name, in_frame, monkeypatch):
+    """The 3 far rows of 60 with the search's size lowered to 40 rows (calib.robust.SEARCH_MAX_ROWS):
+    the search runs on a seeded subsample and says so; every row is judged against its fit, and
+    the rows named, the frame decision and the clean rows' verdicts are the exact search's. Its fit
+    uses the subsample's clean rows (37 to 40 of 60): held-out error within 1.5 times the clean
+    file's (sqrt(60 / 37) = 1.27 from the rows alone, as the other bounds of this file)."""
+    import calib.robust
+
+    robot, _, q, clean, qv, truth, clean_mm = _experiment(name, in_frame)
+    data = clean.copy()
+    data[list(FAR_ROWS), 2] = FAR_Z_MM
+    exact = find_gross_rows(robot, q, data, NOISE, seed=0)
+    assert exact.search == "every row"
+    monkeypatch.setattr(calib.robust, "SEARCH_MAX_ROWS", 40)
+    found = find_gross_rows(robot, q, data, NOISE, seed=0)
+    assert found.success, found.message
+    assert "subsample of 40 of the 60 rows (60 rows > SEARCH_MAX_ROWS = 40)" in found.search
+    assert found.gross == exact.gross == FAR_ROWS
+    assert found.frame_estimated == exact.frame_estimated == in_frame
+    assert found.statistic.shape == (N_ROWS,) and np.all(np.isfinite(found.statistic))
+    assert np.array_equal(found.statistic <= found.cutoff, exact.statistic <= exact.cutoff)
+    assert _heldout_mm(found.fit, qv, truth) <= 1.5 * clean_mm
+    again = find_gross_rows(robot, q, data, NOISE, seed=0)
+    np.testing.assert_array_equal(again.statistic, found.statistic)  # seeded: the same subsample

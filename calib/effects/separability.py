@@ -157,7 +157,8 @@ def geometry_basis(G: np.ndarray, std: np.ndarray, free: np.ndarray) -> Geometry
         free: (F,) their flat indices.
     """
     Gs = G * std[None, :]
-    _, s, vt = np.linalg.svd(Gs, full_matrices=True)
+    # Every right vector: the thin SVD has them all once M >= F (the full one's M x M U would not fit)
+    _, s, vt = np.linalg.svd(Gs, full_matrices=Gs.shape[0] < Gs.shape[1])
     d = np.zeros(std.size)
     d[:s.size] = s ** 2
     det = d > HELD_INFORMATION

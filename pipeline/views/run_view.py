@@ -8,7 +8,10 @@ and its own default blueprint, so that files of different tools or robots opened
   (timeline ``pose``): nominal geometry at the intended pose, actual geometry (or, for a real
   machine, the identified one) at the measured pose, identified geometry at the pose it predicts.
   Departures from the nominal machine are drawn magnified (:func:`magnification`, written in the
-  view's key ``machine/key``); ``machine/chain_labels``: one colour per chain.
+  view's key ``machine/key``); ``machine/chain_labels``: one colour per chain. Above
+  :data:`MAX_MACHINE_POSES` calibration poses the machines and the arrows below are drawn at
+  evenly spaced poses only (at most that many, each at its own step of the ``pose`` timeline; the
+  key says so); the residual series keep every pose.
 * ``machine/errors/{before,after}``: static arrows at every calibration pose, position error
   before (measured - intended) and after (measured - calibrated prediction), same magnification,
   coloured by magnitude (the scale is in the key); ``machine/flagged``: outlier poses.
@@ -36,18 +39,33 @@ from .charts import (FLAG_COLOR, MACHINE_COLORS, chain_colors, chart_view, log_n
                      log_series_by_pose, magnification, magnitude_colors)
 from .observability import log_observability, observability_views
 
-__all__ = ["log_calibration_run", "blueprint", "summary_markdown", "run_eye", "run_magnification"]
+__all__ = ["log_calibration_run", "blueprint", "summary_markdown", "run_eye", "run_magnification",
+           "MAX_MACHINE_POSES", "drawn_poses"]
+
+#: The 3D machines and error arrows of a run are drawn at no more than this many calibration
+#: poses (evenly spaced; every pose below it): three machines of C chains at 100,000 poses are
+#: millions of line strips, a recording the viewer loads slowly and nobody reads pose by pose.
+MAX_MACHINE_POSES = 2000
+
+
+def drawn_poses(n: int) -> np.ndarray:
+    """0-based indices of the calibration poses drawn in 3D: every one up to
+    :data:`MAX_MACHINE_POSES`, else that many evenly spaced (first and last included)."""
+    if n <= MAX_MACHINE_POSES:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, MAX_MACHINE_POSES).round().astype(int))
 
 
 # -- the calibration run -------------------------------------------------------------------------
-def _log_machine(rec: rr.RecordingStream, path: str, points: np.ndarray, color, radius: float) -> None:
+def _log_machine(rec: rr.RecordingStream, path: str, points: np.ndarray, color, radius: float,
+                 steps: np.ndarray | None = None) -> None:
     """``points``: (N, C, K, 3) chain polylines of N poses, one pose a step of the ``pose``
-    timeline (sent as columns: one call per entity, not one per pose); the platform joins the
-    chains' last points."""
+    timeline (``steps`` (N,), default 0 .. N - 1; sent as columns: one call per entity, not one
+    per pose); the platform joins the chains' last points."""
     n, c = points.shape[:2]
     tips = points[:, :, -1]
     platform = np.concatenate([tips, tips[:, :1]], axis=1)  # (N, C + 1, 3): one closed strip a pose
-    index = [rr.TimeColumn("pose", sequence=np.arange(n))]
+    index = [rr.TimeColumn("pose", sequence=np.arange(n) if steps is None else steps)]
     style = rr.LineStrips3D.columns(colors=[color] * n, radii=[radius] * n)
     for part, strips, per_pose in (("chains", points.reshape(n * c, *points.shape[2:]), c), ("platform", platform, 1)):
         rec.send_columns(f"{path}/{part}", indexes=index,
@@ -197,51 +215,59 @@ def _bar_unit(robot: Robot):
 
 
 def _log_machines(rec: rr.RecordingStream, robot: Robot, thetas, joints: np.ndarray, targets: np.ndarray,
-                  measured: np.ndarray, predicted: np.ndarray, m: float, chains: list[str]) -> float:
+                  measured: np.ndarray, predicted: np.ndarray, m: float, chains: list[str],
+                  steps: np.ndarray | None = None) -> float:
     """The three machines at every calibration pose (timeline ``pose``) and the chain labels.
 
     ``thetas``: (nominal, drawn, identified) parameter vectors, (P,) each (``drawn``: the actual
     machine, or the identified one for a real machine); ``joints`` (N, C); ``targets``,
     ``measured``, ``predicted``: (N, D) poses (mm, rad); ``m``: the departures' magnification.
+    ``steps``: (N,) the poses' steps of the ``pose`` timeline (default 0 .. N - 1).
     Returns the machine's size (mm: the largest extent of the nominal machine over the poses).
     """
     nominal, drawn, identified = thetas
     n, c = joints.shape
+    steps = np.arange(n) if steps is None else steps
     rec.log("machine", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     nominal_joints = robot.inverse_kinematics(nominal, targets)
     nom = robot.chain_points(nominal, nominal_joints, targets)
     act = robot.chain_points(drawn, joints, measured)
     cal = robot.chain_points(identified, joints, predicted)
     size = float(np.ptp(nom.reshape(-1, 3), axis=0).max())
-    _log_machine(rec, "machine/nominal", nom, MACHINE_COLORS["nominal"], size * 0.006)
-    _log_machine(rec, "machine/actual", nom + m * (act - nom), MACHINE_COLORS["actual"], size * 0.004)
-    _log_machine(rec, "machine/calibrated", nom + m * (cal - nom), MACHINE_COLORS["calibrated"], size * 0.0022)
+    _log_machine(rec, "machine/nominal", nom, MACHINE_COLORS["nominal"], size * 0.006, steps)
+    _log_machine(rec, "machine/actual", nom + m * (act - nom), MACHINE_COLORS["actual"], size * 0.004, steps)
+    _log_machine(rec, "machine/calibrated", nom + m * (cal - nom), MACHINE_COLORS["calibrated"], size * 0.0022, steps)
     per_chain = rr.Points3D.columns(positions=nom[:, :, 0].reshape(-1, 3), labels=chains * n,
                                     colors=np.tile(np.asarray(chain_colors(c), dtype=np.uint8), (n, 1))
                                     ).partition([c] * n)
-    rec.send_columns("machine/chain_labels", indexes=[rr.TimeColumn("pose", sequence=np.arange(n))],
+    rec.send_columns("machine/chain_labels", indexes=[rr.TimeColumn("pose", sequence=steps)],
                      columns=[*per_chain, *rr.Points3D.columns(radii=[size * 0.012] * n, show_labels=[True] * n)])
     return size
 
 
 def _log_pose_errors(rec: rr.RecordingStream, robot: Robot, targets: np.ndarray, measured: np.ndarray,
-                     predicted: np.ndarray, m: float, size: float, flagged: list[int]) -> float:
-    """Arrows of the position error at each calibration pose, before (measured - intended) and
-    after (measured - predicted), magnified ``m`` times, and rings at the ``flagged`` poses.
-    ``targets``, ``measured``, ``predicted``: (N, D) poses (mm, rad); ``size``: the machine's (mm).
-    Returns the colour scale's top (um): the largest error before."""
+                     predicted: np.ndarray, m: float, size: float, flagged: list[int],
+                     shown: np.ndarray | None = None) -> float:
+    """Arrows of the position error at the calibration poses ``shown`` (0-based; default every
+    one), before (measured - intended) and after (measured - predicted), magnified ``m`` times,
+    and rings at the ``flagged`` poses. ``targets``, ``measured``, ``predicted``: (N, D) poses
+    (mm, rad); ``size``: the machine's (mm). Returns the colour scale's top (um): the largest
+    error before over every pose."""
     pos = ~robot.angle_pose_mask
     centre = targets[:, pos][:, :3]
     before = (measured - targets)[:, pos][:, :3]
     after = (measured - predicted)[:, pos][:, :3]
     mag_b, mag_a = np.linalg.norm(before, axis=1) * 1e3, np.linalg.norm(after, axis=1) * 1e3
     vmax = float(np.nanmax(mag_b)) if len(targets) else 1.0
-    rec.log("machine/errors/before", rr.Arrows3D(origins=centre, vectors=m * before, colors=magnitude_colors(mag_b, vmax),
-                                                 radii=size * 0.004, labels=[f"pose {k + 1}: {v:.0f} um" for k, v in
-                                                                              enumerate(mag_b)], show_labels=False),
+    shown = np.arange(len(targets)) if shown is None else shown
+    rec.log("machine/errors/before", rr.Arrows3D(origins=centre[shown], vectors=m * before[shown],
+                                                 colors=magnitude_colors(mag_b[shown], vmax), radii=size * 0.004,
+                                                 labels=[f"pose {k + 1}: {mag_b[k]:.0f} um" for k in shown],
+                                                 show_labels=False),
             static=True)
-    rec.log("machine/errors/after", rr.Arrows3D(origins=centre, vectors=m * after, colors=magnitude_colors(mag_a, vmax),
-                                                radii=size * 0.002), static=True)
+    rec.log("machine/errors/after", rr.Arrows3D(origins=centre[shown], vectors=m * after[shown],
+                                                colors=magnitude_colors(mag_a[shown], vmax), radii=size * 0.002),
+            static=True)
     if flagged:
         rec.log("machine/flagged", rr.Points3D(centre[flagged], radii=size * 0.02, colors=FLAG_COLOR,
                                                labels=[f"flagged pose {k + 1}" for k in flagged], show_labels=True),
@@ -250,13 +276,14 @@ def _log_pose_errors(rec: rr.RecordingStream, robot: Robot, targets: np.ndarray,
 
 
 def _log_key(rec: rr.RecordingStream, robot: Robot, m: float, vmax_um: float, *, simulated: bool,
-             flagged: bool) -> None:
+             flagged: bool, drawn: str = "") -> None:
     """The 3D view's key: the machines' colours, the magnification, the arrows' colour scale."""
     what = "actual" if simulated else "measured (identified geometry)"
     key = (f"**grey** nominal, **orange** {what}, **blue** calibrated model; departures from nominal and "
            f"error arrows drawn **x{m:g}**. Arrows: position error at each calibration pose, thick before "
            f"(measured - intended), thin after (measured - calibrated), colour green 0 to red {vmax_um:.0f} um. "
-           + ("Red ring: flagged pose. " if flagged else "") + f"Labels: one colour per {robot.chain_word}.")
+           + ("Red ring: flagged pose. " if flagged else "") + f"Labels: one colour per {robot.chain_word}."
+           + (f" {drawn}" if drawn else ""))
     rec.log("key", rr.TextDocument(key, media_type=rr.MediaType.MARKDOWN), static=True)
 
 
@@ -350,9 +377,14 @@ def log_calibration_run(
     m = magnified if magnified is not None else run_magnification(robot, nominal, actual, identified, targets,
                                                                   measured)
     drawn = actual if actual is not None else identified
-    size = _log_machines(rec, robot, (nominal, drawn, identified), joints, targets, measured, predicted, m, chains)
-    vmax = _log_pose_errors(rec, robot, targets, measured, predicted, m, size, flagged)
-    _log_key(rec, robot, m, vmax, simulated=actual is not None, flagged=bool(flagged))
+    n = len(joints)
+    shown = drawn_poses(n)
+    size = _log_machines(rec, robot, (nominal, drawn, identified), joints[shown], targets[shown], measured[shown],
+                         predicted[shown], m, chains, shown)
+    vmax = _log_pose_errors(rec, robot, targets, measured, predicted, m, size, flagged, shown)
+    words = "" if shown.size == n else (f"Machines and arrows drawn at {shown.size:,} evenly spaced poses of the "
+                                        f"{n:,} ({n:,} > MAX_MACHINE_POSES = {MAX_MACHINE_POSES}).")
+    _log_key(rec, robot, m, vmax, simulated=actual is not None, flagged=bool(flagged), drawn=words)
     _log_residuals(rec, robot, nominal, identified, joints, measured, chains, flagged)
     if heldout_before is not None and heldout_after is not None:
         _log_heldout(rec, robot, heldout_before, heldout_after)

@@ -341,12 +341,15 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     rec = diagnosis = None
     if settings.real is not None:
         rec = read_recording(settings.real)
+        split["read"] = time.perf_counter() - t0
         if settings.robot is not None and settings.robot != rec.robot.name:
             raise ValueError(f"--robot {settings.robot}: the recording {settings.real} is of a {rec.robot.name} "
                              "(its sidecar's 'robot'); leave --robot out with --real")
+        t_checks = time.perf_counter()
         checks = recording_checks(rec, settings.real, prior=settings.prior)  # refuses a mistake it can prove
         warnings += checks.warnings
         diagnosis = checks.diagnosis
+        split["checks"] = time.perf_counter() - t_checks
     # Every output is checked before any work, and the files are published together at the end.
     out = Path(settings.out)
     output_folder(out)
@@ -780,13 +783,16 @@ def learn_tolerance(inp: CalibrationInput, fit) -> bool:
     return True
 
 
-def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) -> Identification:
+def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list, split: dict | None = None) -> Identification:
     """Gross rows first (:func:`gross_row_stage`), then, on the rows kept, the instrument frame
     where the recording needs one (:func:`instrument_fit`), the outlier test (closed-form
     leave-one-out, forward model, poses in the base frame) and the identification from the rows it
     keeps; the one with its flagged rows is kept for the comparison."""
     robot, joints, noise = inp.robot, inp.joints, inp.noise
+    split = {} if split is None else split
+    t0 = time.perf_counter()
     search, kept = gross_row_stage(inp, settings)
+    split["gross_rows"] = time.perf_counter() - t0
     gross_idx = [] if search is None or not search.success else [int(i) for i in search.gross]
     instrument, measured, first = _first_fit(inp, settings, search, kept)
     if learn_tolerance(inp, instrument.result if instrument is not None else first):
@@ -795,12 +801,14 @@ def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list) 
     if inp.tolerance_declared and est is not None and est.contradicted:
         warnings.append(f"the declared tolerance ({est.tolerance_words('reference')}) is contradicted by the rows: "
                         f"{est.evidence_words()}; the rows support {est.tolerance_words()} (declared, so obeyed)")
+    t1 = time.perf_counter()
     try:
         report = find_outliers(robot, joints[kept], measured[kept], noise)
     except (ValueError, KinematicsError) as exc:
         report, outlier_verdict = None, f"outlier test not run: {exc}"
     else:
         outlier_verdict = report.verdict
+    split["outlier_test"] = time.perf_counter() - t1
     loo_idx = [int(kept[i]) for i in report.flagged] if report is not None else []
     flagged_idx = sorted(set(gross_idx) | set(loo_idx))
     result_all, solver = (instrument.result, "lm") if instrument is not None else first
@@ -935,7 +943,8 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
                              "against the declared noise), forward model",
                      "verdict": ident.outlier_verdict, "flagged_rows": ident.flagged, "left_out": ident.left_out,
-                     "model_misfit": misfit},
+                     "model_misfit": misfit,
+                     "search": None if ident.report is None else ident.report.search},
         "model_misfit": misfit,
         "gross_rows": gross_block(inp, ident),
         "with_flagged": comparison[0],
@@ -1081,7 +1090,10 @@ def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> 
         base = groups == BASE_FRAME  # in the base frame: the geometry's uncertainty alone
         if base.any():
             jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
-            cov[base] = np.einsum("ndp,pq,neq->nde", jac, result.covariance, jac)
+            # J Sigma J^T row by row: one (N D, P) x (P, P) product, then (D, P) x (P, D) per row
+            # (a three-operand einsum without a contraction order loops over N D P P D terms)
+            js = (jac.reshape(-1, jac.shape[2]) @ result.covariance).reshape(jac.shape)
+            cov[base] = js @ np.swapaxes(jac, 1, 2)
         if (~base).any():  # geometry and frames' uncertainty together
             cov[~base] = ident.instrument.prediction_covariance(
                 joints[~base], sessions=groups[~base] if inp.n_sessions > 1 else None)
@@ -1276,7 +1288,9 @@ def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
                     f"{1 - GROSS_ALPHA:g} quantile of their coordinates named gross",
             "rows": [int(inp.rows[i]) + 1 for i in ident.gross_idx], "left_out": bool(ident.gross_idx) and
             len(ident.kept) < len(inp.measured), "frame_estimated": bool(search.frame_estimated),
-            "success": bool(search.success), "message": search.message}
+            "success": bool(search.success), "message": search.message,
+            "search": getattr(search, "search", "every row") if not isinstance(search, SessionSearch) else
+            "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
 
 
 def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
@@ -1366,6 +1380,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     from calib.observability import analyze_observability
     from pipeline.views import (application_id, blueprint, log_calibration_run, run_eye, run_magnification,
                                 save_recording, summary_markdown)
+    from pipeline.views.run_view import MAX_MACHINE_POSES, drawn_poses
 
     robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
     nominal = robot.table.nominal
@@ -1377,6 +1392,10 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     magnified = run_magnification(robot, nominal, inp.actual, result.theta, targets, measured)
     history_label = "max dQint (mm)" if (settings.method == "chainwise" and ident.solver == "gn") else "cost"
     heldout_before, heldout_after = (None, None) if held is None else held
+    n, shown = len(joints), drawn_poses(len(joints)).size
+    summary["rerun"] = {"machine_poses_drawn": shown, "form": "every calibration pose drawn in 3D" if shown == n else
+                        f"the 3D machines and arrows at {shown:,} evenly spaced poses of the {n:,} ({n:,} rows > "
+                        f"MAX_MACHINE_POSES = {MAX_MACHINE_POSES}); every pose's residuals on the pose timeline"}
     if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim:  # target positions
         heldout_before = heldout_after = None
 
@@ -1399,20 +1418,26 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     inp = read_input(settings, rec) if rec is not None else simulate_input(settings, progress)
     split["simulate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    ident = identify_step(inp, settings, warnings)
+    ident = identify_step(inp, settings, warnings, stages := {})
     split["identify"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     held, truth_in_gauge, *comparison = validate_step(inp, ident, settings, progress)
     split["simulate"] += time.perf_counter() - t2
     summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
     cv = None
+    split.update(stages)
     if inp.rec is not None and held is None:
+        t_cv = time.perf_counter()
         cv = crossvalidation_of(inp, ident, settings)
         summary.update(cv.summary())
+        split["crossvalidation"] = time.perf_counter() - t_cv
+    t_v = time.perf_counter()
     summary.update(verdict_block(inp, ident, held, cv, diagnosis))
+    split["verdict"] = time.perf_counter() - t_v
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     summary["_calibration"] = calibration_of(inp, ident, summary.get("_recording"))
+    t_s = time.perf_counter()
     if summary["left_to_prior"]:
         try:
             summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
@@ -1423,6 +1448,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             summary["_as_read"] = as_read(inp, ident)
         except ValueError:  # position-only targets: nothing for a pose analysis to read
             pass
+    split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
     log_step(inp, ident, held, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
