@@ -169,7 +169,8 @@ def fold_assignment(n: int, folds: int, seed: int = 0) -> np.ndarray:
 
 def _checked(robot, joints, measured, noise, method, folds, prior, fit_kwargs, measurement, sessions):
     """The checked arguments: ``(joints (N, C), measured (N, M), folds, fit_kwargs dict, per (S,)
-    settings or None, sessions (N,) int or None)``; the robot, noise, data, free names, start and
+    settings or None, sessions (N,) int or None, why: the size switch of the default folds or "")``;
+    the robot, noise, data, free names, start and
     sessions as :func:`calib.measurement.checked_measured_inputs` checks them."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
