@@ -32,7 +32,7 @@ reference scale. The cost is one small (K, K) problem per step, nothing beside t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -89,9 +89,6 @@ class ToleranceEstimate:
             posterior standard deviation at the estimate) and beyond :data:`FAR_TOLERANCES`
             reference standard deviations from nominal, farthest first (the estimated error over
             the reference standard deviation).
-        unit_of: ``{name: unit}`` of the free parameters.
-        error: ``{name: estimated error}`` of the free parameters at the estimate (linearised MAP,
-            parameter units).
         prior_units: (P,) the unit of every parameter of the robot's table.
         noise_scale: the rows' scatter about the linearised model, in declared noise standard
             deviations, estimated with the scale (``1 / sqrt(beta)``): about 1 when the declared
@@ -107,8 +104,6 @@ class ToleranceEstimate:
     determined: dict
     log_evidence_gain: float
     far: tuple = ()
-    unit_of: dict = field(default_factory=dict)
-    error: dict = field(default_factory=dict)
     prior_units: tuple = ()
     noise_scale: float = 1.0
 
@@ -231,8 +226,7 @@ def tolerance_from_data(result, reference: ParameterPrior | None = None) -> Tole
                              factor={u: float(f) for u, f in factor.items()},
                              tolerance={u: typical[u] * float(factor[u]) for u in present},
                              reference_tolerance=typical, determined=determined, log_evidence_gain=float(gain),
-                             far=tuple(far), unit_of=dict(zip(names, [str(u) for u in units])),
-                             error=dict(zip(names, m.tolist())),
+                             far=tuple(far),
                              prior_units=tuple(str(u) for u in robot.table.units),
                              noise_scale=float(1.0 / np.sqrt(beta)))
 

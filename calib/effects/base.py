@@ -229,7 +229,6 @@ class EffectData:
             if not np.all(np.isfinite(tol) & (tol > 0)):
                 raise ValueError("tolerance must be finite and > 0 for every parameter")
             object.__setattr__(self, "tolerance", tol)
-        start = None
         if self.direction is None or self.last_move is None:
             direction, last_move = motion_history(r.inverse_kinematics(theta, r.home_pose[None])[0], q)
         if self.last_move is None:
