@@ -68,6 +68,55 @@ def test_single_unit_scale_is_the_exact_evidence_maximum(seed):
     assert est.contradicted and est.far, "2 mm errors under a 0.1 mm tolerance are contradicted, with names"
 
 
+def _exact_log_evidence_svd(J, y, s, beta=1.0):
+    """log N(y; 0, I / beta + s^2 J J^T) up to the constant, through J's singular values: every
+    term a sum of positives (the rows' part outside J's range subtracted as a vector, not as
+    squares), so it holds its precision where ``y^T y`` is 1e16 and the answer a few thousand."""
+    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    c = U.T @ y
+    outside = y - U @ c
+    var = 1.0 / beta + s * s * sv * sv
+    return -0.5 * (np.sum(c * c / var) + beta * (outside @ outside) + np.sum(np.log(var))
+                   - (len(y) - len(sv)) * np.log(beta))
+
+
+def _exact_with_noise_scale(J, y, s):
+    """The exact log evidence at its best noise scale beta (1-D search on log beta)."""
+    from scipy.optimize import minimize_scalar
+
+    best = minimize_scalar(lambda lb: -_exact_log_evidence_svd(J, y, s, np.exp(lb)), bounds=(-10, 10),
+                           method="bounded", options={"xatol": 1e-10})
+    return -best.fun
+
+
+@pytest.mark.parametrize("noise", ["declared", "estimated"])
+def test_evidence_gain_holds_its_precision_on_millimetre_errors_at_micrometre_noise(noise):
+    """A hand-built machine seen by a precise instrument: errors of 2 mm, rows whose information is
+    1e14 per mm^2 (``b^T A^-1 b`` of order 1e16, the gain a few thousand nats), the noise scale
+    declared or estimated with the tolerance (the fit's chi-square given). The gain is the exact
+    one (SVD in the rows' space) within 1e-4 nats: the textbook form's rounding, ``eps |H| |m|^2``,
+    is a few nats here (it lost thousands on a 6-RUS fit under another BLAS kernel), the form
+    written as a change from the fit rounds to second order."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(7)
+    p, n = robot.n_parameters, 150
+    J = 1e6 * rng.normal(size=(n, p))
+    y = J @ (2.0 * rng.normal(size=p)) + 1.3 * rng.normal(size=n)
+    fit = _linear_result(robot, J, y, np.full(p, 0.1))
+    exact = _exact_log_evidence_svd
+    if noise == "estimated":
+        d = fit.theta - robot.table.nominal
+        fit.chi2, fit.dof = float(np.sum((y - J @ d) ** 2) + np.sum((d / 0.1) ** 2)), n
+        exact = _exact_with_noise_scale
+    est = tolerance_from_data(fit)
+    gain = exact(J, y, est.tolerance["mm"]) - exact(J, y, 0.1)
+    assert gain > 1e3
+    assert est.log_evidence_gain == pytest.approx(gain, abs=1e-4)
+    assert est.contradicted
+    if noise == "estimated":
+        assert est.noise_scale == pytest.approx(1.3, rel=0.2)
+
+
 def test_two_units_each_scaled_by_its_own_evidence():
     """Delta (mm and rad parameters): each unit's factor maximises the exact evidence over a 2-D
     grid about the estimate (no grid point beats it)."""
