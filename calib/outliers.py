@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincinv
 
+from .batched_lu import BatchedLU
 from .engine import identify_forward
 from .noise import SensorNoise
 from .robot import Robot, pose_jacobian_of_parameters
@@ -130,7 +131,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
             r = r0 - Jr @ delta
             H = (Jr @ cov) @ np.swapaxes(Jr, 1, 2)  # (N, D, D) diagonal blocks of the hat matrix
             sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
-            dw = np.linalg.solve(np.eye(d)[None] + sign * H, r[..., None])[..., 0]
+            dw = BatchedLU(np.eye(d)[None] + sign * H).solve(r)
             stat = np.sum(r * dw, axis=1)
             cand = np.flatnonzero(kept)
             if at_once:

@@ -26,7 +26,7 @@ from typing import ClassVar, Iterator, Sequence
 
 import numpy as np
 
-from .batched_lu import BatchedLU
+from .batched_lu import BatchedLU, solve_stacked
 from .noise import SensorNoise
 from .validation import as_array, frozen_array
 
@@ -518,7 +518,7 @@ def raise_if_singular(J: np.ndarray, scale: np.ndarray, rows: np.ndarray) -> Non
 def pose_jacobian_of_joints(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """(N, D, C) ``d pose / d joints`` at consistent ``(joints, poses)`` (implicit function theorem)."""
     jac = robot.closure_jacobians(theta, joints, poses)
-    return -np.linalg.solve(jac.pose, jac.joints)
+    return -solve_stacked(jac.pose, jac.joints)
 
 
 def pose_jacobian_of_parameters(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -528,7 +528,7 @@ def pose_jacobian_of_parameters(robot: Robot, theta: np.ndarray, joints: np.ndar
     ``d pose / d theta = -(dF / d pose)^-1 dF / d theta``.
     """
     jac = robot.closure_jacobians(theta, joints, poses)
-    return -np.linalg.solve(jac.pose, jac.parameters)
+    return -solve_stacked(jac.pose, jac.parameters)
 
 
 #: The description key of the joints' declared ranges: ``[[low, high], ...]``, one pair per joint

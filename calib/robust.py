@@ -56,10 +56,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincinv
 
+from .batched_lu import BatchedLU
 from .measurement import (FRAME_DETECTION_FRACTION, FRAME_DETECTION_RAD, GAUGE_RTOL, MeasuredFit,
                           checked_measured_inputs, detect_frame, identify_measured, instrument_measurements,
                           measurement_residuals, register_frame, whitened_jacobian, whitened_residuals)
 from .noise import SensorNoise
+from .tsqr import triangular_factor
 from .robot import KinematicsError, Robot
 
 __all__ = ["GrossRowResult", "find_gross_rows", "GROSS_ALPHA", "KEPT_FRACTION", "RANDOM_STARTS",
@@ -459,7 +461,7 @@ def _judged(problem: _Problem, est_frame: bool, state: _State) -> np.ndarray:
                                     frame=fit.frame, targets=fit.targets, free=problem.free,
                                     estimate_frame=est_frame, estimate_targets=problem.estimate_targets)
     J = J / scale
-    _, s, vt = np.linalg.svd(J[state.rows].reshape(-1, J.shape[2]), full_matrices=False)
+    _, s, vt = np.linalg.svd(triangular_factor(J[state.rows].reshape(-1, J.shape[2])), full_matrices=False)
     keep = s > GAUGE_RTOL * s[0]
     B = J @ (vt[keep].T / s[keep])  # (N, M, r): H_jj = B_j B_j^T
     H = B @ np.swapaxes(B, 1, 2)
@@ -467,7 +469,7 @@ def _judged(problem: _Problem, est_frame: bool, state: _State) -> np.ndarray:
     inside[state.rows] = True
     sign = np.where(inside, -1.0, 1.0)[:, None, None]
     try:
-        solved = np.linalg.solve(np.eye(J.shape[1])[None] + sign * H, state.white[..., None])[..., 0]
+        solved = BatchedLU(np.eye(J.shape[1])[None] + sign * H).solve(state.white)
     except np.linalg.LinAlgError:  # a row alone determines a direction: no leave-one-out residual
         return state.stat
     return np.sum(state.white * solved, axis=1)

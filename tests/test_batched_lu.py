@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from calib.batched_lu import LARGEST_MULTIPLIER, SMALLEST_BATCH_ENTRIES, BatchedLU
+from calib.batched_lu import LARGEST_MULTIPLIER, SMALLEST_BATCH_ENTRIES, BatchedLU, solve_stacked
 from calib.robots import ROBOTS, default_robot, reference_errors
 from calib.workspace import reachable_poses
 
@@ -124,3 +124,26 @@ def test_inverse_columns_are_lapacks_inverse(n):
         np.testing.assert_array_equal(f.inverse_columns().transpose(2, 1, 0), np.linalg.inv(small))
     b = rng.normal(size=(10, n))
     assert relative_error(BatchedLU(small, inverse=True).solve(b), lapack(small, b)) < 1e-11
+
+
+@pytest.mark.parametrize("k", [1, 6, 42])
+def test_stacked_right_hand_sides_solve_like_lapack(k):
+    """solve_stacked (the inverse by the kept factors times B) against numpy.linalg.solve, with
+    some matrices handed to LAPACK: each solution within cond(A_m) unit round-offs (times a small
+    factor for n and the multipliers) of LAPACK's, relative to its largest entry; the small-stack
+    path is LAPACK's, bit for bit; a singular matrix raises as numpy does."""
+    rng = np.random.default_rng(20 + k)
+    n, m = 6, 2 * SMALLEST_BATCH_ENTRIES // 36
+    A = rng.normal(size=(m, n, n)) + 2.0 * n * np.eye(n)
+    order_row = int(np.argmax(np.abs(A[0, :, 0])))
+    A[1::7, order_row, 0] = 1e-14
+    B = rng.normal(size=(m, n, k))
+    X, reference = solve_stacked(A, B), np.linalg.solve(A, B)
+    cond = np.linalg.cond(A)
+    bound = 6 * (1 + LARGEST_MULTIPLIER) ** 6 * np.finfo(float).eps * cond
+    error = np.abs(X - reference).max(axis=(1, 2)) / np.abs(reference).max(axis=(1, 2))
+    assert np.all(error <= bound)
+    np.testing.assert_array_equal(solve_stacked(A[:10], B[:10]), np.linalg.solve(A[:10], B[:10]))
+    A[500, 2] = 0.0
+    with pytest.raises(np.linalg.LinAlgError):
+        solve_stacked(A, B)

@@ -254,6 +254,7 @@ def _scaled_condition(rec: Recording, poses: _PoseColumns, cal: np.ndarray) -> f
     """Condition number of the identification Jacobian of the ``cal`` rows (bool (N,)), rows
     scaled by the declared noise and columns to unit norm (inf when a parameter has no effect)."""
     from calib.robot import pose_jacobian_of_parameters
+    from calib.tsqr import triangular_factor
 
     robot = rec.robot
     free = robot.table.indices(robot.free_default)
@@ -264,7 +265,7 @@ def _scaled_condition(rec: Recording, poses: _PoseColumns, cal: np.ndarray) -> f
     norms = np.linalg.norm(A, axis=0)
     if not np.all(norms > 0):
         return float("inf")
-    sv = np.linalg.svd(A / norms, compute_uv=False)
+    sv = np.linalg.svd(triangular_factor(A / norms), compute_uv=False)  # A's singular values
     return float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
 
 
