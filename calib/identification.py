@@ -59,7 +59,7 @@ from .validation import as_array
 
 __all__ = ["calibrate", "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
            "Verdict", "SessionSearch", "UnreachableRows", "BASE_FRAME", "INSTRUMENT_FOLDS", "SOLVERS", "PRODUCED_BY",
-           "identify_rows", "gross_row_search", "first_fit", "learn_tolerance", "validation_errors",
+           "identify_rows", "gross_row_search", "first_fit", "learn_tolerance", "validation_errors", "instrument_heldout",
            "crossvalidation_of", "crossvalidation_settings", "prediction_check", "verdict_of", "information_verdict",
            "description_verdict", "likely_cause", "calibration_of", "instrument_frames"]
 
