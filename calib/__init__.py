@@ -32,5 +32,6 @@ lazily_exported, __getattr__, __dir__ = lazy_exports(__name__, {
     "prior": ("ParameterPrior",),
     "crossval": ("CrossValidation", "crossvalidate", "crossvalidate_model"),
     "calibration": ("Calibration", "CalibrationFileError", "register_delivery"),
+    "identification": ("CalibrationOutcome", "calibrate"),
 })
 __all__ = ["paper", *lazily_exported]

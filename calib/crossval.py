@@ -23,7 +23,7 @@ variance, P parameters: 0.1 % at 100,000 hexapod rows, below the figure's spread
 The prediction of a left-out row is the forward kinematics of the fold's model at the row's
 joints, started from the measured pose (``robot.forward_kinematics(theta, joints,
 initial=measured)``); its error is measured minus predicted, as the held-out error of recorded
-validation rows (:mod:`pipeline.workflows.calibration`): it includes the sensor noise. With an
+validation rows (:func:`calib.identification.validation_errors`): it includes the sensor noise. With an
 instrument frame or targets (``measurement=``), each fold is fitted by
 :func:`calib.measurement.identify_measured` and predicted in the instrument's coordinates.
 

@@ -376,7 +376,7 @@ def test_an_explicit_name_taken_is_refused_before_any_work(work, capsys):
 
 
 def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, monkeypatch):
-    import pipeline.workflows.calibration as calibration
+    import calib.identification as calibration
 
     csv_path, out = work
 

@@ -194,7 +194,7 @@ def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
     all (the identified model cannot reach their joints): said so, not a figure it does not have."""
     from types import SimpleNamespace
 
-    from pipeline.workflows.calibration import likely_cause
+    from calib.identification import likely_cause
 
     inp = SimpleNamespace(where="rec.csv")
     ident = SimpleNamespace(gross=None, result=SimpleNamespace(message="converged"))

@@ -17,7 +17,7 @@ import pytest
 from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures
 from calib.prior import MOVED_BY_DATA, parameter_sources
 from pipeline.run import IMPLAUSIBLE_LINES, print_implausible
-from pipeline.workflows.calibration import likely_cause
+from calib.identification import likely_cause
 
 
 def test_a_parameter_moved_far_beyond_its_prior_is_the_datas():

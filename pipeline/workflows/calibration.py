@@ -15,26 +15,22 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from calib import paper
-from calib.evidence import MIN_DETERMINED, ToleranceEstimate, tolerance_from_data
-from calib.engine import IdentificationResult, gauge_representative, identify, integrated_error
-from calib.measurement import frame_to_dict, identify_as_measured, identify_measured, instrument_measurements, \
-    measured_gauge_representative, measurement_residuals
+from calib.design import augment_poses
+from calib.engine import IdentificationResult, gauge_representative, integrated_error
+from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification, SessionSearch, UnreachableRows,
+                                  calibrate)
+from calib.measurement import frame_to_dict, measured_gauge_representative
 from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
 from calib.noise import SensorNoise
-from calib.outliers import find_outliers
-from calib.robust import GROSS_ALPHA, find_gross_rows
-from calib.crossval import crossvalidate
-from calib.design import augment_poses
 from calib.prior import ParameterPrior
-from calib.robot import KinematicsError, Robot, check_joint_limits, pose_jacobian_of_parameters
+from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
+from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
-from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, NameReservation, Recording, build_report, command_columns,
-                              command_csv, output_folder, frame_session, render_html, row_message, session_measurement,
-                              validity_domain)
+from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, build_report, command_columns, command_csv,
+                              output_folder, frame_session, render_html, row_message, session_measurement)
 
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
@@ -199,39 +195,10 @@ def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, fre
             "max_abs_rad": float(np.abs(err[angle]).max()) if angle.any() else None}
 
 
-def _instrument_heldout(robot: Robot, fit, val_joints, val_meas, sessions=None):
-    """Held-out errors of a recording in an instrument frame or of targets: measured minus the
-    prediction, before (nominal geometry, the registered frame, the start offsets) and after;
-    ``sessions``: (M,) each validation row's frame group (None: one; :data:`BASE_FRAME`: the
-    base frame, the fit's targets)."""
-    k = fit.n_targets
-    nominal = robot.forward_kinematics(robot.table.nominal, val_joints)
-    rows = np.zeros(len(val_joints), dtype=int) if sessions is None else np.asarray(sessions)
-    several = fit.n_sessions > 1
-    before = np.empty_like(np.asarray(val_meas, dtype=float))
-    after = np.empty_like(before)
-    for s in np.unique(rows):
-        at = rows == s
-        if s == BASE_FRAME:
-            frame, targets = np.zeros(6), fit.targets
-            predicted = instrument_measurements(robot, robot.forward_kinematics(fit.result.theta, val_joints[at]),
-                                                None, fit.targets)
-        else:
-            reg = fit.registrations[s] if several else fit.registration
-            estimated = fit.frames_estimated[s] if several else fit.frame_estimated
-            frame = reg.frame if estimated and reg is not None else fit.frames[s]
-            targets = None if k == 0 else (reg.targets if reg is not None and estimated else fit.targets)
-            predicted = fit.predict(val_joints[at], sessions=s if several else None)
-        before[at] = measurement_residuals(robot, val_meas[at], instrument_measurements(robot, nominal[at], frame,
-                                                                                          targets), k)
-        after[at] = measurement_residuals(robot, val_meas[at], predicted, k)
-    return before, after
-
-
 def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     """(N, D) full poses ``measured`` taken out of their rows' instrument frames (``groups``: each
-    row's frame group, :func:`frame_groups`; rows in :data:`BASE_FRAME` as they are; ``several``:
-    the fit has several frames)."""
+    row's frame group, :func:`frame_groups`; rows in :data:`calib.identification.BASE_FRAME` as they
+    are; ``several``: the fit has several frames)."""
     out = np.array(measured, dtype=float)
     at = groups != BASE_FRAME
     out[at] = fit.to_base(out[at], sessions=groups[at] if several else None)
@@ -239,7 +206,7 @@ def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
 
 
 def _instrument_basis(fit) -> str:
-    """What the held-out errors of :func:`_instrument_heldout` are."""
+    """What the held-out errors of :func:`calib.identification.instrument_heldout` are."""
     what = "target positions" if fit.n_targets else "poses"
     return (f"recorded validation rows: measured {what} minus model prediction, instrument frame "
             "(includes sensor noise)")
@@ -286,23 +253,6 @@ def _instrument_block(fit, before, after) -> dict:
                                                   "after_figures": error_figures(a)}
             block["heldout_orientation_error_rad"] = None
     return block
-
-
-def _identify(robot: Robot, joints, measured, noise: SensorNoise, settings: RunSettings, where: str, prior=None,
-              rows=None):
-    """The run's identification of ``joints``/``measured`` (data rows ``rows`` of the recording,
-    for the messages; default 0..N-1); a failure said with the file and its 1-based row."""
-    solver = settings.solver or ("gn" if settings.method == "chainwise" else "lm")
-    options = {"solver": solver}
-    if settings.method == "chainwise":
-        options.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
-    try:
-        return identify(robot, joints, measured, noise, method=settings.method, prior=prior, **options), solver
-    except KinematicsError as exc:
-        rows = np.arange(len(joints)) if rows is None else rows
-        raise ValueError(f"{row_message(exc, where, rows)} (the {robot.name} cannot reach the recorded joints)") from None
-    except ValueError as exc:
-        raise ValueError(f"{where}: {len(measured)} calibration rows are too few or unusable: {exc}") from None
 
 
 def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: tuple | None, truth, free) -> dict:
@@ -416,7 +366,7 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
                   "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
     else:
         source = recording_source(settings.real)
-    calibration = replace(calibration, recording=source)
+    calibration = replace(calibration, recording=source, produced_by="pipeline.run")
     outputs.temp("calibration").write_text(calibration_text(calibration))
     if "mjcf" in targets_out:
         from pipeline.simulation.mjcf_export import mjcf_text
@@ -428,27 +378,34 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
 NO_PRIOR = "none (--no-prior: plain least squares)"
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class CalibrationInput:
-    """The measurements a run calibrates from, simulated or read (the first step of a run).
+    """The measurements a run calibrates from, simulated or read (the first step of a run), as
+    plain data for :func:`calib.identification.calibrate` (:func:`calibrate_input`).
 
     Attributes:
         robot, noise: the robot and the declared noise.
-        joints: (N, C) calibration joints; measured: (N, D) calibration poses (or target positions).
+        joints: (N, C) calibration joints; measured: (N, D) calibration poses (or (N, 3K) target
+            positions), each row in its frame group's instrument frame.
         rows: (N,) 0-based data rows of the calibration rows in the recording.
+        t_s: (N,) the calibration rows' times, s.
         where: how messages name the data (the file, or the simulated poses).
         scenario: the run's scenario in words.
         actual, injected: the true parameter vector and its errors, when known (else None).
         val_joints, val_meas: the recording's validation rows (empty when simulating).
         rec: the recording read (None when simulating); sim: the simulation's parts (None when reading).
-        tolerance: each parameter's tolerance (:func:`machine_tolerance`): the prior, and the yardstick
-            of :func:`implausible_parameters` with or without one; prior: it, or None with --no-prior.
-            Where none is declared both become the tolerance learnt from the rows
-            (:func:`learn_tolerance`) once the gross rows are out.
-        tolerance_declared: the sidecar declares ``meta.parameter_tolerance``.
-        tolerance_estimate: the tolerance the rows support (:class:`calib.evidence.ToleranceEstimate`),
-            the prior where none is declared, a check of the declared one otherwise; None with
-            --no-prior or before :func:`learn_tolerance`.
+        tolerance: each parameter's tolerance as declared (:func:`declared_tolerance`): the prior
+            (unless --no-prior), and the yardstick of :func:`implausible_parameters`; where none
+            is declared the run may learn one from the rows (:func:`calib.identification.learn_tolerance`,
+            :attr:`calib.identification.CalibrationOutcome.data` holds the one used).
+        tolerance_source: where the tolerance came from, in words.
+        tolerance_declared: the sidecar declares ``meta.parameter_tolerance`` or --tolerance was given.
+        measurement: (S,) how each frame group was measured (:func:`pipeline.formats.session_measurement`
+            of the session that owns its frame), or None (simulated: poses in the base frame).
+        sessions: (N,) each calibration row's frame group; val_sessions: (M,) each validation
+            row's (:data:`calib.identification.BASE_FRAME` for the base frame); None when simulating.
+        frame_sessions: (S,) the name of each frame group's session (:func:`frame_groups`).
+        session_frames: ``{session: frame group}`` of every session of the recording.
     """
 
     robot: Robot
@@ -456,6 +413,7 @@ class CalibrationInput:
     joints: np.ndarray
     measured: np.ndarray
     rows: np.ndarray
+    t_s: np.ndarray
     where: str
     scenario: str
     actual: np.ndarray | None
@@ -465,13 +423,13 @@ class CalibrationInput:
     rec: Recording | None = None
     sim: dict | None = None
     tolerance: ParameterPrior | None = None
-    prior: ParameterPrior | None = None
-    prior_source: str = NO_PRIOR
+    tolerance_source: str = ""
+    tolerance_declared: bool = False
+    measurement: tuple | None = None
     sessions: np.ndarray | None = None
     val_sessions: np.ndarray | None = None
-    tolerance_declared: bool = False
-    tolerance_estimate: ToleranceEstimate | None = None
     frame_sessions: tuple = ()
+    session_frames: dict | None = None
 
     @property
     def n_sessions(self) -> int:
@@ -479,14 +437,68 @@ class CalibrationInput:
         calibration rows (:func:`frame_groups`; 1 for a simulated run)."""
         return 1 if self.rec is None else len(self.frame_sessions)
 
-    def measurement(self, s: int = 0):
-        """How frame group ``s`` was measured (:func:`pipeline.formats.session_measurement` of the
-        session that owns its frame)."""
-        return session_measurement(self.rec, self.frame_sessions[s])
+
+def calibrate_input(inp: CalibrationInput, settings: RunSettings, *, diagnosis=None, progress=None,
+                    assess: bool = True) -> CalibrationOutcome:
+    """The identification policy (:func:`calib.identification.calibrate`) on ``inp`` as ``settings``
+    ask: a recording's rows searched for gross rows and cross-validated where it has no validation
+    rows; a simulated run's held-out errors measured on its machine (:func:`simulated_heldout`).
+
+    Raises:
+        ValueError: rows that cannot be calibrated; a row the model cannot reach named by its data
+            row in the recording (:func:`pipeline.formats.row_message`).
+    """
+    sim = inp.sim
+    heldout = simulated_heldout(inp, progress) if sim is not None and sim["val"] is not None else None
+    recorded = inp.rec is not None
+    try:
+        return calibrate(inp.robot, inp.joints, inp.measured, inp.noise, measurement=inp.measurement,
+                         sessions=inp.sessions if recorded else None,
+                         session_names=inp.frame_sessions if recorded else None,
+                         session_frames=inp.session_frames,
+                         validation_joints=inp.val_joints if recorded else None,
+                         validation_measured=inp.val_meas if recorded else None,
+                         validation_sessions=inp.val_sessions if recorded else None,
+                         validation_rows=inp.rec.rows("validation") if recorded else None, heldout=heldout,
+                         tolerance=inp.tolerance, tolerance_declared=inp.tolerance_declared,
+                         tolerance_source=inp.tolerance_source, prior=settings.prior, method=settings.method,
+                         solver=settings.solver, weighted=settings.weighted, keep_outliers=settings.keep_outliers,
+                         search_gross_rows=recorded, cross_validate=recorded, assess=assess, rows=inp.rows,
+                         t_s=inp.t_s, diagnosis=diagnosis, where=inp.where,
+                         geometry_source=sidecar_name(settings.real) if recorded else None, seed=settings.seed)
+    except UnreachableRows as exc:
+        raise ValueError(f"{row_message(exc.kinematics, exc.where, exc.rows)} ({exc.what})") from None
+
+
+def simulated_heldout(inp: CalibrationInput, progress):
+    """``errors(theta) -> (before, after)``: the simulated machine's held-out poses (N, D), measured
+    noise-free under nominal commands (before) and under the model ``theta``'s compensated commands
+    (after), minus the targets.
+
+    Raises (from ``errors``):
+        ValueError: the model cannot command a held-out pose (its geometry is implausible).
+    """
+    robot, sim = inp.robot, inp.sim
+    progress = progress or (lambda label, done, total: None)
+
+    def errors(theta):
+        try:
+            compensated = robot.inverse_kinematics(theta, sim["heldout"])
+            check_joint_limits(robot, compensated, "held-out pose")
+        except KinematicsError as exc:
+            raise ValueError(
+                f"the identified model cannot command the held-out poses ({exc}); its geometry is "
+                "implausible: the measurements carry effects the geometric model lacks (gravity, "
+                "payload, compliance; see python -m pipeline.discover)") from exc
+        after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
+            "measuring held-out poses (compensated commands)", d, t))
+        return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
+
+    return errors
 
 
 #: The key of a recording-as-read's meta saying where its ``parameter_tolerance`` came from when a
-#: run learnt it from the rows (:func:`learn_tolerance`; never written to a file).
+#: run learnt it from the rows (:func:`calib.identification.learn_tolerance`; never written to a file).
 TOLERANCE_SOURCE_KEY = "parameter_tolerance_source"
 
 
@@ -551,29 +563,28 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     where = str(settings.real)
     if len(measured) == 0:
         raise ValueError(f"{where}, column 'set': no calibration rows (every row is 'validation')")
-    tolerance, prior_source = declared_tolerance(robot, rec.meta, sidecar_name(settings.real), settings.tolerance)
+    tolerance, source = declared_tolerance(robot, rec.meta, sidecar_name(settings.real), settings.tolerance)
     groups, index = frame_groups(rec, where)
     cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
-    return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured,
-                            rows=cal_rows, where=where, scenario=f"recording {settings.real}",
+    # every session's frame group (a session captured in another's frame too), as the calibration names them
+    session_frames = {name: int(index[rec.session_rows(name)[0]]) for name in rec.session_names}
+    return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured, rows=cal_rows,
+                            t_s=rec.t_s[cal_rows], where=where, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
                             val_joints=val_joints, val_meas=val_meas, rec=rec, tolerance=tolerance,
-                            prior=tolerance if settings.prior else None,
-                            prior_source=prior_source if settings.prior else NO_PRIOR,
+                            tolerance_source=source,
+                            tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None,
+                            measurement=tuple(session_measurement(rec, name) for name in groups),
                             sessions=index[cal_rows], val_sessions=index[val_rows], frame_sessions=groups,
-                            tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None)
-
-
-#: A row's frame group in :func:`frame_groups` when it is predicted in the base frame (a session
-#: without calibration rows declared in the base frame).
-BASE_FRAME = -1
+                            session_frames=session_frames)
 
 
 def frame_groups(rec: Recording, where: str = "the recording") -> tuple[tuple[str, ...], np.ndarray]:
     """``(frame sessions, (N,) int)``: the sessions whose instrument frame the run fits (those with
     a frame of their own whose rows, or the rows of the sessions captured in it, include
-    calibration rows; in order), and each row's place among them (:data:`BASE_FRAME` for the rows
-    of a session without calibration rows declared in the base frame).
+    calibration rows; in order), and each row's place among them
+    (:data:`calib.identification.BASE_FRAME` for the rows of a session without calibration rows
+    declared in the base frame).
 
     Raises:
         ValueError: a session with validation rows and no calibration rows whose frame cannot be
@@ -606,263 +617,12 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))
-    tolerance, prior_source = declared_tolerance(robot, None, "", settings.tolerance)
+    tolerance, source = declared_tolerance(robot, None, "", settings.tolerance)
     return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
-                            rows=np.arange(len(cal.measured)), where="the simulated calibration poses",
+                            rows=np.arange(len(cal.measured)), t_s=cal.t_s, where="the simulated calibration poses",
                             scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
                             val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, tolerance=tolerance,
-                            prior=tolerance if settings.prior else None,
-                            prior_source=prior_source if settings.prior else NO_PRIOR,
-                            tolerance_declared=settings.tolerance is not None)
-
-
-@dataclass
-class Identification:
-    """The identification step's outcome: the fit used (``result``), the fits with and without the
-    flagged rows, the outlier test, the instrument frame fit (or None) and the rows used."""
-
-    result: IdentificationResult
-    result_all: IdentificationResult
-    result_kept: IdentificationResult | None
-    solver: str
-    report: object
-    outlier_verdict: str
-    flagged_idx: list
-    flagged: list
-    keep: np.ndarray
-    left_out: bool
-    used: np.ndarray
-    instrument: object
-    measured: np.ndarray
-    gross: object = None
-    gross_idx: list = field(default_factory=list)
-    kept: np.ndarray | None = None
-
-
-def gross_row_stage(inp: CalibrationInput, settings: RunSettings):
-    """``(search, kept rows)``: the gross rows of a recording found before anything is fitted to
-    them (:func:`calib.robust.find_gross_rows`: trimmed fits, a row named only when no consistent
-    fit explains it; the instrument frame inferred from the rows it makes consistent); simulated
-    runs skip it: ``(None, every row)``. With ``keep_outliers`` the rows are named, not left out."""
-    n = len(inp.measured)
-    if inp.rec is None:
-        return None, np.arange(n)
-    if inp.n_sessions > 1:
-        search = SessionSearch([session_search(inp, settings, s) for s in range(inp.n_sessions)], inp.sessions)
-    else:
-        ms = inp.measurement(0)
-        search = find_gross_rows(inp.robot, inp.joints, inp.measured, inp.noise, frame=ms.frame, targets=ms.targets,
-                                 estimate_targets=ms.estimate_targets if ms.targets is not None else None,
-                                 seed=settings.seed)
-    if not search.success or settings.keep_outliers:
-        return search, np.arange(n)
-    return search, np.flatnonzero(search.kept)
-
-
-def session_search(inp: CalibrationInput, settings: RunSettings, s: int):
-    """The gross-row search of session ``s``'s calibration rows, in its own instrument frame."""
-    ms = inp.measurement(s)
-    rows = np.flatnonzero(inp.sessions == s)
-    return find_gross_rows(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, frame=ms.frame,
-                           targets=ms.targets, estimate_targets=ms.estimate_targets if ms.targets is not None else None,
-                           seed=settings.seed)
-
-
-class SessionSearch:
-    """The gross-row searches of a recording's sessions (one instrument frame each) read as one:
-    ``gross``, ``kept``, ``statistic`` over the calibration rows; ``success`` where every session's
-    search judged its rows; ``frame_estimated`` where any estimated a frame; ``searches`` each."""
-
-    def __init__(self, searches: list, sessions: np.ndarray):
-        self.searches, self.sessions = searches, sessions
-        n = sessions.size
-        self.kept, self.statistic = np.ones(n, dtype=bool), np.full(n, np.nan)
-        for s, search in enumerate(searches):
-            rows = np.flatnonzero(sessions == s)
-            self.kept[rows] = search.kept
-            self.statistic[rows] = search.statistic
-        self.gross = tuple(int(i) for i in np.flatnonzero(~self.kept))
-        self.success = all(search.success for search in searches)
-        self.frame_estimated = any(search.frame_estimated for search in searches)
-        self.cutoff = searches[0].cutoff
-        self.fit = None
-        self.message = "; ".join(f"session {s + 1}: {search.message}" for s, search in enumerate(searches))
-
-
-def instrument_fit(inp: CalibrationInput, search, kept: np.ndarray):
-    """The geometry fitted with the recording's instrument frame and target offsets, on the rows
-    the gross-row stage kept, where the recording needs them (None: plain poses in the base frame)."""
-    if inp.rec is None:
-        return None
-    if inp.n_sessions > 1:
-        return sessions_fit(inp, search, kept)
-    ms = inp.measurement(0)
-    joints, measured = inp.joints[kept], inp.measured[kept]
-    if search is None or not search.success:  # the search could not judge: the frame test on every row
-        return identify_as_measured(inp.robot, joints, measured, inp.noise, ms, prior=inp.prior)
-    if not search.frame_estimated and ms.n_targets == 0:
-        return None
-    start = search.fit.frame if search.frame_estimated and search.fit is not None else ms.initial_frame
-    # "auto" on the rows kept: the frame test of every run, now on rows the frame makes consistent.
-    return identify_measured(inp.robot, joints, measured, inp.noise,
-                             frame="auto" if search.frame_estimated else "base", initial_frame=start,
-                             targets=ms.targets, estimate_targets=ms.estimate_targets if ms.n_targets else None,
-                             prior=inp.prior)
-
-
-def sessions_fit(inp: CalibrationInput, search, kept: np.ndarray):
-    """One geometry, an instrument frame for each session (estimated where its own search found one
-    or its settings ask for it), fitted together on the rows kept (:func:`calib.measurement.identify_measured`
-    with ``sessions``)."""
-    names = inp.frame_sessions
-    per = [inp.measurement(s) for s in range(len(names))]
-    searches = search.searches if isinstance(search, SessionSearch) else [None] * len(names)
-    frames, starts = [], []
-    for ms, found in zip(per, searches):
-        estimated = (found.frame_estimated if found is not None and found.success else ms.frame == "estimate")
-        frames.append("auto" if estimated and ms.frame != "estimate" else ("estimate" if estimated else "base"))
-        starts.append(found.fit.frame if estimated and found is not None and found.fit is not None
-                      else ms.initial_frame)
-    ms0 = per[0]
-    return identify_measured(inp.robot, inp.joints[kept], inp.measured[kept], inp.noise, frame=frames,
-                             initial_frame=starts, targets=ms0.targets,
-                             estimate_targets=ms0.estimate_targets if ms0.n_targets else None, prior=inp.prior,
-                             sessions=inp.sessions[kept])
-
-
-def _first_fit(inp: CalibrationInput, settings: RunSettings, search, kept: np.ndarray):
-    """``(instrument, measured, (result, solver))`` of the rows ``kept`` under ``inp.prior``: the
-    instrument fit where the recording needs one (then ``measured`` the poses in the base frame
-    and the result pair None), else the run's identification of the base-frame poses."""
-    instrument = instrument_fit(inp, search, kept)
-    measured = inp.measured if instrument is None else instrument.base_poses(
-        inp.joints, inp.measured, sessions=inp.sessions if inp.n_sessions > 1 else None)
-    if instrument is not None:
-        return instrument, measured, None
-    return None, measured, _identify(inp.robot, inp.joints[kept], measured[kept], inp.noise, settings, inp.where,
-                                     inp.prior, inp.rows[kept])
-
-
-def learn_tolerance(inp: CalibrationInput, fit) -> bool:
-    """The tolerance the rows support (:func:`calib.evidence.tolerance_from_data`), from ``fit``
-    (an identification result, or the ``(result, solver)`` pair, made under ``inp.prior``). Where
-    the recording declares none and the rows show the robot's default too tight (the units of
-    :attr:`calib.evidence.ToleranceEstimate.wider`), the learnt tolerance becomes the prior and the
-    yardstick of the run (``inp`` is updated, its ``prior_source`` says so) and True is returned
-    (refit under it); a default the rows do not contradict stays, with the estimate said; a declared one
-    is kept and checked (``inp.tolerance_estimate`` says whether the rows contradict it). Without
-    a prior (--no-prior) nothing is learnt."""
-    result = fit[0] if isinstance(fit, tuple) else fit
-    if inp.prior is None or result is None or result.prior is None:
-        return False
-    try:
-        estimate = tolerance_from_data(result, reference=inp.prior)
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        inp.prior_source += f" (no tolerance could be learnt from the rows: {exc})"
-        return False
-    inp.tolerance_estimate = estimate
-    if inp.tolerance_declared:
-        return False
-    default = estimate.tolerance_words("reference")
-    if all(f == 1.0 for f in estimate.factor.values()):
-        inp.prior_source = (f"the {inp.robot.name}'s default tolerance ({default}, one standard deviation): the rows "
-                            "determine too few parameters to learn one")
-        return False
-    if not estimate.wider:
-        inp.prior_source = (f"the {inp.robot.name}'s default tolerance ({default}, one standard deviation), "
-                            f"consistent with the rows or wider than they show (estimated from the data: "
-                            f"{estimate.tolerance_words()}); a default wider than the machine costs nothing where "
-                            "the rows determine the parameters")
-        return False
-    inp.prior = inp.tolerance = estimate.widened_prior()
-    kept = [u for u in estimate.factor if u not in estimate.wider]
-    inp.prior_source = (f"tolerance estimated from the data: "
-                        f"{', '.join(f'{estimate.tolerance[u]:.3g} {u}' for u in estimate.wider)} (the "
-                        f"{inp.robot.name}'s default {default} is contradicted: {estimate.evidence_words()})"
-                        + (f"; the default kept for {', '.join(kept)}" if kept else ""))
-    return True
-
-
-def identify_step(inp: CalibrationInput, settings: RunSettings, warnings: list, split: dict | None = None) -> Identification:
-    """Gross rows first (:func:`gross_row_stage`), then, on the rows kept, the instrument frame
-    where the recording needs one (:func:`instrument_fit`), the outlier test (closed-form
-    leave-one-out, forward model, poses in the base frame) and the identification from the rows it
-    keeps; the one with its flagged rows is kept for the comparison."""
-    robot, joints, noise = inp.robot, inp.joints, inp.noise
-    split = {} if split is None else split
-    t0 = time.perf_counter()
-    search, kept = gross_row_stage(inp, settings)
-    split["gross_rows"] = time.perf_counter() - t0
-    gross_idx = [] if search is None or not search.success else [int(i) for i in search.gross]
-    instrument, measured, first = _first_fit(inp, settings, search, kept)
-    if learn_tolerance(inp, instrument.result if instrument is not None else first):
-        instrument, measured, first = _first_fit(inp, settings, search, kept)  # under the learnt tolerance
-    est = inp.tolerance_estimate
-    if inp.tolerance_declared and est is not None and est.contradicted:
-        warnings.append(f"the declared tolerance ({est.tolerance_words('reference')}) is contradicted by the rows: "
-                        f"{est.evidence_words()}; the rows support {est.tolerance_words()} (declared, so obeyed)")
-    t1 = time.perf_counter()
-    try:
-        report = find_outliers(robot, joints[kept], measured[kept], noise)
-    except (ValueError, KinematicsError) as exc:
-        report, outlier_verdict = None, f"outlier test not run: {exc}"
-    else:
-        outlier_verdict = report.verdict
-    split["outlier_test"] = time.perf_counter() - t1
-    loo_idx = [int(kept[i]) for i in report.flagged] if report is not None else []
-    flagged_idx = sorted(set(gross_idx) | set(loo_idx))
-    result_all, solver = (instrument.result, "lm") if instrument is not None else first
-    keep = np.setdiff1d(kept, loo_idx)
-    left_out = bool(loo_idx) and not settings.keep_outliers and instrument is None
-    if loo_idx and instrument is not None:
-        warnings.append("the rows the leave-one-out test flags are kept: leaving them out is not done with an "
-                        "instrument frame or targets estimated (gross rows are left out before the frame is fitted)")
-    result_kept = None
-    if loo_idx and instrument is None:
-        try:
-            result_kept, _ = _identify(robot, joints[keep], measured[keep], noise, settings, inp.where, inp.prior,
-                                       inp.rows[keep])
-        except ValueError as exc:
-            warnings.append(f"the flagged rows are kept: without them {exc}")
-            left_out = False
-    return Identification(result=result_kept if left_out else result_all, result_all=result_all,
-                          result_kept=result_kept, solver=solver, report=report, outlier_verdict=outlier_verdict,
-                          flagged_idx=flagged_idx, flagged=[int(inp.rows[i]) + 1 for i in flagged_idx], keep=keep,
-                          left_out=left_out, used=keep if left_out else kept, instrument=instrument,
-                          measured=measured, gross=search, gross_idx=gross_idx, kept=kept)
-
-
-def heldout_errors(inp: CalibrationInput, ident: Identification, theta, progress):
-    """``(before, after)`` held-out pose errors of the model ``theta``, or None: on the simulated
-    machine, its compensated commands; on a recording, the validation rows' prediction errors."""
-    robot, sim, instrument = inp.robot, inp.sim, ident.instrument
-    if sim is not None and sim["val"] is not None:
-        try:
-            compensated = robot.inverse_kinematics(theta, sim["heldout"])
-            check_joint_limits(robot, compensated, "held-out pose")
-        except KinematicsError as exc:
-            raise ValueError(
-                f"the identified model cannot command the held-out poses ({exc}); its geometry is "
-                "implausible: the measurements carry effects the geometric model lacks (gravity, "
-                "payload, compliance; see python -m pipeline.discover)") from exc
-        after = sim["bed"].measure(compensated, progress=lambda d, t: progress(
-            "measuring held-out poses (compensated commands)", d, t))
-        return sim["val"].true_poses - sim["heldout"], after.true_poses - sim["heldout"]
-    if instrument is not None and len(inp.val_joints):
-        return _instrument_heldout(robot, instrument, inp.val_joints, inp.val_meas, inp.val_sessions)
-    if sim is None and len(inp.val_joints):
-        # A recording holds the validation poses measured under nominal commands only: the
-        # identified model's prediction error there stands for the compensated error (equal to
-        # first order), and includes the sensor noise.
-        nominal = robot.table.nominal
-        try:
-            before = inp.val_meas - robot.forward_kinematics(nominal, inp.val_joints, initial=inp.val_meas)
-            after = inp.val_meas - robot.forward_kinematics(theta, inp.val_joints, initial=inp.val_meas)
-        except KinematicsError as exc:
-            raise ValueError(f"{row_message(exc, inp.where, inp.rec.rows('validation'))} (a validation row the model "
-                             "cannot reach)") from None
-        return before, after
-    return None
+                            tolerance_source=source, tolerance_declared=settings.tolerance is not None)
 
 
 def heldout_basis(inp: CalibrationInput, ident: Identification) -> str:
@@ -874,35 +634,38 @@ def heldout_basis(inp: CalibrationInput, ident: Identification) -> str:
     return "recorded validation rows: measured minus model prediction (includes sensor noise)"
 
 
-def validate_step(inp: CalibrationInput, ident: Identification, settings: RunSettings, progress):
-    """``(held, truth_in_gauge, with_flagged, without_flagged)``: the held-out errors of the fit
-    used, the true parameters in the fit's gauge (or None) and the with/without-flagged-rows
-    comparison (or None)."""
+def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray | None:
+    """(P,) the true parameters (a simulated machine's, or those a recording's sidecar names) in the
+    fit's gauge (:func:`calib.engine.gauge_representative`, or with an instrument fit
+    :func:`calib.measurement.measured_gauge_representative`), or None where unknown."""
+    if inp.actual is None:
+        return None
     robot, result, instrument = inp.robot, ident.result, ident.instrument
-    held = heldout_errors(inp, ident, result.theta, progress)
+    if instrument is None:
+        return gauge_representative(robot, inp.actual, result.start)
+    return measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
+                                         targets=instrument.targets if instrument.targets_estimated else None,
+                                         start=result.start)
+
+
+def flagged_rows(inp: CalibrationInput, ident: Identification) -> list[int]:
+    """The rows named gross or flagged, as 1-based data rows (:data:`ROW_NUMBERING`)."""
+    return [int(inp.rows[i]) + 1 for i in ident.flagged_idx]
+
+
+def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.ndarray | None, settings: RunSettings,
+               warnings: list) -> dict:
+    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found
+    (``truth``: :func:`truth_in_gauge`)."""
+    ident, held, data = outcome.identification, outcome.heldout, outcome.data
+    robot, result, instrument = inp.robot, ident.result, ident.instrument
     free = result.free_names
-    truth_in_gauge = None
-    if inp.actual is not None:
-        truth_in_gauge = gauge_representative(robot, inp.actual, result.start) if instrument is None else \
-            measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
-                                          targets=instrument.targets if instrument.targets_estimated else None,
-                                          start=result.start)
-    with_flagged = without_flagged = None
+    flagged = flagged_rows(inp, ident)
+    comparison = (None, None)
     if ident.result_kept is not None:
-        other = ident.result_all if ident.left_out else ident.result_kept
-        blocks = {id(result): held, id(other): heldout_errors(inp, ident, other.theta, progress)}
-        with_flagged = _variant(robot, ident.result_all, list(ident.kept), blocks[id(ident.result_all)],
-                                truth_in_gauge, free)
-        without_flagged = _variant(robot, ident.result_kept, list(ident.keep), blocks[id(ident.result_kept)],
-                                   truth_in_gauge, free)
-    return held, truth_in_gauge, with_flagged, without_flagged
-
-
-def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gauge, comparison,
-               settings: RunSettings, warnings: list) -> dict:
-    """The run's summary (the same keys for every robot)."""
-    robot, result, instrument = inp.robot, ident.result, ident.instrument
-    free = result.free_names
+        comparison = (_variant(robot, ident.result_all, list(ident.kept), outcome.heldout_with_flagged, truth, free),
+                      _variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth,
+                               free))
     chainwise_gn = settings.method == "chainwise" and ident.solver == "gn"
     history = list(result.history) if (chainwise_gn and instrument is None) \
         else [float(integrated_error(robot, result.pose_residuals if instrument is None else
@@ -913,7 +676,7 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         "scenario": inp.scenario,
         "method": settings.method,
         "solver": ident.solver,
-        "weighted": (settings.weighted or inp.prior is not None) if settings.method == "chainwise" else True,
+        "weighted": (settings.weighted or data.prior is not None) if settings.method == "chainwise" else True,
         "calibration_poses": int(len(inp.measured)),
         "calibration_poses_used": int(ident.used.size),
         "heldout_poses": 0 if held is None else len(held[0]),
@@ -925,10 +688,9 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         "injected_errors": None if inp.injected is None else robot.table.to_dict(inp.injected),
         "identified_errors": robot.table.to_dict(result.errors),
         "identified_std": robot.table.to_dict(result.std),
-        "parameter_error": None if truth_in_gauge is None else
-            _parameter_error(robot, result.theta, truth_in_gauge, free),
-        "gain_G_percent": None if truth_in_gauge is None else {
-            k: v for k, v in calibration_gain(robot, truth_in_gauge, result.start, result.theta,
+        "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free),
+        "gain_G_percent": None if truth is None else {
+            k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
                                               free).as_dict().items() if k != "per_parameter"},
         "iterations": result.iterations,
         "converged": result.success,
@@ -939,10 +701,10 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         "max_dqint_history": history,
         "condition_numbers": result.condition_numbers.tolist(),
         "row_numbering": ROW_NUMBERING,
-        "flagged_poses": ident.flagged,
+        "flagged_poses": flagged,
         "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
                              "against the declared noise), forward model",
-                     "verdict": ident.outlier_verdict, "flagged_rows": ident.flagged, "left_out": ident.left_out,
+                     "verdict": ident.outlier_verdict, "flagged_rows": flagged, "left_out": ident.left_out,
                      "model_misfit": misfit,
                      "search": None if ident.report is None else ident.report.search},
         "model_misfit": misfit,
@@ -962,8 +724,8 @@ def summary_of(inp: CalibrationInput, ident: Identification, held, truth_in_gaug
         summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
         if inp.n_sessions > 1:
             summary.update(sessions_block(inp, instrument))
-    summary.update(prior_block(inp, result))
-    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, inp.tolerance, result.free_names)
+    summary.update(prior_block(outcome))
+    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, data.tolerance, result.free_names)
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
@@ -1006,189 +768,14 @@ def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray)
     return {"heldout_per_pose": per, "iso9283": iso}
 
 
-#: Folds of the cross-validation of an instrument-frame fit (each fold refits geometry and frame).
-INSTRUMENT_FOLDS = 10
-
-
-def crossvalidation_of(inp: CalibrationInput, ident: Identification, settings: RunSettings):
-    """The cross-validated prediction error of a recording without validation rows
-    (:func:`calib.crossval.crossvalidate` on the rows the fit used, fitted as the run fits them:
-    leave-one-out for the forward method, 10-fold for the chain-wise one and with an instrument
-    frame, each session's own with several sessions); its ``summary()`` gives
-    ``crossvalidated_position_error_mm`` / ``crossvalidated_orientation_error_rad`` (RMS, mean,
-    max) and ``crossvalidation``."""
-    rows = ident.used
-    if rows.size < 2:  # nothing to predict a row from: said in words, not as the folds' bounds
-        total = len(inp.rec.sets)
-        what = "the recording holds one data row" if total == 1 else \
-            f"of its {total} rows one calibration row is left to fit once the gross rows are out"
-        raise ValueError(f"{inp.where}: {what}: a calibration is judged by predicting rows it did not use, and one "
-                         "row leaves none (add validation rows, or measure more poses spread over the workspace)")
-    if ident.instrument is not None:
-        several = inp.n_sessions > 1
-        cv = crossvalidate(inp.robot, inp.joints[rows], inp.measured[rows], inp.noise, method="forward",
-                           folds=min(INSTRUMENT_FOLDS, rows.size), prior=inp.prior,
-                           measurement=crossvalidation_settings(inp, ident.instrument), seed=settings.seed,
-                           sessions=inp.sessions[rows] if several else None)
-    else:
-        kw = {"solver": ident.solver}
-        if settings.method == "chainwise":
-            kw.update(weighted=settings.weighted, epsilon=paper.PAPER_EPSILON)
-        cv = crossvalidate(inp.robot, inp.joints[rows], ident.measured[rows], inp.noise, method=settings.method,
-                           prior=inp.prior, fit_kwargs=kw, seed=settings.seed)
-    return cv
-
-
-def crossvalidation_settings(inp: CalibrationInput, instrument):
-    """How each fold fits the instrument: the frame estimated (from the run's) where the run
-    estimated it, else the base frame; with several sessions one settings a session (its frame),
-    the targets session 0's (as :func:`sessions_fit`)."""
-    ms = inp.measurement(0)
-    if inp.n_sessions == 1:
-        return replace(ms, frame="estimate" if instrument.frame_estimated else "base",
-                       initial_frame=instrument.frame if instrument.frame_estimated else None)
-    per = [inp.measurement(s) for s in range(inp.n_sessions)]
-    return [replace(one, frame="estimate" if estimated else "base", initial_frame=frame if estimated else None,
-                    targets=per[0].targets, estimate_targets=per[0].estimate_targets)
-            for one, frame, estimated in zip(per, instrument.frames, instrument.frames_estimated)]
-
-
-#: False-alarm probability of the verdict's chi-square tests (the fit, the predictions).
-VERDICT_ALPHA = 1e-3
-
-
-def chi2_limit(dof: int) -> float:
-    """The chi-square's ``1 - VERDICT_ALPHA`` quantile on ``dof`` degrees of freedom."""
-    return float(2.0 * gammaincinv(dof / 2.0, 1.0 - VERDICT_ALPHA))
-
-
-def prediction_check(inp: CalibrationInput, ident: Identification, held, cv) -> dict | None:
-    """Whether the predictions of rows the fit did not use agree with what the fit says they can be:
-    each row's prediction residual (validation rows, or the cross-validation's) whitened by its
-    covariance, the declared noise plus the identified parameters' uncertainty carried to the pose
-    (``S + J Sigma J^T``), summed against the chi-square on their coordinates. None where there is
-    nothing to test (a simulated run's held-out errors are noise-free truths; target data)."""
-    if inp.rec is None or ident.instrument is not None and ident.instrument.targets is not None:
-        return None
-    robot, result = inp.robot, ident.result
-    if held is not None:
-        joints, poses, residuals, what = inp.val_joints, inp.val_meas, held[1], "validation rows"
-    elif cv is not None:
-        joints, poses = inp.joints[ident.used], ident.measured[ident.used]
-        residuals, what = cv.residuals, f"cross-validation ({cv.scheme})"
-    else:
-        return None
-    ok = np.all(np.isfinite(residuals), axis=1)
-    if not ok.any():
-        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
-    joints, poses, residuals = joints[ok], poses[ok], residuals[ok]
-    std = inp.noise.pose_std(robot.pose_units)
-    try:
-        groups = inp.val_sessions[ok] if ident.instrument is not None and held is not None else \
-            np.full(len(joints), BASE_FRAME)
-        cov = np.empty((len(joints), robot.pose_dim, robot.pose_dim))
-        base = groups == BASE_FRAME  # in the base frame: the geometry's uncertainty alone
-        if base.any():
-            jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
-            # J Sigma J^T row by row: one (N D, P) x (P, P) product, then (D, P) x (P, D) per row
-            # (a three-operand einsum without a contraction order loops over N D P P D terms)
-            js = (jac.reshape(-1, jac.shape[2]) @ result.covariance).reshape(jac.shape)
-            cov[base] = js @ np.swapaxes(jac, 1, 2)
-        if (~base).any():  # geometry and frames' uncertainty together
-            cov[~base] = ident.instrument.prediction_covariance(
-                joints[~base], sessions=groups[~base] if inp.n_sessions > 1 else None)
-        cov += np.diag(std ** 2)
-    except KinematicsError:
-        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
-    w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
-    chi2, dof = float(np.sum(w ** 2)), int(w.size)
-    limit = chi2_limit(dof)
-    return {"what": what, "agrees": bool(chi2 <= limit), "ratio": float(np.sqrt(chi2 / dof)),
-            "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
-
-
-def verdict_block(inp: CalibrationInput, ident: Identification, held, cv, diagnosis=None) -> dict:
-    """``success`` and ``verdict``: success only where the fit converged, the calibration rows it
-    used (less the gross rows) fit within the declared noise and the predictions of rows it did not
-    use agree (:func:`prediction_check`); otherwise the likely cause with its evidence: the
-    recording's diagnosis (:func:`calib.diagnosis.diagnose`, made by the checks before any fit)
-    where it names one, else :func:`likely_cause`. ``diagnosis``: the diagnosis' summary, rows
-    1-based."""
-    result = ident.result
-    dof = max(int(result.dof), 1)
-    fit_ok = bool(np.isfinite(result.chi2) and result.chi2 <= chi2_limit(dof))
-    check = prediction_check(inp, ident, held, cv)
-    success = bool(result.success and fit_ok and (check is None or check["agrees"]))
-    evidence = {"converged": bool(result.success), "fit_ratio": float(np.sqrt(result.chi2 / dof)),
-                "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
-                "predictions": check}
-    block = {"diagnosis": None if diagnosis is None else diagnosis_summary(diagnosis, inp)}
-    uninformed = information_verdict(inp, ident) or description_verdict(inp, ident)
-    if uninformed is not None:
-        cause, words = uninformed
-        return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
-    if success:
-        words = "calibrated: the rows fit to the declared noise" + (
-            f" and the {check['what']} are predicted to it" if check else "")
-        return {**block, "success": True, "verdict": {"words": words, "cause": None, "evidence": evidence}}
-    if diagnosis is not None and diagnosis.cause in ("conversion", "unmeasured column"):
-        cause, words = diagnosis.cause, f"not calibrated: {diagnosis.message}"
-    else:
-        cause, words = likely_cause(inp, ident, evidence)
-    return {**block, "success": False, "verdict": {"words": words, "cause": cause, "evidence": evidence}}
-
-
-def information_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
-    """``(cause, words)`` of a fit that learnt nothing from its rows, else None: rows that do not
-    move the machine (every calibration row used at one pose, :func:`calib.diagnosis.no_motion_words`:
-    ``"no_motion"``), or, with the tolerances as a prior, no parameter determined by the data
-    (:meth:`calib.engine.IdentificationResult.parameter_sources`: none whose posterior standard
-    deviation fell below half the prior's, none moved beyond 3 prior standard deviations:
-    ``"no_information"``), and fewer than one direction determined singly or in combinations
-    (:meth:`calib.engine.IdentificationResult.directions_determined`: a plane of poses determines
-    combinations, not single parameters). Such a fit is never a success, however well the rows fit."""
-    from calib.diagnosis import no_motion_words, same_pose_rows
-
-    robot, result = inp.robot, ident.result
-    joints = inp.joints[ident.used]
-    still = no_motion_words(robot, joints, inp.noise.joint_std)
-    if still is not None:
-        return "no_motion", f"not calibrated: {still}"
-    sources = result.parameter_sources()
-    seen = result.directions_determined()
-    if seen is None or seen >= MIN_DETERMINED or any(v == "data" for v in sources.values()):
-        return None
-    free = [n for n, v in sources.items() if v != "held"]
-    same = len(same_pose_rows(robot, joints, inp.noise.joint_std))
-    rows = f"; {same} of {len(joints)} rows are the same pose" if same > 1 else ""
-    noise = inp.noise.pose_std(robot.pose_units)
-    idx = robot.table.indices(free)
-    units = np.array(robot.table.units)[idx]
-    tolerance = ", ".join(f"{np.median(result.prior.std[idx][units == u]):.3g} {u}" for u in dict.fromkeys(units))
-    return "no_information", (
-        f"not calibrated: the rows determine nothing beyond the tolerance: of the {len(free)} parameters none has "
-        f"its standard deviation below half its tolerance, none moved beyond 3 tolerances, and all together they "
-        f"determine {seen:.2g} of the {len(free)} directions (noise standard deviation "
-        f"{noise[0]:.3g} {robot.pose_units[0]} against a tolerance of {tolerance}{rows}): the geometry reported "
-        "is the prior's, not a measurement; measure more poses, spread over the workspace, or with less noise")
-
-
-def description_verdict(inp: CalibrationInput, ident: Identification) -> tuple[str, str] | None:
-    """``("description", words)`` where the fitted errors are a scale of the nominal geometry
-    described (:func:`calib.diagnosis.description_pattern`, against the declared tolerance or the
-    robot's default, not one learnt from these rows: the learnt one grows to hold the pattern):
-    the sidecar describes another machine; else None."""
-    from calib.diagnosis import description_pattern
-
-    robot, result = inp.robot, ident.result
-    reference = inp.tolerance if inp.tolerance_declared and inp.tolerance is not None else ParameterPrior.default(robot)
-    pattern = description_pattern(robot, result.errors, reference.std, result.free_names)
-    if not pattern:
-        return None
-    where = f" in {sidecar_name(inp.where)}" if inp.rec is not None else ""
-    return "description", (f"not calibrated: the fitted errors are a pattern of the description, not physics: "
-                           f"{'; '.join(p['words'] for p in pattern)}: the nominal geometry{where} seems to be another "
-                           "machine's; give this machine's nominal geometry")
+def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
+    """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
+    recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
+    ``verdict`` (``words``, ``cause``, ``evidence``)."""
+    verdict = outcome.verdict
+    return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
+            "success": verdict.success,
+            "verdict": {"words": verdict.words, "cause": verdict.cause, "evidence": verdict.evidence}}
 
 
 def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
@@ -1199,39 +786,13 @@ def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
     return out
 
 
-def likely_cause(inp: CalibrationInput, ident: Identification, evidence: dict) -> tuple[str, str]:
-    """``(cause, words)`` of a calibration that is no success: a diagnosed mistake in the file, gross
-    rows, or physics the geometric model leaves out."""
-    where = inp.where
-    if not evidence["converged"]:
-        return "no_convergence", f"not calibrated: the fit did not converge ({ident.result.message})"
-    search = ident.gross
-    if search is not None and not search.success:
-        beyond = int(np.sum(search.statistic > search.cutoff))
-        if 2 * beyond <= search.statistic.size:  # the search failed for another reason: say which
-            return "gross_search_failed", (f"not calibrated: the gross-row search could not judge the rows "
-                                           f"({search.message}), and the fit on every row is "
-                                           f"{evidence['fit_ratio']:.3g} times the declared noise off the model")
-        return "model_misfit", (f"not calibrated: the model misfits most rows ({beyond} of {search.statistic.size} "
-                                f"beyond the declared noise even after the trimmed fits), so no row can be called "
-                                f"gross: physics the geometric model leaves out (run python -m pipeline.discover "
-                                f"--real {where}) or a mistake in the file")
-    if evidence["fit_at_noise"] and evidence["predictions"]["ratio"] is None:
-        return "unpredictable_rows", (f"not calibrated: the model cannot predict the {evidence['predictions']['what']} "
-                                      "(it cannot reach their joints): a geometry far from the nominal one")
-    ratio = evidence["fit_ratio"] if not evidence["fit_at_noise"] else evidence["predictions"]["ratio"]
-    what = "the calibration rows" if not evidence["fit_at_noise"] else f"the {evidence['predictions']['what']}"
-    return "left_out_physics", (f"not calibrated: {what} are {ratio:.3g} times the declared noise off the model: "
-                                f"physics the geometric model leaves out (run python -m pipeline.discover --real "
-                                f"{where}), or noise declared too small")
-
-
-def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
+def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
     """The recording as the run read it (see :class:`AsRead`).
 
     Raises:
         ValueError: position-only target data (their poses are the model's, not measurements).
     """
+    ident, data = outcome.identification, outcome.data
     rec, instrument = inp.rec, ident.instrument
     block = {"gross_rows": gross_block(inp, ident)}
     measured = rec.measured
@@ -1247,11 +808,11 @@ def as_read(inp: CalibrationInput, ident: Identification) -> AsRead:
             block.update(sessions_block(inp, instrument))
     gross = [int(inp.rows[i]) for i in ident.gross_idx]
     meta = rec.meta
-    if inp.tolerance is not None and not inp.tolerance_declared and inp.tolerance_estimate is not None:
+    if not data.tolerance_declared and data.tolerance_estimate is not None:
         # The tolerance learnt from the rows travels with the recording as read: every later fit of it
         # (discovery's) takes it as the run did, and says where it came from.
-        meta = {**rec.meta, "parameter_tolerance": inp.tolerance.tolerance_by_name(inp.robot),
-                TOLERANCE_SOURCE_KEY: inp.prior_source}
+        meta = {**rec.meta, "parameter_tolerance": data.tolerance.tolerance_by_name(inp.robot),
+                TOLERANCE_SOURCE_KEY: data.tolerance_source}
     return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block)
 
 
@@ -1274,7 +835,7 @@ def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
     reads a recording)."""
     settings = RunSettings(real=Path(path), seed=seed)
     inp = read_input(settings, rec)
-    return as_read(inp, identify_step(inp, settings, []))
+    return as_read(inp, calibrate_input(inp, settings, assess=False))
 
 
 def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
@@ -1293,18 +854,21 @@ def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
             "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
 
 
-def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
-    """Summary keys of what the data determined: the prior used, per parameter its posterior
-    standard deviation and source (``data`` below half the prior's, else ``prior``; ``held``),
-    the combinations the poses left to the prior, in words."""
-    left = [c["combination"] + (f" ({inp.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
+def prior_block(outcome: CalibrationOutcome) -> dict:
+    """Summary keys of what the data determined: the prior used (the tolerance learnt where the run
+    learnt one; :data:`NO_PRIOR` with --no-prior), per parameter its posterior standard deviation
+    and source (``data`` below half the prior's, else ``prior``; ``held``), the combinations the
+    poses left to the prior, in words."""
+    data, result = outcome.data, outcome.result
+    left = [c["combination"] + (f" ({data.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
             + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
     sources = result.parameter_sources()
-    est = inp.tolerance_estimate
+    est = data.tolerance_estimate
     seen = result.directions_determined()
-    return {"prior": {"used": inp.prior is not None, "source": inp.prior_source,
-                      "tolerance": None if inp.prior is None else inp.prior.tolerance_by_name(inp.robot),
-                      "declared": inp.tolerance_declared,
+    return {"prior": {"used": data.prior is not None,
+                      "source": data.tolerance_source if data.prior is not None else NO_PRIOR,
+                      "tolerance": None if data.prior is None else data.prior.tolerance_by_name(data.robot),
+                      "declared": data.tolerance_declared,
                       "learnt": None if est is None else est.summary()},
             "parameter_determination": result.determination(),
             "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
@@ -1312,14 +876,15 @@ def prior_block(inp: CalibrationInput, result: IdentificationResult) -> dict:
             "left_to_prior": left}
 
 
-def suggested_poses(inp: CalibrationInput, ident: Identification, settings: RunSettings, summary: dict):
+def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, summary: dict):
     """``(command file CSV text, its sidecar JSON text)``: :data:`SUGGESTED_POSES` poses that
     determine what the measured ones left to the prior (:func:`calib.design.augment_poses`, over
     the robot's full workspace), with the joints the nominal controller commands for them, ready to
     measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words."""
+    ident = outcome.identification
     robot, result = inp.robot, ident.result
     measured = ident.measured[ident.used]
-    poses = augment_poses(robot, result.theta, measured, SUGGESTED_POSES, inp.noise, inp.prior.std,
+    poses = augment_poses(robot, result.theta, measured, SUGGESTED_POSES, inp.noise, outcome.data.prior.std,
                           free=result.free_names, seed=settings.seed)
     joints = robot.inverse_kinematics(robot.table.nominal, poses)
     words = pose_kind_words(robot, measured, poses)
@@ -1413,44 +978,40 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
 
 
 def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None):
-    """The analysis of :func:`run_calibration`, in its named steps: simulate or read, identify,
-    validate, summarise, log (the ``.rrd`` to its temporary file); the caller publishes."""
+    """The analysis of :func:`run_calibration`, in its named steps: simulate or read, calibrate
+    (:func:`calibrate_input`: identify, validate, verdict), summarise, log (the ``.rrd`` to its
+    temporary file); the caller publishes."""
     inp = read_input(settings, rec) if rec is not None else simulate_input(settings, progress)
     split["simulate"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    ident = identify_step(inp, settings, warnings, stages := {})
-    split["identify"] = time.perf_counter() - t1
-    t2 = time.perf_counter()
-    held, truth_in_gauge, *comparison = validate_step(inp, ident, settings, progress)
-    split["simulate"] += time.perf_counter() - t2
-    summary = summary_of(inp, ident, held, truth_in_gauge, comparison, settings, warnings)
-    cv = None
-    split.update(stages)
-    if inp.rec is not None and held is None:
-        t_cv = time.perf_counter()
-        cv = crossvalidation_of(inp, ident, settings)
-        summary.update(cv.summary())
-        split["crossvalidation"] = time.perf_counter() - t_cv
-    t_v = time.perf_counter()
-    summary.update(verdict_block(inp, ident, held, cv, diagnosis))
-    split["verdict"] = time.perf_counter() - t_v
+    outcome = calibrate_input(inp, settings, diagnosis=diagnosis, progress=progress)
+    ident, seconds = outcome.identification, outcome.seconds
+    warnings += outcome.warnings
+    split["identify"] = seconds["identify"]
+    split["simulate"] += seconds["heldout"]  # a simulated run measures its held-out poses
+    summary = summary_of(inp, outcome, truth_in_gauge(inp, ident), settings, warnings)
+    split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
+    if outcome.crossvalidation is not None:
+        summary.update(outcome.crossvalidation.summary())
+        split["crossvalidation"] = seconds["crossvalidation"]
+    summary.update(verdict_block(inp, outcome))
+    split["verdict"] = seconds["verdict"]
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
-    summary["_calibration"] = calibration_of(inp, ident, summary.get("_recording"))
+    summary["_calibration"] = outcome.calibration
     t_s = time.perf_counter()
     if summary["left_to_prior"]:
         try:
-            summary["_suggested_poses"] = suggested_poses(inp, ident, settings, summary)
+            summary["_suggested_poses"] = suggested_poses(inp, outcome, settings, summary)
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
             summary["suggested_poses"] = {"poses": 0, "what": f"none suggested: {exc}", "why": ""}
     if inp.rec is not None:
         try:
-            summary["_as_read"] = as_read(inp, ident)
+            summary["_as_read"] = as_read(inp, outcome)
         except ValueError:  # position-only targets: nothing for a pose analysis to read
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    log_step(inp, ident, held, summary, settings, outputs.temp("rrd"))
+    log_step(inp, ident, outcome.heldout, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
     return summary, ident.result
 
@@ -1458,36 +1019,6 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
 def sha256_text(text: str) -> str:
     """The SHA-256 of ``text`` as written (UTF-8)."""
     return hashlib.sha256(text.encode()).hexdigest()
-
-
-def instrument_frames(inp: CalibrationInput, instrument) -> tuple[dict, dict]:
-    """``({session: (6,) frame}, {session: (6,) std})`` of a fit's instrument frames, empty when the
-    data were in the base frame."""
-    if instrument is None or not np.any(instrument.frames):
-        return {}, {}
-    if inp.rec is None:
-        return {"session 1": np.array(instrument.frames[0])}, {"session 1": np.array(instrument.frames_std[0])}
-    groups, index = frame_groups(inp.rec)  # every session (those captured in another's frame too)
-    first = {name: int(index[inp.rec.session_rows(name)[0]]) for name in inp.rec.session_names}
-    return ({n: np.array(instrument.frames[g]) for n, g in first.items() if g != BASE_FRAME},
-            {n: np.array(instrument.frames_std[g]) for n, g in first.items() if g != BASE_FRAME})
-
-
-def calibration_of(inp: CalibrationInput, ident: Identification, simulated: Recording | None) -> Calibration:
-    """What the run found, as a calibration file holds it (:mod:`pipeline.formats.calibration_file`;
-    the recording's name and hashes are added when the files are written): the identified
-    geometry, the instrument frames, no effect, the domain of the rows used."""
-    robot, result, used = inp.robot, ident.result, ident.used
-    idx = robot.table.indices(result.free_names)
-    rows = inp.rows[used]
-    t_s = (inp.rec if inp.rec is not None else simulated).t_s[rows]
-    frames, frames_std = instrument_frames(inp, ident.instrument)
-    return Calibration(robot=robot, theta=result.theta, std=result.std, free=tuple(result.free_names),
-                       covariance=result.covariance[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
-                       targets=None if ident.instrument is None else ident.instrument.targets,
-                       validity=validity_domain(robot, ident.measured[used], inp.joints[used], t_s, result.theta),
-                       noise=inp.noise,
-                       produced_by="pipeline.run")
 
 
 def _predicted_or(robot: Robot, theta, joints, measured) -> np.ndarray:
