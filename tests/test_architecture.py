@@ -132,7 +132,7 @@ def test_the_words_of_a_verdict_load_no_rerun():
     import subprocess
     import sys
 
-    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.discovery_words; "
+    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.report_text; "
             "print('rerun' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "False"

@@ -1,7 +1,7 @@
 """File formats: the recording (CSV + JSON sidecar), the checks a recording passes before
-anything is fitted to it, lab exports turned into recordings, command files, the report (its model, its words, its HTML), the
-LinuxCNC files, and safe writing of every output (atomic files, sets published together, locks on
-names).
+anything is fitted to it, lab exports turned into recordings, command files, the report (its
+model, its words, its HTML), the LinuxCNC files, and safe writing of every output (atomic files,
+sets published together, locks on names).
 
 The names below are imported from their modules when first used: a command loads the formats
 it reads or writes, not every one (the lab exports' TOML reader, the checks of a measured
