@@ -23,8 +23,9 @@ if TYPE_CHECKING:
     from .report import Effects, EffectRow, FigureRow, Flagged, Heldout, Law, Noise, ParameterRow, Report
 
 __all__ = ["terminal_lines", "report_markdown", "verdict_words", "model_words", "report_title", "verdict_text",
-           "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes", "tolerance_verdict", "determined_by",
-           "effect_evidence", "effect_notes", "law_words", "remaining_words", "flagged_words", "DISPLAY_SCALE",
+           "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes",
+           "tolerance_verdict", "determined_by", "effect_evidence", "effect_notes", "law_words", "remaining_words",
+           "flagged_words", "DISPLAY_SCALE",
            "IMPLAUSIBLE_LINES", "DISCOVERY_IMPLAUSIBLE_LINES", "COMBINATION_LINES", "PRIOR_NAMES",
            "MARKDOWN_PRIOR_NAMES", "SEPARATION_LINES"]
 
@@ -378,8 +379,9 @@ def _discovery_lines(r: Report) -> list[str]:
         if r.verdict.success:
             lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
         else:
-            lines.append(f"Left-out physics: none of the candidates ({', '.join(c.name for c in x.candidates) or 'none given'}) "
-                         f"earns its place; what remains is not explained (see the verdict).")
+            names = ", ".join(c.name for c in x.candidates) or "none given"
+            lines.append(f"Left-out physics: none of the candidates ({names}) earns its place; what remains is not "
+                         "explained (see the verdict).")
     else:
         status = "" if r.verdict.success else " (partial: the remainder is not explained)"
         lines.append(f"Left-out physics: {' + '.join(e.name for e in x.effects)}{status}; cross-validated whitened RMS "
