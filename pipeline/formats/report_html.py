@@ -16,8 +16,8 @@ from pathlib import Path
 from .outputs import atomic_write
 from .report import Report, build_report
 from .report_text import (DISPLAY_SCALE, determined_by, effect_evidence, effect_notes, figure_label, flagged_words,
-                          heldout_basis, implausible_notes, law_words, machine_facts, per_pose_label, remaining_words,
-                          report_title, tolerance_verdict, verdict_text)
+                          heldout_basis, implausible_notes, law_words, machine_facts, no_effect_words, per_pose_label,
+                          remaining_words, report_title, tolerance_verdict, verdict_text)
 
 __all__ = ["render_html", "write_report", "svg_dot_plot", "svg_parameter_plot"]
 #: Significant digits of a displayed figure.
@@ -281,8 +281,8 @@ def _effects(r: Report) -> str:
         parts.append("<table id=\"effects\"><tr><th>effect</th><th>granularity</th><th>coefficients</th>"
                      "<th>evidence</th></tr>" + "".join(body) + "</table>")
     else:
-        names = ", ".join(c.name for c in x.candidates) or "none"
-        parts.append(f"<p>No effect of the candidates ({e(names)}) earns its place.</p>")
+        words = no_effect_words(x)
+        parts.append(f"<p>{e(words[0].upper() + words[1:])}.</p>")
     parts.append(f"<p>What remains: {e(remaining_words(x))}</p>")
     notes = effect_notes(x)
     if notes:

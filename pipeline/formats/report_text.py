@@ -7,7 +7,8 @@ calibration or a discovery is composed here, from the typed model.
 - the phrases the HTML report (:mod:`pipeline.formats.report_html`) lays out: :func:`report_title`,
   :func:`verdict_text`, :func:`machine_facts`, :func:`figure_label`, :func:`tolerance_verdict`,
   :func:`determined_by`, :func:`heldout_basis`, :func:`implausible_notes`, :func:`effect_evidence`,
-  :func:`effect_notes`, :func:`law_words`, :func:`remaining_words`, :func:`flagged_words`;
+  :func:`effect_notes`, :func:`law_words`, :func:`no_effect_words`, :func:`remaining_words`,
+  :func:`flagged_words`;
 - the words a discovery's summary carries (:func:`verdict_words`, :func:`model_words`).
 
 Pure text: no Rerun, no NumPy; the fleet's workers and the discovery's workflow word a verdict
@@ -24,7 +25,8 @@ if TYPE_CHECKING:
 
 __all__ = ["terminal_lines", "report_markdown", "verdict_words", "model_words", "report_title", "verdict_text",
            "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes",
-           "tolerance_verdict", "determined_by", "effect_evidence", "effect_notes", "law_words", "remaining_words",
+           "tolerance_verdict", "determined_by", "effect_evidence", "effect_notes", "law_words", "no_effect_words",
+           "remaining_words",
            "flagged_words", "DISPLAY_SCALE",
            "IMPLAUSIBLE_LINES", "DISCOVERY_IMPLAUSIBLE_LINES", "COMBINATION_LINES", "PRIOR_NAMES",
            "MARKDOWN_PRIOR_NAMES", "SEPARATION_LINES"]
@@ -203,6 +205,11 @@ def law_words(law: Law) -> str:
     return "with it the recording is explained" if law.explained else f"with it: {law.remaining}"
 
 
+def no_effect_words(x: Effects) -> str:
+    """That no candidate effect was named."""
+    return f"none of the candidates ({', '.join(c.name for c in x.candidates) or 'none given'}) earns its place"
+
+
 def remaining_words(x: Effects) -> str:
     """What the discovery's model leaves."""
     return x.remaining.summary if x.remaining.present else "nothing beyond the declared noise"
@@ -379,9 +386,7 @@ def _discovery_lines(r: Report) -> list[str]:
         if r.verdict.success:
             lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
         else:
-            names = ", ".join(c.name for c in x.candidates) or "none given"
-            lines.append(f"Left-out physics: none of the candidates ({names}) earns its place; what remains is not "
-                         "explained (see the verdict).")
+            lines.append(f"Left-out physics: {no_effect_words(x)}; what remains is not explained (see the verdict).")
     else:
         status = "" if r.verdict.success else " (partial: the remainder is not explained)"
         lines.append(f"Left-out physics: {' + '.join(e.name for e in x.effects)}{status}; cross-validated whitened RMS "
