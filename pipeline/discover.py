@@ -1,7 +1,7 @@
 """``python -m pipeline.discover --real FILE``: find the physics the geometric model left out.
 
 A thin front end of :func:`pipeline.workflows.discovery.run_discovery` (which says what it does):
-parse the flags, call it, print the report.
+parse the flags, call it, print its report (:func:`pipeline.formats.report_text.terminal_lines`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from pathlib import Path
 from calib.effects import EFFECTS
 from calib.robots import ROBOTS
 from pipeline.cli import ArgumentParser, cli_main, nonnegative_int
-from pipeline.formats.discovery_words import report_lines
+from pipeline.formats.report import build_report
+from pipeline.formats.report_text import terminal_lines
 from pipeline.workflows.discovery import DiscoveryReport, DiscoverySettings, run_discovery
 
 __all__ = ["build_parser", "settings_from_args", "run", "main"]
@@ -83,29 +84,8 @@ def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
 def run(argv: list[str] | None = None) -> DiscoveryReport:
     """Parse ``argv``, run the discovery, print the report; raises on bad input (see :func:`main`)."""
     report = run_discovery(settings_from_args(build_parser().parse_args(argv)))
-    for line in report_lines(report.summary):
+    for line in terminal_lines(build_report(report.summary)):
         print(line)
-    cv = report.summary.get("crossvalidated_position_error_mm")
-    if cv and cv.get("rms") is not None:
-        info = report.summary["crossvalidation"]
-        print(f"Cross-validated prediction error ({info['scheme']}, {info['model']}): position RMS "
-              f"{1e3 * cv['rms']:.3f} um, mean {1e3 * cv['mean']:.3f} um, max {1e3 * cv['max']:.3f} um")
-    implausible = report.summary.get("implausible_parameters") or {}
-    for words in implausible.get("words", [])[:5]:
-        print(f"Implausible with the geometry alone, back within tolerance with the effects: {words}")
-    if len(implausible.get("words", [])) > 5:
-        print(f"... and {len(implausible['words']) - 5} more parameters (summary JSON: implausible_parameters)")
-    for item in implausible.get("with_effects", []):
-        print(f"Still implausible with the effects: {item['words']}")
-    if "law_kept" in report.summary:
-        print(f"kept the proposed law in {report.summary['law_kept']}" if report.summary["law_kept"]
-              else "no law proposed: nothing kept (--law)")
-    print(f"wrote {report.summary['rrd']}")
-    print(f"wrote {report.summary['calibration']}")
-    if report.summary.get("mjcf"):
-        print(f"wrote {report.summary['mjcf']}")
-    if report.summary.get("report"):
-        print(f"wrote {report.summary['report']}")
     return report
 
 

@@ -1,6 +1,7 @@
 """``python -m pipeline.run``: calibrate any registered robot, simulated or from a recording.
 
-Thin: parses the flags, calls :func:`pipeline.workflows.calibration.run_calibration`, prints the summary.
+Thin: parses the flags, calls :func:`pipeline.workflows.calibration.run_calibration`, prints the
+summary's report (:mod:`pipeline.formats.report_text`).
 The calibration (and with it MuJoCo and Rerun) is imported when a run starts, not for ``--help``.
 """
 
@@ -18,6 +19,8 @@ from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
 from .cli import ArgumentParser, cli_main
+from .formats.report import build_report
+from .formats.report_text import terminal_lines
 
 if TYPE_CHECKING:
     from pipeline.workflows.calibration import RunResult, RunSettings
@@ -158,112 +161,11 @@ def _progress(enabled: bool):
     return report
 
 
-def print_heldout(s: dict) -> None:
-    """The held-out errors: mean, RMS and max, before and after; without held-out poses the
-    cross-validated prediction error."""
-    h, o = s.get("heldout_position_error_mm"), s.get("heldout_orientation_error_rad")
-    cv = s.get("crossvalidation")
-    if not h and cv:
-        print(f"  no held-out poses: cross-validated prediction error ({cv['scheme']}, {cv['fits']} fits), "
-              "measured minus the prediction of a fit without the row (includes sensor noise)")
-        for label, block, scale in (("position error, um", s["crossvalidated_position_error_mm"], 1e3),
-                                    ("orientation error, urad", s["crossvalidated_orientation_error_rad"], 1e6)):
-            if block and block["rms"] is not None:
-                print(f"  {label:<28}" + "  ".join(f"{fig} {scale * block[fig]:.3f}" for fig in ("rms", "mean", "max")))
-        return
-    if not h:
-        return
-    print(f"  {'held-out (' + str(s['heldout_poses']) + ' poses)':<28}{'before':>12}{'after':>12}")
-    for label, block, scale in (("position error, um", h, 1e3), ("orientation error, urad", o, 1e6)):
-        if not block:
-            continue
-        for fig in ("mean", "rms", "max"):
-            b, a = block["before_figures"][fig], block["after_figures"][fig]
-            print(f"  {label + ' ' + fig:<28}{scale * b:>12.3f}{scale * a:>12.3f}")
-    if h["after"] > 0:
-        print(f"  improvement of mean position error: {h['before'] / h['after']:.1f}x  ({s['heldout_basis']})")
-
-
-def print_determination(s: dict) -> None:
-    """What the data determined and what they left to the prior."""
-    prior, by = s.get("prior") or {}, s.get("determined_by") or {}
-    if not prior.get("used"):
-        print("  prior: none (--no-prior: plain least squares)")
-        return
-    left = by.get("prior") or []
-    seen = s.get("directions_determined")
-    print(f"  prior: {prior['source']}")
-    print(f"  determined by the data: {len(by.get('data') or [])} parameters" +
-          (f" (the rows determine about {seen:.0f} of the {len(by.get('data') or []) + len(left)} free directions, "
-           "singly or in combinations)" if seen is not None else "") +
-          f"; left to the prior: {len(left)}" + (f" ({', '.join(left[:8])}{', ...' if len(left) > 8 else ''})" if left else ""))
-    for words in (s.get("left_to_prior") or [])[:3]:
-        print(f"    left to the prior: {words}")
-    if len(s.get("left_to_prior") or []) > 3:
-        print(f"    ... {len(s['left_to_prior']) - 3} more combination(s) in the summary JSON")
-    if s.get("suggested_poses"):
-        sp = s["suggested_poses"]
-        print(f"  suggested: measure {sp['poses']} more poses ({sp['what']}): {s.get('suggested_poses_path', '')}")
-
-
-#: Implausible parameters printed one a line; the rest are counted (the summary JSON lists them all).
-IMPLAUSIBLE_LINES = 3
-
-
-def print_implausible(items: list) -> None:
-    """The identified errors beyond the implausibility bound, in a few lines."""
-    if not items:
-        return
-    print(f"  implausible: {len(items)} parameter{'s' if len(items) > 1 else ''} far beyond the tolerance: the "
-          "geometry may be absorbing unmodelled physics (python -m pipeline.discover) or the declared tolerance "
-          "is too tight")
-    for item in items[:IMPLAUSIBLE_LINES]:
-        print(f"    {item['words']}")
-    if len(items) > IMPLAUSIBLE_LINES:
-        print(f"    ... {len(items) - IMPLAUSIBLE_LINES} more in the summary JSON (implausible_parameters)")
-
-
 def print_summary(s: dict) -> None:
-    """The summary in plain words, for the terminal."""
-    print(f"Calibration of the {s['robot']} - {s['scenario']}")
-    if s.get("verdict"):
-        print(f"  {'SUCCESS' if s['success'] else 'NOT A SUCCESS'}: {s['verdict']['words']}")
-    print(f"  method {s['method']} ({s['solver']}): {s['iterations']} iterations; {s['message']}")
-    print(f"  max dQint per iteration: {', '.join(f'{v:.3g}' for v in s['max_dqint_history'])}")
-    print_heldout(s)
-    pe = s.get("parameter_error")
-    if pe:
-        parts = [f"{1e3 * pe['rms_mm']:.3f} um" if pe["rms_mm"] is not None else None,
-                 f"{pe['rms_rad']:.3g} rad" if pe["rms_rad"] is not None else None]
-        print(f"  parameter error RMS (identified - injected): {', '.join(p for p in parts if p)}")
-    if s.get("gain_G_percent"):
-        g = s["gain_G_percent"]
-        print(f"  calibration gain G: mean over parameters {g['mean']:.4f}%, on the error norm {g['norm']:.4f}%")
-    print(f"  condition numbers: {', '.join(f'{c:.0f}' for c in s['condition_numbers'])}")
-    fl = s["flagged_poses"]
-    out = s.get("outliers") or {}
-    state = (" (left out; --keep-outliers keeps them)" if out.get("left_out") else " (kept)") if fl else ""
-    print(f"  flagged data rows (row k = file line k + 1): {', '.join(str(i) for i in fl) if fl else 'none'}{state}")
-    if out.get("verdict"):
-        print(f"  outlier test: {out['verdict']}")
-    w, wo = s.get("with_flagged"), s.get("without_flagged")
-    if w and wo and w.get("heldout_position_error_mm") and wo.get("heldout_position_error_mm"):
-        print(f"  held-out position error after: {1e3 * wo['heldout_position_error_mm']['after']:.3f} um without the "
-              f"flagged rows, {1e3 * w['heldout_position_error_mm']['after']:.3f} um with them")
-    print_determination(s)
-    if s.get("measurement_frame"):
-        f = s["measurement_frame"]
-        print(f"  instrument frame: translation {', '.join(f'{v:.4g}' for v in f['translation_mm'])} mm, rotation "
-              f"{', '.join(f'{v:.4g}' for v in f['rotation_rad'])} rad")
-        for words in s.get("measurement_frame_held") or ():
-            print(f"    {words}")
-    print_implausible(s.get("implausible_parameters") or [])
-    for warning in s.get("warnings") or ():
-        print(f"  warning: {warning}")
-    print(f"  wall time {s['wall_time_s']:.2f} s  (" + ", ".join(f"{k} {v:.2f} s" for k, v in s["wall_time_split_s"].items()) + ")")
-    for k in ("rrd", "csv", "json", "calibration", "mjcf", "summary_json", "report"):
-        if s.get(k):
-            print(f"  wrote {s[k]}")
+    """The summary (``s``: a run's summary dict) in plain words, for the terminal
+    (:func:`pipeline.formats.report_text.terminal_lines` of its report)."""
+    for line in terminal_lines(build_report(s)):
+        print(line)
 
 
 def run(argv: list[str] | None = None) -> RunResult:

@@ -132,7 +132,26 @@ def test_the_words_of_a_verdict_load_no_rerun():
     import subprocess
     import sys
 
-    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.discovery_words; "
+    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.report_text; "
             "print('rerun' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "False"
+
+
+def test_the_report_and_its_words_import_no_rerun_and_no_numpy():
+    """The report's model and its wording (the terminal summary, the Rerun markdown, the HTML's
+    phrases) are pure text: no statement of either module, deferred ones included, imports Rerun
+    or NumPy (the views log the markdown; the fleet's workers word a verdict without a viewer)."""
+    def third_party(path: Path) -> set[str]:
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                names.add((node.module or "").split(".")[0])
+        return names
+
+    for module in ("report", "report_text"):
+        imported = third_party(ROOT / "pipeline" / "formats" / f"{module}.py")
+        assert not imported & {"rerun", "numpy"}, (module, sorted(imported))
+    assert "rerun" in third_party(ROOT / "pipeline" / "views" / "run_view.py")  # the check sees an import

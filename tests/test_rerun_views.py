@@ -84,10 +84,15 @@ def test_parameter_bars_are_named_identified_beside_injected(robot_run):
 def test_summary_is_markdown_tables_with_short_lines(robot_run):
     from rerun.chunk import RrdReader
 
-    _, rrd, _ = robot_run
+    from pipeline.formats import build_report, report_markdown
+
+    _, rrd, res = robot_run
     chunk = next(c for c in RrdReader(str(rrd)).stream().to_chunks() if str(c.entity_path) == "/summary")
     text = chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
-    assert "| held-out | RMS before | RMS after | mean after | max after |" in text  # RMS, mean and max
+    assert text == report_markdown(build_report(res.summary))  # the run's report, as the terminal's
+    assert "| held-out (5 poses) | before | after |" in text
+    for fig in ("RMS", "mean", "max"):  # RMS, mean and max, before and after
+        assert f"| position {fig}, um |" in text
     table_rows = [ln for ln in text.splitlines() if ln.startswith("|")]
     assert table_rows and max(len(ln) for ln in table_rows) < 90
     assert text.isascii() or set(text) - set(map(chr, range(128))) <= set("±×µσ")

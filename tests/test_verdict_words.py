@@ -16,8 +16,9 @@ import pytest
 
 from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures
 from calib.prior import MOVED_BY_DATA, parameter_sources
-from pipeline.run import IMPLAUSIBLE_LINES, print_implausible
 from calib.identification import likely_cause
+from pipeline.formats.report_text import IMPLAUSIBLE_LINES
+from pipeline.run import print_summary
 
 
 def test_a_parameter_moved_far_beyond_its_prior_is_the_datas():
@@ -61,11 +62,15 @@ def test_the_diagnosis_says_a_movement_in_its_unit():
 
 
 def test_implausible_parameters_are_a_headline_and_a_few_lines(capsys):
+    """A summary naming 37 implausible parameters (and nothing else a run prints): the terminal
+    gives a headline, the first few, and the count of the rest."""
     items = [{"name": f"B{k}.y", "words": f"B{k}.y = +2 mm from nominal, 20 times its tolerance 0.1 mm"}
              for k in range(37)]
-    print_implausible(items)
+    print_summary({"robot": "hexapod", "scenario": "a recording", "implausible_parameters": items})
     out = capsys.readouterr().out.strip().splitlines()
-    assert len(out) == 1 + IMPLAUSIBLE_LINES + 1
+    start = next(i for i, line in enumerate(out) if line.lstrip().startswith("implausible:"))
+    out = out[start:start + 1 + IMPLAUSIBLE_LINES + 1]
     assert out[0].lstrip().startswith("implausible: 37 parameters") and "pipeline.discover" in out[0]
+    assert [line.strip() for line in out[1:-1]] == [item["words"] for item in items[:IMPLAUSIBLE_LINES]]
     assert "34 more in the summary JSON" in out[-1]
     assert sum("pipeline.discover" in line for line in out) == 1

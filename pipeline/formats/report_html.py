@@ -1,5 +1,6 @@
 """The report (:mod:`pipeline.formats.report`) as one self-contained HTML file: no script, no
-network, the plots inline SVG drawn here, every string escaped.
+network, the plots inline SVG drawn here, every string escaped. The sentences are
+:mod:`pipeline.formats.report_text`'s; this module lays them out.
 
 Figures are shown in um and urad (the model keeps mm and rad), four significant digits; each
 figure's cell names what it is in a ``data-figure`` attribute (``heldout/position error/after/rms``)
@@ -14,11 +15,11 @@ from pathlib import Path
 
 from .outputs import atomic_write
 from .report import Report, build_report
+from .report_text import (DISPLAY_SCALE, determined_by, effect_evidence, effect_notes, figure_label, flagged_words,
+                          heldout_basis, implausible_notes, law_words, machine_facts, no_effect_words, per_pose_label,
+                          remaining_words, report_title, tolerance_verdict, verdict_text)
 
-__all__ = ["render_html", "write_report", "DISPLAY_SCALE", "svg_dot_plot", "svg_parameter_plot"]
-
-#: Displayed unit and scale of each model unit.
-DISPLAY_SCALE = {"mm": ("um", 1e3), "rad": ("urad", 1e6)}
+__all__ = ["render_html", "write_report", "svg_dot_plot", "svg_parameter_plot"]
 #: Significant digits of a displayed figure.
 DIGITS = 4
 #: Colours of before / after (the Rerun views' grey and blue) and of an implausible parameter.
@@ -168,14 +169,15 @@ def _verdict(r: Report) -> str:
         ("calibration", True): "CALIBRATED", ("calibration", False): "NOT A SUCCESS",
         ("discovery", True): "EXPLAINED", ("discovery", False): "NOT EXPLAINED"}[(r.kind, bool(ok))]
     cause = f" (cause: {r.verdict.cause})" if r.verdict.cause else ""
-    said = r.verdict.words.lower().startswith(("calibrated", "not calibrated", "explained", "not explained"))
+    words = verdict_text(r)
+    said = words.lower().startswith(("calibrated", "not calibrated", "explained", "not explained"))
     lead = "" if said else f"{e(label)}: "
-    return (f'<div class="verdict {"ok" if ok else ("" if ok is None else "bad")}" id="verdict">{lead}{e(r.verdict.words)}'
+    return (f'<div class="verdict {"ok" if ok else ("" if ok is None else "bad")}" id="verdict">{lead}{e(words)}'
             f'{e(cause)}</div>')
 
 
 def _machine(r: Report) -> str:
-    rows = "".join(f"<tr><th>{e(f.label)}</th><td>{e(f.value)}</td></tr>" for f in r.machine)
+    rows = "".join(f"<tr><th>{e(label)}</th><td>{e(value)}</td></tr>" for label, value in machine_facts(r))
     return f'<h2>Machine and recording</h2><table id="machine">{rows}</table>'
 
 
@@ -193,10 +195,12 @@ def _parameters(r: Report) -> str:
                     f'<td class="num" data-figure="parameter/{e(row.name)}/error">{e(fmt(row.error))}</td>'
                     f'<td class="num" data-figure="parameter/{e(row.name)}/two_sigma">{e(fmt(row.two_sigma))}</td>'
                     f'<td class="num" data-figure="parameter/{e(row.name)}/tolerance">{e(fmt(row.tolerance))}</td>'
-                    f'<td>{e(row.unit)}</td><td>{e(row.determined_by or "-")}</td><td>{e(row.verdict)}</td></tr>')
+                    f'<td>{e(row.unit)}</td><td>{e(determined_by(row) or "-")}</td><td>{e(tolerance_verdict(row))}</td>'
+                    '</tr>')
     notes = [f"<p class=\"note\">Prior: {e(p.prior)}</p>"]
-    if p.implausible:
-        notes.append("<ul>" + "".join(f"<li>{e(w)}</li>" for w in p.implausible) + "</ul>")
+    implausible = implausible_notes(r)
+    if implausible:
+        notes.append("<ul>" + "".join(f"<li>{e(w)}</li>" for w in implausible) + "</ul>")
     if p.left_to_prior:
         notes.append("<p class=\"note\">Combinations the poses left to the prior:</p><ul>"
                      + "".join(f"<li>{e(w)}</li>" for w in p.left_to_prior) + "</ul>")
@@ -211,15 +215,16 @@ def _heldout(r: Report) -> str:
     rows = []
     for f in h.figures:
         shown, _ = display(f.unit)
+        label = figure_label(r, f)
         for fig in ("rms", "mean", "max"):
             b = None if f.before is None else getattr(f.before, fig)
             a = None if f.after is None else getattr(f.after, fig)
             if a is None and b is None:
                 continue
-            rows.append(f"<tr><td>{e(f.label)}</td><td>{e(fig)}</td>"
-                        + num(b, f.unit, f"heldout/{f.label}/before/{fig}")
-                        + num(a, f.unit, f"heldout/{f.label}/after/{fig}") + f"<td>{e(shown)}</td></tr>")
-    parts = [f"<h2>Held-out errors</h2><p class=\"note\">{e(h.basis)} ({h.poses} poses)</p>",
+            rows.append(f"<tr><td>{e(label)}</td><td>{e(fig)}</td>"
+                        + num(b, f.unit, f"heldout/{label}/before/{fig}")
+                        + num(a, f.unit, f"heldout/{label}/after/{fig}") + f"<td>{e(shown)}</td></tr>")
+    parts = [f"<h2>Held-out errors</h2><p class=\"note\">{e(heldout_basis(r))} ({h.poses} poses)</p>",
              "<table id=\"heldout\"><tr><th>quantity</th><th>figure</th><th>before</th><th>after</th><th>unit</th></tr>"
              + "".join(rows) + "</table>"]
     if h.noise_floor_mm is not None:
@@ -227,9 +232,10 @@ def _heldout(r: Report) -> str:
                      f'{e(fmt(h.noise_floor_mm, 1e3))}</span> um</p>')
     for pp in h.per_pose:
         shown, scale = display(pp.unit)
+        label = per_pose_label(pp.quantity)
         parts.append(svg_dot_plot([("before", BEFORE, [v * scale for v in pp.before]),
                                    ("after", AFTER, [v * scale for v in pp.after])],
-                                  y_label=f"{pp.label}, {shown}", title=f"{pp.label} per held-out pose",
+                                  y_label=f"{label}, {shown}", title=f"{label} per held-out pose",
                                   x_label="held-out pose (in the order measured)" if pp.rows is None else
                                   f"held-out row (data rows {pp.rows[0]} to {pp.rows[-1]})"))
     if h.iso9283:
@@ -267,28 +273,31 @@ def _effects(r: Report) -> str:
     if x.effects:
         body = []
         for row in x.effects:
-            coefs = "<br>".join(f"{e(n)} = {e(fmt(v))}" + (f" &plusmn; {e(fmt(s))}" if s is not None else "") + f" {e(u)}"
-                                for n, v, s, u in row.coefficients)
-            body.append(f"<tr><td>{e(row.name)}</td><td>{e(row.granularity)}</td><td>{coefs}</td>"
-                        f"<td>{e(row.evidence)}</td></tr>")
+            coefs = "<br>".join(f"{e(c.name)} = {e(fmt(c.value))}" + (f" &plusmn; {e(fmt(c.std))}" if c.std is not None
+                                                                       else "") + f" {e(c.unit)}"
+                                for c in row.coefficients)
+            body.append(f"<tr><td>{e(row.name)}</td><td>{e(row.granularity.replace('_', ' '))}</td><td>{coefs}</td>"
+                        f"<td>{e(effect_evidence(row))}</td></tr>")
         parts.append("<table id=\"effects\"><tr><th>effect</th><th>granularity</th><th>coefficients</th>"
                      "<th>evidence</th></tr>" + "".join(body) + "</table>")
     else:
-        parts.append(f"<p>No effect of the candidates ({e(', '.join(x.candidates) or 'none')}) earns its place.</p>")
-    parts.append(f"<p>What remains: {e(x.remaining)}</p>")
-    if x.notes:
-        parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in x.notes) + "</ul>")
+        words = no_effect_words(x)
+        parts.append(f"<p>{e(words[0].upper() + words[1:])}.</p>")
+    parts.append(f"<p>What remains: {e(remaining_words(x))}</p>")
+    notes = effect_notes(x)
+    if notes:
+        parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ul>")
     if x.law is not None:
         law = x.law
-        n = max((len(v) for _, v, _, _ in law.constants), default=0)
+        n = max((len(c.values) for c in law.constants), default=0)
         head = "<tr><th>constant</th><th>unit</th>" + "".join(f"<th>joint {j + 1}</th>" for j in range(n)) + "</tr>"
-        body = "".join(f"<tr><td>{e(name)}</td><td>{e(unit)}</td>" + "".join(
-            f'<td class="num">{e(fmt(v))}' + (f" &plusmn; {e(fmt(std[j]))}" if std else "") + "</td>" for j, v in enumerate(vals))
-            + "</tr>" for name, vals, std, unit in law.constants)
+        body = "".join(f"<tr><td>{e(c.name)}</td><td>{e(c.unit)}</td>" + "".join(
+            f'<td class="num">{e(fmt(v))}' + (f" &plusmn; {e(fmt(c.std[j]))}" if c.std else "") + "</td>"
+            for j, v in enumerate(c.values)) + "</tr>" for c in law.constants)
         parts.append(f"<h3>Proposed law, not in the library</h3><p><code>{e(law.formula)}</code></p>"
                      f"<p>cross-validated residual RMS <span data-figure=\"law/cv_before\" data-unit=\"um\">"
                      f"{e(fmt(law.cv_before_mm, 1e3))}</span> um -> <span data-figure=\"law/cv_after\" data-unit=\"um\">"
-                     f"{e(fmt(law.cv_after_mm, 1e3))}</span> um; {e(law.words)}</p><table id=\"law\">{head}{body}</table>")
+                     f"{e(fmt(law.cv_after_mm, 1e3))}</span> um; {e(law_words(law))}</p><table id=\"law\">{head}{body}</table>")
     return "".join(parts)
 
 
@@ -296,7 +305,7 @@ def _flagged(r: Report) -> str:
     f = r.flagged
     rows = ", ".join(map(str, f.rows)) or "none"
     gross = ", ".join(map(str, f.gross)) or "none"
-    words = "".join(f"<li>{e(w)}</li>" for w in f.words)
+    words = "".join(f"<li>{e(w)}</li>" for w in flagged_words(r))
     return (f"<h2>Flagged rows</h2><p id=\"flagged\">flagged: <span data-figure=\"flagged\">{e(rows)}</span>; named gross "
             f"before any fit: <span data-figure=\"gross\">{e(gross)}</span></p><ul>{words}</ul>")
 
@@ -319,11 +328,12 @@ def _compensation(r: Report) -> str:
 def render_html(report: Report) -> str:
     """The report as one HTML document (a string; no external resource)."""
     warnings = "".join(f"<li>{e(w)}</li>" for w in report.warnings)
-    body = [f"<h1>{e(report.title)}</h1>", _verdict(report), _machine(report), _heldout(report), _effects(report),
+    title = report_title(report)
+    body = [f"<h1>{e(title)}</h1>", _verdict(report), _machine(report), _heldout(report), _effects(report),
             _parameters(report), _frames(report), _flagged(report), _compensation(report),
             f"<h2>Warnings</h2><ul>{warnings}</ul>" if warnings else ""]
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>{e(report.title)}</title><style>{STYLE}</style></head><body>" + "".join(body)
+            f"<title>{e(title)}</title><style>{STYLE}</style></head><body>" + "".join(body)
             + "</body></html>\n")
 
 

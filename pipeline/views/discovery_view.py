@@ -1,6 +1,6 @@
-"""The discovery's report in words (printed lines, the markdown summary) and its Rerun view
-(rerun-sdk 0.41 API): residuals against time, stroke, the direction of the last move and the
-verdict's quantity, candidate evidence bars named by effect."""
+"""The discovery's Rerun view (rerun-sdk 0.41 API): residuals against time, stroke, the direction
+of the last move and the verdict's quantity, candidate evidence bars named by effect, and the
+report's markdown (:func:`pipeline.formats.report_text.report_markdown`) as its summary panel."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from calib.effects import EFFECTS, EffectData
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.robot import Robot
 from pipeline.formats import Recording
-
-from pipeline.formats.discovery_words import law_lines, model_words, report_lines, separation_lines, verdict_words
+from pipeline.formats.report import build_report
+from pipeline.formats.report_text import model_words, report_markdown
 
 from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, chart_view, log_named_bars,
                      log_residual_scatter, save_recording)
@@ -24,8 +24,7 @@ from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, c
 #: Size of each residual chart, chart units (about pixels at 1600x900).
 CHART_W, CHART_H = 600.0, 160.0
 
-__all__ = ["PLOTTED_QUANTITIES", "quantity_values",
-           "verdict_quantity", "discovery_markdown", "write_discovery_rrd"]
+__all__ = ["PLOTTED_QUANTITIES", "quantity_values", "verdict_quantity", "write_discovery_rrd"]
 
 
 #: The quantities the discovery file always plots the residuals against (the fourth chart is the
@@ -83,58 +82,6 @@ def verdict_quantity(s: dict) -> tuple[str, str]:
     return "stroke", "no other quantity tested"
 
 
-def _um(v_mm: float) -> str:
-    return f"{1e3 * v_mm:.2f}"
-
-
-def discovery_markdown(s: dict, chain_word: str = "chain") -> str:
-    """The discovery file's summary panel: the verdict first, then short tables."""
-    rem = s["remaining"]
-    model = model_words(s["effects"])
-    lines = [f"# {'Explained' if s['explained'] else 'NOT explained'}", "", s["verdict"], "",
-             "| what remains | |", "|---|---|",
-             f"| model | {model} |",
-             f"| residual RMS | {_um(rem['rms_mm'])} um (noise floor {_um(rem['noise_floor_mm'])} um) |",
-             f"| whitened | {rem['noise_ratio']:.2f} x the declared noise |",
-             f"| follows | {', '.join(rem['follows']) or 'none of the quantities tested'} |",
-             f"| on {chain_word}s | {', '.join(map(str, rem['chains'])) or 'none'} |",
-             f"| held-out RMS | {_um(s['heldout_rms_before_mm'])} -> {_um(s['heldout_rms_after_mm'])} um |",
-             f"| flagged rows | {', '.join(map(str, s['flagged_poses'])) or 'none'} |"]
-    if s["outliers"]["model_wrong"]:
-        lines.append(f"| bad rows | {len(s['outliers']['bad_rows'])} of {s['rows']}: model wrong, none left out |")
-    if s["effects"]:
-        lines += ["", "| effect | coefficient | value | +- | unit |", "|---|---|---|---|---|"]
-        for e in s["effects"]:
-            for k, v in s["effect_parameters"][e].items():
-                if k not in ("significance", "granularity"):
-                    unc = f"{v['std']:.2g}" if np.isfinite(v["std"]) else ""
-                    lines.append(f"| {e} | {k} | {v['value']:.4g} | {unc} | {v['unit']} |")
-    law = s.get("proposed_law")
-    if law:
-        lines += ["", f"**Proposed law, not in the library**: `{law['formula']}`; cross-validated residual "
-                      f"{_um(law['cv_rms_before_mm'])} -> {_um(law['cv_rms_after_mm'])} um.", "",
-                  "| term | constant per " + chain_word + " | unit |", "|---|---|---|"]
-        lines += [f"| {k} | {', '.join(f'{x:.4g}' for x in v)} | {law['units'][k]} |" for k, v in law["constants"].items()]
-    ev = s["evidence"]
-    lines += ["", "| candidate | BIC drop alone | CV RMS | named |", "|---|---|---|---|",
-              f"| (geometry) | 0 | {ev['none']['cv_whitened_rms']:.2f} | |"]
-    for c in s["candidates"]:
-        e = ev.get(c, {})
-        lines.append(f"| {c} | {e.get('delta_bic_vs_none', float('nan')):.0f} | "
-                     f"{e.get('cv_whitened_rms', float('nan')):.2f} | {'yes' if c in s['effects'] else ''} |")
-    lines += ["", "BIC drop: evidence against geometry alone (an effect needs 10 to enter); CV RMS: "
-              "cross-validated whitened residual (1 = the noise)."]
-    for a in s["aliases"]:
-        within = "contains it; the simpler one named" if a.get("nested") else f"within {a['delta_bic']:.1f} BIC"
-        lines += ["", f"Cannot tell apart: {a['named']} and {a['rival']} ({within})."]
-    r = s.get("mujoco_resimulation")
-    if r:
-        lines += ["", f"MuJoCo re-simulation, position RMS: {r['before']['position_um']:.2f} -> "
-                      f"{r['after']['position_um']:.2f} um."]
-    lines += ["", "Geometry alone, where the mismatch is:"] + [f"- {t}" for t in s["located"]["summary"]]
-    return "\n".join(lines)
-
-
 def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, overwrite: bool = False) -> Path:
     """The discovery file of ``report`` (a :class:`pipeline.workflows.discovery.DiscoveryReport`):
     the verdict first, the residuals before and after against time, stroke, the direction of the
@@ -178,7 +125,7 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
                        unit="signed log10(1 + |BIC drop|)", groups=[1 if c in named else 0 for c in order],
                        group_names=["not named", "named (in the model)"], title="Evidence per candidate",
                        note="an effect needs a BIC drop of 10 (1.04 here) and a lower CV residual", name_px=130.0)
-        r.log("summary", rr.TextDocument(discovery_markdown(s, robot.chain_word), media_type=rr.MediaType.MARKDOWN),
+        r.log("summary", rr.TextDocument(report_markdown(build_report(s)), media_type=rr.MediaType.MARKDOWN),
               static=True)
         r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
         r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)

@@ -22,7 +22,8 @@ and its own default blueprint, so that files of different tools or robots opened
 * ``convergence/chart``: log-scale chart of max dQint (or cost) per iteration (static; the same
   values as ``convergence/log10`` on timeline ``iteration``).
 * ``parameters/chart``: named bars, identified (+-2 sigma) beside injected, one scale.
-* ``observability``: see :mod:`pipeline.views.observability`; ``summary``: markdown tables.
+* ``observability``: see :mod:`pipeline.views.observability`; ``summary``: the run's report as
+  markdown (:func:`pipeline.formats.report_text.report_markdown`, given to :func:`log_calibration_run`).
 
 The charts are drawn with :mod:`pipeline.views.charts`.
 """
@@ -39,8 +40,7 @@ from .charts import (FLAG_COLOR, MACHINE_COLORS, chain_colors, chart_view, log_n
                      log_series_by_pose, magnification, magnitude_colors)
 from .observability import log_observability, observability_views
 
-__all__ = ["log_calibration_run", "blueprint", "summary_markdown", "run_eye", "run_magnification",
-           "MAX_MACHINE_POSES", "drawn_poses"]
+__all__ = ["log_calibration_run", "blueprint", "run_eye", "run_magnification", "MAX_MACHINE_POSES", "drawn_poses"]
 
 #: The 3D machines and error arrows of a run are drawn at no more than this many calibration
 #: poses (evenly spaced; every pose below it): three machines of C chains at 100,000 poses are
@@ -129,83 +129,6 @@ def blueprint(robot: Robot | None = None, *, eye: rrb.EyeControls3D | None = Non
         rrb.SelectionPanel(state="collapsed"),
         collapse_panels=True,
     )
-
-
-def _flagged_state(summary: dict) -> str:
-    left_out = (summary.get("outliers") or {}).get("left_out")
-    return " (data rows; left out)" if left_out else " (data rows; kept)"
-
-
-def error_table(summary: dict) -> list[str]:
-    """Markdown rows of the held-out errors (before and after: RMS, mean, max), or of the
-    cross-validated prediction error where there are no held-out poses."""
-    h, o = summary.get("heldout_position_error_mm"), summary.get("heldout_orientation_error_rad")
-    if h and "after_figures" in h:
-        rows = ["", "| held-out | RMS before | RMS after | mean after | max after |", "|---|---|---|---|---|"]
-        for label, block, scale in (("position, um", h, 1e3), ("orientation, urad", o, 1e6)):
-            if block:
-                b, a = block["before_figures"], block["after_figures"]
-                rows.append(f"| {label} | {scale * b['rms']:.3f} | {scale * a['rms']:.3f} | {scale * a['mean']:.3f} | "
-                            f"{scale * a['max']:.3f} |")
-        return rows
-    cv = summary.get("crossvalidated_position_error_mm")
-    if cv and cv.get("rms") is not None:
-        rows = ["", f"| cross-validated ({summary['crossvalidation']['scheme']}) | RMS | mean | max |",
-                "|---|---|---|---|", f"| position, um | {1e3 * cv['rms']:.3f} | {1e3 * cv['mean']:.3f} | "
-                                    f"{1e3 * cv['max']:.3f} |"]
-        co = summary.get("crossvalidated_orientation_error_rad")
-        if co and co.get("rms") is not None:
-            rows.append(f"| orientation, urad | {1e6 * co['rms']:.3f} | {1e6 * co['mean']:.3f} | {1e6 * co['max']:.3f} |")
-        return rows
-    return []
-
-
-def summary_markdown(summary: dict) -> str:
-    """The run summary as a markdown panel: short lines and tables."""
-    h = summary.get("heldout_position_error_mm")
-    n = summary["declared_noise"]
-    verdict = summary.get("verdict")
-    lines = [
-        f"## {summary['robot']}: calibration",
-        f"{summary['scenario']}",
-        "",
-        *([f"**{'Success' if summary.get('success') else 'Not a success'}**: {verdict['words']}", ""]
-          if verdict else []),
-        "| run | |", "|---|---|",
-        f"| method | {summary['method']} ({summary['solver']}) |",
-        f"| poses | {summary['calibration_poses']} calibration, {summary['heldout_poses']} held-out |",
-        f"| noise | {n.get('position_mm', 0):g} mm, {n.get('orientation_rad', 0):g} rad, "
-        f"joints {n.get('joint', 0):g} ({n.get('distribution', '')}) |",
-        f"| iterations | {summary['iterations']} "
-        f"({'converged' if summary.get('converged', summary.get('success')) else 'not converged'}) |",
-        f"| flagged rows | {', '.join(str(i) for i in summary['flagged_poses']) or 'none'}"
-        f"{_flagged_state(summary) if summary['flagged_poses'] else ''} |",
-    ]
-    lines += error_table(summary)
-    pe = summary.get("parameter_error")
-    g = summary.get("gain_G_percent")
-    if pe and pe.get("rms_mm") is not None:
-        lines += ["", "| parameters | |", "|---|---|",
-                  f"| error RMS, lengths | {1e3 * pe['rms_mm']:.2f} um |"]
-        if pe.get("rms_rad") is not None:
-            lines.append(f"| error RMS, angles | {1e6 * pe['rms_rad']:.2f} urad |")
-        if g:
-            lines.append(f"| gain G (norm) | {g['norm']:.2f} % |")
-    by = summary.get("determined_by")
-    if by and (summary.get("prior") or {}).get("used"):
-        lines += ["", f"Determined by the data: {len(by['data'])} parameters; left to the prior: {len(by['prior'])}"
-                  + (f" ({', '.join(by['prior'][:10])}{', ...' if len(by['prior']) > 10 else ''})" if by['prior'] else "")]
-    cn = summary["condition_numbers"]
-    lines += ["", f"Condition number{'s' if len(cn) > 1 else ''}: " + ", ".join(f"{c:.0f}" for c in cn)]
-    if h:
-        lines += ["", f"Held-out basis: {summary['heldout_basis']}."]
-    lines += ["", f"Stop: {summary['message']}"]
-    out = summary.get("outliers") or {}
-    if out.get("verdict"):
-        lines += ["", f"Outlier test: {out['verdict']}"]
-    for w in summary.get("warnings") or ():
-        lines += ["", f"Warning: {w}"]
-    return "\n".join(lines)
 
 
 def _bar_unit(robot: Robot):
@@ -366,7 +289,8 @@ def log_calibration_run(
         predicted: (N, D) poses the identified model predicts at the commanded joints.
         history: max dQint (or cost) per iteration.
         heldout_before, heldout_after: (M, D) held-out pose errors (reached - target), or None.
-        summary_markdown: text of the summary panel.
+        summary_markdown: text of the summary panel (the run's report as markdown,
+            :func:`pipeline.formats.report_text.report_markdown`).
         observability: a :class:`calib.observability.ObservabilityAnalysis` to log, or None.
         flagged: 0-based indices of the calibration poses flagged as outliers.
         history_label: what ``history`` holds.

@@ -77,12 +77,13 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.formats.discovery_words import report_lines
+    from pipeline.formats.report import build_report
+    from pipeline.formats.report_text import terminal_lines
     from pipeline.workflows.discovery import discover
 
     rep = discover(rec, seed=seed, resim=False, candidates=candidates)
     s = rep.summary
-    lines = report_lines(s)
+    lines = terminal_lines(build_report(s))
     said_explained = any("explains the recording to the noise" in line for line in lines) or \
         lines[0].startswith("Explained")
     tests_pass = s["tests"]["noise"]["consistent"] and not s["remaining"]["follows"]

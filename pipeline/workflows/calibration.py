@@ -350,12 +350,12 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
     calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
     the summary's private keys (``_recording``, ``_calibration``) are taken out of it first."""
-    from pipeline.formats import calibration_text, recording_source, recording_texts
+    from pipeline.formats import calibration_text, recording_source, recording_texts, summary_document
 
     recording = summary.pop("_recording", None)
     calibration = summary.pop("_calibration")
     if "summary_json" in targets_out:
-        outputs.temp("summary_json").write_text(json.dumps(summary, indent=1))
+        outputs.temp("summary_json").write_text(json.dumps(summary_document(summary), indent=1))
     if "report" in targets_out:
         outputs.temp("report").write_text(render_html(build_report(summary)))
     if recording is not None:
@@ -943,8 +943,8 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
              rrd_path: Path) -> None:
     """Write the run's ``.rrd`` (its default layout, the robot's application id)."""
     from calib.observability import analyze_observability
-    from pipeline.views import (application_id, blueprint, log_calibration_run, run_eye, run_magnification,
-                                save_recording, summary_markdown)
+    from pipeline.formats import report_markdown
+    from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
     from pipeline.views.run_view import MAX_MACHINE_POSES, drawn_poses
 
     robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
@@ -968,7 +968,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=inp.actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
                             predicted=predicted, history=result.history, heldout_before=heldout_before,
-                            heldout_after=heldout_after, summary_markdown=summary_markdown(summary),
+                            heldout_after=heldout_after, summary_markdown=report_markdown(build_report(summary)),
                             observability=analysis, flagged=ident.flagged_idx, history_label=history_label,
                             magnified=magnified)
 

@@ -33,11 +33,11 @@ from mjcf.simulator import SettleError
 from calib.effects.records import effect_record, fitted_effects
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
-                              read_json_file, read_recording, recording_checks, recording_source, validity_domain,
-                              write_calibration, write_report)
+                              read_json_file, read_recording, recording_checks, recording_source, summary_document,
+                              validity_domain, write_calibration, write_report)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
-from pipeline.formats.discovery_words import verdict_words
+from pipeline.formats.report_text import verdict_words
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
@@ -607,7 +607,8 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         report.summary["report"] = str(settings.report)
         report.summary["compensation"] = compensation_table(rec, cal, report.summary)
     if settings.summary_json is not None:
-        atomic_write(settings.summary_json, json.dumps(report.summary, indent=1), overwrite=settings.overwrite)
+        atomic_write(settings.summary_json, json.dumps(summary_document(report.summary), indent=1),
+                     overwrite=settings.overwrite)
     if settings.report is not None:
         write_report(report.summary, settings.report, overwrite=settings.overwrite)
     return report
