@@ -120,14 +120,14 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         fit = identify_forward(robot, joints[kept], measured[kept], noise, free=free, start=theta)
         theta = fit.theta
         r0, J = _whitened(robot, theta, joints, measured, noise)
-        Jr = J[:, :, idx]
+        Jr = J if np.array_equal(idx, np.arange(J.shape[2])) else np.take(J, idx, axis=2)
         # Backward search on the model linearised at this fit: leaving rows out moves the
         # estimate by delta = (sum_kept Jr^T Jr)^-1 sum_kept Jr^T r0, in closed form.
         grown = False
         while True:
-            A = Jr[kept].reshape(-1, p)
+            A = Jr.reshape(-1, p) if kept.all() else Jr[kept].reshape(-1, p)  # a view while every row is kept
             cov = np.linalg.pinv(A.T @ A, hermitian=True)
-            delta = cov @ (A.T @ r0[kept].ravel())
+            delta = cov @ (A.T @ (r0.ravel() if kept.all() else r0[kept].ravel()))
             r = r0 - Jr @ delta
             H = (Jr @ cov) @ np.swapaxes(Jr, 1, 2)  # (N, D, D) diagonal blocks of the hat matrix
             sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
