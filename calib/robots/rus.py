@@ -133,6 +133,26 @@ class RotaryHexapod(Robot):
         return {"M": t[:, 0:3], "az": t[:, 3], "el": t[:, 4], "r": t[:, 5], "q0": t[:, 6], "s": t[:, 7],
                 "P": t[:, 8:11]}
 
+    def _chain_parts(self, theta) -> dict:
+        """:meth:`split`'s views of ``theta`` with what the kinematics derive from them alone: the
+        crank frames ``u v a`` (6, 3), ``u_t v_t M_t`` (3, 6, 1) their chain-major columns, ``cos_az
+        sin_az sin_el`` (6, 1). Kept for the last ``theta`` asked (a Newton iteration asks for one
+        ``theta`` many times); read-only."""
+        t = np.asarray(theta, dtype=float)
+        key = t.tobytes()
+        kept = self.__dict__.get("_parts")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        p = self.split(t.copy())
+        p["u"], p["v"], p["a"] = crank_frames(p["az"], p["el"])
+        p["u_t"], p["v_t"], p["M_t"] = (p[k].T[:, :, None].copy() for k in ("u", "v", "M"))
+        p["cos_az"], p["sin_az"], p["sin_el"] = (f(p[k])[:, None] for f, k in ((np.cos, "az"), (np.sin, "az"),
+                                                                                (np.sin, "el")))
+        for v in p.values():
+            v.setflags(write=False)
+        self.__dict__["_parts"] = (key, p)
+        return p
+
     def _vectors(self, theta, joints, poses):
         """Chain-major (each quantity (3, 6, N) or (6, N): numpy's inner loops then run over the
         poses, several times faster than over the chains of an (N, 6, 3) array): ``(p, R, c, s,
@@ -140,15 +160,14 @@ class RotaryHexapod(Robot):
         yaw's ``cos_gamma sin_gamma`` (N,); ``R`` (3, 3, N) the rotations' entries; ``c, s`` (6,
         N) cos and sin of ``phi``; ``e`` (3, 6, N) the crank directions; ``w = R P``, the crank
         tips ``C`` and the rod vectors ``D = R P + t - C``, each (3, 6, N) mm."""
-        p = self.split(theta)
-        p["u"], p["v"], p["a"] = crank_frames(p["az"], p["el"])
+        p = self._chain_parts(theta)
         x = np.ascontiguousarray(np.asarray(poses, dtype=float).T)  # (6, N)
         phi = np.asarray(joints, dtype=float).T + p["q0"][:, None]
         c, s = np.cos(phi), np.sin(phi)
         R, cos, sin = rotation_entries(x[3:6])
-        p["cos_gamma"], p["sin_gamma"] = cos[2], sin[2]
-        e = c * p["u"].T[:, :, None] + s * p["v"].T[:, :, None]
-        C = p["M"].T[:, :, None] + p["r"][:, None] * e
+        p = dict(p, cos_gamma=cos[2], sin_gamma=sin[2])
+        e = c * p["u_t"] + s * p["v_t"]
+        C = p["M_t"] + p["r"][:, None] * e
         w = np.einsum("ikn,lk->iln", R, p["P"])
         D = (w + x[0:3, None, :]) - C
         return p, R, c, s, e, w, C, D
@@ -189,7 +208,7 @@ class RotaryHexapod(Robot):
         if parameters:
             r = p["r"][:, None]
             nu, nv, na = (np.einsum("iln,li->ln", n, p[k]) for k in ("u", "v", "a"))
-            ca, sa, se = np.cos(p["az"])[:, None], np.sin(p["az"])[:, None], np.sin(p["el"])[:, None]
+            ca, sa, se = p["cos_az"], p["sin_az"], p["sin_el"]
             Jc = np.empty((6, len(CHAIN_PARAMETERS), n.shape[2]))
             np.negative(n.transpose(1, 0, 2), out=Jc[:, 0:3])
             # du/daz = (-cos az, -sin az, 0), dv/daz = sin el (sin az, -cos az, 0)
