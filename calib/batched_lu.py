@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BatchedLU", "solve_stacked", "LARGEST_MULTIPLIER", "SMALLEST_BATCH_ENTRIES"]
+__all__ = ["BatchedLU", "solve_stacked", "inverse_stacked", "LARGEST_MULTIPLIER", "SMALLEST_BATCH_ENTRIES"]
 
 #: Largest multiplier of the elimination (in absolute value) for which a matrix's factors are
 #: kept; partial pivoting keeps them at most 1. Larger: the matrix is solved by LAPACK.
@@ -156,8 +156,21 @@ def solve_stacked(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     m, n, _ = A.shape
     if m * n * n < SMALLEST_BATCH_ENTRIES:
         return np.linalg.solve(A, B)
-    inverse = BatchedLU(A).inverse_columns().transpose(2, 1, 0)  # (M, n, n), inverse[m, i, j]
-    return np.matmul(np.ascontiguousarray(inverse), B)
+    return np.matmul(inverse_stacked(A), B)
+
+
+def inverse_stacked(A: np.ndarray) -> np.ndarray:
+    """(M, n, n) the inverse of every matrix of ``A`` (M, n, n), C-ordered: by the kept factors
+    (:meth:`BatchedLU.inverse_columns`) for a stack of at least :data:`SMALLEST_BATCH_ENTRIES`
+    entries (100,000 6 x 6 matrices: 0.05 s), ``numpy.linalg.inv`` below.
+
+    Raises:
+        numpy.linalg.LinAlgError: a matrix is singular.
+    """
+    m, n, _ = A.shape
+    if m * n * n < SMALLEST_BATCH_ENTRIES:
+        return np.linalg.inv(A)
+    return np.ascontiguousarray(BatchedLU(A).inverse_columns().transpose(2, 1, 0))
 
 
 def _pivot_order(a: np.ndarray) -> np.ndarray:

@@ -445,6 +445,26 @@ class _Problem:
     sessions: np.ndarray | None = None
 
 
+def _sessions_on(frame, sessions, rows) -> tuple:
+    """``(frame, sessions)`` of ``rows`` alone: the sessions present among them numbered 0, 1, ...
+    with their frame modes (one session left: None and its mode)."""
+    if sessions is None:
+        return frame, None
+    present, inverse = np.unique(np.asarray(sessions)[rows], return_inverse=True)
+    modes = frame if isinstance(frame, str) else [frame[int(k)] for k in present]
+    if present.size == 1:
+        return (modes if isinstance(modes, str) else modes[0]), None
+    return modes, inverse
+
+
+def _on_rows(problem: _Problem, rows) -> _Problem:
+    """``problem`` for ``rows`` alone (:func:`_sessions_on`)."""
+    if problem.sessions is None:
+        return problem
+    frame, sessions = _sessions_on(problem.frame, problem.sessions, rows)
+    return replace(problem, frame=frame, sessions=sessions)
+
+
 def _figures(problem: _Problem, joints, measured, screen: bool = False, as_written: bool = False) -> FitFigures:
     """Fit the geometry (and frame) to ``(joints, measured)`` (``screen``: the cheap fit of
     :data:`SCREEN_ITERATIONS`); its figures, also on failure."""
@@ -482,9 +502,10 @@ def _figures(problem: _Problem, joints, measured, screen: bool = False, as_writt
 
 def _screen_rows(problem: _Problem, n: int, m: int) -> np.ndarray:
     """Evenly spaced rows for the screen: :data:`SCREEN_ROWS_FACTOR` times the fewest rows that
-    identify the unknowns (free parameters, frame, target offsets), or every row."""
+    identify the unknowns (free parameters, a frame a session, target offsets), or every row."""
     k = 0 if problem.targets is None else len(problem.targets)
-    unknowns = problem.free.size + 6 + (3 * k if problem.estimate_targets is not False else 0)
+    frames = 1 if problem.sessions is None else int(np.max(problem.sessions, initial=0)) + 1
+    unknowns = problem.free.size + 6 * frames + (3 * k if problem.estimate_targets is not False else 0)
     want = SCREEN_ROWS_FACTOR * -(-unknowns // m)
     return np.arange(n) if want >= n else np.unique(np.linspace(0, n - 1, want).round().astype(int))
 
@@ -569,10 +590,11 @@ def _conversions(problem: _Problem, joints, measured, written: FitFigures, count
     ``{"screened": ((name, chi2/dof), ...), "named": [(Conversion, FitFigures), ...]}`` best first."""
     k = 0 if problem.targets is None else len(problem.targets)
     rows = _screen_rows(problem, *measured.shape)
+    sub = _on_rows(problem, rows)
     screened = []
     for conv in conversion_registry(problem.robot, k):
         q, m = conv.apply(joints, measured)
-        screened.append((conv, _figures(problem, q[rows], m[rows], screen=True)))
+        screened.append((conv, _figures(sub, q[rows], m[rows], screen=True)))
         counter[0] += 1
     screened.sort(key=lambda cf: cf[1].chi2_dof)
     best = screened[0][1].chi2_dof if screened else float("inf")
@@ -624,6 +646,7 @@ def _unexplained(problem: _Problem, joints, measured, written: FitFigures, scree
     best = f"; the best conversion screened, {screened[0][0]}, gives {screened[0][1]:.3g}" if screened else ""
     tried = (f"as written ({written.words()}), nor after any of the {len(screened)} conversions tried"
              f"{best}")
+    gross = gross and problem.sessions is None  # the search knows one instrument frame
     if gross:
         from .robust import find_gross_rows
 
@@ -660,8 +683,8 @@ def _fit_words(robot: Robot, written: FitFigures, tolerance: np.ndarray) -> str:
             "platform turns the platform joints' coordinates) or a machine far from its nominal geometry")
 
 
-def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str = "auto", targets=None,
-             estimate_targets: bool | None = None, tolerance=None, gross: bool = True) -> Diagnosis:
+def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame="auto", targets=None,
+             estimate_targets: bool | None = None, tolerance=None, gross: bool = True, sessions=None) -> Diagnosis:
     """Judge whether ``(joints, measured)`` fit ``robot`` at the declared ``noise``; if not, name
     the likely cause with its evidence (module doc).
 
@@ -671,11 +694,14 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
         measured: (N, D) full poses, or (N, 3K) target positions with ``targets``, as recorded.
         noise: declared noise.
         frame: instrument frame mode (:data:`calib.measurement.FRAME_MODES`), for the data as
-            written and every conversion.
+            written and every conversion; or one a session (``sessions``).
         targets, estimate_targets: target offsets, as :func:`calib.measurement.identify_measured`.
         tolerance: ``parameter_tolerance`` mapping (:meth:`calib.prior.ParameterPrior.from_tolerance`);
             default the robot's.
-        gross: look for gross rows (:func:`calib.robust.find_gross_rows`) when no conversion fits.
+        gross: look for gross rows (:func:`calib.robust.find_gross_rows`) when no conversion fits
+            (one session only: the search knows one instrument frame).
+        sessions: (N,) int, each row's session (its own instrument frame; every fit has one frame
+            a session, as :func:`calib.measurement.identify_measured`), or None: one.
 
     Above :data:`DIAGNOSIS_MAX_ROWS` rows a seeded subsample of that many rows is judged (its
     ``rows`` says so; ``gross_rows`` are then rows of the subsample, numbered in the input).
@@ -684,22 +710,26 @@ def diagnose(robot: Robot, joints, measured, noise: SensorNoise, *, frame: str =
         A :class:`Diagnosis`; never raises on data that cannot be fitted (their fit says why).
     """
     joints, measured = np.array(joints, dtype=float), np.array(measured, dtype=float)
+    sessions = None if sessions is None else np.asarray(sessions, dtype=int)
     n = len(joints)
     if n <= DIAGNOSIS_MAX_ROWS:
-        return _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross)
+        return _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross, sessions)
     sub = np.sort(np.random.default_rng(n).choice(n, size=DIAGNOSIS_MAX_ROWS, replace=False))
-    found = _diagnose(robot, joints[sub], measured[sub], noise, frame, targets, estimate_targets, tolerance, gross)
+    frame_sub, sessions_sub = _sessions_on(frame, sessions, sub)
+    found = _diagnose(robot, joints[sub], measured[sub], noise, frame_sub, targets, estimate_targets, tolerance, gross,
+                      sessions_sub)
     return replace(found, gross_rows=tuple(int(sub[i]) for i in found.gross_rows),
                    rows=f"a seeded subsample of {DIAGNOSIS_MAX_ROWS:,} of the {n:,} rows ({n:,} rows > "
                         f"DIAGNOSIS_MAX_ROWS = {DIAGNOSIS_MAX_ROWS})")
 
 
-def _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross) -> Diagnosis:
+def _diagnose(robot, joints, measured, noise, frame, targets, estimate_targets, tolerance, gross,
+              sessions=None) -> Diagnosis:
     """:func:`diagnose` of every row given."""
     t0 = time.perf_counter()
     problem = _Problem(robot, noise, frame, None if targets is None else np.asarray(targets, dtype=float),
                        estimate_targets, ParameterPrior.from_tolerance(robot, tolerance).std,
-                       np.sort(robot.table.indices(robot.free_default)))
+                       np.sort(robot.table.indices(robot.free_default)), sessions)
     counter = [1]
     written = _figures(problem, joints, measured, as_written=True)
     if written.fits and written.plausible:

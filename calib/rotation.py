@@ -11,6 +11,7 @@ import numpy as np
 
 __all__ = [
     "rotation_matrix",
+    "rotation_entries",
     "rotation_matrix_derivatives",
     "euler_from_matrix",
     "quaternion_from_euler",
@@ -43,6 +44,28 @@ def rotation_matrix(angles: np.ndarray) -> np.ndarray:
     R[..., 2, 1] = cb * sa
     R[..., 2, 2] = cb * ca
     return R
+
+
+def rotation_entries(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Structure-of-arrays rotations, for kinematics vectorised over poses (each entry one
+    contiguous row of N values).
+
+    Args:
+        angles: (3, N) ``[alpha, beta, gamma]`` rows, rad.
+
+    Returns:
+        ``(R, c, s)``: (3, 3, N) ``R[i, k]`` the entries of ``Rz(gamma) Ry(beta) Rx(alpha)``;
+        (3, N) the angles' cosines and sines.
+    """
+    c, s = np.cos(angles), np.sin(angles)
+    ca, cb, cg = c
+    sa, sb, sg = s
+    sbsa, sbca = sb * sa, sb * ca
+    R = np.empty((3, 3) + c.shape[1:])
+    R[0, 0], R[0, 1], R[0, 2] = cg * cb, cg * sbsa - sg * ca, cg * sbca + sg * sa
+    R[1, 0], R[1, 1], R[1, 2] = sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa
+    R[2, 0], R[2, 1], R[2, 2] = -sb, cb * sa, cb * ca
+    return R, c, s
 
 
 def _elementary(axis: int, t: np.ndarray, derivative: bool) -> np.ndarray:

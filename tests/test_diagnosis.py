@@ -194,3 +194,22 @@ def test_above_the_diagnosis_size_a_subsample_is_judged_and_said(name, monkeypat
     assert d.cause == exact.cause == "conversion" and d.conversion.name == exact.conversion.name, d.message
     d = diagnose(robot, joints, spoiled, NOISE)
     assert d.cause == "gross rows" and set(d.gross_rows) <= {4, 17, 30} and d.gross_rows, d.message
+
+
+#: A second session's instrument frame: :data:`FAR_FRAME` moved 50 mm along x and turned 0.01 rad about z.
+MOVED_FRAME = FAR_FRAME + np.array([50.0, 0.0, 0.0, 0.0, 0.0, 0.01])
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_two_sessions_are_judged_each_in_its_own_instrument_frame(name):
+    """Rows 0-19 seen from FAR_FRAME, rows 20-39 from another frame (50 mm and 0.01 rad away): told
+    the sessions, the diagnosis fits each row in its session's frame (two frames estimated) and
+    finds nothing wrong in one fit (one frame for both sessions would be 50 mm, 5e4 times the
+    noise, off for half the rows)."""
+    robot, joints, true, noise = experiment(name)
+    sessions = np.repeat([0, 1], N_ROWS // 2)
+    measured = np.where(sessions[:, None] == 0, instrument_measurements(robot, true, FAR_FRAME),
+                        instrument_measurements(robot, true, MOVED_FRAME)) + noise
+    d = diagnose(robot, joints, measured, NOISE, frame=["auto", "auto"], sessions=sessions)
+    assert d.success and d.cause == "none" and d.fits == 1, d.message
+    assert d.written.fit.n_sessions == 2 and d.written.frame_estimated

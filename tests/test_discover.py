@@ -23,13 +23,20 @@ BLIND_ROBOTS = ("hexapod",)
 HEXAPOD_EFFECTS = effects_for(default_robot("hexapod"))
 #: Few seeds here; the rates over many are measured by benchmarks/blind_rates.py (docs/discovery.md).
 SEEDS = range(2)
+#: Workers of the blind suites here: one (the recordings analysed in this process, one after
+#: another). pytest-xdist already keeps every core busy, and a local Dask cluster of its own per
+#: suite would add its workers' start (about 4 s of CPU) and more processes than cores. The
+#: cluster path is tested by test_executor, test_fleet and test_study; each recording's analysis
+#: is the same either way (deterministic per case).
+BLIND_WORKERS = 1
 
 
 @pytest.fixture(scope="module")
 def blind():
     """Seeded recordings per effect and for none, each analysed as it is, with its effect left
     out of the candidates, and with three gross rows added; discovery is not told the truth."""
-    return run_blind_suite(None, SEEDS, robot="hexapod", kinds=("single", "leave_one_out", "gross3"))
+    return run_blind_suite(None, SEEDS, robot="hexapod", kinds=("single", "leave_one_out", "gross3"),
+                           workers=BLIND_WORKERS)
 
 
 def _failures(results, criterion):
@@ -67,7 +74,7 @@ def test_blind_rows_isolated_gross_rows_flagged_and_systematic_rows_kept(blind):
 def test_blind_pairs_of_effects_are_both_named():
     rs = run_blind_suite(None, range(1), robot="hexapod", kinds=("pair",),
                          pairs=[("joint_friction", "thermal_drift"), ("compliance", "joint_friction"),
-                                ("thermal_drift", "periodic_screw_error")])
+                                ("thermal_drift", "periodic_screw_error")], workers=BLIND_WORKERS)
     assert not _failures(rs, "named")
     assert not _failures(rs, "rows")
 
@@ -75,7 +82,7 @@ def test_blind_pairs_of_effects_are_both_named():
 @pytest.mark.slow
 def test_blind_verdict_never_contradicts_its_tests_under_stress():
     rs = run_blind_suite(("none", "joint_friction"), range(1), robot="hexapod",
-                         kinds=("noise10", "noise100", "gross30", "geometry_off"))
+                         kinds=("noise10", "noise100", "gross30", "geometry_off"), workers=BLIND_WORKERS)
     assert len(rs) == 8
     assert not _failures(rs, "consistent")
     for r in rs:

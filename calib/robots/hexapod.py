@@ -15,7 +15,7 @@ import numpy as np
 from .. import paper
 from ..validation import as_array
 from ..robot import JOINT_RANGES_KEY, ClosureJacobians, Parameter, ParameterTable, Robot, checked_joint_ranges
-from ..rotation import rotation_matrix
+from ..rotation import rotation_entries, rotation_matrix
 
 __all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS",
            "FULL_WORKSPACE_OFFSETS"]
@@ -176,14 +176,8 @@ class Hexapod(Robot):
         B, dl, P = self.legs(theta)
         p = np.ascontiguousarray(np.asarray(poses, dtype=float).T)  # (6, N)
         n = p.shape[1]
-        c, s = np.cos(p[3:6]), np.sin(p[3:6])
-        ca, cb, cg = c
-        sa, sb, sg = s
-        sbsa, sbca = sb * sa, sb * ca
-        R = np.empty((3, 3, n))  # R[i, k] (N,): the rotation's entries
-        R[0, 0], R[0, 1], R[0, 2] = cg * cb, cg * sbsa - sg * ca, cg * sbca + sg * sa
-        R[1, 0], R[1, 1], R[1, 2] = sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa
-        R[2, 0], R[2, 1], R[2, 2] = -sb, cb * sa, cb * ca
+        R, c, s = rotation_entries(p[3:6])  # R[i, k] (N,): the rotation's entries
+        cg, sg = c[2], s[2]
         w = np.einsum("ikn,lk->iln", R, P)  # (3, 6, N): R P_l
         L = w + (p[0:3, None, :] - B.T[:, :, None])  # (3, 6, N) leg vectors
         norm = np.sqrt(np.einsum("iln,iln->ln", L, L))

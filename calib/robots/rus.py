@@ -25,7 +25,7 @@ import numpy as np
 from ..validation import as_array
 from ..robot import (JOINT_RANGES_KEY, ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot,
                      checked_joint_ranges)
-from ..rotation import rotation_matrix, rotation_matrix_derivatives
+from ..rotation import rotation_entries, rotation_matrix
 
 __all__ = ["RotaryHexapod", "CHAIN_PARAMETERS", "CHAIN_UNITS", "WORKSPACE_HALF_WIDTHS",
            "JOINT_RANGE_RAD", "crank_frames", "default_rotary_hexapod"]
@@ -133,69 +133,127 @@ class RotaryHexapod(Robot):
         return {"M": t[:, 0:3], "az": t[:, 3], "el": t[:, 4], "r": t[:, 5], "q0": t[:, 6], "s": t[:, 7],
                 "P": t[:, 8:11]}
 
-    def _geometry(self, theta, joints, poses):
-        """Crank tips C (N, 6, 3), rod vectors D = R P + t - C (N, 6, 3), R (N, 3, 3), crank
-        directions e and tangents w (N, 6, 3), the frames (u, v, a) (6, 3) and the parts."""
-        p = self.split(theta)
-        u, v, a = crank_frames(p["az"], p["el"])
-        phi = joints + p["q0"][None]
-        c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
-        e = c * u[None] + s * v[None]
-        w = -s * u[None] + c * v[None]
-        C = p["M"][None] + p["r"][None, :, None] * e
-        R = rotation_matrix(poses[:, 3:6])
-        D = np.einsum("nij,lj->nli", R, p["P"]) + poses[:, None, 0:3] - C
-        return C, D, R, e, w, phi, (u, v, a), p
+    def _chain_parts(self, theta) -> dict:
+        """:meth:`split`'s views of ``theta`` with what the kinematics derive from them alone: the
+        crank frames ``u v a`` (6, 3), ``u_t v_t M_t`` (3, 6, 1) their chain-major columns, ``cos_az
+        sin_az sin_el`` (6, 1). Kept for the last ``theta`` asked (a Newton iteration asks for one
+        ``theta`` many times); read-only."""
+        t = np.asarray(theta, dtype=float)
+        key = t.tobytes()
+        kept = self.__dict__.get("_parts")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        p = self.split(t.copy())
+        p["u"], p["v"], p["a"] = crank_frames(p["az"], p["el"])
+        p["u_t"], p["v_t"], p["M_t"] = (p[k].T[:, :, None].copy() for k in ("u", "v", "M"))
+        p["cos_az"], p["sin_az"], p["sin_el"] = (f(p[k])[:, None] for f, k in ((np.cos, "az"), (np.sin, "az"),
+                                                                                (np.sin, "el")))
+        for v in p.values():
+            v.setflags(write=False)
+        self.__dict__["_parts"] = (key, p)
+        return p
+
+    def _vectors(self, theta, joints, poses):
+        """Chain-major (each quantity (3, 6, N) or (6, N): numpy's inner loops then run over the
+        poses, several times faster than over the chains of an (N, 6, 3) array): ``(p, R, c, s,
+        e, w, C, D)`` with ``p`` :meth:`split`'s views, the crank frames ``u v a`` (6, 3) and the
+        yaw's ``cos_gamma sin_gamma`` (N,); ``R`` (3, 3, N) the rotations' entries; ``c, s`` (6,
+        N) cos and sin of ``phi``; ``e`` (3, 6, N) the crank directions; ``w = R P``, the crank
+        tips ``C`` and the rod vectors ``D = R P + t - C``, each (3, 6, N) mm."""
+        p = self._chain_parts(theta)
+        x = np.ascontiguousarray(np.asarray(poses, dtype=float).T)  # (6, N)
+        phi = np.asarray(joints, dtype=float).T + p["q0"][:, None]
+        c, s = np.cos(phi), np.sin(phi)
+        R, cos, sin = rotation_entries(x[3:6])
+        p = dict(p, cos_gamma=cos[2], sin_gamma=sin[2])
+        e = c * p["u_t"] + s * p["v_t"]
+        C = p["M_t"] + p["r"][:, None] * e
+        w = np.einsum("ikn,lk->iln", R, p["P"])
+        D = (w + x[0:3, None, :]) - C
+        return p, R, c, s, e, w, C, D
+
+    def _chains(self, theta, joints, poses, jacobian: bool = False, parameters: bool = False):
+        """One pass over the six chains at N poses (:meth:`_vectors`' layout).
+
+        Returns ``(F, Jt, Jc, dq)``:
+
+        * ``F`` (6, N) mm: the closure ``|D_i| - s_i``;
+        * ``Jt`` (6, 6, N) (``jacobian``; else None): ``Jt[i, k, n] = dF_i / d pose_k``. With
+          ``n_i = D_i / |D_i|``, ``w_i = R P_i`` and ``m_i = w_i x n_i``: ``dF_i/d t = n_i``,
+          ``dF_i/d alpha = (R e_x) . m_i``, ``dF_i/d beta = (Rz e_y) . m_i``, ``dF_i/d gamma =
+          e_z . m_i`` (``dR/d alpha = R [e_x]x``, ``dR/d beta = [Rz e_y]x R``, ``dR/d gamma =
+          [e_z]x R``);
+        * ``Jc`` (6, 11, N) (``parameters``; else None): ``dF_i / d`` chain i's own eleven
+          parameters (:data:`CHAIN_PARAMETERS` order); ``dq`` (6, N): ``dF_i / d q_i`` (also
+          ``dF_i / d q0_i``), with ``parameters``.
+        """
+        p, R, c, s, e, w, C, D = self._vectors(theta, joints, poses)
+        norm = np.sqrt(np.einsum("iln,iln->ln", D, D))
+        F = norm - p["s"][:, None]
+        if not (jacobian or parameters):
+            return F, None, None, None
+        n = D / norm  # (3, 6, N) unit rod directions
+        n0, n1, n2 = n
+        Jt = Jc = dq = None
+        if jacobian:
+            Jt = np.empty((6, 6, n.shape[2]))
+            Jt[:, 0:3] = n.transpose(1, 0, 2)
+            w0, w1, w2 = w
+            mx = w1 * n2 - w2 * n1
+            my = w2 * n0 - w0 * n2
+            mz = w0 * n1 - w1 * n0
+            Jt[:, 3] = R[0, 0] * mx + R[1, 0] * my + R[2, 0] * mz
+            Jt[:, 4] = p["cos_gamma"] * my - p["sin_gamma"] * mx
+            Jt[:, 5] = mz
+        if parameters:
+            r = p["r"][:, None]
+            nu, nv, na = (np.einsum("iln,li->ln", n, p[k]) for k in ("u", "v", "a"))
+            ca, sa, se = p["cos_az"], p["sin_az"], p["sin_el"]
+            Jc = np.empty((6, len(CHAIN_PARAMETERS), n.shape[2]))
+            np.negative(n.transpose(1, 0, 2), out=Jc[:, 0:3])
+            # du/daz = (-cos az, -sin az, 0), dv/daz = sin el (sin az, -cos az, 0)
+            Jc[:, 3] = -r * (c * (-ca * n0 - sa * n1) + s * (se * (sa * n0 - ca * n1)))
+            Jc[:, 4] = r * s * na  # dv/del = -a, du/del = 0
+            Jc[:, 5] = -(c * nu + s * nv)
+            dq = -r * (c * nv - s * nu)  # crank tangent -sin(phi) u + cos(phi) v
+            Jc[:, 6] = dq
+            Jc[:, 7] = -1.0
+            np.einsum("ikn,iln->lkn", R, n, out=Jc[:, 8:11])  # R^T n_l
+        return F, Jt, Jc, dq
 
     def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, 6, 3, 3) mm: motor centre ``M_i``, crank tip ``C_i``, platform joint ``R P_i + t``."""
-        C, D, *_ , p = self._geometry(theta, joints, poses)
+        p, _, _, _, _, _, C, D = self._vectors(theta, joints, poses)
+        C, D = C.transpose(2, 1, 0), D.transpose(2, 1, 0)
         return np.stack([np.broadcast_to(p["M"], C.shape), C, C + D], axis=2)
 
     # -- kinematics -----------------------------------------------------------------------
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        _, D, *_, p = self._geometry(theta, joints, poses)
-        return np.linalg.norm(D, axis=-1) - p["s"][None]
-
-    def _pose_jacobian(self, theta, joints, poses):
-        """``(Jpose, n, geometry)``: (N, 6, 6) ``dF / d pose``, (N, 6, 3) unit rod directions and
-        :meth:`_geometry`'s tuple; one computation for :meth:`closure_jacobians` and
-        :meth:`closure_pose_jacobian`."""
-        geometry = self._geometry(theta, joints, poses)
-        D, p = geometry[1], geometry[-1]
-        n = D / np.linalg.norm(D, axis=-1, keepdims=True)  # (N, 6, 3) unit rod directions
-        dR = rotation_matrix_derivatives(poses[:, 3:6])  # (N, 3 angles, 3, 3)
-        Jpose = np.empty((joints.shape[0], 6, 6))
-        Jpose[:, :, 0:3] = n
-        Jpose[:, :, 3:6] = np.einsum("nli,nkij,lj->nlk", n, dR, p["P"])
-        return Jpose, n, geometry
+        return self._chains(theta, joints, poses)[0].T
 
     def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        return self._pose_jacobian(theta, joints, poses)[0]
+        return self._chains(theta, joints, poses, jacobian=True)[1].transpose(2, 0, 1)
+
+    def closure_and_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray,
+                                  poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        F, Jt, _, _ = self._chains(theta, joints, poses, jacobian=True)
+        return F.T, Jt.transpose(2, 0, 1)
 
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
-        Jpose, n, (_, _, R, e, w, phi, (_, _, a), p) = self._pose_jacobian(theta, joints, poses)
-        n_rows = joints.shape[0]
-        r = p["r"][None]
-        dq = -r * np.einsum("nli,nli->nl", n, w)  # dF/dq = dF/dq0
-        ca, sa = np.cos(p["az"]), np.sin(p["az"])
-        se = np.sin(p["el"])
-        du_daz = np.stack([-ca, -sa, np.zeros(6)], -1)
-        dv_daz = np.stack([se * sa, -se * ca, np.zeros(6)], -1)
-        c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
-        Jc = np.empty((n_rows, 6, len(CHAIN_PARAMETERS)))
-        Jc[..., 0:3] = -n
-        Jc[..., 3] = -r * np.einsum("nli,nli->nl", n, c * du_daz[None] + s * dv_daz[None])
-        Jc[..., 4] = r * np.sin(phi) * np.einsum("nli,li->nl", n, a)  # dv/del = -a, du/del = 0
-        Jc[..., 5] = -np.einsum("nli,nli->nl", n, e)
-        Jc[..., 6] = dq
-        Jc[..., 7] = -1.0
-        Jc[..., 8:11] = np.einsum("nji,nlj->nli", R, n)  # R^T n
+        return self.closure_with_jacobians(theta, joints, poses)[1]
+
+    def closure_with_jacobians(self, theta: np.ndarray, joints: np.ndarray,
+                               poses: np.ndarray) -> tuple[np.ndarray, ClosureJacobians]:
+        F, Jt, Jc, dq = self._chains(theta, joints, poses, jacobian=True, parameters=True)
+        n_rows = F.shape[1]
         Jtheta = np.zeros((n_rows, 6, 6, len(CHAIN_PARAMETERS)))
         idx = np.arange(6)
-        Jtheta[:, idx, idx] = Jc
-        return ClosureJacobians(pose=Jpose, joints=dq[:, :, None] * np.eye(6)[None],
-                                parameters=Jtheta.reshape(n_rows, 6, -1))
+        Jtheta[:, idx, idx] = Jc.transpose(2, 0, 1)
+        Jq = np.zeros((n_rows, 6, 6))
+        Jq[:, idx, idx] = dq.T
+        # contiguous: LAPACK's batched inverse and solve take it faster than the view
+        return F.T, ClosureJacobians(pose=np.ascontiguousarray(Jt.transpose(2, 0, 1)), joints=Jq,
+                                     parameters=Jtheta.reshape(n_rows, 6, -1))
 
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, 6) motor angles, rad, wrapped to (-pi, pi].

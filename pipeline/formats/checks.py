@@ -20,7 +20,7 @@ import numpy as np
 
 from calib.measurement import measurement_settings, target_names
 
-from .recording import Recording, RecordingError, columns, sidecar_path
+from .recording import Recording, RecordingError, columns, row_frame_groups, sidecar_path
 
 __all__ = ["plausibility", "recording_checks", "RecordingChecks", "REFUSED_CONDITION", "WARNED_CONDITION",
            "ROTATION_CONVENTION", "JOINT_LIMIT_TOLERANCE"]
@@ -298,11 +298,14 @@ def _excitation(rec: Recording, poses: _PoseColumns, path: Path, prior: bool) ->
 
 def _diagnosis(rec: Recording):
     """:func:`calib.diagnosis.diagnose` of every row of ``rec``, as its ``meta.measurement`` says
-    (instrument frame mode, target offsets)."""
+    (instrument frame mode, target offsets); with several instrument frames (sessions), each row
+    in its own session's (:func:`~pipeline.formats.recording.row_frame_groups`)."""
     from calib.diagnosis import diagnose
 
     settings = measurement_settings(rec.meta.get("measurement"))
-    return diagnose(rec.robot, rec.joints, rec.measured, rec.noise, frame=settings.frame, targets=settings.targets,
+    sessions, modes = row_frame_groups(rec)
+    return diagnose(rec.robot, rec.joints, rec.measured, rec.noise, frame=settings.frame if sessions is None else modes,
+                    targets=settings.targets, sessions=sessions,
                     estimate_targets=settings.estimate_targets if settings.targets is not None else None)
 
 

@@ -29,12 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.measurement import FRAME_MODES
 from calib.robot import KinematicsError
 
 from .lab_export import (ANGLE_UNITS, LENGTH_UNITS, ROTATION_DIRECTIONS, LabExportError, LabMap,
                          convert_lab_files)
-from .recording import Recording, frame_session, session_measurement
+from .recording import Recording, row_frame_groups
 
 __all__ = ["MapReading", "map_readings", "lab_checks", "TOO_FEW_ROWS"]
 
@@ -224,18 +223,6 @@ def _same_within_noise(rec: Recording, other: Recording) -> bool:
                                                                                  <= joint))
 
 
-def _sessions(rec: Recording) -> tuple[np.ndarray | None, object]:
-    """``(each row's frame group or None for one, the frame mode(s))``: sessions captured in one
-    instrument frame (a session naming another's) share it."""
-    groups = list(dict.fromkeys(frame_session(rec, n) for n in rec.session_names))
-    modes = [session_measurement(rec, g).frame for g in groups]
-    modes = [m if m in FRAME_MODES else "auto" for m in modes]
-    if len(groups) == 1:
-        return None, modes[0]
-    index = {n: groups.index(frame_session(rec, n)) for n in rec.session_names}
-    return np.array([index[s] for s in rec.sessions]), modes
-
-
 def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
     """Check the recording ``rec`` that ``lab_map`` made of ``files`` on evidence (module doc).
 
@@ -249,7 +236,7 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
     from calib.diagnosis import compare_readings
 
     robot = rec.robot
-    sessions, frame = _sessions(rec)
+    sessions, frame = row_frame_groups(rec)
     readings, alternatives = {}, {}
     for reading in map_readings(lab_map):
         try:

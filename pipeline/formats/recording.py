@@ -54,7 +54,7 @@ __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "
            "sidecar_path", "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
            "check_session_name", "check_channel_name", "read_text_file", "frame_session", "shared_frame_error",
-           "SESSION_NAME"]
+           "SESSION_NAME", "row_frame_groups"]
 
 SETS = ("calibration", "validation")
 FORMAT = "parallel-calib recording"
@@ -256,6 +256,19 @@ def session_measurement(rec: Recording, name: str) -> MeasurementSettings:
     merged = dict(rec.meta.get("measurement") or {})
     merged.update(rec.session_info.get(frame_session(rec, name), {}).get("measurement", {}))
     return measurement_settings(merged or None)
+
+
+def row_frame_groups(rec: Recording) -> tuple[np.ndarray | None, object]:
+    """``(each row's frame group (N,) int or None for one, the frame mode(s))``: sessions captured
+    in one instrument frame (a session naming another's) share it; the modes one a group (a
+    list), or the one group's mode."""
+    groups = list(dict.fromkeys(frame_session(rec, n) for n in rec.session_names))
+    modes = [session_measurement(rec, g).frame for g in groups]
+    modes = [m if m in FRAME_MODES else "auto" for m in modes]
+    if len(groups) == 1:
+        return None, modes[0]
+    index = {n: groups.index(frame_session(rec, n)) for n in rec.session_names}
+    return np.array([index[s] for s in rec.sessions]), modes
 
 
 #: The row a calib message names (its own numbering, 0-based, of the arrays it was given).
