@@ -138,6 +138,7 @@ def test_recordings_of_another_hexapod_work_the_same(effect, tmp_path):
     assert np.abs(diff[:, :3]).max() < 0.003  # mm
 
 
+@pytest.mark.slow
 def test_cli_names_fits_resimulates_and_logs(tmp_path, capsys):
     rec = effect_recording("joint_friction", 2)
     path, _ = write_recording(tmp_path / "friction.csv", rec)
@@ -230,6 +231,7 @@ def test_a_run_recording_with_few_calibration_rows_is_analysed_whole(tmp_path):
 FAR_FRAME = np.array([500.0, -300.0, 150.0, 0.4, -0.2, 0.3])  # 0.5 m away, turned 0.4 rad
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("robot", sorted(ROBOTS))
 @pytest.mark.parametrize("effect", ["none", "joint_friction"])
 def test_discovery_reads_a_recording_in_an_instrument_frame_as_the_run_does(robot, effect, tmp_path):

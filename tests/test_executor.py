@@ -212,6 +212,7 @@ def test_progress_display_on_a_terminal_and_in_a_log():
     assert len(log.getvalue().splitlines()) == 3
 
 
+@pytest.mark.slow
 def test_ctrl_c_at_the_terminal_stops_a_cluster_job_with_one_line(tmp_path):
     """Ctrl-C reaches the terminal's whole process group, the local cluster's workers included:
     they ignore it (started with SIGINT ignored), the job stops in the main process with exit 130

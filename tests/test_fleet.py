@@ -108,6 +108,7 @@ def test_fleet_on_a_cluster_prints_rows_and_dask_s_progress_on_stderr(fleet_fold
     assert sorted(line.split()[0] for line in lines if line.startswith("  [")) == ["[1/3]", "[2/3]", "[3/3]"]
 
 
+@pytest.mark.slow
 def test_interrupted_fleet_keeps_what_finished(fleet_folder, tmp_path):
     """Rows land as each machine finishes: a fleet stopped after two keeps them, and the rerun does the rest."""
     out = tmp_path / "out"

@@ -52,6 +52,7 @@ def check_law(found, terms, truth):
     return s
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(LAWS))
 def test_a_law_outside_the_library_is_proposed_with_its_constants_per_leg(name):
     terms, draw, law = LAWS[name]
@@ -175,6 +176,7 @@ def test_a_law_recording_is_the_machine_with_its_joints_moved_by_the_law(robot):
         np.testing.assert_allclose(largest, sim["law"]["largest_contribution_mm"], rtol=0.05)
 
 
+@pytest.mark.slow
 def test_a_proposed_law_is_kept_in_a_file_and_names_the_next_recording(tmp_path, capsys):
     """``pipeline.discover --law FILE`` keeps the law (refusing to overwrite), ``--use-law FILE``
     makes it a candidate effect: a second recording of the same law is explained by the kept law,

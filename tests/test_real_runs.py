@@ -132,6 +132,7 @@ def two_session_recording(robot_name, path, seed, validation_rows):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("robot_name", sorted(ROBOTS))
 def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machine(robot_name, tmp_path):
     """pipeline.run --real on a recording of two sessions (the importer makes one per input file),
@@ -171,6 +172,7 @@ def test_two_sessions_in_frames_50_mm_and_a_degree_apart_calibrate_as_one_machin
                                   read_command_file(tmp_path / "base_cmd.csv")[1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("robot_name", sorted(ROBOTS))
 def test_two_sessions_without_validation_rows_get_a_crossvalidated_figure(robot_name, tmp_path):
     """pipeline.run --real on two sessions (frames 50 mm and 0.6 degree apart), every row a
@@ -204,6 +206,7 @@ def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
     assert cause == "unpredictable_rows" and "cannot predict the validation rows" in words
 
 
+@pytest.mark.slow
 def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monkeypatch):
     """A hexapod recording of 80 calibration rows (kinematic model, a machine drawn from the
     default prior, 1 um / 1 urad normal noise), 3 rows at z = 1000 mm, run as recorded and with

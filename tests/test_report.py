@@ -238,6 +238,7 @@ def discovery_run(tmp_path_factory):
     return out, report.summary
 
 
+@pytest.mark.slow
 def test_the_discovery_report_holds_the_effects_and_figures(discovery_run, tmp_path):
     out, s = discovery_run
     text = (out / "fr.html").read_text()

@@ -208,6 +208,7 @@ def test_discovery_file_marks_flagged_rows(tmp_path):
     assert "/per_row/rms_um/flagged" in rrd_entities(rrd)
 
 
+@pytest.mark.slow
 def test_snapshot_renders_the_default_view_or_says_why_not(tmp_path, capsys, monkeypatch):
     import os
     import subprocess
@@ -266,6 +267,7 @@ def _different_pixels(a, b) -> float:
     return float(np.mean(np.abs(pa - pb).max(axis=2) > PIXEL_TOLERANCE))
 
 
+@pytest.mark.slow
 def test_files_of_two_robots_opened_together_keep_their_own_layouts(tmp_path):
     """A hexapod run file then a Delta run file opened in ONE viewer: distinct application ids,
     each file's blueprint its robot's (chain word, orientation view), and the viewer draws the
