@@ -185,6 +185,7 @@ class EffectRecord:
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
+        """The coefficients' names, in the effect's own order."""
         return tuple(c.name for c in self.coefficients)
 
     @classmethod
