@@ -27,7 +27,7 @@ from scipy.optimize import root
 from calib.calibration import Calibration
 from calib.effects import EFFECTS
 from calib.effects.granularity import per_chain_form
-from calib.effects.records import FittedEffect, effect_record
+from calib.effects.records import EffectRecord, FittedEffect
 from calib.robots import ROBOTS, default_robot
 from calib.workspace import reachable_poses
 from timing import best_time, print_table_head
@@ -45,7 +45,7 @@ def calibration(robot) -> tuple[Calibration, np.ndarray]:
     dead_band = FittedEffect(per_chain_form(EFFECTS["joint_friction"]), band, np.zeros(robot.n_chains))
     names = tuple(robot.free_default)
     cal = Calibration(robot=robot, theta=theta, std=np.zeros(robot.n_parameters), free=names,
-                      covariance=np.zeros((len(names), len(names))), records=(effect_record(dead_band, robot),))
+                      covariance=np.zeros((len(names), len(names))), effects=(EffectRecord.from_fitted(dead_band, robot),))
     return cal, band
 
 

@@ -1,9 +1,9 @@
 """The calibration: what a calibration found, one object from the fit to the controller.
 
 :class:`Calibration` bundles the robot, the identified parameters with their covariance, the
-instrument frames, the targets, the effects found (records, rebuilt as
-:class:`calib.effects.records.FittedEffect` objects), the validity domain, the declared noise and
-the provenance. ``pipeline.run`` and ``pipeline.discover`` make it; it gives the compensated
+instrument frames, the targets, the effects found (:class:`calib.effects.records.EffectRecord`
+objects, rebuilt as :class:`calib.effects.records.FittedEffect` ones by
+:meth:`Calibration.fitted_effects`), the validity domain, the declared noise and the provenance. ``pipeline.run`` and ``pipeline.discover`` make it; it gives the compensated
 commands (:meth:`Calibration.commands`), where the identified machine goes
 (:meth:`Calibration.predict`), and its deliveries (:meth:`Calibration.to_linuxcnc`,
 :meth:`Calibration.to_mjcf`, :meth:`Calibration.report`: plug-ins, :data:`DELIVERIES`).
@@ -20,8 +20,9 @@ which holds
   (``{"translation_mm", "rotation_rad"}``, with ``std``), empty when the data were in the base
   frame; ``targets``: the target offsets on the platform (mm) or null;
 - ``effects``: the effects found with their coefficients (a record each,
-  :mod:`calib.effects.records`: name, granularity, coefficients by name with std and unit,
-  searched parameter, and a law's terms for a proposed or kept law); empty for a run;
+  :meth:`calib.effects.records.EffectRecord.to_dict`: name, granularity, coefficients by name
+  with std and unit, searched parameter, a compliance's reference payload, and a law's terms for
+  a proposed or kept law); empty for a run;
 - ``validity``: the domain the calibration saw: pose box (``pose_min``/``pose_max`` by pose
   coordinate: the platform poses of the calibration rows in the base frame, by the identified
   model's forward kinematics, not what the instrument reported), joint ranges (``joint_min``/``joint_max``), time span ``t_s``;
@@ -51,8 +52,8 @@ from typing import Callable
 import numpy as np
 
 # calib.compensation and calib.effects.records (the effects' registry, SciPy's statistics behind
-# discovery) are imported where a calibration's effects are rebuilt or its commands computed:
-# writing a calibration file loads neither.
+# discovery) are imported where a calibration file is read, its effects rebuilt or its commands
+# computed: writing a calibration file loads neither (its effects' records write themselves).
 from .files import atomic_write, read_json_file
 from .measurement import frame_from_dict, frame_to_dict
 from .noise import SensorNoise
@@ -142,7 +143,9 @@ class Calibration:
         frames: ``{session: (6,) frame}``, each session's instrument frame (base frame: empty).
         frames_std: ``{session: (6,) std}``.
         targets: (K, 3) target offsets on the platform, mm, or None.
-        records: the effects found, as records (:func:`calib.effects.records.effect_record`).
+        effects: the effects found (:class:`calib.effects.records.EffectRecord`, each with its
+            granularity, coefficients with std and unit, searched parameter, law's terms);
+            :meth:`fitted_effects` rebuilds them.
         validity: the domain the calibration saw (``pose_min``, ``pose_max``, ``joint_min``,
             ``joint_max``: lists in the robot's order; ``t_s``: ``[first, last]``).
         noise: the declared noise of the recording.
@@ -159,7 +162,7 @@ class Calibration:
     frames: dict = field(default_factory=dict)
     frames_std: dict = field(default_factory=dict)
     targets: np.ndarray | None = None
-    records: tuple = ()
+    effects: tuple = ()
     validity: dict = field(default_factory=dict)
     noise: SensorNoise = field(default_factory=SensorNoise)
     recording: dict = field(default_factory=dict)
@@ -188,12 +191,15 @@ class Calibration:
         """
         return write_calibration(path, self, overwrite=overwrite)
 
-    def effects(self, channels: dict | None = None, where: str = "effects") -> list:
-        """The effects found, rebuilt (a law's recorded ``channels`` one value per row acted on)."""
-        from .effects.records import effect_from_record
+    def fitted_effects(self, channels: dict | None = None, where: str = "effects") -> list:
+        """The effects found, rebuilt (:meth:`calib.effects.records.EffectRecord.fitted`):
+        :class:`calib.effects.records.FittedEffect` s on the calibration's robot, a law bound to
+        its recorded ``channels`` (``{name: (N,)}``, one value per row acted on).
 
-        return [effect_from_record(d, self.robot, channels=channels, where=f"{where}[{k}]")
-                for k, d in enumerate(self.records)]
+        Raises:
+            ValueError: a record that does not fit the robot (names ``where[k]`` and the key).
+        """
+        return [e.fitted(self.robot, channels, where=f"{where}[{k}]") for k, e in enumerate(self.effects)]
 
     def to_dict(self) -> dict:
         """The calibration file's JSON object (see the module docstring)."""
@@ -211,7 +217,7 @@ class Calibration:
                 "measurement_frames": {s: {**frame_to_dict(f), "std": frame_to_dict(self.frames_std.get(s, np.zeros(6)))}
                                        for s, f in self.frames.items()},
                 "targets": None if self.targets is None else np.asarray(self.targets, dtype=float).tolist(),
-                "effects": list(self.records), "validity": self.validity}
+                "effects": [e.to_dict() for e in self.effects], "validity": self.validity}
 
 
     # ------------------------------------------------------------------ the machine
@@ -234,7 +240,7 @@ class Calibration:
             geometry_only: the identified geometry alone (the effects left out).
         """
         channels = dict(channels or {})
-        effects = [] if geometry_only else self.effects(channels=channels)
+        effects = [] if geometry_only else self.fitted_effects(channels)
         from .compensation import compensated_commands
 
         return compensated_commands(self.robot, self.theta, targets, effects, t_s=t_s, channels=channels,
@@ -284,7 +290,7 @@ class Calibration:
         channels = dict(channels)
         from .compensation import machine_poses
 
-        return machine_poses(self.robot, self.theta, joints, self.effects(channels=channels), t_s=t_s,
+        return machine_poses(self.robot, self.theta, joints, self.fitted_effects(channels), t_s=t_s,
                              channels=channels, previous=previous)
 
     # ------------------------------------------------------------------ deliveries
@@ -478,11 +484,17 @@ def read_calibration(path, robot: str | None = None) -> Calibration:
         raise CalibrationFileError(f"{path}: key 'declared_noise': {exc}") from None
     if not isinstance(d["effects"], list):
         raise CalibrationFileError(f"{path}: key 'effects': expected a list of effect records")
+    from .effects.records import EffectRecord
+
+    try:
+        effects = tuple(EffectRecord.from_dict(e, f"effects[{k}]") for k, e in enumerate(d["effects"]))
+    except ValueError as exc:
+        raise CalibrationFileError(f"{path}: key {exc}") from None
     cal = Calibration(robot=rob, theta=theta, std=std, free=free, covariance=cov, frames=frames, frames_std=frames_std,
-                      targets=targets, records=tuple(d["effects"]), validity=d["validity"], noise=noise,
+                      targets=targets, effects=effects, validity=d["validity"], noise=noise,
                       recording=d["recording"], produced_by=str(d["produced_by"]), source=path)
-    try:  # every record rebuilt once (a law's channels are not needed to check its terms)
-        cal.effects(where="effects")
+    try:  # every record rebuilt once on the robot (a law's channels are not needed to check its terms)
+        cal.fitted_effects(where="effects")
     except ValueError as exc:
         raise CalibrationFileError(f"{path}: key {exc}") from None
     _validity(cal, path)

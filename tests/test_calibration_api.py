@@ -27,7 +27,7 @@ from calib.compensation import COMPENSATION_TOLERANCE
 from calib.effects import EFFECTS, EffectData
 from calib.effects.compliance import LoadedCompliance
 from calib.effects.granularity import per_chain_form
-from calib.effects.records import FittedEffect, effect_record
+from calib.effects.records import EffectRecord, FittedEffect
 from calib.noise import SensorNoise
 from calib.robot import FORWARD_KINEMATICS_TOL_MM, pose_jacobian_of_joints
 from calib.robots import ROBOTS, default_robot
@@ -78,8 +78,8 @@ def made_calibration(robot, seed: int = 0) -> Calibration:
         covariance=a @ a.T * 1e-6, frames={"s1": frame, "s2": -frame}, frames_std={"s1": np.full(6, 1e-3),
                                                                                   "s2": np.full(6, 2e-3)},
         targets=rng.normal(size=(2, 3)) * 50.0,
-        records=tuple(effect_record(fe, robot, REFERENCE_PAYLOAD_KG if isinstance(fe.effect, LoadedCompliance)
-                                    else None) for fe in fitted),
+        effects=tuple(EffectRecord.from_fitted(fe, robot, REFERENCE_PAYLOAD_KG if isinstance(fe.effect, LoadedCompliance)
+                                               else None) for fe in fitted),
         validity=validity_domain(robot, poses, joints, np.linspace(0.0, 100.0, 60), theta),
         noise=SensorNoise(1e-3, 1e-6, "normal"), recording={"name": "made.csv", "sha256": "0" * 64},
         produced_by="tests/test_calibration_api.py")
@@ -129,7 +129,7 @@ def test_commands_are_the_numbers_pipeline_compensate_writes(written, tmp_path):
     assert commands.shape == (len(targets), cal.robot.n_chains)
     np.testing.assert_array_equal(commands, written_commands)
     side = json.loads((tmp_path / "commands.json").read_text())
-    assert sorted(side["compensated"]) == sorted(r["name"] for r in cal.records) and not side["not_compensated"]
+    assert sorted(side["compensated"]) == sorted(e.name for e in cal.effects) and not side["not_compensated"]
 
 
 def test_what_the_commands_leave_out_is_warned(written):
@@ -172,7 +172,7 @@ def test_predict_applies_a_dead_band_as_worked_out_here():
     band = np.linspace(2e-3, 4e-3, robot.n_chains)
     dead_band = FittedEffect(per_chain_form(EFFECTS["joint_friction"]), band, np.zeros(robot.n_chains))
     cal = Calibration(robot=robot, theta=cal.theta, std=cal.std, free=cal.free, covariance=cal.covariance,
-                      records=(effect_record(dead_band, robot),), validity=cal.validity)
+                      effects=(EffectRecord.from_fitted(dead_band, robot),), validity=cal.validity)
     targets, _, _ = targets_of(cal, 12)
     joints = robot.inverse_kinematics(cal.theta, targets)
     joints[4] = joints[3]  # a command unchanged keeps the last direction
@@ -232,10 +232,10 @@ def test_every_field_round_trips_through_the_file(written, tmp_path):
     for s in cal.frames:
         np.testing.assert_array_equal(back.frames[s], cal.frames[s])
         np.testing.assert_array_equal(back.frames_std[s], cal.frames_std[s])
-    assert list(back.records) == json.loads(json.dumps(list(cal.records))) and back.validity == cal.validity
+    assert back.effects == cal.effects and back.validity == cal.validity
     assert back.noise == cal.noise and back.recording == cal.recording and back.produced_by == cal.produced_by
     assert back.source == path and cal.source is None
-    for a, b in zip(back.effects(), cal.effects()):
+    for a, b in zip(back.fitted_effects(), cal.fitted_effects()):
         assert type(a.effect) is type(b.effect) and a.effect.granularity == b.effect.granularity
         np.testing.assert_array_equal(a.coefficients, b.coefficients)
     again = back.write(tmp_path / "again.calibration.json")

@@ -9,7 +9,7 @@ import pytest
 
 from calib.compensation import COMPENSATION_TOLERANCE, compensated_commands, effect_displacement
 from calib.effects import EFFECTS, EffectData, effects_for, per_chain_form
-from calib.effects.records import FittedEffect, effect_from_record, effect_record
+from calib.effects.records import EffectRecord, FittedEffect
 from calib.robots import ROBOTS, default_robot
 from pipeline.compensate import main as compensate_main
 from pipeline.formats import CALIBRATION_VERSION, read_calibration, read_command_file
@@ -47,7 +47,7 @@ def test_records_rebuild_the_same_effect(robot_name):
     shared = [FittedEffect(EFFECTS[fe.name], fe.coefficients[:len(EFFECTS[fe.name].coefficients(robot))],
                            fe.std[:len(EFFECTS[fe.name].coefficients(robot))], fe.extra) for fe in effects]
     for fe in effects + shared:
-        back = effect_from_record(json.loads(json.dumps(effect_record(fe, robot))), robot)
+        back = EffectRecord.from_dict(json.loads(json.dumps(EffectRecord.from_fitted(fe, robot).to_dict()))).fitted(robot)
         assert back.effect.granularity == fe.effect.granularity and back.name == fe.name
         np.testing.assert_array_equal(back.coefficients, fe.coefficients)
         np.testing.assert_array_equal(back.effect.joint_regressors(robot, data.theta, data, back.extra),
@@ -109,8 +109,8 @@ def test_a_proposed_law_is_compensated_through_the_command_line(tmp_path, capsys
     assert discover_main(["--real", str(tmp_path / "lag.csv"), "--no-resim", "--out", str(tmp_path)]) == 0
     cal_path = tmp_path / "lag_discover.calibration.json"
     cal = read_calibration(cal_path, "hexapod")
-    law = [d for d in cal.records if "law" in d]
-    assert len(law) == 1 and [t["key"] for t in law[0]["law"]["terms"]] == ["last move"]
+    law = [e for e in cal.effects if e.law is not None]
+    assert len(law) == 1 and [t.family.key for t in law[0].law.terms] == ["last move"]
     targets, t_s = heldout_targets(rec, 50, 1002)
     names = ["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"]
     (tmp_path / "targets.csv").write_text(",".join(names) + "\n" + "\n".join(",".join(repr(float(v)) for v in p)
@@ -167,7 +167,7 @@ BAD_FILES = {
                           "effects[0].name: 'magic'"),
     "a coefficient renamed": (lambda d: d["effects"].append({"name": "joint_friction", "granularity": "shared",
                                                              "coefficients": {"friction": 1e-3}, "std": {"friction": 0},
-                                                             "units": {}, "searched": None}),
+                                                             "units": {"friction": "mm"}, "searched": None}),
                               "effects[0].coefficients: expected the coefficients ['dead_band']"),
     "a parameter not a number": (lambda d: d["parameters"]["by_name"]["B1.x"].update(identified="x"),
                                  "parameters.by_name.B1.x"),
@@ -241,7 +241,7 @@ def test_a_run_calibration_file_reads_back_as_the_run_found_it(calibrated):
     np.testing.assert_array_equal(np.sqrt(np.diag(cal.covariance)), cal.std[free])  # the same numbers, as written
     assert np.all(cal.std[np.setdiff1d(np.arange(robot.n_parameters), free)] == 0)
     assert s["recording"]["sha256"] == hashlib.sha256((calibrated / "r.csv").read_bytes()).hexdigest()
-    assert cal.records == () and cal.frames == {} and cal.produced_by == "pipeline.run"
+    assert cal.effects == () and cal.frames == {} and cal.produced_by == "pipeline.run"
     with pytest.raises(ValueError, match="another robot"):
         read_calibration(calibrated / "r.calibration.json", "delta")
 
@@ -258,11 +258,11 @@ def test_a_compliance_found_at_two_payloads_is_compensated_at_each_targets_paylo
     assert e["summary"]["effects"] == ["compliance"] and e["compensation"].compensated == ("compliance",)
     assert e["physics"] <= 1.5 * e["floor"] and e["physics"] <= 0.5 * e["geometry"], e
     cal = e["calibration"]
-    (record,) = cal.records
-    assert record["reference_payload_kg"] == np.mean(rec.extras["payload_kg"])
-    assert any(name.startswith("payload_over_stiffness") for name in record["coefficients"])
+    (record,) = cal.effects
+    assert record.reference_payload_kg == np.mean(rec.extras["payload_kg"])
+    assert any(name.startswith("payload_over_stiffness") for name in record.coefficient_names)
     targets = rec.measured[:5]
-    c = compensated_commands(rec.robot, cal.theta, targets, cal.effects())
+    c = compensated_commands(rec.robot, cal.theta, targets, cal.fitted_effects())
     assert "payload_kg" in c.left_out["compliance"] and c.compensated == ()
 
 

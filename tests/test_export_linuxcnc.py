@@ -464,7 +464,7 @@ def _model_landing(cal, commands, targets, t_s):
     from calib.compensation import effect_displacement
     from calib.linuxcnc import joint_table_effects
 
-    held, _ = joint_table_effects(cal.effects())
+    held, _ = joint_table_effects(cal.fitted_effects())
     joints = commands + effect_displacement(cal.robot, cal.theta, held, commands, targets, t_s)
     return cal.robot.forward_kinematics(cal.theta, joints)
 

@@ -9,7 +9,7 @@ import pytest
 
 from calib.effects import EFFECTS
 from calib.effects.granularity import per_chain_form
-from calib.effects.records import FittedEffect, effect_record
+from calib.effects.records import EffectRecord, FittedEffect
 from calib.robots import default_robot
 from calib.robots.rus import RotaryHexapod
 from calib.rotation import euler_from_quaternion
@@ -32,7 +32,7 @@ def calibration(robot, theta, fitted=()):
     home = robot.home_pose[None]
     validity = validity_domain(robot, home, robot.inverse_kinematics(robot.table.nominal, home), [0.0])
     return Calibration(validity=validity, robot=robot, theta=np.asarray(theta, dtype=float), std=np.zeros(robot.n_parameters), free=free,
-                       covariance=np.eye(len(free)) * 1e-6, records=tuple(effect_record(fe, robot) for fe in fitted),
+                       covariance=np.eye(len(free)) * 1e-6, effects=tuple(EffectRecord.from_fitted(fe, robot) for fe in fitted),
                        recording={"name": "test.csv"}, produced_by="tests")
 
 
@@ -226,7 +226,7 @@ def test_pipeline_discover_writes_the_machine_with_its_effects(tmp_path, capsys)
     assert f"wrote {xml}" in capsys.readouterr().out
     cal = read_calibration(tmp_path / "hexapod_joint_friction_0_discover.calibration.json")
     assert xml.read_text() == mjcf_text(cal)
-    held = [r["name"] for r in cal.records]
+    held = [e.name for e in cal.effects]
     assert held and f"Effects held: {', '.join(held)}" in xml.read_text()
     again = ["--scenario", "joint_friction", "--no-resim", "--out", str(tmp_path / "again"), "--export-mjcf", str(xml)]
     assert discover_main(again) == 2  # the file exists: refused before the analysis, nothing written

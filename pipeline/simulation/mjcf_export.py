@@ -88,10 +88,10 @@ def _settings_of(fe, robot, context: MachineContext) -> dict | None:
 def _context(cal: Calibration) -> MachineContext:
     """The machine the effects' coefficients are turned into physics on: the robot's nominal
     machine (:func:`pipeline.simulation.machine_context`), carrying the payload a compliance fitted
-    at several payloads stands for (its record's ``reference_payload_kg``)."""
+    at several payloads stands for (its record's ``reference_payload_kg``, kg)."""
     context = machine_context(cal.robot)
-    payloads = [r["reference_payload_kg"] for r in cal.records if "reference_payload_kg" in r]
-    return context.with_payload(float(payloads[0])) if payloads else context
+    payloads = [e.reference_payload_kg for e in cal.effects if e.reference_payload_kg is not None]
+    return context.with_payload(payloads[0]) if payloads else context
 
 
 def identified_machine(cal: Calibration) -> IdentifiedMachine:
@@ -104,7 +104,7 @@ def identified_machine(cal: Calibration) -> IdentifiedMachine:
     robot = cal.robot
     context = _context(cal)
     held, not_held, drawn = [], {}, []
-    for fe in cal.effects():
+    for fe in cal.fitted_effects():
         s = _settings_of(fe, robot, context)
         if s is None:
             not_held[fe.name] = LAW_NOT_HELD
@@ -168,7 +168,7 @@ def _comment(cal: Calibration, options: MachineOptions, held: list, not_held: di
             lines.append("MuJoCo's frictionloss is a soft constraint: at rest a joint creeps through it to its target, "
                          "so the friction acts while the joints move but leaves no dead band at rest.")
     else:
-        lines.append("Effects held: none" + (" (the calibration found none)." if not cal.records else "."))
+        lines.append("Effects held: none" + (" (the calibration found none)." if not cal.effects else "."))
     if not_held:
         lines.append("Effects MuJoCo cannot hold, left out of this model: "
                      + "; ".join(f"{n} ({why})" for n, why in not_held.items()) + ".")

@@ -30,7 +30,7 @@ from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from calib.diagnosis import no_motion_words
 from mjcf.simulator import SettleError
-from calib.effects.records import effect_record, fitted_effects
+from calib.effects.records import EffectRecord, fitted_effects
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
                               read_json_file, read_recording, recording_checks, recording_source, summary_document,
@@ -513,7 +513,7 @@ def discovery_calibration(rec: Recording, report: DiscoveryReport, block: dict, 
     reference = None if payload is None else float(np.mean(payload[rows]))  # a compliance at several payloads
     return Calibration(robot=robot, theta=fit.theta, std=np.sqrt(np.clip(np.diag(cov), 0.0, None)), free=free,
                        covariance=cov[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
-                       records=tuple(effect_record(fe, robot, reference) for fe in fitted_effects(fit)),
+                       effects=tuple(EffectRecord.from_fitted(fe, robot, reference) for fe in fitted_effects(fit)),
                        validity=validity_domain(robot, rec.measured[rows], rec.joints[rows], rec.t_s[rows]),
                        noise=rec.noise, recording=source, produced_by="pipeline.discover")
 
@@ -625,13 +625,13 @@ def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict 
     calibration's effects): per target its data row, the pose and each joint's physics correction
     (command minus the geometry's joint, joint unit), what was compensated and what not (why).
     None without an effect found, or where the identified machine cannot reach the targets."""
-    if not cal.records:
+    if not cal.effects:
         return None
     robot = rec.robot
     rows = np.asarray(summary["heldout_per_row"]["rows"][:COMPENSATION_TARGETS], dtype=int) - 1
     channels = {k: v[rows] for k, v in rec.extras.items()}
     try:
-        comp = compensated_commands(robot, cal.theta, rec.measured[rows], cal.effects(channels=channels),
+        comp = compensated_commands(robot, cal.theta, rec.measured[rows], cal.fitted_effects(channels),
                                     t_s=rec.t_s[rows], channels=channels)
     except ValueError:  # KinematicsError: a target out of reach of the identified machine
         return None

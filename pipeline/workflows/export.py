@@ -179,7 +179,7 @@ def _names(robot) -> list[str]:
 def _hexapod(cal: Calibration, settings: ExportSettings) -> ExportReport:
     robot, source = cal.robot, Path(settings.calibration).name
     check_export_folder(settings.out, _names(robot), overwrite=settings.overwrite)
-    effects = cal.effects()
+    effects = cal.fitted_effects()
     held, _ = joint_table_effects(effects)
     geometry = genhex_geometry(robot, cal.theta)
     tables = comp_tables(robot, cal.theta, held, cal.validity["joint_min"], cal.validity["joint_max"], geometry.jmap)
@@ -216,7 +216,7 @@ def _projection_line(rms: float, mx: float, n: int) -> str:
 def _delta(cal: Calibration, settings: ExportSettings) -> ExportReport:
     robot, source, v = cal.robot, Path(settings.calibration).name, cal.validity
     check_export_folder(settings.out, _names(robot), overwrite=settings.overwrite)
-    effects = cal.effects()
+    effects = cal.fitted_effects()
     held, _ = joint_table_effects(effects)
     fit_poses = workspace_sample(robot, cal.theta, v["pose_min"], v["pose_max"], FIT_SAMPLE, FIT_SEED)
     geometry = rotarydelta_fit(robot, cal.theta, fit_poses)
