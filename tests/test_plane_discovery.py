@@ -4,7 +4,6 @@ errors of 1 to 3 mm, 0.3 mm / 1.5 mrad capture noise, a 5 mm tolerance declared 
 import json
 
 import numpy as np
-import pytest
 
 from calib.effects import EffectData
 from calib.noise import SensorNoise
