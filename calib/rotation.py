@@ -12,6 +12,7 @@ import numpy as np
 __all__ = [
     "rotation_matrix",
     "rotation_entries",
+    "length_pose_jacobian",
     "rotation_matrix_derivatives",
     "euler_from_matrix",
     "quaternion_from_euler",
@@ -66,6 +67,29 @@ def rotation_entries(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     R[1, 0], R[1, 1], R[1, 2] = sg * cb, sg * sbsa + cg * ca, sg * sbca - cg * sa
     R[2, 0], R[2, 1], R[2, 2] = -sb, cb * sa, cb * ca
     return R, c, s
+
+
+def length_pose_jacobian(u: np.ndarray, w: np.ndarray, R: np.ndarray, cos_gamma: np.ndarray,
+                         sin_gamma: np.ndarray) -> np.ndarray:
+    """(C, 6, N) the derivative of C lengths with respect to the platform pose, structure-of-arrays.
+
+    Each length runs along the unit vector ``u`` (3, C, N) to a platform point ``R P`` whose
+    rotated offset is ``w`` (3, C, N); ``R`` (3, 3, N) and the cosine and sine of gamma (N,) are
+    :func:`rotation_entries`'. With ``m = w x u``: ``d/d t = u``, ``d/d alpha = (R e_x) . m``,
+    ``d/d beta = (Rz e_y) . m``, ``d/d gamma = e_z . m`` (``dR/d alpha = R [e_x]x``,
+    ``dR/d beta = [Rz e_y]x R``, ``dR/d gamma = [e_z]x R``): a hexapod's legs, a 6-RUS's rods.
+    """
+    u0, u1, u2 = u
+    w0, w1, w2 = w
+    J = np.empty((u.shape[1], 6, u.shape[2]))
+    J[:, 0:3] = u.transpose(1, 0, 2)
+    mx = w1 * u2 - w2 * u1
+    my = w2 * u0 - w0 * u2
+    mz = w0 * u1 - w1 * u0
+    J[:, 3] = R[0, 0] * mx + R[1, 0] * my + R[2, 0] * mz
+    J[:, 4] = cos_gamma * my - sin_gamma * mx
+    J[:, 5] = mz
+    return J
 
 
 def _elementary(axis: int, t: np.ndarray, derivative: bool) -> np.ndarray:

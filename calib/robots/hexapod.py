@@ -15,7 +15,7 @@ import numpy as np
 from .. import paper
 from ..validation import as_array
 from ..robot import JOINT_RANGES_KEY, ClosureJacobians, Parameter, ParameterTable, Robot, checked_joint_ranges
-from ..rotation import rotation_entries, rotation_matrix
+from ..rotation import length_pose_jacobian, rotation_entries, rotation_matrix
 
 __all__ = ["Hexapod", "LEG_PARAMETERS", "DEFAULT_STROKE_MM", "paper_hexapod", "PAPER_WORKSPACE_HALF_WIDTHS",
            "FULL_WORKSPACE_OFFSETS"]
@@ -187,18 +187,9 @@ class Hexapod(Robot):
         if not (jacobian or parameters):
             return F, None, None
         u = L / norm  # (3, 6, N) unit leg vectors
-        u0, u1, u2 = u
         Jt = Jleg = None
         if jacobian:
-            Jt = np.empty((6, 6, n))
-            Jt[:, 0:3] = u.transpose(1, 0, 2)
-            w0, w1, w2 = w
-            mx = w1 * u2 - w2 * u1
-            my = w2 * u0 - w0 * u2
-            mz = w0 * u1 - w1 * u0
-            Jt[:, 3] = R[0, 0] * mx + R[1, 0] * my + R[2, 0] * mz
-            Jt[:, 4] = cg * my - sg * mx
-            Jt[:, 5] = mz
+            Jt = length_pose_jacobian(u, w, R, cg, sg)
         if parameters:
             Jleg = np.empty((6, 7, n))
             np.negative(u.transpose(1, 0, 2), out=Jleg[:, 0:3])

@@ -25,7 +25,7 @@ import numpy as np
 from ..validation import as_array
 from ..robot import (JOINT_RANGES_KEY, ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot,
                      checked_joint_ranges)
-from ..rotation import rotation_entries, rotation_matrix
+from ..rotation import length_pose_jacobian, rotation_entries, rotation_matrix
 
 __all__ = ["RotaryHexapod", "CHAIN_PARAMETERS", "CHAIN_UNITS", "WORKSPACE_HALF_WIDTHS",
            "JOINT_RANGE_RAD", "crank_frames", "default_rotary_hexapod"]
@@ -196,15 +196,7 @@ class RotaryHexapod(Robot):
         n0, n1, n2 = n
         Jt = Jc = dq = None
         if jacobian:
-            Jt = np.empty((6, 6, n.shape[2]))
-            Jt[:, 0:3] = n.transpose(1, 0, 2)
-            w0, w1, w2 = w
-            mx = w1 * n2 - w2 * n1
-            my = w2 * n0 - w0 * n2
-            mz = w0 * n1 - w1 * n0
-            Jt[:, 3] = R[0, 0] * mx + R[1, 0] * my + R[2, 0] * mz
-            Jt[:, 4] = p["cos_gamma"] * my - p["sin_gamma"] * mx
-            Jt[:, 5] = mz
+            Jt = length_pose_jacobian(n, w, R, p["cos_gamma"], p["sin_gamma"])
         if parameters:
             r = p["r"][:, None]
             nu, nv, na = (np.einsum("iln,li->ln", n, p[k]) for k in ("u", "v", "a"))
