@@ -32,3 +32,11 @@ def dask_two_workers():
 
     with dask_client(2) as client:
         yield client
+
+
+def pytest_collection_modifyitems(config, items):
+    """The modules holding slow tests first, each module's tests kept together and in their order:
+    under pytest-xdist (``--dist worksteal``) the long tests start first and the short ones fill the
+    other cores' time at the end, instead of one long test running alone last."""
+    slow_modules = {item.module.__name__ for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.module.__name__ not in slow_modules)

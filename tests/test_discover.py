@@ -31,14 +31,6 @@ SEEDS = range(2)
 BLIND_WORKERS = 1
 
 
-@pytest.fixture(scope="module")
-def blind():
-    """Seeded recordings per effect and for none, each analysed as it is, with its effect left
-    out of the candidates, and with three gross rows added; discovery is not told the truth."""
-    return run_blind_suite(None, SEEDS, robot="hexapod", kinds=("single", "leave_one_out", "gross3"),
-                           workers=BLIND_WORKERS)
-
-
 def _failures(results, criterion):
     return [(r["kind"], r["effects"], r["seed"], r["named"], r["explained"], r["follows"][:3], r["flagged"])
             for r in results if not r["criteria"].get(criterion, True)]
@@ -46,28 +38,32 @@ def _failures(results, criterion):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", HEXAPOD_EFFECTS)
-def test_blind_single_effect_is_named_and_explained(blind, effect):
-    rs = [r for r in blind if r["kind"] == "single" and r["effects"] == ([] if effect == "none" else [effect])]
-    assert len(rs) == len(SEEDS)
-    assert all(60 <= r["rows"] <= 120 for r in rs)
-    assert all(3 <= m <= 10 for r in rs for m in r["magnitude_noise"].values())  # concealed: 3-10 x the noise
-    assert not _failures(rs, "named")
-    for r in rs:
+def test_blind_recordings_of_one_effect(effect):
+    """Seeded recordings with this effect (or none), each analysed as it is, with its effect left
+    out of the candidates, and with three gross rows added; discovery is not told the truth. One
+    test an effect, so that pytest-xdist spreads the recordings over the cores."""
+    rs = run_blind_suite((effect,), SEEDS, robot="hexapod", kinds=("single", "leave_one_out", "gross3"),
+                         workers=BLIND_WORKERS)
+    truth = [] if effect == "none" else [effect]
+    assert all(r["effects"] == truth for r in rs)
+    # Analysed as it is: named and explained.
+    single = [r for r in rs if r["kind"] == "single"]
+    assert len(single) == len(SEEDS)
+    assert all(60 <= r["rows"] <= 120 for r in single)
+    assert all(3 <= m <= 10 for r in single for m in r["magnitude_noise"].values())  # concealed: 3-10 x the noise
+    assert not _failures(single, "named")
+    for r in single:
         assert r["heldout_after_mm"] <= 1.5 * r["noise_floor_mm"], r
-
-
-@pytest.mark.slow
-def test_blind_effect_left_out_is_unknown_and_the_remainder_points_at_what_it_follows(blind):
-    rs = [r for r in blind if r["kind"] == "leave_one_out"]
-    assert {r["left_out"] for r in rs} == set(HEXAPOD_EFFECTS) - {"none"}
-    assert not _failures(rs, "unknown")
-    assert not _failures(rs, "points")
-
-
-@pytest.mark.slow
-def test_blind_rows_isolated_gross_rows_flagged_and_systematic_rows_kept(blind):
-    assert not _failures(blind, "rows")  # <= 2% without gross rows; exactly the three gross rows
-    assert not _failures(blind, "consistent")
+    # Its effect left out of the candidates: said to be unknown, the remainder pointing at what it follows.
+    left_out = [r for r in rs if r["kind"] == "leave_one_out"]
+    assert [r["left_out"] for r in left_out] == ([] if effect == "none" else [effect] * len(SEEDS))
+    assert not _failures(left_out, "unknown")
+    assert not _failures(left_out, "points")
+    # Rows: <= 2% flagged without gross rows; exactly the three gross rows where they were added
+    # (to the recordings with an effect).
+    assert len([r for r in rs if r["kind"] == "gross3"]) == (0 if effect == "none" else len(SEEDS))
+    assert not _failures(rs, "rows")
+    assert not _failures(rs, "consistent")
 
 
 @pytest.mark.slow
