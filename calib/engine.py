@@ -336,12 +336,16 @@ def _chain_groups(robot: Robot, idx: np.ndarray) -> list[tuple[np.ndarray, np.nd
     return [(np.array([c for c, _ in g]), np.array([ix for _, ix in g])) for g in groups.values()]
 
 
-def _chain_systems(J: np.ndarray, r: np.ndarray, w: np.ndarray | None, chains: np.ndarray,
+def _chain_systems(jac: ClosureJacobians, r: np.ndarray, w: np.ndarray | None, chains: np.ndarray,
                    params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The weighted chain-wise systems of one group: ``A`` (M, N, K) C-ordered, one chain's
-    ``J[:, c, ix] * w[:, c, None]`` per slice, and ``b`` (M, N), ``r[:, c] * w[:, c]``
+    ``J[:, c, ix] * w[:, c, None]`` per slice (``J`` the closure's parameter Jacobian, gathered
+    from its own entries where the robot gives them), and ``b`` (M, N), ``r[:, c] * w[:, c]``
     (``w`` None: unweighted)."""
-    A = J[:, chains[:, None], params]  # (N, M, K), a copy
+    if jac.own is not None and np.array_equal(jac.chains[params], np.broadcast_to(chains[:, None], params.shape)):
+        A = jac.own[:, params]  # (N, M, K), a copy: chain m's closure by its own parameters
+    else:
+        A = jac.parameters[:, chains[:, None], params]  # (N, M, K), a copy
     A = np.ascontiguousarray(np.moveaxis(A, 1, 0) if w is None else np.moveaxis(A * w[:, chains, None], 1, 0))
     b = r[:, chains].T if w is None else (r[:, chains] * w[:, chains]).T
     return A, b
@@ -414,7 +418,7 @@ def _chain_evaluation(robot, theta, joints, measured, groups, w, noise=None) -> 
         if std is not None:
             std[rows] = _closure_std(robot, jac, noise)
         for (chains, params), (gram, g) in zip(groups, systems):
-            A, b = _chain_systems(jac.parameters, rb, None if w is None else w[rows], chains, params)
+            A, b = _chain_systems(jac, rb, None if w is None else w[rows], chains, params)
             gram += np.swapaxes(A, 1, 2) @ A
             g += np.einsum("mnk,mn->mk", A, b)
     return _ChainEvaluation(r, offset, systems, std)
@@ -428,7 +432,7 @@ def _chain_factors(robot, theta, joints, measured, chains, params, w) -> np.ndar
     R = None
     for rows in _row_blocks(joints.shape[0]):
         rb, jac = robot.closure_with_jacobians(theta, joints[rows], measured[rows])
-        A, b = _chain_systems(jac.parameters, rb, None if w is None else w[rows], chains, params)
+        A, b = _chain_systems(jac, rb, None if w is None else w[rows], chains, params)
         R = triangular_update(R, np.concatenate([A, b[:, :, None]], axis=2))
     return R
 
@@ -624,13 +628,16 @@ SIMULTANEOUS_NEWTON_STEPS = 12
 OWNERS_CHECK_ROWS = 256
 
 
-def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray | None:
+def _chain_owners(robot, jac: ClosureJacobians, idx: np.ndarray) -> np.ndarray | None:
     """(K,) the chain each free parameter ``idx`` belongs to (``robot.table.chains``), where the
-    parameter Jacobian ``parameters`` (B, C, P) of some rows shows each chain's closure moved by
-    its own parameters alone (every other entry exactly zero: what the chain-wise fit assumes);
-    else None (a robot whose closures share parameters: the forward fit then takes the dense
-    product)."""
+    closure Jacobians ``jac`` of some rows declare (``own``) or show (the dense (B, C, P)
+    ``parameters``) each chain's closure moved by its own parameters alone (every other entry
+    exactly zero: what the chain-wise fit assumes); else None (a robot whose closures share
+    parameters: the forward fit then takes the dense product)."""
     owners = np.asarray(robot.table.chains)[idx]
+    if jac.own is not None and np.array_equal(jac.chains, robot.table.chains):
+        return owners
+    parameters = jac.parameters
     others = np.ones((parameters.shape[1], idx.size), dtype=bool)
     others[owners, np.arange(idx.size)] = False
     chains, columns = np.nonzero(others)
@@ -642,12 +649,13 @@ def _chain_owners(robot, parameters: np.ndarray, idx: np.ndarray) -> np.ndarray 
 CHAIN_PRODUCT_ROWS = 512
 
 
-def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np.ndarray, idx: np.ndarray,
+def _forward_normal_equations(columns: np.ndarray, jac: ClosureJacobians, e: np.ndarray, idx: np.ndarray,
                               owners: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """``(J^T J (K, K), J^T e (K,))`` of a block of B rows of the whitened forward residual, its
     Jacobian ``J = W M dF/dtheta`` not formed: ``columns`` (C, D, B) the whitened inverse pose
-    Jacobians column by column (``columns[c, :, n]`` column c of ``W_n M_n``), ``parameters``
-    (B, C, P) ``dF/dtheta``, ``e`` (B, D) the whitened residual.
+    Jacobians column by column (``columns[c, :, n]`` column c of ``W_n M_n``), ``jac`` the
+    block's closure Jacobians (``dF/dtheta`` (B, C, P) its ``parameters``, or its ``own`` entries),
+    ``e`` (B, D) the whitened residual.
 
     With ``owners`` (:func:`_chain_owners`) parameter k moves closure ``owners[k]`` alone, by
     ``v[n, k]``: row n's share of ``J^T J`` is ``(v v^T) * S[owners][:, owners]`` with ``S =
@@ -658,9 +666,10 @@ def _forward_normal_equations(columns: np.ndarray, parameters: np.ndarray, e: np
     each). None: the (D B, K) Jacobian of the block, formed densely."""
     k = idx.size
     if owners is None:
-        jt = np.einsum("cin,nck->kin", columns, parameters[:, :, idx]).reshape(k, -1)
+        jt = np.einsum("cin,nck->kin", columns, jac.parameters[:, :, idx]).reshape(k, -1)
         return jt @ jt.T, jt @ e.T.ravel()
-    vt = np.ascontiguousarray(parameters[:, owners, idx].T)  # (K, B)
+    # (K, B): each free parameter's entry in its own chain's closure
+    vt = np.ascontiguousarray((jac.parameters[:, owners, idx] if jac.own is None else jac.own[:, idx]).T)
     if columns.shape[2] < CHAIN_PRODUCT_ROWS:  # few rows: the Jacobian's rows, three calls
         jt = np.take(columns, owners, axis=0)  # (K, D, B)
         jt *= vt[:, None, :]
@@ -706,7 +715,7 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
             p[rows] -= np.einsum("cin,nc->ni", inverses[block], r)
         r, jac = robot.closure_with_jacobians(theta, q, p[rows])
         if not structure:
-            structure.append(_chain_owners(robot, jac.parameters, idx))
+            structure.append(_chain_owners(robot, jac, idx))
         factors = BatchedLU(jac.pose, inverse=True)
         np.subtract(p[rows], factors.solve(r), out=newton[rows])
         largest = max(largest, float(np.max(np.abs(r))))
@@ -720,7 +729,7 @@ def _newton_pass(robot, theta, joints, measured, p, idx, white, white_columns, n
             condition_bound = np.sqrt(np.einsum("nij,nij,j->n", jac.pose, jac.pose, column_scale ** 2)
                                       * np.einsum("jin,jin,i->n", inverse, inverse, column_scale ** -2))  # >= cond_2
             regular = regular and bool(np.all(condition_bound < SINGULAR_CONDITION))
-        block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac.parameters, e,
+        block_gram, block_gradient = _forward_normal_equations(white_columns(inverse, rows), jac, e,
                                                                idx, structure[0])
         gram += block_gram
         gradient += block_gradient

@@ -129,22 +129,41 @@ class ParameterTable:
         return np.array([u == "rad" for u in self.units])
 
 
-@dataclass(frozen=True, eq=False)
 class ClosureJacobians:
     """Derivatives of the closure residuals ``F`` (N, C) at N configurations.
 
     Attributes:
         pose: (N, C, D) ``dF_i / d pose_k``; mm/mm for positions, mm/rad for angles.
         joints: (N, C, C) ``dF_i / d q_k`` (diagonal for these mechanisms), mm per joint unit.
-        parameters: (N, C, P) ``dF_i / d theta_k``, mm per parameter unit.
+        parameters: (N, C, P) ``dF_i / d theta_k``, mm per parameter unit; where the robot gives
+            ``own``, built from it on first use (zeros off each parameter's own chain).
+        own: (N, P) or None. Where each chain's closure moves with its own parameters alone
+            (``chains[k]`` the chain of parameter k, the parameter table's ``chains``): parameter
+            k's derivative of its own chain's closure, ``dF_{chains[k]} / d theta_k``, every other
+            entry of ``parameters`` being zero. None: ``parameters`` given densely, structure not
+            declared.
 
     The arrays may be read-only views (the hexapod's ``joints`` is ``-I`` broadcast): copy
     before writing.
     """
 
-    pose: np.ndarray
-    joints: np.ndarray
-    parameters: np.ndarray
+    __slots__ = ("pose", "joints", "own", "chains", "_parameters")
+
+    def __init__(self, pose: np.ndarray, joints: np.ndarray, parameters: np.ndarray | None = None, *,
+                 own: np.ndarray | None = None, chains: np.ndarray | None = None):
+        if (parameters is None) == (own is None) or (own is not None and chains is None):
+            raise ValueError("give the dense parameters, or own with the parameters' chains")
+        self.pose, self.joints, self.own, self.chains = pose, joints, own, chains
+        self._parameters = parameters
+
+    @property
+    def parameters(self) -> np.ndarray:
+        if self._parameters is None:
+            n, p = self.own.shape
+            dense = np.zeros((n, self.pose.shape[1], p))
+            dense[:, self.chains, np.arange(p)] = self.own
+            self._parameters = dense
+        return self._parameters
 
 
 class Robot(ABC):
@@ -529,31 +548,38 @@ def pose_jacobian_of_parameters(robot: Robot, theta: np.ndarray, joints: np.ndar
     ``d pose / d theta = -(dF / d pose)^-1 dF / d theta``.
     """
     jac = robot.closure_jacobians(theta, joints, poses)
-    out = solve_closure_parameters(robot, jac.pose, jac.parameters)
+    out = solve_closure_parameters(robot, jac)
     return np.negative(out, out=out)
 
 
-def solve_closure_parameters(robot: Robot, pose: np.ndarray, parameters: np.ndarray) -> np.ndarray:
+def solve_closure_parameters(robot: Robot, jac: ClosureJacobians) -> np.ndarray:
     """(N, D, P) ``pose^-1 parameters`` of a :class:`ClosureJacobians`' (N, C, D) ``pose`` and (N,
     C, P) ``parameters`` blocks (``numpy.linalg.solve``'s result, to rounding).
 
     Where, as every robot here has it, each closure involves only its own chain's parameters
-    (``parameters[:, i, k]`` zero unless parameter k belongs to chain i, checked by counting the
-    nonzero entries), column k is chain c's column of the inverse times ``parameters[:, c, k]``: one
-    (N, C, C) inverse instead of a solve with P right-hand sides (the 6-RUS's 66: 8 times fewer
-    flops, and no LAPACK call per right-hand side; the inverse by :func:`calib.batched_lu.inverse_stacked`).
-    Otherwise :func:`calib.batched_lu.solve_stacked`.
+    (``jac.own`` given, or ``parameters[:, i, k]`` zero unless parameter k belongs to chain i,
+    checked by counting the nonzero entries), column k is chain c's column of the inverse times
+    parameter k's own entry: one (N, C, C) inverse instead of a solve with P right-hand sides (the
+    6-RUS's 66: 8 times fewer flops, and no LAPACK call per right-hand side; the inverse by
+    :func:`calib.batched_lu.inverse_stacked`). Otherwise :func:`calib.batched_lu.solve_stacked`.
 
     Raises:
         numpy.linalg.LinAlgError: a singular ``pose`` block.
     """
-    n, c, _ = parameters.shape
+    pose = jac.pose
     chains = robot.table.chains
-    if pose.shape[1] != pose.shape[2] or chains.size != parameters.shape[2] or c != robot.n_chains:
-        return solve_stacked(pose, parameters)
-    own = parameters[:, chains, np.arange(chains.size)]  # (N, P): each column's own chain's entry
-    if np.count_nonzero(parameters) != np.count_nonzero(own):
-        return solve_stacked(pose, parameters)
+    c = pose.shape[1]
+    if pose.shape[1] != pose.shape[2] or c != robot.n_chains:
+        return solve_stacked(pose, jac.parameters)
+    own = jac.own
+    if own is None or not np.array_equal(jac.chains, chains):
+        parameters = jac.parameters
+        if chains.size != parameters.shape[2]:
+            return solve_stacked(pose, parameters)
+        own = parameters[:, chains, np.arange(chains.size)]  # (N, P): each column's own chain's entry
+        if np.count_nonzero(parameters) != np.count_nonzero(own):
+            return solve_stacked(pose, parameters)
+    n = own.shape[0]
     inverse = inverse_stacked(pose)
     k = chains.size // c
     if k * c == chains.size and np.array_equal(chains, np.repeat(np.arange(c), k)):

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import calib.engine as engine
+from calib.robot import ClosureJacobians
 from calib.engine import identify_chainwise, identify_forward
 from calib.noise import SensorNoise
 from calib.observability import identification_jacobian
@@ -168,9 +169,51 @@ def test_chain_owners_are_the_parameter_tables_chains(name):
     parameter Jacobian with one entry of another chain's parameter set gives None."""
     robot, joints, measured, _ = _data(name, n=30)
     idx = np.arange(robot.n_parameters)
-    P = robot.closure_jacobians(robot.table.nominal, joints, measured).parameters
-    np.testing.assert_array_equal(engine._chain_owners(robot, P, idx), robot.table.chains)
+    jac = robot.closure_jacobians(robot.table.nominal, joints, measured)
+    np.testing.assert_array_equal(engine._chain_owners(robot, jac, idx), robot.table.chains)
+    # The dense Jacobian alone (no declared structure) shows the same owners...
+    dense = ClosureJacobians(jac.pose, jac.joints, jac.parameters.copy())
+    np.testing.assert_array_equal(engine._chain_owners(robot, dense, idx), robot.table.chains)
+    # ... and one entry of another chain's parameter set breaks them.
     other = (int(robot.table.chains[0]) + 1) % robot.n_chains
-    P = P.copy()
-    P[3, other, 0] = 1e-300
-    assert engine._chain_owners(robot, P, idx) is None
+    dense.parameters[3, other, 0] = 1e-300
+    assert engine._chain_owners(robot, dense, idx) is None
+
+
+def test_declared_own_entries_make_the_dense_parameter_jacobian():
+    """The hexapod and the 6-RUS give their closures' own entries (``ClosureJacobians.own``, the
+    dense Jacobian built on first use): the own entry on each parameter's chain, zero elsewhere,
+    and the fits that read ``own`` give what they give from the dense Jacobian alone (the finite
+    differences of the dense Jacobian are tests/test_robot_contract.py's)."""
+    for name in ("hexapod", "rus"):
+        robot, joints, measured, noise = _data(name, n=30)
+        jac = robot.closure_jacobians(robot.table.nominal, joints, measured)
+        assert jac.own is not None, name
+        np.testing.assert_array_equal(jac.chains, robot.table.chains)
+        P, k = jac.parameters, np.arange(robot.n_parameters)
+        np.testing.assert_array_equal(P[:, robot.table.chains, k], jac.own)
+        off = np.ones(P.shape[1:], dtype=bool)
+        off[robot.table.chains, k] = False
+        assert not np.any(P[:, off])
+
+
+@pytest.mark.parametrize("name", ("hexapod", "rus"))
+def test_fits_reading_the_own_entries_equal_the_fits_on_the_dense_jacobian(name, monkeypatch):
+    """The forward and chain-wise fits (and the pose Jacobians of the parameters) read the
+    closures' own entries where the robot gives them: the same numbers, to the bit, as from the
+    dense parameter Jacobian alone (the same entries, gathered from another array)."""
+    robot, joints, measured, noise = _data(name)
+    own = (identify_forward(robot, joints, measured, noise), identify_chainwise(robot, joints, measured, noise))
+    original = type(robot).closure_with_jacobians
+
+    def dense_only(self, theta, q, poses):
+        r, jac = original(self, theta, q, poses)
+        return r, ClosureJacobians(jac.pose, jac.joints, jac.parameters)
+
+    monkeypatch.setattr(type(robot), "closure_with_jacobians", dense_only)
+    assert robot.closure_jacobians(robot.table.nominal, joints[:3], measured[:3]).own is None
+    dense = (identify_forward(robot, joints, measured, noise), identify_chainwise(robot, joints, measured, noise))
+    for a, b in zip(own, dense):
+        assert a.iterations == b.iterations
+        np.testing.assert_array_equal(a.theta, b.theta)
+        np.testing.assert_array_equal(a.covariance, b.covariance)

@@ -238,14 +238,14 @@ class RotaryHexapod(Robot):
                                poses: np.ndarray) -> tuple[np.ndarray, ClosureJacobians]:
         F, Jt, Jc, dq = self._chains(theta, joints, poses, jacobian=True, parameters=True)
         n_rows = F.shape[1]
-        Jtheta = np.zeros((n_rows, 6, 6, len(CHAIN_PARAMETERS)))
         idx = np.arange(6)
-        Jtheta[:, idx, idx] = Jc.transpose(2, 0, 1)
         Jq = np.zeros((n_rows, 6, 6))
         Jq[:, idx, idx] = dq.T
-        # contiguous: LAPACK's batched inverse and solve take it faster than the view
+        # contiguous: LAPACK's batched inverse and solve take it faster than the view. Each
+        # chain's closure moves with its own parameters alone (the table's chain by chain order):
+        # the (N, P) own entries, the dense (N, 6, P) built only where asked for.
         return F.T, ClosureJacobians(pose=np.ascontiguousarray(Jt.transpose(2, 0, 1)), joints=Jq,
-                                     parameters=Jtheta.reshape(n_rows, 6, -1))
+                                     own=Jc.transpose(2, 0, 1).reshape(n_rows, -1), chains=self.table.chains)
 
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, 6) motor angles, rad, wrapped to (-pi, pi].
