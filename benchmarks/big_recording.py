@@ -91,11 +91,12 @@ def main() -> None:
     print(f"pipeline.run --real: {wall:.2f} s process wall time (its own wall_time_s {s['wall_time_s']:.2f} s)")
     for k, v in s["wall_time_split_s"].items():
         print(f"  {k:>24}: {v:.3f} s")
-    for key in ("crossvalidation", "gross_rows", "outliers", "checks", "observability_scheme", "rerun"):
+    for key in ("crossvalidation", "gross_rows", "outliers", "checks", "diagnosis", "observability_scheme", "rerun"):
         block = s.get(key)
         if isinstance(block, dict):
             print(f"  {key}: " + "; ".join(f"{k}={v}" for k, v in block.items()
-                                           if k in ("scheme", "search", "form", "screen", "poses_logged")))
+                                           if k in ("scheme", "search", "form", "screen", "poses_logged", "excitation", "rows")
+                                           and isinstance(v, str)))
     rrd = Path(s["rrd"])
     print(f"  .rrd: {rrd.stat().st_size / 1e6:.2f} MB")
     if args.snapshot:

@@ -115,8 +115,10 @@ def _configurations(robot: Robot, theta, poses, joints, name: str = "poses"):
 
 def _whitened_jacobian(robot: Robot, theta, poses, joints, noise, idx) -> np.ndarray:
     """(N, D, F) ``W d pose / d theta_free``."""
-    winv = pose_whitening(robot, theta, joints, poses, noise)
     J = pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]
+    if not noise.joint_std > 0:  # the same diagonal whitening for every pose: a product, the einsum's numbers
+        return J * (1.0 / noise.pose_std(robot.pose_units))[None, :, None]
+    winv = pose_whitening(robot, theta, joints, poses, noise)
     return np.einsum("nij,njk->nik", winv, J)
 
 
@@ -417,22 +419,26 @@ def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joi
         var[touched] = np.inf
     with np.errstate(divide="ignore"):
         cond = float(s[0] / s[-1]) if s[-1] > tol else float("inf")
-        norms = np.linalg.norm(A, axis=0)
-        An = A / np.where(norms > 0, norms, 1.0)
-        ss = np.linalg.svd(An if R is None else R * (scale / np.where(norms > 0, norms, 1.0)), compute_uv=False)
+        # A's column norms are R's times the scale (As = Q R): no pass over the N D rows for them
+        norms = np.linalg.norm(A, axis=0) if R is None else np.linalg.norm(R, axis=0) * scale
+        unit = np.where(norms > 0, norms, 1.0)
+        ss = np.linalg.svd(A / unit if R is None else R * (scale / unit), compute_uv=False)
         scond = float(ss[0] / ss[-1]) if (ss.size == n_free and ss[-1] > rank_rtol * ss[0]) else float("inf")
         logs = np.log(np.where(s > 0, s, 1.0))
         o1 = float(np.exp(logs.mean()) / np.sqrt(m)) if rank == n_free else 0.0
     smin = float(s[-1]) if rank == n_free else 0.0
     indices = np.array(idx)
     indices.setflags(write=False)
+    A.setflags(write=False)  # made here, held by nobody else: read-only without a copy
+    # A^T A from the triangle where there is one (A = Q R D_scale): equal to rounding, no pass over the rows
+    fisher = A.T @ A if R is None else (R * scale).T @ (R * scale)
     return ObservabilityAnalysis(
         names=names, units=tuple(robot.table.units[i] for i in idx), indices=indices,
         n_parameters=robot.n_parameters, scale=frozen_array(scale), n_poses=poses.shape[0], noise=noise,
-        jacobian=frozen_array(A), singular_values=frozen_array(s), right_singular_vectors=frozen_array(Vt),
+        jacobian=A, singular_values=frozen_array(s), right_singular_vectors=frozen_array(Vt),
         rank=rank, condition_number=cond, scaled_condition_number=scond, o1=o1,
         o2=smin / float(s[0]) if s[0] > 0 else 0.0, o3=smin, o4=smin ** 2 / float(s[0]) if s[0] > 0 else 0.0,
-        fisher=frozen_array(A.T @ A), crb=frozen_array(crb), crb_std=frozen_array(np.sqrt(var)),
+        fisher=frozen_array(fisher), crb=frozen_array(crb), crb_std=frozen_array(np.sqrt(var)),
         not_identifiable=not_identifiable,
     )
 

@@ -100,7 +100,10 @@ class GrossRowResult:
         gross: 0-based indices (into the input arrays) of the rows named gross, ascending.
         kept: (N,) bool, the rows the fit used (False for gross rows).
         statistic: (N,) each row's leverage-corrected statistic against ``fit`` (dimensionless,
-            chi-square(M) at the declared noise: module doc); NaN where not computed.
+            chi-square(M) at the declared noise: module doc); NaN where not computed. Above
+            :data:`SEARCH_MAX_ROWS` rows, a row outside the subsample's fit whose plain statistic
+            is within the cutoff keeps the plain one (the correction of a row left out can only
+            lower it: the judgement is the same; its Jacobian is not computed).
         residuals: (N, M) each row's whitened residual against ``fit`` (dimensionless).
         cutoff: the chi-square(M) ``1 - alpha`` quantile a gross row exceeds.
         dof: M, the coordinates of a row.
@@ -246,15 +249,25 @@ def _subsampled(problem: _Problem, mode: str, alpha: float, random_starts: int, 
     counter = _Counter()
     counter.fits, counter.failed = found.fits, found.failed_subsets
     fit = found.fit
+    # Full poses in the base frame: the measured poses start the forward kinematics (a few Newton
+    # steps where the home pose needs many); the same poses to its tolerance.
+    start = problem.measured if problem.targets is None and not found.frame_estimated else None
     try:
         white, poses = whitened_residuals(problem.robot, fit.result.theta, problem.joints, problem.measured,
-                                          problem.noise, frame=fit.frame, targets=fit.targets)
+                                          problem.noise, frame=fit.frame, targets=fit.targets, initial=start)
     except (ValueError, np.linalg.LinAlgError) as exc:  # a row the subsample's model cannot reach
         return _widened(found, n, sub, form, success=False,
                         message=f"{found.message}; the rows outside the subsample could not be judged: {exc}")
     stat = np.sum(white ** 2, axis=1)
     state = _State(rows=sub[found.kept], fit=fit, white=white, stat=stat, poses=poses)
-    judged = _judged(problem, found.frame_estimated, state) if np.all(np.isfinite(stat)) else stat
+    # The leverage correction of a row left out of the fit, r^T (I + H_jj)^-1 r, is at most its
+    # plain statistic (H_jj is positive semi-definite): a row outside the fit whose plain statistic
+    # is within the cutoff is kept whatever its leverage, and only the fit's rows and the others
+    # above the cutoff need their hat-matrix blocks (the Jacobian of those rows alone).
+    inside = np.zeros(n, bool)
+    inside[state.rows] = True
+    judge = np.flatnonzero(inside | (stat > found.cutoff))
+    judged = _judged(problem, found.frame_estimated, state, judge) if np.all(np.isfinite(stat)) else stat
     kept = judged <= found.cutoff
     trimmed = tuple(int(sub[i]) for i in found.trimmed_rows)
     common = dict(statistic=judged, residuals=white, cutoff=found.cutoff, dof=found.dof, fit=fit,
@@ -450,29 +463,40 @@ def _trimmed_fit(problem: _Problem, est_frame: bool, begin: dict, rng: np.random
     return _c_steps(problem, est_frame, best, MAX_C_STEPS, counter)
 
 
-def _judged(problem: _Problem, est_frame: bool, state: _State) -> np.ndarray:
+def _judged(problem: _Problem, est_frame: bool, state: _State, rows: np.ndarray | None = None) -> np.ndarray:
     """(N,) each row's statistic corrected for leverage, chi-square(M) to first order for a row
     at the declared noise: ``r^T (I - H_jj)^-1 r`` for a row in the fit (its residual predicted
     by the fit without it), ``r^T (I + H_jj)^-1 r`` for a row left out (the fit's prediction
     error added), ``H_jj`` (M, M) the row's block of the hat matrix of the fitted rows' whitened
-    Jacobian (geometry, targets, frame; the gauge's null directions dropped)."""
+    Jacobian (geometry, targets, frame; the gauge's null directions dropped).
+
+    ``rows``: (R,) ascending 0-based indices, every row of the fit (``state.rows``) among them:
+    only these are corrected (the Jacobian of these rows alone), the others keep their plain
+    statistic ``state.stat``; None: every row."""
     fit = state.fit
-    J, scale, _ = whitened_jacobian(problem.robot, fit.result.theta, problem.joints, state.poses, problem.noise,
-                                    frame=fit.frame, targets=fit.targets, free=problem.free,
+    at = slice(None) if rows is None else rows
+    J, scale, _ = whitened_jacobian(problem.robot, fit.result.theta, problem.joints[at], state.poses[at],
+                                    problem.noise, frame=fit.frame, targets=fit.targets, free=problem.free,
                                     estimate_frame=est_frame, estimate_targets=problem.estimate_targets)
     J = J / scale
-    _, s, vt = np.linalg.svd(triangular_factor(J[state.rows].reshape(-1, J.shape[2])), full_matrices=False)
+    fitted = state.rows if rows is None else np.searchsorted(rows, state.rows)
+    _, s, vt = np.linalg.svd(triangular_factor(J[fitted].reshape(-1, J.shape[2])), full_matrices=False)
     keep = s > GAUGE_RTOL * s[0]
-    B = J @ (vt[keep].T / s[keep])  # (N, M, r): H_jj = B_j B_j^T
+    B = J @ (vt[keep].T / s[keep])  # (R, M, r): H_jj = B_j B_j^T
     H = B @ np.swapaxes(B, 1, 2)
     inside = np.zeros(len(J), bool)
-    inside[state.rows] = True
+    inside[fitted] = True
     sign = np.where(inside, -1.0, 1.0)[:, None, None]
+    white = state.white[at]
     try:
-        solved = BatchedLU(np.eye(J.shape[1])[None] + sign * H).solve(state.white)
+        solved = BatchedLU(np.eye(J.shape[1])[None] + sign * H).solve(white)
     except np.linalg.LinAlgError:  # a row alone determines a direction: no leave-one-out residual
         return state.stat
-    return np.sum(state.white * solved, axis=1)
+    if rows is None:
+        return np.sum(white * solved, axis=1)
+    out = state.stat.copy()
+    out[rows] = np.sum(white * solved, axis=1)
+    return out
 
 
 def _reweighted(problem: _Problem, est_frame: bool, best: _State, cutoff: float, alpha: float, counter: _Counter,

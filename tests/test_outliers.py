@@ -37,3 +37,48 @@ def test_above_the_size_every_row_above_the_threshold_goes_at_once(name, monkeyp
     assert fast.flagged == exact.flagged and not fast.misfit, fast.verdict
     clean = np.setdiff1d(np.arange(60), SPOILED)
     np.testing.assert_allclose(fast.statistic[clean], exact.statistic[clean], rtol=1e-3, atol=1e-3)
+
+
+def test_hat_blocks_are_the_diagonal_blocks_of_the_hat_matrix():
+    """calib.outliers.hat_blocks against the blocks of ``J cov J^T`` formed whole (independent:
+    one dense product), for a positive definite ``cov`` and a rank-deficient one (a gauge-like
+    null direction). The two computations of each block differ by rounding: relative to
+    ``|J_j|^2 |cov|`` a few times p eps (bound 100 p eps)."""
+    rng = np.random.default_rng(7)
+    n, d, p = 30, 6, 12
+    J = rng.normal(size=(n, d, p))
+    M = rng.normal(size=(3 * p, p))
+    for cov in (np.linalg.inv(M.T @ M), np.linalg.pinv(M[:, :-1].T @ M[:, :-1])):
+        if cov.shape[0] < p:  # rank deficient: the last parameter not seen
+            cov = np.pad(cov, ((0, 1), (0, 1)))
+        whole = J.reshape(-1, p) @ cov @ J.reshape(-1, p).T
+        blocks = calib.outliers.hat_blocks(J, cov)
+        bound = 100 * p * np.finfo(float).eps * np.linalg.norm(cov, 2)
+        for j in range(n):
+            expected = whole[d * j:d * (j + 1), d * j:d * (j + 1)]
+            assert np.abs(blocks[j] - expected).max() <= bound * np.sum(J[j] ** 2)
+
+
+@pytest.mark.parametrize("name", ["hexapod", "delta"])
+def test_above_the_size_the_checking_refit_keeps_the_first_jacobian(name, monkeypatch):
+    """60 rows, three 50 um off, the at-once search (ONE_AT_A_TIME_MAX_ROWS lowered to 40): with
+    REUSED_JACOBIAN_MIN_ROWS lowered to 40 as well the checking refit keeps the first fit's
+    Jacobian; ``search`` says so, the rows flagged are the same, and every row's statistic agrees
+    with the recomputed Jacobian's to the Jacobian's change over the refit's step (the refit moves
+    the estimate by the three rows' pull, about 50 um over a machine of hundreds of mm: 1e-3
+    relative bounds it)."""
+    robot = default_robot(name)
+    theta = robot.table.nominal + reference_errors(robot, 2)
+    poses = reachable_poses(robot, 60, 4, theta=theta)
+    joints = robot.inverse_kinematics(theta, poses)
+    measured = poses + NOISE.sample(60, 5, robot.pose_units)
+    measured[list(SPOILED), 0] += 0.05
+    monkeypatch.setattr(calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40)
+    recomputed = find_outliers(robot, joints, measured, NOISE)
+    assert "REUSED_JACOBIAN_MIN_ROWS" not in recomputed.search
+    monkeypatch.setattr(calib.outliers, "REUSED_JACOBIAN_MIN_ROWS", 40)
+    reused = find_outliers(robot, joints, measured, NOISE)
+    assert reused.search.endswith("(60 rows > REUSED_JACOBIAN_MIN_ROWS = 40)"), reused.search
+    assert reused.flagged == recomputed.flagged == SPOILED, reused.verdict
+    np.testing.assert_allclose(reused.statistic, recomputed.statistic, rtol=1e-3, atol=1e-3)
+    assert not np.array_equal(reused.statistic, recomputed.statistic)  # the other form ran

@@ -211,8 +211,9 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     """A hexapod recording of 80 calibration rows (kinematic model, a machine drawn from the
     default prior, 1 um / 1 urad normal noise), 3 rows at z = 1000 mm, run as recorded and with
     every size constant lowered below its rows: the summary names each scalable form (gross-row
-    search on a subsample, 2-fold cross-validation, the outlier search at once, the diagnosis on a
-    subsample, the 3D machines decimated), the same gross rows are named, and the cross-validated
+    search on a subsample, 2-fold cross-validation, the outlier search at once and its checking refit
+    on the first fit's Jacobian, the diagnosis and the excitation check on subsamples, the 3D machines
+    decimated), the same gross rows are named, and the cross-validated
     RMS position error agrees with the exact run's (10-fold) within its spread: 77 rows know an
     RMS to ~1/sqrt(2 * 77 * 3) = 5 %, and a fold model fitted to half of them adds at most
     P / (38 * 6) of the noise's variance (the hexapod's free parameters): a band of 0.8 to 1.3."""
@@ -221,6 +222,7 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     import calib.observability
     import calib.outliers
     import calib.robust
+    import pipeline.formats.checks
     import pipeline.views.run_view
     from benchmarks.big_recording import make_recording
 
@@ -235,8 +237,12 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     assert exact["outliers"]["search"] == "one row at a time"
     assert exact["diagnosis"]["rows"] == "every row"
     assert exact["rerun"]["machine_poses_drawn"] == 80
+    assert exact["checks"]["excitation"] == "every calibration row"
+    assert "REUSED_JACOBIAN_MIN_ROWS" not in exact["outliers"]["search"]
     for module, name, value in ((calib.robust, "SEARCH_MAX_ROWS", 50), (calib.crossval, "FEW_FOLDS_MIN_ROWS", 40),
                                 (calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40),
+                                (calib.outliers, "REUSED_JACOBIAN_MIN_ROWS", 40),
+                                (pipeline.formats.checks, "EXCITATION_MAX_ROWS", 50),
                                 (calib.diagnosis, "DIAGNOSIS_MAX_ROWS", 50),
                                 (pipeline.views.run_view, "MAX_MACHINE_POSES", 30),
                                 (calib.observability, "QR_FIRST_ROWS", 40)):
@@ -245,7 +251,11 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     assert s["gross_rows"]["rows"] == exact["gross_rows"]["rows"] == list(rows + 1)
     assert "(80 rows > SEARCH_MAX_ROWS = 50)" in s["gross_rows"]["search"]
     assert s["crossvalidation"]["scheme"] == "2-fold (77 rows > FEW_FOLDS_MIN_ROWS = 40)"
-    assert s["outliers"]["search"] == "every row above the threshold at once (77 rows > ONE_AT_A_TIME_MAX_ROWS = 40)"
+    assert s["outliers"]["search"] == ("every row above the threshold at once (77 rows > ONE_AT_A_TIME_MAX_ROWS = 40); "
+                                       "the checking refits' residuals against the first fit's Jacobian (77 rows > "
+                                       "REUSED_JACOBIAN_MIN_ROWS = 40)")
+    assert s["checks"]["excitation"] == ("a seeded subsample of 50 of the 80 calibration rows (80 rows > "
+                                         "EXCITATION_MAX_ROWS = 50)")
     assert "(80 rows > DIAGNOSIS_MAX_ROWS = 50)" in s["diagnosis"]["rows"]
     assert s["rerun"]["machine_poses_drawn"] == 30 and "MAX_MACHINE_POSES = 30" in s["rerun"]["form"]
     ratio = s["crossvalidated_position_error_mm"]["rms"] / exact["crossvalidated_position_error_mm"]["rms"]

@@ -194,3 +194,32 @@ def test_above_the_search_size_a_subsample_is_searched_and_every_row_judged(name
     assert _heldout_mm(found.fit, qv, truth) <= 1.5 * clean_mm
     again = find_gross_rows(robot, q, data, NOISE, seed=0)
     np.testing.assert_array_equal(again.statistic, found.statistic)  # seeded: the same subsample
+
+
+@pytest.mark.parametrize("name", ["hexapod", "delta"])
+def test_above_the_search_size_only_the_rows_that_can_fail_are_leverage_corrected(name, monkeypatch):
+    """The subsample's judgement of every row (SEARCH_MAX_ROWS lowered to 40, 60 rows, three far):
+    a row outside the fit whose plain statistic (the squared whitened residual) is within the
+    cutoff keeps the plain one; the correction of a row left out, ``r^T (I + H)^-1 r``, can only
+    lower it, so such a row is kept either way. Checked: those rows' statistic is the plain one;
+    the far rows' (outside the fit, above the cutoff) is corrected and at most the plain one; the
+    fit's rows' (``r^T (I - H)^-1 r``) at least the plain one, and above it for all but rounding."""
+    import calib.robust
+
+    robot, _, q, clean, _, _, _ = _experiment(name, False)
+    data = clean.copy()
+    data[list(FAR_ROWS), 2] = FAR_Z_MM
+    monkeypatch.setattr(calib.robust, "SEARCH_MAX_ROWS", 40)
+    found = find_gross_rows(robot, q, data, NOISE, seed=0)
+    assert found.success and found.gross == FAR_ROWS, found.message
+    plain = np.sum(found.residuals ** 2, axis=1)
+    sub = np.sort(np.random.default_rng([0, N_ROWS]).choice(N_ROWS, size=40, replace=False))  # the seeded subsample
+    inside = np.zeros(N_ROWS, bool)
+    inside[sub[np.isin(sub, FAR_ROWS, invert=True)]] = True  # the fit's rows: the subsample's kept ones
+    skipped = ~inside & (plain <= found.cutoff)
+    assert skipped.sum() >= 15
+    np.testing.assert_array_equal(found.statistic[skipped], plain[skipped])
+    far = list(FAR_ROWS)
+    assert np.all(found.statistic[far] <= plain[far]) and np.all(found.statistic[far] > found.cutoff)
+    assert np.all(found.statistic[inside] >= plain[inside] * (1 - 1e-12))
+    assert np.all(found.statistic[inside] > plain[inside])

@@ -11,7 +11,7 @@ recording).
 from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
-    "checks": ("JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "ROTATION_CONVENTION", "WARNED_CONDITION",
+    "checks": ("EXCITATION_MAX_ROWS", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "ROTATION_CONVENTION", "WARNED_CONDITION",
                "RecordingChecks", "plausibility", "recording_checks"),
     "calibration_file": ("ABSURD_TOLERANCES", "CALIBRATION_FORMAT", "CALIBRATION_SUFFIX", "CALIBRATION_VERSION",
                          "Calibration", "CalibrationFileError", "calibration_text", "check_plausible_parameters",

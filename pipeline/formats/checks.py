@@ -23,6 +23,7 @@ from calib.measurement import measurement_settings, target_names
 from .recording import Recording, RecordingError, columns, row_frame_groups, sidecar_path
 
 __all__ = ["plausibility", "recording_checks", "RecordingChecks", "REFUSED_CONDITION", "WARNED_CONDITION",
+           "EXCITATION_MAX_ROWS",
            "ROTATION_CONVENTION", "JOINT_LIMIT_TOLERANCE"]
 
 
@@ -33,6 +34,13 @@ REFUSED_CONDITION = 1e8
 
 
 WARNED_CONDITION = 1e6
+
+#: Above this many calibration rows the excitation check takes the condition number of a seeded
+#: subsample of this many of them (``RecordingChecks.excitation`` says so): the column-scaled
+#: condition number is a ratio, which this many rows drawn from the file's estimate to a few per
+#: cent (measured: docs/benchmarks.md), against thresholds two decades apart; each row costs its
+#: closure Jacobians and a (D, P) block of the Jacobian.
+EXCITATION_MAX_ROWS = 5000
 
 #: Joint readings past the nominal range by at most this fraction of the range (a leg's whole
 #: stroke, a motor's whole range) are accepted with a warning: a real encoder reads a little past
@@ -269,6 +277,20 @@ def _scaled_condition(rec: Recording, poses: _PoseColumns, cal: np.ndarray) -> f
     return float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
 
 
+def excitation_rows(cal: np.ndarray) -> tuple[np.ndarray, str]:
+    """``(rows (N,) bool, form in words)``: the calibration rows ``cal`` (bool (N,)) the excitation
+    check judges: every one, or above :data:`EXCITATION_MAX_ROWS` a seeded subsample of that many
+    (the seed is the row count: the same file, the same rows)."""
+    n = int(np.count_nonzero(cal))
+    if n <= EXCITATION_MAX_ROWS:
+        return cal, "every calibration row"
+    picked = np.flatnonzero(cal)[np.random.default_rng(n).choice(n, size=EXCITATION_MAX_ROWS, replace=False)]
+    rows = np.zeros(cal.size, bool)
+    rows[picked] = True
+    return rows, (f"a seeded subsample of {EXCITATION_MAX_ROWS:,} of the {n:,} calibration rows ({n:,} rows > "
+                  f"EXCITATION_MAX_ROWS = {EXCITATION_MAX_ROWS})")
+
+
 def _excitation(rec: Recording, poses: _PoseColumns, path: Path, prior: bool) -> str | None:
     """Calibration poses too alike to identify the parameters (condition number above
     :data:`REFUSED_CONDITION`): refused for plain least squares (``prior`` False), a warning with
@@ -277,7 +299,7 @@ def _excitation(rec: Recording, poses: _PoseColumns, path: Path, prior: bool) ->
     cal = rec.sets == "calibration"
     if cal.sum() < 2 or poses.n_targets:
         return None
-    cond = _scaled_condition(rec, poses, cal)
+    cond = _scaled_condition(rec, poses, excitation_rows(cal)[0])
     if cond > REFUSED_CONDITION and prior:
         return (f"{path}: the calibration poses leave parameter combinations undetermined (the identification "
                 f"alone is {_condition_in_words(cond)}, condition number {cond:.2g}): the tolerances hold them "
@@ -358,10 +380,13 @@ class RecordingChecks:
         warnings: in words, each naming the file (and rows, columns).
         diagnosis: :func:`calib.diagnosis.diagnose` of every row (the verdict whether the file fits
             its machine, and if not the likely cause), or None for fewer than two rows.
+        excitation: the rows whose condition number the excitation check took, in words (every
+            calibration row, or a seeded subsample above :data:`EXCITATION_MAX_ROWS`).
     """
 
     warnings: list
     diagnosis: object
+    excitation: str = "every calibration row"
 
 
 def recording_checks(rec: Recording, csv_path: str | Path, *, prior: bool = True) -> RecordingChecks:
@@ -391,7 +416,8 @@ def recording_checks(rec: Recording, csv_path: str | Path, *, prior: bool = True
     diagnosis = _diagnosis(rec) if len(rec.joints) >= 2 else None
     if diagnosis is not None:
         warnings += _units_and_conventions(rec, poses, path, diagnosis)
-    return RecordingChecks([w for w in warnings if w is not None], diagnosis)
+    excitation = excitation_rows(rec.sets == "calibration")[1]
+    return RecordingChecks([w for w in warnings if w is not None], diagnosis, excitation)
 
 
 def plausibility(rec: Recording, csv_path: str | Path, *, prior: bool = True) -> list[str]:

@@ -556,16 +556,18 @@ def _data_at_once(data: list[list[str]], idx: dict[str, int],
     width = len(idx)
     if any(len(row) != width for row in data):
         return None
-    cells = np.array(data, dtype=str).reshape(len(data), width)
+    # The cells as Python strings, converted by Python's float (what the row-by-row reading calls):
+    # the same numbers, and the same cells refused, in one numpy call a column block.
+    cells = np.array(data, dtype=object).reshape(len(data), width)
     try:
-        values = np.stack([cells[:, idx[name]].astype(float) for name in expected], axis=1) if data else \
-            np.empty((0, len(expected)))
+        values = cells[:, [idx[name] for name in expected]].astype(float)
     except ValueError:
         return None
     if not np.all(np.isfinite(values)):
         return None
-    sets = np.char.strip(cells[:, idx["set"]]) if "set" in idx else np.full(len(data), "calibration")
-    sessions = np.char.strip(cells[:, idx["session"]]) if "session" in idx else np.full(len(data), DEFAULT_SESSION)
+    sets = np.char.strip(cells[:, idx["set"]].astype(str)) if "set" in idx else np.full(len(data), "calibration")
+    sessions = (np.char.strip(cells[:, idx["session"]].astype(str)) if "session" in idx
+                else np.full(len(data), DEFAULT_SESSION))
     if not np.all(np.isin(sets, SETS)):
         return None
     names = np.unique(sessions)

@@ -288,7 +288,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     t0 = time.perf_counter()
     split: dict[str, float] = {}
     warnings: list[str] = []
-    rec = diagnosis = None
+    rec = diagnosis = checks = None
     if settings.real is not None:
         rec = read_recording(settings.real)
         split["read"] = time.perf_counter() - t0
@@ -322,7 +322,8 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf",
                                                       "report": "--report"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
-            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis)
+            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
+                                   None if checks is None else {"excitation": checks.excitation})
             suggestion = summary.pop("_suggested_poses", None)
             if suggestion is None:
                 for key in ("suggested_poses", "suggested_poses_json"):
@@ -977,10 +978,12 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
 
 
-def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None):
+def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None,
+         checks: dict | None = None):
     """The analysis of :func:`run_calibration`, in its named steps: simulate or read, calibrate
     (:func:`calibrate_input`: identify, validate, verdict), summarise, log (the ``.rrd`` to its
-    temporary file); the caller publishes."""
+    temporary file); the caller publishes. ``checks``: the summary's ``checks`` block (the
+    recording checks' forms, e.g. ``{"excitation": rows in words}``), None when simulating."""
     inp = read_input(settings, rec) if rec is not None else simulate_input(settings, progress)
     split["simulate"] = time.perf_counter() - t0
     outcome = calibrate_input(inp, settings, diagnosis=diagnosis, progress=progress)
@@ -989,6 +992,8 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     split["identify"] = seconds["identify"]
     split["simulate"] += seconds["heldout"]  # a simulated run measures its held-out poses
     summary = summary_of(inp, outcome, truth_in_gauge(inp, ident), settings, warnings)
+    if checks is not None:
+        summary["checks"] = checks
     split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
     if outcome.crossvalidation is not None:
         summary.update(outcome.crossvalidation.summary())
