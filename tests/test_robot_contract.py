@@ -205,9 +205,11 @@ def test_run_noise_free_compensates_to_1e4_mm_and_real_reproduces_it(name, tmp_p
     assert sim.summary["heldout_position_error_mm"]["after"] <= 1e-4
     assert sim.summary["heldout_position_error_mm"]["before"] > 1e3 * sim.summary["heldout_position_error_mm"]["after"]
     real = run(["--real", str(tmp_path / "sim.csv"), "--out", str(tmp_path), "--name", "real", "--quiet"])
-    # One schema: a recording's run lacks only what the simulation alone knows and the files it writes.
+    # One schema: a recording's run lacks only what the simulation alone knows and the files it
+    # writes, and adds only what its recording's checks did (``checks``).
     assert real.summary["robot"] == name and set(real.summary) == set(sim.summary) - {
-        "settle_steps_per_pose", "simulation", "kinematic_departure", "csv", "json"}
+        "settle_steps_per_pose", "simulation", "kinematic_departure", "csv", "json"} | {"checks"}
+    assert real.summary["checks"] == {"excitation": "every calibration row"}
     for key in sim.summary["identified_errors"]:
         assert abs(real.summary["identified_errors"][key] - sim.summary["identified_errors"][key]) <= 1e-6
     assert real.summary["injected_errors"] == sim.summary["injected_errors"]
