@@ -126,6 +126,7 @@ def test_every_room_exports_what_it_names(package):
         assert getattr(mod, name) is not None, f"{package}.{name}"
 
 
+@pytest.mark.slow
 def test_the_words_of_a_verdict_load_no_rerun():
     """The discovery's and the fleet's workflows word their verdicts without Rerun (a fleet's Dask
     workers load none): Rerun is imported only where a .rrd file is written."""

@@ -64,6 +64,7 @@ def test_a_pair_recording_leaving_each_out_removes_each_family(seen):
     assert everything == effects_for(default_robot("hexapod"))
 
 
+@pytest.mark.slow
 def test_one_recording_with_no_workers_reports_progress_on_stderr(monkeypatch, capsys):
     """With no --workers and no --scheduler, one recording runs here (the local cluster is at most a
     worker a recording): the command still shows its progress, on stderr, and stdout is the rates only.

@@ -384,6 +384,7 @@ def test_the_entry_points_in_pyproject_give_pipelines_deliveries(empty_registry,
     assert {"linuxcnc", "mjcf"} <= set(calibration_module.DELIVERIES)
 
 
+@pytest.mark.slow
 def test_calib_imports_nothing_of_pipeline():
     """``from calib import Calibration`` and a compensation load no pipeline module (a fresh
     interpreter)."""

@@ -31,6 +31,7 @@ def slow_square(x):
     return x * x
 
 
+@pytest.mark.slow
 def test_run_tasks_here_and_on_a_cluster(dask_two_workers):
     seen = []
     here = list(run_tasks(math.sqrt, [1, 4, 9], workers=1, progress=lambda d, t: seen.append((d, t))))
@@ -44,6 +45,7 @@ def test_run_tasks_here_and_on_a_cluster(dask_two_workers):
         assert env == WORKER_ENV and cores == 1
 
 
+@pytest.mark.slow
 def test_a_finished_job_sends_the_scheduler_no_cancel_request(dask_two_workers):
     """The scheduler tells every client of every cancel request, empty ones too, and a client
     connecting at that moment fails its handshake (distributed 2026.8: an AssertionError in
@@ -80,6 +82,7 @@ def test_worker_count_checks_the_count_and_defaults_to_the_cores():
         runs_here(0)
 
 
+@pytest.mark.slow
 def test_a_failing_task_stops_the_job(dask_two_workers):
     with pytest.raises(ValueError, match="three"):
         list(run_tasks(fails_on_three, range(6), client=dask_two_workers))
@@ -111,6 +114,7 @@ def quiet_cluster(dask_two_workers):
     return dask_two_workers, set(threading.enumerate())
 
 
+@pytest.mark.slow
 def test_progress_of_a_cluster_job_is_dask_s_on_stderr(quiet_cluster, capsys):
     client, threads = quiet_cluster
     capsys.readouterr()

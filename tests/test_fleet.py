@@ -97,6 +97,7 @@ def test_fleet_of_twenty_calibrates_eighteen_and_names_two_broken_files(fleet_fo
     assert {r["machine"]: r["status"] for r in rep.rows}["orphan"] == "calibrated"
 
 
+@pytest.mark.slow
 def test_fleet_on_a_cluster_prints_rows_and_dask_s_progress_on_stderr(fleet_folder, tmp_path, dask_two_workers,
                                                                      capsys):
     folder = some_machines(fleet_folder, tmp_path / "three", "hexapod_00", "delta_00", "rus_00")
@@ -169,6 +170,7 @@ def test_recordings_named_in_upper_case_are_machines_too(fleet_folder, tmp_path,
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("address", ["tcp://127.0.0.1:1", "127.0.0.1:1"])  # nothing listens on port 1
 def test_unreachable_scheduler_is_refused_before_any_output(fleet_folder, tmp_path, capsys, address):
     """``--scheduler`` where no scheduler answers: exit 2, one line naming the flag, and no output

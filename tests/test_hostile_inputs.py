@@ -375,6 +375,7 @@ def test_an_explicit_name_taken_is_refused_before_any_work(work, capsys):
     refused(["--heldout", "0", "--name", "earlier"], out, capsys, "--out", "earlier.rrd exists; pass --overwrite")
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_leaves_nothing_that_looks_complete(work, capsys, monkeypatch):
     import calib.identification as calibration
 
@@ -506,6 +507,7 @@ time.sleep(60)
 """
 
 
+@pytest.mark.slow
 def test_a_killed_run_blocks_no_rerun_and_its_temporary_files_go(work, capsys):
     import subprocess
     import sys

@@ -216,6 +216,7 @@ def test_one_start_writes_what_the_single_search_always_did(tmp_path):
     assert (tmp_path / "b.json").read_text() == (tmp_path / "a.json").read_text()
 
 
+@pytest.mark.slow
 def test_starts_give_the_same_files_on_one_and_two_workers(tmp_path, dask_two_workers, capsys):
     argv = ["--poses", "8", "--seed", "3", "--candidates", "300", "--starts", "4"]
     a, b = tmp_path / "one.csv", tmp_path / "two.csv"

@@ -193,6 +193,7 @@ def test_the_run_reports_iso9283_of_the_repeated_validation_poses(real_run):
             assert shown(figs, f"iso9283/{k}/{fig}") == pytest.approx(p[key], rel=DISPLAY_RTOL)
 
 
+@pytest.mark.slow
 def test_the_run_report_opens_in_headless_chromium(real_run, tmp_path):
     out, _, s = real_run
     dom = chromium_renders(out / "lab.html", tmp_path)

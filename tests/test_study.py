@@ -65,6 +65,7 @@ def test_true_errors(name):
     np.testing.assert_array_equal(true_errors(robot, "reference", 4), reference_errors(robot, 4))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ROBOTS)
 def test_results_independent_of_worker_count(name, dask_two_workers):
     """The study on a local Dask cluster of two workers gives the numbers of one worker (same seed)."""
@@ -226,6 +227,7 @@ def test_cli_validation(argv, match, capsys):
     assert match in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_study_on_an_existing_cluster_by_address(dask_two_workers):
     """--scheduler ADDRESS: the same numbers on a cluster the study did not start."""
     robot, theta, poses, commanded = setup("delta")
