@@ -106,10 +106,13 @@ def test_the_subsample_is_seeded_and_stratified_in_time():
 def test_the_blocked_crossvalidation_above_the_threshold_is_the_closed_form_one():
     """Above the threshold the closed-form cross-validation keeps each fold's geometry block
     (the same Woodbury algebra): the same cross-validated RMS to rounding (1e-9, far below any
-    difference between candidates)."""
-    data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
-    full, sub = both(data, "periodic_screw_error")
-    for key in ("none", "periodic_screw_error"):
+    difference between candidates), on a step the two searches find alike (a refined value differs
+    within its refinement, and its cross-validated RMS with it)."""
+    t = recording("none", [], None).t_s
+    data = recording("lost_count", [0.004], JointStep(2, float((t[300] + t[301]) / 2)))
+    full, sub = both(data, "lost_count")
+    assert sub.chosen.extra == full.chosen.extra
+    for key in ("none", "lost_count"):
         assert sub.evidence[key]["cv_whitened_rms"] == pytest.approx(full.evidence[key]["cv_whitened_rms"], rel=1e-9)
     assert sub.evidence["cv_whitened_rms_chosen"] == pytest.approx(full.evidence["cv_whitened_rms_chosen"], rel=1e-9)
 
@@ -129,3 +132,21 @@ def test_the_normal_equations_of_a_tall_fit_give_the_svd_fit(monkeypatch):
     assert gram.chi2 == pytest.approx(svd.chi2, rel=1e-8)
     np.testing.assert_allclose(gram.coefficients, svd.coefficients, rtol=1e-6, atol=1e-8 * np.abs(svd.coefficients).max())
     np.testing.assert_allclose(gram.theta, svd.theta, rtol=0, atol=1e-8 * np.abs(svd.theta).max())
+
+
+def test_the_geometry_basis_of_a_tall_jacobian_from_its_information_is_the_svds(monkeypatch):
+    """calib.effects.separability.GRAM_MIN_RESIDUALS lowered to 0: the determined and held
+    combinations from the information's eigenvectors span what the SVD's right vectors span
+    (projectors equal to 1e-9; the information's eigenvalues lie far from HELD_INFORMATION here:
+    a column scaled by 1e-3 is held, the others determined)."""
+    import calib.effects.separability as sep
+
+    rng = np.random.default_rng(5)
+    G = rng.normal(size=(600, 8)) * np.array([1, 1, 1, 1, 1, 1, 1, 1e-3])
+    std, free = np.full(8, 1.0), np.arange(8)
+    svd = sep.geometry_basis(G, std, free)
+    monkeypatch.setattr(sep, "GRAM_MIN_RESIDUALS", 0)
+    gram = sep.geometry_basis(G, std, free)
+    assert svd.determined.shape == gram.determined.shape == (8, 7) and gram.held.shape == (8, 1)
+    for a, b in ((svd.determined, gram.determined), (svd.held, gram.held)):
+        np.testing.assert_allclose(a @ a.T, b @ b.T, atol=1e-9)

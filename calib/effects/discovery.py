@@ -56,8 +56,8 @@ from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
 from .compliance import for_payload, payload_varies
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
-from .separability import (HELD_INFORMATION, GeometryBasis, flat_coordinates, geometry_basis, pose_families,
-                           unseparated_combinations)
+from .separability import (GRAM_MIN_RESIDUALS, HELD_INFORMATION, GeometryBasis, flat_coordinates, geometry_basis,
+                           pose_families, unseparated_combinations)
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
            "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
@@ -176,15 +176,6 @@ def _geometry(data: EffectData) -> GeometryBasis | None:
     return _BASES[data]
 
 
-#: Whitened residuals above which a least-squares problem of the discovery (a Gauss-Newton step,
-#: a chi-square, an F test) is solved through its normal equations (columns scaled to unit norm,
-#: a symmetric eigendecomposition of the small Gram matrix) instead of an SVD of the tall matrix:
-#: 600,000 x 42 at 100,000 hexapod rows is 0.6 s by SVD, a tenth of that by the Gram matrix.
-#: The hexapod's whitened geometry columns, scaled, have condition numbers of 1e3 to 1e4: the
-#: Gram matrix squares it, which leaves 8 digits of a step that Gauss-Newton then iterates on
-#: (the next step corrects the last). 20,000 hexapod rows (:data:`SEARCH_ROWS_MAX`); below it the
-#: SVD, as always: nothing changes.
-GRAM_MIN_RESIDUALS = 120_000
 
 
 def _solve(A: np.ndarray, b: np.ndarray, gram: bool | None = None) -> np.ndarray:
@@ -193,7 +184,7 @@ def _solve(A: np.ndarray, b: np.ndarray, gram: bool | None = None) -> np.ndarray
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     As = A / scale
-    if A.shape[0] > GRAM_MIN_RESIDUALS if gram is None else gram:
+    if (A.shape[0] > GRAM_MIN_RESIDUALS) if gram is None else gram:
         return np.linalg.pinv(As.T @ As, hermitian=True) @ (As.T @ b) / scale
     x, *_ = np.linalg.lstsq(As, b, rcond=None)
     return x / scale
@@ -833,9 +824,15 @@ class _SearchSpace:
         """The chi-square left with ``eff`` at search coordinate ``u`` fitted too."""
         Xq = eff.joint_regressors(self.data.robot, self.theta, self.data, eff.searched_value(u))
         X = (self.M @ Xq).reshape(self.b.size, -1)
-        X = X - self.Q @ (self.Q.T @ X)
-        e = self.b - X @ _solve(X, self.b, gram=True)  # a few columns, every one scaled: no SVD of the tall X
-        return float(e @ e)
+        # One pass over Q, not two: with P = I - Q Q^T, (P X)^T (P X) = X^T X - (Q^T X)^T (Q^T X)
+        # and (P X)^T b = X^T b (b has Q projected out). The chi-square's reduction is
+        # b^T P X ((P X)^T P X)^+ (P X)^T b, the columns scaled to unit norm first.
+        QX = self.Q.T @ X
+        G = X.T @ X - QX.T @ QX
+        scale = np.sqrt(np.clip(np.diag(G), 0.0, None))
+        scale[scale == 0] = 1.0
+        Xb = (X.T @ self.b) / scale
+        return float(self.b @ self.b - Xb @ np.linalg.pinv(G / np.outer(scale, scale), hermitian=True) @ Xb)
 
 
 def _golden(cost, a: float, b: float, iterations: int) -> float:
