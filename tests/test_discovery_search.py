@@ -150,3 +150,14 @@ def test_the_geometry_basis_of_a_tall_jacobian_from_its_information_is_the_svds(
     assert svd.determined.shape == gram.determined.shape == (8, 7) and gram.held.shape == (8, 1)
     for a, b in ((svd.determined, gram.determined), (svd.held, gram.held)):
         np.testing.assert_allclose(a @ a.T, b @ b.T, atol=1e-9)
+
+
+def test_the_report_says_when_the_search_ran_on_a_subsample():
+    from pipeline.formats.report import Search
+    from pipeline.formats.report_text import search_words
+
+    assert search_words(None) is None  # every row searched: nothing said
+    words = search_words(Search(rows=99893, subsample_rows=10000, threshold=20000,
+                                effects=("lost_count", "thermal_warmup")))
+    assert "(lost_count, thermal_warmup)" in words and "10,000 of the 99,893 rows" in words
+    assert "above 20,000 rows" in words and "every row" in words
