@@ -56,15 +56,15 @@ from .base import Effect, EffectData, closure_regressors, orthonormal_columns
 from .granularity import PerChainForm, form_key, per_chain_form
 from .compliance import for_payload, payload_varies
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
-from .separability import (HELD_INFORMATION, GeometryBasis, flat_coordinates, geometry_basis, pose_families,
-                           unseparated_combinations)
+from .separability import (GRAM_MIN_RESIDUALS, HELD_INFORMATION, GeometryBasis, flat_coordinates, geometry_basis,
+                           pose_families, unseparated_combinations)
 
 __all__ = ["MIN_DELTA_BIC", "MIN_ROWS", "MAX_EFFECTS", "ALIAS_CORRELATION", "ALIAS_DELTA_BIC",
            "MIN_NESTED_DELTA_BIC", "MIN_GRANULARITY_DELTA_BIC", "VERDICT_ALPHA", "POSE_DRIFT_Z",
            "NOISE_ALPHA", "OUTLIER_ALPHA", "MAX_BAD_FRACTION", "SIGNIFICANCE_ALPHA", "EffectFit", "Discovery", "fit_effect",
            "fit_effects", "discover_effects", "discover_effect", "remainder_tests", "outlier_scan",
            "locate_mismatch", "closure_noise_covariance", "closure_noise_std", "regressor_correlation", "candidate_forms",
-           "propose_law"]
+           "propose_law", "SEARCH_ROWS_MAX", "SEARCH_SUBSAMPLE_ROWS", "search_subsample"]
 
 #: Evidence an effect needs to enter the model: BIC lower by at least this ("very strong" on
 #: the Kass-Raftery scale; a chance reduction of a one-parameter effect's chi-square by 16 has
@@ -176,10 +176,17 @@ def _geometry(data: EffectData) -> GeometryBasis | None:
     return _BASES[data]
 
 
-def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+
+
+def _solve(A: np.ndarray, b: np.ndarray, gram: bool | None = None) -> np.ndarray:
+    """Least squares ``A x ~ b``, columns scaled; through the Gram matrix with ``gram`` (default:
+    above :data:`GRAM_MIN_RESIDUALS` rows)."""
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
-    x, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    As = A / scale
+    if (A.shape[0] > GRAM_MIN_RESIDUALS) if gram is None else gram:
+        return np.linalg.pinv(As.T @ As, hermitian=True) @ (As.T @ b) / scale
+    x, *_ = np.linalg.lstsq(As, b, rcond=None)
     return x / scale
 
 
@@ -482,9 +489,15 @@ class _Linear:
     measured orientation, noise included, and would lend any effect that resembles them
     evidence from the noise)."""
 
-    def __init__(self, data: EffectData, geometry: EffectFit):
+    def __init__(self, data: EffectData, geometry: EffectFit, *, search_rows_max: int | None = None,
+                 search_subsample_rows: int | None = None, seed: int = 0):
         robot = data.robot
         self.data, self.theta = data, geometry.theta
+        self.search_rows_max = SEARCH_ROWS_MAX if search_rows_max is None else int(search_rows_max)
+        self.search_subsample_rows = SEARCH_SUBSAMPLE_ROWS if search_subsample_rows is None else int(search_subsample_rows)
+        self.seed = seed
+        self.searches: list = []  # the subsampled searches made (:meth:`search_form`)
+        self._spaces_for: tuple = ((), None)
         jac = robot.closure_jacobians(self.theta, data.joints, data.measured)
         self.winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
         self.dF_dq = jac.joints
@@ -550,7 +563,10 @@ class _Linear:
         """The searched parameter minimising the chi-square with ``blocks`` fitted too: on the
         effect's grid of the search coordinate, refined by golden-section search between the
         best grid point's neighbours (unless the effect says its fit is constant between grid
-        points: :attr:`Effect.refine_search`)."""
+        points: :attr:`Effect.refine_search`). Above ``search_rows_max`` measurements the grid is
+        scanned on a subsample and confirmed and refined on every row (:meth:`_subsampled_search`)."""
+        if self.n // self.C > self.search_rows_max:
+            return self._subsampled_search(eff, blocks)
         Q = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         b = self.b - Q @ (Q.T @ self.b)
         robot = self.data.robot
@@ -572,23 +588,122 @@ class _Linear:
         if not eff.refine_search:
             return eff.searched_value(grid[k])
         a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
-        g = (np.sqrt(5) - 1) / 2
-        c, d = b_ - g * (b_ - a), a + g * (b_ - a)
-        fc, fd = cost(c), cost(d)
-        for _ in range(30):
-            if fc < fd:
-                b_, d, fd = d, c, fc
-                c = b_ - g * (b_ - a)
-                fc = cost(c)
+        return eff.searched_value(_golden(cost, a, b_, SEARCH_GOLDEN_ITERATIONS))
+
+    def _cv_rms_blocked(self, blocks: list, folds: int, seed: int) -> float:
+        """:meth:`cv_rms` through the Woodbury identity with the geometry's part of each fold
+        kept: the rows reordered fold by fold once (each fold a slice), and each fold's
+        ``Qg_k^T Qg_k`` computed once for every call with the same ``folds`` and ``seed``; a call
+        then costs a pass over the effects' few columns. The same deleted residuals."""
+        key = (folds, seed)
+        if getattr(self, "_cv_folds", (None,))[0] != key:
+            m = self.n // self.C
+            order = np.random.default_rng(seed).permutation(m)
+            parts = [np.sort(order[k::folds]) for k in range(folds)]
+            idx = np.concatenate([(r[:, None] * self.C + np.arange(self.C)).ravel() for r in parts])
+            bounds = np.cumsum([0] + [r.size * self.C for r in parts])
+            Qg = self.Qg[idx]
+            grams = [Qg[lo:hi].T @ Qg[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
+            self._cv_folds = (key, idx, bounds, Qg, grams)
+        _, idx, bounds, Qg, grams = self._cv_folds
+        Qb = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
+        e = (self.b - Qb @ (Qb.T @ self.b))[idx]  # b has the geometry projected out already
+        Qb = Qb[idx]
+        g = Qg.shape[1]
+        ss = 0.0
+        for (lo, hi), Gk in zip(zip(bounds[:-1], bounds[1:]), grams):
+            Qgk, Qbk, ek = Qg[lo:hi], Qb[lo:hi], e[lo:hi]
+            cross = Qgk.T @ Qbk
+            K = np.eye(g + Qbk.shape[1]) - np.block([[Gk, cross], [cross.T, Qbk.T @ Qbk]])
+            y = np.linalg.solve(K, np.concatenate([Qgk.T @ ek, Qbk.T @ ek]))
+            d = ek + Qgk @ y[:g] + Qbk @ y[g:]
+            ss += float(d @ d)
+        return float(np.sqrt(ss / self.n))
+
+    def _spaces(self, blocks: list) -> tuple["_SearchSpace", "_SearchSpace"]:
+        """The subsample's and every row's :class:`_SearchSpace` with ``blocks`` fitted (the last
+        ones kept: every candidate of a selection step is searched with the same blocks)."""
+        kept, spaces = self._spaces_for
+        if spaces is not None and len(kept) == len(blocks) and all(a is b for a, b in zip(kept, blocks)):
+            return spaces
+        C = self.C
+        if not hasattr(self, "_M"):
+            self._M = -(self.winv @ self.dF_dq)  # whitened closure per joint displacement (closure_regressors)
+        Qb = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
+        full = _SearchSpace(self.data, self.theta, self._M, np.hstack([self.Qg, Qb]), self.b - Qb @ (Qb.T @ self.b))
+        rows = search_subsample(self.data.t_s, self.search_subsample_rows, self.seed)
+        idx = (rows[:, None] * C + np.arange(C)).ravel()
+        # Every row's geometry columns restricted to the subsample span the subsample's own; so do
+        # the blocks and b (each every row's minus a geometric part): projected again on the
+        # subsample they are the subsample's linearised fit.
+        Qg = orthonormal_columns(self.Qg[idx])
+        B = np.hstack([x[idx] for x in blocks]) if blocks else np.zeros((idx.size, 0))
+        Q = np.hstack([Qg, orthonormal_columns(B - Qg @ (Qg.T @ B))])
+        sub = _SearchSpace(self.data.subset(rows), self.theta, self._M[rows], Q, self.b[idx] - Q @ (Q.T @ self.b[idx]))
+        self._spaces_for = (list(blocks), (sub, full))
+        return sub, full
+
+    def _subsampled_search(self, eff: Effect, blocks: list) -> float:
+        """:meth:`search` above ``search_rows_max`` measurements: the effect's grid (every row's)
+        scanned on ``search_subsample_rows`` rows (:func:`search_subsample`), then on every
+        row the :data:`SEARCH_CONFIRMED` best local minima of the subsample's chi-square
+        compared, the best followed down to a local minimum of every row's chi-square over the
+        grid and refined by :data:`SEARCH_REFINE_ITERATIONS` golden-section steps between its
+        grid neighbours; a search not refined (:attr:`Effect.refine_search`) tries
+        every grid point within :data:`SEARCH_WINDOW_SPACINGS` subsample row spacings of the
+        subsample's best on every row (coarse to fine past :data:`SEARCH_GRID_MAX`)."""
+        sub, full = self._spaces(blocks)
+        grid = eff.search_grid(self.data)
+        m = sub.data.n
+        self.searches.append(eff.name)
+        if not eff.refine_search:
+            if len(grid) > SEARCH_GRID_MAX:
+                k = _coarse_to_fine(lambda u: sub.cost(eff, u), grid)
             else:
-                a, c, fc = c, d, fd
-                d = a + g * (b_ - a)
-                fd = cost(d)
-        return eff.searched_value((a + b_) / 2)
+                k = int(np.argmin([sub.cost(eff, u) for u in grid]))
+            w = int(np.ceil(SEARCH_WINDOW_SPACINGS * self.data.n / m))
+            lo, hi = max(k - w, 0), min(k + w, len(grid) - 1)
+            window = grid[lo:hi + 1]
+            if len(window) > SEARCH_GRID_MAX:
+                j = _coarse_to_fine(lambda u: full.cost(eff, u), window)
+            else:
+                j = int(np.argmin([full.cost(eff, u) for u in window]))
+            return eff.searched_value(window[j])
+        costs = np.array([sub.cost(eff, u) for u in grid])
+        inner = np.r_[True, costs[1:] <= costs[:-1]] & np.r_[costs[:-1] <= costs[1:], True]
+        minima = sorted(np.flatnonzero(inner), key=lambda i: (costs[i], i))[:SEARCH_CONFIRMED]
+        known: dict[int, float] = {}
+
+        def at(i: int) -> float:
+            if i not in known:
+                known[i] = full.cost(eff, grid[i])
+            return known[i]
+
+        k = min(minima, key=lambda i: (at(i), i))
+        while True:  # down to a local minimum of every row's chi-square over the grid
+            j = min((i for i in (k - 1, k + 1) if 0 <= i < len(grid)), key=lambda i: (at(i), i))
+            if at(j) >= at(k):
+                break
+            k = j
+        a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+        return eff.searched_value(_golden(lambda u: full.cost(eff, u), a, b_, SEARCH_REFINE_ITERATIONS))
+
+    def search_form(self) -> dict:
+        """How the searched parameters were searched, for the discovery's summary: ``{"form":
+        "every row"}`` or, when a search ran on a subsample, ``{"form": "subsample", "rows",
+        "subsample_rows", "threshold", "effects"}`` (the effects so searched)."""
+        if not self.searches:
+            return {"form": "every row"}
+        return {"form": "subsample", "rows": int(self.data.n),
+                "subsample_rows": int(min(self.search_subsample_rows, self.data.n)), "threshold": self.search_rows_max,
+                "effects": sorted(set(self.searches))}
 
     def cv_rms(self, blocks: list, folds: int, seed: int) -> float:
         """Whitened RMS of the deleted residuals of ``folds``-fold cross-validation (whole
-        measurements left out), closed form through the hat matrix."""
+        measurements left out), closed form through the hat matrix. Above ``search_rows_max``
+        measurements the folds' geometry blocks are computed once (:meth:`_cv_rms_blocked`)."""
+        if self.n // self.C > self.search_rows_max:
+            return self._cv_rms_blocked(blocks, folds, seed)
         Q = self.Qg if not blocks else np.hstack([self.Qg, orthonormal_columns(np.hstack(blocks))])
         e = self.b - Q @ (Q.T @ self.b)
         m = self.n // self.C
@@ -651,6 +766,90 @@ def _coarse_to_fine(cost, grid) -> int:
 #: the dense (n_k x n_k) one of its rows: the same deleted residuals, without a matrix that
 #: grows as the fold's rows squared (107 GiB at 100,000 hexapod rows in 5 folds).
 DENSE_FOLD_MAX = 2000
+
+
+#: Measurements above which a searched parameter's grid is scanned on a subsample
+#: (:meth:`_Linear.search`): one evaluation of the chi-square is a pass over every whitened
+#: residual (0.22 s at 100,000 hexapod rows), and a selection step searches every candidate's grid
+#: (about 1,300 evaluations on the full library). Below it nothing changes.
+SEARCH_ROWS_MAX = 20_000
+#: Rows of that subsample (:func:`search_subsample`). A searched value is located to within its
+#: grid step when its effect's chi-square reduction on the subsample, ``S m / N`` for a
+#: reduction ``S`` on every row, is some 44 or more (a screw's pitch: a grid step shifts the
+#: phase by a sixth of a turn across the stroke, which costs ``S m / N`` times about 9%); every row
+#: then confirms and refines it (:data:`SEARCH_CONFIRMED`, :data:`SEARCH_REFINE_ITERATIONS`).
+SEARCH_SUBSAMPLE_ROWS = 10_000
+#: Golden-section steps of the search between the best grid point's neighbours.
+SEARCH_GOLDEN_ITERATIONS = 30
+#: Local minima of the subsample's chi-square over the grid compared on every row.
+SEARCH_CONFIRMED = 3
+#: Golden-section steps on every row between the confirmed grid point's neighbours: the bracket
+#: of two grid steps shrinks to 0.016 of one (:data:`SEARCH_GOLDEN_ITERATIONS` on every row take it to 1e-6 of one).
+SEARCH_REFINE_ITERATIONS = 10
+#: A search that is not refined (a step time between two measurements) tries, on every row,
+#: the grid points within this many subsample row spacings (rows / subsample rows) of the
+#: subsample's best: the subsample's chi-square is the same anywhere between two of its rows.
+SEARCH_WINDOW_SPACINGS = 2
+
+
+def search_subsample(t_s: np.ndarray, size: int, seed: int) -> np.ndarray:
+    """Sorted indices of a seeded subsample of ``size`` rows stratified in time: the rows in time
+    order cut into ``size`` consecutive strata, one row drawn from each (every row when there are
+    no more than ``size``). ``t_s`` (N,) s."""
+    n = t_s.size
+    if n <= size:
+        return np.arange(n)
+    order = np.argsort(t_s, kind="stable")
+    edges = np.linspace(0, n, size + 1).astype(int)
+    rng = np.random.default_rng(seed)
+    pick = edges[:-1] + (rng.random(size) * np.diff(edges)).astype(int)
+    return np.sort(order[pick])
+
+
+@dataclass(frozen=True, eq=False)
+class _SearchSpace:
+    """The linearised fit's whitened space on some rows, for a searched parameter's chi-square:
+    ``data`` those rows, ``theta`` (P,) the linearisation point, ``M`` (n, C, C) the whitened
+    closure per unit joint displacement, ``Q`` (n C, r) an orthonormal basis of what is fitted
+    beside the effect (the geometry, the other effects' columns), ``b`` (n C,) the whitened
+    residual with ``Q`` projected out."""
+
+    data: EffectData
+    theta: np.ndarray
+    M: np.ndarray
+    Q: np.ndarray
+    b: np.ndarray
+
+    def cost(self, eff: Effect, u) -> float:
+        """The chi-square left with ``eff`` at search coordinate ``u`` fitted too."""
+        Xq = eff.joint_regressors(self.data.robot, self.theta, self.data, eff.searched_value(u))
+        X = (self.M @ Xq).reshape(self.b.size, -1)
+        # One pass over Q, not two: with P = I - Q Q^T, (P X)^T (P X) = X^T X - (Q^T X)^T (Q^T X)
+        # and (P X)^T b = X^T b (b has Q projected out). The chi-square's reduction is
+        # b^T P X ((P X)^T P X)^+ (P X)^T b, the columns scaled to unit norm first.
+        QX = self.Q.T @ X
+        G = X.T @ X - QX.T @ QX
+        scale = np.sqrt(np.clip(np.diag(G), 0.0, None))
+        scale[scale == 0] = 1.0
+        Xb = (X.T @ self.b) / scale
+        return float(self.b @ self.b - Xb @ np.linalg.pinv(G / np.outer(scale, scale), hermitian=True) @ Xb)
+
+
+def _golden(cost, a: float, b: float, iterations: int) -> float:
+    """The midpoint of the bracket golden-section search leaves of ``[a, b]`` after ``iterations`` steps."""
+    g = (np.sqrt(5) - 1) / 2
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = cost(c), cost(d)
+    for _ in range(iterations):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = cost(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = cost(d)
+    return (a + b) / 2
 
 
 def _canonical_correlation(A: np.ndarray, B: np.ndarray) -> float:
@@ -1286,6 +1485,10 @@ class Discovery:
             geometric combinations held at the prior mean, the candidate forms that cannot be
             separated from them on this pose set (never named), and the poses that would
             separate them; empty otherwise.
+        search: how the searched parameters (a pitch, a time constant, a step time) were
+            searched in the last round's selection: ``{"form": "every row"}``, or above
+            ``search_rows_max`` measurements ``{"form": "subsample", "rows", "subsample_rows",
+            "threshold", "effects"}`` (:meth:`_Linear.search_form`).
     """
 
     effects: tuple
@@ -1303,6 +1506,7 @@ class Discovery:
     located: dict
     proposed_law: ProposedLaw | None = None
     separation: dict = field(default_factory=dict)
+    search: dict = field(default_factory=lambda: {"form": "every row"})
 
     @property
     def effect(self) -> str:
@@ -1350,9 +1554,10 @@ def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, s
     sel["chosen"] = chosen
 
 
-def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int):
+def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int,
+            search_rows_max: int | None = None, search_subsample_rows: int | None = None):
     geo = fit_effects(sub, ())
-    lin = _Linear(sub, geo)
+    lin = _Linear(sub, geo, search_rows_max=search_rows_max, search_subsample_rows=search_subsample_rows, seed=seed)
     sel = _select(lin, models, max_effects, min_delta_bic, folds, seed)
     _nested_check(sub, lin, geo, models, sel)
     names = list(sel["chosen"])
@@ -1367,13 +1572,15 @@ def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: floa
         names.remove(max(weak, key=lambda n: p_value[n]))
         sel.setdefault("insignificant", []).append(weak)
         fit = geo
+    sel["search"] = lin.search_form()
     return geo, fit, sel
 
 
 def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
                      outlier_alpha: float = OUTLIER_ALPHA, folds: int = 5, seed: int = 0, max_rounds: int = 3,
                      min_delta_bic: float = MIN_DELTA_BIC, per_chain: bool = True, laws: bool = True,
-                     channels: dict | None = None) -> Discovery:
+                     channels: dict | None = None, search_rows_max: int | None = None,
+                     search_subsample_rows: int | None = None) -> Discovery:
     """Name the left-out physics (up to ``max_effects`` effects together), fit it, test what
     remains, and isolate gross rows (see the module docstring).
 
@@ -1393,6 +1600,10 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
             terms (:func:`propose_law`, :mod:`calib.effects.laws`).
         channels: extra recorded channels ``{name: (N,) or (N, C)}`` (a temperature) the law's
             terms may use.
+        search_rows_max: measurements above which the searched parameters' grids are scanned on
+            a subsample and confirmed on every row (default :data:`SEARCH_ROWS_MAX`; the
+            discovery's ``search`` says which form ran).
+        search_subsample_rows: rows of that subsample (default :data:`SEARCH_SUBSAMPLE_ROWS`).
 
     Raises:
         ValueError: too few rows, an unknown candidate or one that does not apply to the robot.
@@ -1411,7 +1622,8 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     flagged: list[int] = []
     for _ in range(max_rounds):
         sub = data.subset(kept)
-        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed)
+        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
+                                search_subsample_rows)
         scan = outlier_scan(sub, fit, alpha=outlier_alpha)
         new = scan["flagged"]
         if scan["model_wrong"] or not new or kept.size - len(new) < MIN_ROWS \
@@ -1423,7 +1635,8 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         kept = np.delete(kept, new)
     else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
         sub = data.subset(kept)
-        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed)
+        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
+                                search_subsample_rows)
         scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
     tests = remainder_tests(sub, fit, alpha=alpha)
     explained = tests["explained"]
@@ -1451,7 +1664,7 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
                      partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
                      tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
-                     located=locate_mismatch(sub, geo), proposed_law=law, separation=separated)
+                     located=locate_mismatch(sub, geo), proposed_law=law, separation=separated, search=sel["search"])
 
 
 def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict) -> dict:

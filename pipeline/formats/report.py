@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow", "Parameters", "Suggested",
            "Determination", "Implausible", "Figures", "FigureRow", "PerPose", "IsoPose", "CrossValidation", "Heldout",
            "FrameRow", "Frames", "Coefficient", "EffectRow", "Candidate", "Remaining", "GeometryTest", "Alias",
-           "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Effects",
+           "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Search", "Effects",
            "Flagged", "CompensationTable", "Timing", "Outputs", "build_report", "report_kind", "summary_document",
            "REPORT_KEY", "OUTPUT_KEYS"]
 
@@ -425,6 +425,20 @@ class Resimulation:
 
 
 @dataclass(frozen=True)
+class Search:
+    """How a discovery searched its nonlinear parameters (a screw's pitch, a warm-up's time
+    constant, a lost count's step time) above ``threshold`` measurements: each grid scanned on a
+    seeded subsample of ``subsample_rows`` of the ``rows`` rows, stratified in time, then confirmed
+    and refined on every row (:meth:`calib.effects.discovery._Linear.search`); ``effects`` those
+    searched so."""
+
+    rows: int
+    subsample_rows: int
+    threshold: int
+    effects: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Effects:
     """What discovery found beyond the geometry: the geometry alone's test and where its mismatch
     is (words), the effects named, every candidate's evidence, the cross-validated whitened RMS of
@@ -442,6 +456,7 @@ class Effects:
     separation: Separation | None = None
     law: Law | None = None
     resimulation: Resimulation | None = None
+    search: Search | None = None
 
 
 @dataclass(frozen=True)
@@ -773,6 +788,14 @@ def _law(law: dict | None) -> Law | None:
                library_effects_dropped=tuple(law.get("library_effects_dropped") or ()))
 
 
+def _search(s: dict) -> Search | None:
+    x = s.get("search") or {}
+    if x.get("form") != "subsample":
+        return None
+    return Search(rows=x["rows"], subsample_rows=x["subsample_rows"], threshold=x["threshold"],
+                  effects=tuple(x.get("effects") or ()))
+
+
 def _resimulation(s: dict) -> Resimulation | None:
     r = s.get("mujoco_resimulation")
     if not r:
@@ -806,7 +829,8 @@ def _effects(s: dict) -> Effects:
                    located=tuple((s.get("located") or {}).get("summary") or ()),
                    cv_whitened_rms_geometry=(ev.get("none") or {}).get("cv_whitened_rms"),
                    cv_whitened_rms_chosen=ev.get("cv_whitened_rms_chosen"), aliases=_aliases(s),
-                   separation=_separation(s), law=_law(s.get("proposed_law")), resimulation=_resimulation(s))
+                   separation=_separation(s), law=_law(s.get("proposed_law")), resimulation=_resimulation(s),
+                   search=_search(s))
 
 
 def _flagged(s: dict, kind: str) -> Flagged:

@@ -8,7 +8,7 @@ calibration or a discovery is composed here, from the typed model.
   :func:`verdict_text`, :func:`machine_facts`, :func:`figure_label`, :func:`tolerance_verdict`,
   :func:`determined_by`, :func:`heldout_basis`, :func:`implausible_notes`, :func:`effect_evidence`,
   :func:`effect_notes`, :func:`law_words`, :func:`no_effect_words`, :func:`remaining_words`,
-  :func:`flagged_words`;
+  :func:`search_words`, :func:`flagged_words`;
 - the words a discovery's summary carries (:func:`verdict_words`, :func:`model_words`).
 
 Pure text: no Rerun, no NumPy; the fleet's workers and the discovery's workflow word a verdict
@@ -21,12 +21,12 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .report import Effects, EffectRow, FigureRow, Flagged, Heldout, Law, Noise, ParameterRow, Report
+    from .report import Effects, EffectRow, FigureRow, Flagged, Heldout, Law, Noise, ParameterRow, Report, Search
 
 __all__ = ["terminal_lines", "report_markdown", "verdict_words", "model_words", "report_title", "verdict_text",
            "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes",
            "tolerance_verdict", "determined_by", "effect_evidence", "effect_notes", "law_words", "no_effect_words",
-           "remaining_words",
+           "remaining_words", "search_words",
            "flagged_words", "DISPLAY_SCALE",
            "IMPLAUSIBLE_LINES", "DISCOVERY_IMPLAUSIBLE_LINES", "COMBINATION_LINES", "PRIOR_NAMES",
            "MARKDOWN_PRIOR_NAMES", "SEPARATION_LINES"]
@@ -171,6 +171,16 @@ def effect_evidence(row: EffectRow) -> str:
     return "; ".join(parts)
 
 
+def search_words(search: Search | None) -> str | None:
+    """How a discovery searched its nonlinear parameters, when not on every row (None then)."""
+    if search is None:
+        return None
+    which = f" ({', '.join(search.effects)})" if search.effects else ""
+    return (f"searched parameters{which} scanned on a seeded subsample of {search.subsample_rows:,} of the "
+            f"{search.rows:,} rows, stratified in time (above {search.threshold:,} rows), then confirmed and refined "
+            f"on every row")
+
+
 def effect_notes(x: Effects) -> list[str]:
     """A discovery's findings beside its effects: the cross-validated RMS, the aliases, the re-simulation."""
     notes = []
@@ -182,6 +192,9 @@ def effect_notes(x: Effects) -> list[str]:
     if x.resimulation is not None:
         notes.append(f"MuJoCo machine re-simulated: position RMS {x.resimulation.before_um:.4g} um -> "
                      f"{x.resimulation.after_um:.4g} um")
+    words = search_words(x.search)
+    if words is not None:
+        notes.append(words[0].upper() + words[1:])
     return notes
 
 
@@ -411,6 +424,9 @@ def _discovery_lines(r: Report) -> list[str]:
                          f"{a.delta_bic:.1f} BIC, regressor correlation {_f(a.correlation, '.2f')}); {a.named} fitted.")
     lines += _separation_lines(x)
     lines += _law_lines(x.law)
+    words = search_words(x.search)
+    if words is not None:
+        lines.append(f"Search: {words}.")
     closure = h.figures[0]
     lines.append(f"Held-out residual RMS: {_f(closure.before.rms, '.3f', 1e3)} um -> {_f(closure.after.rms, '.3f', 1e3)} "
                  f"um (noise floor {_f(h.noise_floor_mm, '.3f', 1e3)} um; {h.basis}).")
@@ -633,5 +649,8 @@ def _discovery_markdown(r: Report) -> list[str]:
                                    "with the effects", DISCOVERY_IMPLAUSIBLE_LINES)
     lines += _implausible_markdown(r.implausible.with_effects, "Still implausible with the effects",
                                    len(r.implausible.with_effects))
+    words = search_words(x.search)
+    if words is not None:
+        lines += ["", f"Search: {words}."]
     lines += ["", "Geometry alone, where the mismatch is:"] + [f"- {w}" for w in x.located]
     return lines

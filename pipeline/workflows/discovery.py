@@ -288,6 +288,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "located": disc.located,
         "rows": int(rec.joints.shape[0]),
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
+        "search": disc.search,
     }
     summary["implausible_parameters"] = implausibility(rec, disc)
     summary["time"] = "row order" if row_order(rec) else "measured"

@@ -1,0 +1,163 @@
+"""The searched parameters' subsampled search (calib.effects.discovery.SEARCH_ROWS_MAX): above the
+threshold a searched parameter's grid is scanned on a seeded subsample stratified in time and
+confirmed and refined on every row. Here the threshold is lowered through ``discover_effects``'s
+``search_rows_max`` (and the subsample through ``search_subsample_rows``) on a few hundred rows:
+the subsampled search must find what the search on every row finds (within one grid step, the
+search's own resolution before its refinement) and the injected truth, and say that it ran; below
+the threshold nothing changes."""
+
+import numpy as np
+import pytest
+
+from calib.effects import EFFECTS, EffectData, discover_effects
+from calib.effects.discovery import SEARCH_ROWS_MAX, search_subsample
+from calib.effects.lost_count import JointStep
+from calib.noise import SensorNoise
+from calib.robots import default_robot
+
+NOISE = SensorNoise(0.001, 1e-6, "normal")
+#: A wide hexapod workspace (mm, rad), where the effects and the geometry separate.
+WORKSPACE = np.array([[-25, 25], [-25, 25], [190, 215], [-0.1, 0.1], [-0.1, 0.1], [-0.15, 0.15]], dtype=float)
+#: Rows of the recordings; the threshold and the subsample lowered below them.
+ROWS, THRESHOLD, SUBSAMPLE = 900, 400, 300
+
+
+def recording(effect: str, coef, extra, seed: int = 3) -> EffectData:
+    """The nominal hexapod with its joints moved by ``effect``'s regressors times ``coef`` (the
+    measured poses the forward kinematics at the displaced joints, exact), 1 um / 1 urad noise."""
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(seed)
+    targets = WORKSPACE[:, 0] + rng.uniform(size=(ROWS, 6)) * np.ptp(WORKSPACE, axis=1)
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    t = np.cumsum(rng.uniform(0.5, 1.5, ROWS))
+    Xq = EFFECTS[effect].joint_regressors(robot, robot.table.nominal,
+                                          EffectData(robot, robot.table.nominal, joints, targets, t, NOISE), extra)
+    reached = robot.forward_kinematics(robot.table.nominal, joints + Xq @ np.asarray(coef, dtype=float), initial=targets)
+    reached = reached + NOISE.sample(ROWS, seed + 1, robot.pose_units)
+    return EffectData(robot, robot.table.nominal, joints, reached, t, NOISE)
+
+
+def both(data: EffectData, effect: str):
+    """The discovery with every row searched and with the subsampled search."""
+    full = discover_effects(data, candidates=[effect], laws=False)
+    sub = discover_effects(data, candidates=[effect], laws=False, search_rows_max=THRESHOLD,
+                           search_subsample_rows=SUBSAMPLE)
+    return full, sub
+
+
+@pytest.mark.parametrize("effect, coef, truth", [("periodic_screw_error", [0.003, -0.002], 7.3),
+                                                 ("thermal_warmup", [2e-5], 250.0)])
+def test_a_refined_searched_value_is_found_on_the_subsample_as_on_every_row(effect, coef, truth):
+    data = recording(effect, coef, truth)
+    full, sub = both(data, effect)
+    assert full.search == {"form": "every row"}
+    assert sub.search == {"form": "subsample", "rows": ROWS, "subsample_rows": SUBSAMPLE, "threshold": THRESHOLD,
+                          "effects": [effect]}
+    assert full.effects == sub.effects == (effect,) and sub.explained, sub.remaining["summary"]
+    eff = EFFECTS[effect]
+    grid = eff.search_grid(data)
+    step = float(np.diff(grid).mean())
+    # The search coordinate (1 / pitch, log tau) within one grid step of every row's search.
+    u = {"periodic_screw_error": lambda v: 1.0 / v, "thermal_warmup": np.log}[effect]
+    assert abs(u(sub.chosen.extra) - u(full.chosen.extra)) < step
+    assert abs(u(sub.chosen.extra) - u(truth)) < step
+    # The same fit, then, to well within the chi-square's own spread (sqrt(2 dof)).
+    assert abs(sub.chosen.chi2 - full.chosen.chi2) < 0.01 * np.sqrt(2 * full.chosen.dof)
+
+
+def test_a_step_time_is_found_on_the_subsample_as_on_every_row():
+    t = recording("none", [], None).t_s
+    truth = JointStep(4, float((t[611] + t[612]) / 2))
+    data = recording("lost_count", [0.004], truth)
+    full, sub = both(data, "lost_count")
+    assert sub.search["form"] == "subsample" and sub.search["effects"] == ["lost_count"]
+    # Not refined: the step lies between two measurements, and every row's window around the
+    # subsample's best finds the very step every row's search finds, the one made.
+    assert full.chosen.extra == sub.chosen.extra == truth
+    assert full.effects == sub.effects == ("lost_count",)
+
+
+def test_below_the_threshold_the_search_is_that_on_every_row():
+    """At the threshold itself (``search_rows_max`` = the rows) and with the default (far above the
+    rows) the discovery is the same to the last bit: the subsample path is not taken."""
+    data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
+    default = discover_effects(data, candidates=["periodic_screw_error"], laws=False)
+    at = discover_effects(data, candidates=["periodic_screw_error"], laws=False, search_rows_max=ROWS,
+                          search_subsample_rows=SUBSAMPLE)
+    assert ROWS < SEARCH_ROWS_MAX
+    assert default.search == at.search == {"form": "every row"}
+    assert at.chosen.extras == default.chosen.extras
+    assert at.chosen.chi2 == default.chosen.chi2
+    np.testing.assert_array_equal(at.chosen.coefficients, default.chosen.coefficients)
+
+
+def test_the_subsample_is_seeded_and_stratified_in_time():
+    t = np.cumsum(np.random.default_rng(0).uniform(0.5, 1.5, 1000))[::-1].copy()  # rows not in time order
+    rows = search_subsample(t, 100, 7)
+    assert rows.size == 100 and np.all(np.diff(rows) > 0)
+    np.testing.assert_array_equal(rows, search_subsample(t, 100, 7))
+    assert not np.array_equal(rows, search_subsample(t, 100, 8))
+    # One row from each stratum of 10 consecutive rows in time.
+    rank = np.argsort(np.argsort(t))
+    np.testing.assert_array_equal(np.sort(rank[rows]) // 10, np.arange(100))
+    np.testing.assert_array_equal(search_subsample(t, 5000, 7), np.arange(1000))
+
+
+def test_the_blocked_crossvalidation_above_the_threshold_is_the_closed_form_one():
+    """Above the threshold the closed-form cross-validation keeps each fold's geometry block
+    (the same Woodbury algebra): the same cross-validated RMS to rounding (1e-9, far below any
+    difference between candidates), on a step the two searches find alike (a refined value differs
+    within its refinement, and its cross-validated RMS with it)."""
+    t = recording("none", [], None).t_s
+    data = recording("lost_count", [0.004], JointStep(2, float((t[300] + t[301]) / 2)))
+    full, sub = both(data, "lost_count")
+    assert sub.chosen.extra == full.chosen.extra
+    for key in ("none", "lost_count"):
+        assert sub.evidence[key]["cv_whitened_rms"] == pytest.approx(full.evidence[key]["cv_whitened_rms"], rel=1e-9)
+    assert sub.evidence["cv_whitened_rms_chosen"] == pytest.approx(full.evidence["cv_whitened_rms_chosen"], rel=1e-9)
+
+
+def test_the_normal_equations_of_a_tall_fit_give_the_svd_fit(monkeypatch):
+    """calib.effects.discovery.GRAM_MIN_RESIDUALS lowered to 0 (every fit through the Gram
+    matrix): the joint fit of the geometry and a screw error is the SVD's to 1e-8 relative
+    (the Gram matrix squares the scaled columns' condition number, 1e3 to 1e4 here; Gauss-Newton
+    corrects each step's error on the next)."""
+    import calib.effects.discovery
+    from calib.effects import fit_effects
+
+    data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
+    svd = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
+    monkeypatch.setattr(calib.effects.discovery, "GRAM_MIN_RESIDUALS", 0)
+    gram = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
+    assert gram.chi2 == pytest.approx(svd.chi2, rel=1e-8)
+    np.testing.assert_allclose(gram.coefficients, svd.coefficients, rtol=1e-6, atol=1e-8 * np.abs(svd.coefficients).max())
+    np.testing.assert_allclose(gram.theta, svd.theta, rtol=0, atol=1e-8 * np.abs(svd.theta).max())
+
+
+def test_the_geometry_basis_of_a_tall_jacobian_from_its_information_is_the_svds(monkeypatch):
+    """calib.effects.separability.GRAM_MIN_RESIDUALS lowered to 0: the determined and held
+    combinations from the information's eigenvectors span what the SVD's right vectors span
+    (projectors equal to 1e-9; the information's eigenvalues lie far from HELD_INFORMATION here:
+    a column scaled by 1e-3 is held, the others determined)."""
+    import calib.effects.separability as sep
+
+    rng = np.random.default_rng(5)
+    G = rng.normal(size=(600, 8)) * np.array([1, 1, 1, 1, 1, 1, 1, 1e-3])
+    std, free = np.full(8, 1.0), np.arange(8)
+    svd = sep.geometry_basis(G, std, free)
+    monkeypatch.setattr(sep, "GRAM_MIN_RESIDUALS", 0)
+    gram = sep.geometry_basis(G, std, free)
+    assert svd.determined.shape == gram.determined.shape == (8, 7) and gram.held.shape == (8, 1)
+    for a, b in ((svd.determined, gram.determined), (svd.held, gram.held)):
+        np.testing.assert_allclose(a @ a.T, b @ b.T, atol=1e-9)
+
+
+def test_the_report_says_when_the_search_ran_on_a_subsample():
+    from pipeline.formats.report import Search
+    from pipeline.formats.report_text import search_words
+
+    assert search_words(None) is None  # every row searched: nothing said
+    words = search_words(Search(rows=99893, subsample_rows=10000, threshold=20000,
+                                effects=("lost_count", "thermal_warmup")))
+    assert "(lost_count, thermal_warmup)" in words and "10,000 of the 99,893 rows" in words
+    assert "above 20,000 rows" in words and "every row" in words
