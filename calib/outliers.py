@@ -47,10 +47,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincinv
 
-from .batched_lu import BatchedLU, inverse_stacked
+from .batched_lu import BatchedLU
 from .engine import identify_forward
 from .noise import SensorNoise
-from .robot import Robot, pose_jacobian_of_parameters
+from .robot import ChainJacobianFactors, Robot, chain_jacobian_factors, pose_jacobian_of_parameters
 
 __all__ = ["OutlierReport", "find_outliers", "hat_blocks", "MISFIT_FRACTION", "ONE_AT_A_TIME_MAX_ROWS",
            "REUSED_JACOBIAN_MIN_ROWS", "STRUCTURED_JACOBIAN_MIN_ROWS"]
@@ -63,8 +63,6 @@ ONE_AT_A_TIME_MAX_ROWS = 2000
 REUSED_JACOBIAN_MIN_ROWS = 10000
 #: Above this many rows a chain-structured robot's Jacobian is kept as its factors (module doc).
 STRUCTURED_JACOBIAN_MIN_ROWS = 10000
-#: Rows of a block of the factored hat-matrix blocks (a block's (B, C, P) products stay in cache).
-HAT_BLOCK_ROWS = 4096
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,91 +107,18 @@ def hat_blocks(J: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return B @ np.swapaxes(B, 1, 2)
 
 
-class _ChainJacobian:
-    """The whitened pose Jacobian of N rows by the P free parameters, kept as its factors: row j's
-    (D, P) block is ``M_j S_j`` with ``M`` (N, D, m) the whitened ``-(dF/dpose)^-1`` columns of
-    the m chains with free parameters and ``S_j`` block-diagonal, chain a's K free parameters'
-    own entries ``own`` (N, m, K) (module doc). The free parameters are chain a's K in order,
-    chain by chain."""
-
-    def __init__(self, M: np.ndarray, own: np.ndarray):
-        self.M, self.own = M, own
-        self.n, self.m, self.k = own.shape
-        self.p = self.m * self.k
-
-    def gram(self, rows=None) -> np.ndarray:
-        """(P, P) ``sum_j J_j^T J_j`` over ``rows`` (an index array; None: every row)."""
-        M, own = (self.M, self.own) if rows is None else (self.M[rows], self.own[rows])
-        W = np.einsum("nia,nib->nab", M, M)  # (N, m, m): M_j^T M_j
-        G = np.empty((self.p, self.p))
-        k = self.k
-        for a in range(self.m):
-            scaled = (W[:, a, :, None] * own).reshape(own.shape[0], -1)  # (N, P)
-            G[a * k:(a + 1) * k] = own[:, a].T @ scaled
-        return G
-
-    def rmatvec(self, r: np.ndarray) -> np.ndarray:
-        """(P,) ``sum_j J_j^T r_j`` of ``r`` (N, D)."""
-        t = np.einsum("nia,ni->na", self.M, r)
-        return np.einsum("nak,na->ak", self.own, t).ravel()
-
-    def matvec(self, x: np.ndarray) -> np.ndarray:
-        """(N, D) ``J_j x`` of every row, ``x`` (P,)."""
-        s = np.einsum("nak,ak->na", self.own, x.reshape(self.m, self.k))
-        return np.einsum("nia,na->ni", self.M, s)
-
-    def hat(self, cov: np.ndarray) -> np.ndarray:
-        """(N, D, D) ``J_j cov J_j^T`` as :func:`hat_blocks`, through the factors: with ``cov = L
-        L^T`` (its eigen-factor, as there), ``V_j = S_j L`` (m, P) chain block by chain block,
-        ``Q_j = V_j V_j^T`` (m, m), ``M_j Q_j M_j^T``; block by block of :data:`HAT_BLOCK_ROWS` rows."""
-        w, v = np.linalg.eigh(cov)
-        L = (v * np.sqrt(np.clip(w, 0.0, None))).reshape(self.m, self.k, self.p)  # chain a's rows of L
-        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
-        for start in range(0, self.n, HAT_BLOCK_ROWS):
-            rows = slice(start, start + HAT_BLOCK_ROWS)
-            own, M = self.own[rows], self.M[rows]
-            V = np.empty((own.shape[0], self.m, self.p))
-            for a in range(self.m):
-                V[:, a] = own[:, a] @ L[a]
-            Q = V @ np.swapaxes(V, 1, 2)  # (B, m, m)
-            out[rows] = (M @ Q) @ np.swapaxes(M, 1, 2)
-        return out
-
-    def dense(self, rows) -> np.ndarray:
-        """(len(rows), D, P) the Jacobian's rows ``rows`` formed."""
-        M, own = self.M[rows], self.own[rows]
-        return (M[:, :, :, None] * own[:, None, :, :]).reshape(M.shape[0], M.shape[1], self.p)
-
-
-def _chain_blocks(robot: Robot, jac, idx: np.ndarray):
-    """``(chains (m,), columns (m, K))`` where the free parameters ``idx`` come chain by chain, K
-    of each chain's, and ``jac`` gives their own entries (square pose blocks), else None."""
-    if jac.own is None or jac.pose.shape[1] != jac.pose.shape[2] or not np.array_equal(jac.chains, robot.table.chains):
-        return None
-    owner = robot.table.chains[idx]
-    chains = np.unique(owner)
-    k = idx.size // chains.size
-    if k * chains.size != idx.size or not np.array_equal(owner, np.repeat(owner[::k], k)) or \
-            np.unique(owner[::k]).size != chains.size:
-        return None
-    return owner[::k], idx.reshape(-1, k)
-
-
 def _whitened(robot: Robot, theta, joints, measured, noise, idx=None, structured=False):
     """``(r (N, D), J)``: the whitened residuals at ``theta`` (forward kinematics from the measured
     poses) and their Jacobian by the free parameters ``idx`` (all: None): a (N, D, P) array, or,
-    with ``structured`` where the robot's closures allow it, a :class:`_ChainJacobian`."""
+    with ``structured`` where the robot's closures allow it, its
+    :class:`~calib.robot.ChainJacobianFactors`."""
     std = noise.pose_std(robot.pose_units)
     pred = robot.forward_kinematics(theta, joints, initial=measured)
     r = (measured - pred) / std
     if structured:
-        jac = robot.closure_jacobians(theta, joints, pred)
-        blocks = _chain_blocks(robot, jac, np.arange(robot.n_parameters) if idx is None else idx)
-        if blocks is not None:
-            chains, columns = blocks
-            M = inverse_stacked(jac.pose)[:, :, chains]
-            M *= (-1.0 / std)[None, :, None]
-            return r, _ChainJacobian(M, jac.own[:, columns])
+        factors = chain_jacobian_factors(robot, theta, joints, pred, idx, 1.0 / std)
+        if factors is not None:
+            return r, factors
     J = pose_jacobian_of_parameters(robot, theta, joints, pred) / std[None, :, None]
     return r, J
 
@@ -250,7 +175,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         else:
             r0, J = _whitened(robot, theta, joints, measured, noise, idx, structured)
             last = None
-            if isinstance(J, _ChainJacobian):
+            if isinstance(J, ChainJacobianFactors):
                 Jr, gram_all = J, J.gram()
                 if "STRUCTURED_JACOBIAN_MIN_ROWS" not in search:
                     search += (f"; the Jacobian kept as its chains' factors ({n:,} rows > "
@@ -262,7 +187,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         grown = False
         while True:
             same = last is not None and np.array_equal(last[0], kept)
-            if isinstance(Jr, _ChainJacobian):
+            if isinstance(Jr, ChainJacobianFactors):
                 out = np.flatnonzero(~kept)
                 if not same:
                     gram = gram_all - Jr.gram(out) if out.size else gram_all
@@ -279,7 +204,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
                 cov, H, factors = last[1:]
             else:
                 # (N, D, D) diagonal blocks of the hat matrix
-                H = Jr.hat(cov) if isinstance(Jr, _ChainJacobian) else hat_blocks(Jr, cov)
+                H = Jr.hat(cov) if isinstance(Jr, ChainJacobianFactors) else hat_blocks(Jr, cov)
                 sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
                 factors = BatchedLU(np.eye(d)[None] + sign * H)
                 last = (kept.copy(), cov, H, factors)
