@@ -114,10 +114,13 @@ def _configurations(robot: Robot, theta, poses, joints, name: str = "poses"):
 
 
 def _whitened_jacobian(robot: Robot, theta, poses, joints, noise, idx) -> np.ndarray:
-    """(N, D, F) ``W d pose / d theta_free``."""
-    J = pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]
+    """(N, D, F) ``W d pose / d theta_free`` (a new array)."""
+    J = pose_jacobian_of_parameters(robot, theta, joints, poses)  # a new array: scaled in place
+    if not np.array_equal(idx, np.arange(J.shape[2])):  # every parameter free: no gathered copy
+        J = J[:, :, idx]
     if not noise.joint_std > 0:  # the same diagonal whitening for every pose: a product, the einsum's numbers
-        return J * (1.0 / noise.pose_std(robot.pose_units))[None, :, None]
+        J *= (1.0 / noise.pose_std(robot.pose_units))[None, :, None]
+        return J
     winv = pose_whitening(robot, theta, joints, poses, noise)
     return np.einsum("nij,njk->nik", winv, J)
 
