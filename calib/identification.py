@@ -51,9 +51,10 @@ from .evidence import MIN_DETERMINED, ToleranceEstimate, tolerance_from_data
 from .measurement import (MeasuredFit, MeasurementSettings, identify_as_measured, identify_measured,
                           instrument_measurements, measurement_residuals)
 from .noise import SensorNoise
+from . import outliers
 from .outliers import OutlierReport, find_outliers
 from .prior import ParameterPrior
-from .robot import KinematicsError, Robot, pose_jacobian_of_parameters
+from .robot import KinematicsError, Robot, chain_jacobian_factors, pose_jacobian_of_parameters
 from .robust import GrossRowResult, find_gross_rows
 from .validation import as_array
 
@@ -824,9 +825,13 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
     carried to the pose (``S + J Sigma J^T``), summed against the chi-square on their coordinates.
     None where there is nothing to test (no measured rows held out; target data).
 
+    Above :data:`calib.outliers.STRUCTURED_JACOBIAN_MIN_ROWS` rows in the base frame ``J Sigma
+    J^T`` is taken through the Jacobian's chain factors where the robot's closures give them
+    (:func:`calib.robot.chain_jacobian_factors`; equal to rounding), and ``"form"`` says so.
+
     Returns:
         ``{"what", "agrees", "ratio" (RMS whitened residual, or None where no row could be
-        predicted), "limit_ratio", "rows"}``.
+        predicted), "limit_ratio", "rows"}`` (and ``"form"`` where the factored form ran).
     """
     if ident.instrument is not None and ident.instrument.targets is not None:
         return None
@@ -848,12 +853,18 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
             np.full(len(joints), BASE_FRAME)
         cov = np.empty((len(joints), robot.pose_dim, robot.pose_dim))
         base = groups == BASE_FRAME  # in the base frame: the geometry's uncertainty alone
+        factors = None
         if base.any():
-            jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
-            # J Sigma J^T row by row: one (N D, P) x (P, P) product, then (D, P) x (P, D) per row
-            # (a three-operand einsum without a contraction order loops over N D P P D terms)
-            js = (jac.reshape(-1, jac.shape[2]) @ result.covariance).reshape(jac.shape)
-            cov[base] = js @ np.swapaxes(jac, 1, 2)
+            if np.count_nonzero(base) > outliers.STRUCTURED_JACOBIAN_MIN_ROWS:  # the chain factors, where given
+                factors = chain_jacobian_factors(robot, result.theta, joints[base], poses[base])
+            if factors is not None:
+                cov[base] = factors.sandwich(result.covariance)
+            else:
+                jac = pose_jacobian_of_parameters(robot, result.theta, joints[base], poses[base])
+                # J Sigma J^T row by row: one (N D, P) x (P, P) product, then (D, P) x (P, D) per row
+                # (a three-operand einsum without a contraction order loops over N D P P D terms)
+                js = (jac.reshape(-1, jac.shape[2]) @ result.covariance).reshape(jac.shape)
+                cov[base] = js @ np.swapaxes(jac, 1, 2)
         if (~base).any():  # geometry and frames' uncertainty together
             cov[~base] = ident.instrument.prediction_covariance(
                 joints[~base], sessions=groups[~base] if data.n_sessions > 1 else None)
@@ -863,8 +874,12 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
     w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
     chi2, dof = float(np.sum(w ** 2)), int(w.size)
     limit = chi2_limit(dof)
-    return {"what": what, "agrees": bool(chi2 <= limit), "ratio": float(np.sqrt(chi2 / dof)),
-            "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
+    check = {"what": what, "agrees": bool(chi2 <= limit), "ratio": float(np.sqrt(chi2 / dof)),
+             "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
+    if factors is not None:
+        check["form"] = (f"J Sigma J^T through the Jacobian's chain factors ({factors.n:,} rows > "
+                         f"STRUCTURED_JACOBIAN_MIN_ROWS = {outliers.STRUCTURED_JACOBIAN_MIN_ROWS})")
+    return check
 
 
 def verdict_of(data: CalibrationData, ident: Identification, held, cv, diagnosis=None) -> Verdict:

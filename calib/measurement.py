@@ -491,9 +491,11 @@ def whitened_residuals(robot: Robot, theta, joints, measured, noise: SensorNoise
     k = 0 if targets is None else len(targets)
     measured = as_array(measured, "measured", (joints.shape[0], robot.pose_dim if k == 0 else 3 * k))
     poses = robot.forward_kinematics(theta, joints, initial=initial)
+    r = measurement_residuals(robot, measured, instrument_measurements(robot, poses, frame, targets), k)
+    if noise.joint_std == 0:  # a diagonal whitening: each coordinate over its std (the product's numbers)
+        return r * (1.0 / noise.pose_std(measurement_units(robot, k))), poses
     Hp, _, _ = measurement_jacobians(robot, poses, frame, targets)
     winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
-    r = measurement_residuals(robot, measured, instrument_measurements(robot, poses, frame, targets), k)
     return np.einsum("nij,nj->ni", winv, r), poses
 
 

@@ -114,10 +114,13 @@ def _configurations(robot: Robot, theta, poses, joints, name: str = "poses"):
 
 
 def _whitened_jacobian(robot: Robot, theta, poses, joints, noise, idx) -> np.ndarray:
-    """(N, D, F) ``W d pose / d theta_free``."""
-    J = pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, idx]
+    """(N, D, F) ``W d pose / d theta_free`` (a new array)."""
+    J = pose_jacobian_of_parameters(robot, theta, joints, poses)  # a new array: scaled in place
+    if not np.array_equal(idx, np.arange(J.shape[2])):  # every parameter free: no gathered copy
+        J = J[:, :, idx]
     if not noise.joint_std > 0:  # the same diagonal whitening for every pose: a product, the einsum's numbers
-        return J * (1.0 / noise.pose_std(robot.pose_units))[None, :, None]
+        J *= (1.0 / noise.pose_std(robot.pose_units))[None, :, None]
+        return J
     winv = pose_whitening(robot, theta, joints, poses, noise)
     return np.einsum("nij,njk->nik", winv, J)
 
@@ -395,20 +398,23 @@ def analyze_observability(robot: Robot, theta, poses, noise: SensorNoise, *, joi
     A = _whitened_jacobian(robot, theta, poses, joints, noise, idx).reshape(-1, idx.size)
     n_free = idx.size
     scale = parameter_scale(robot)[idx]
-    As = A / scale
     m = A.shape[0]
     # A full SVD where there are fewer rows than parameters: the missing singular vectors are the
     # combinations the poses do not see at all (with more rows the thin one has every V: the full
     # U of N rows would hold N^2 numbers).
     # Above QR_FIRST_ROWS rows, the SVDs of the triangle R of As = Q R (the same singular values
     # and right vectors; Q, N x P, never formed: calib.tsqr, block by block): A's column scalings are R's (An = As D, R D).
-    R = triangular_factor(As) if poses.shape[0] > QR_FIRST_ROWS and m >= n_free else None
+    # As = A / scale formed only where the SVD or the null directions need it (not a copy of the
+    # rows where the triangle serves: its blocks are scaled as they are taken, the same numbers).
+    R = triangular_factor(A, column_scale=scale) if poses.shape[0] > QR_FIRST_ROWS and m >= n_free else None
+    As = A / scale if R is None else None
     _, s_thin, Vt = np.linalg.svd(As if R is None else R, full_matrices=m < n_free)
     s = np.zeros(n_free)
     s[: s_thin.size] = s_thin
     tol = rank_rtol * s[0] if s[0] > 0 else 0.0
     rank = int(np.count_nonzero(s > tol)) if s[0] > 0 else 0
-    null_basis, not_identifiable = _null_combinations(robot, As, idx, names, scale, tol, n_free - rank)
+    null_basis, not_identifiable = _null_combinations(robot, A / scale if As is None and rank < n_free else As, idx,
+                                                      names, scale, tol, n_free - rank)
     Vt[rank:] = null_basis  # the same null space, in one chain's parameters where possible
     Vr = Vt[:rank]
     crb_scaled = (Vr.T / s[:rank] ** 2) @ Vr

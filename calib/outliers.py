@@ -21,7 +21,18 @@ estimate (the forward kinematics from the measured poses) but keep the first fit
 pass over every row's closure Jacobians saved a refit): the refit moves the estimate by the
 removed rows' pull, a few times the noise over the square root of the rows, which changes the
 Jacobian by that over the machine's size (below 1e-6 relative at 10,000 rows of a 1 um
-instrument on a machine of 100 mm), and the statistics by as much relative.
+instrument on a machine of 100 mm), and the statistics by as much relative. Such a refit keeps
+the kept rows and the Jacobian of the last pass, hence its covariance and hat-matrix blocks: they
+are reused (the same numbers), only the residuals are new.
+
+Above :data:`STRUCTURED_JACOBIAN_MIN_ROWS` rows, where each chain's closure moves with its own
+parameters alone (:attr:`calib.robot.ClosureJacobians.own`: the hexapod, the 6-RUS) and the free
+parameters come chain by chain, as many per chain, the (N, D, P) Jacobian is never formed: row
+j's is ``M_j S_j``, ``M_j`` (D, C) the whitened inverse pose Jacobian and ``S_j`` (C, P) its
+parameters' own entries, one chain's block per row; the Gram products, the residual updates and
+the hat-matrix blocks ``M_j (S_j cov S_j^T) M_j^T`` are taken through the factors (about a fifth
+of the flops, no 200 MB array at 100,000 rows of 42 parameters), equal to the dense ones to
+rounding; the Gram product of the kept rows is every row's less the few left out.
 
 A few bad rows are outliers; many are not: when more than ``max_fraction`` of the rows would
 have to go, the model does not fit the data at the declared noise (an unmodelled effect, or noise
@@ -39,10 +50,10 @@ from scipy.special import gammaincinv
 from .batched_lu import BatchedLU
 from .engine import identify_forward
 from .noise import SensorNoise
-from .robot import Robot, pose_jacobian_of_parameters
+from .robot import ChainJacobianFactors, Robot, chain_jacobian_factors, pose_jacobian_of_parameters
 
 __all__ = ["OutlierReport", "find_outliers", "hat_blocks", "MISFIT_FRACTION", "ONE_AT_A_TIME_MAX_ROWS",
-           "REUSED_JACOBIAN_MIN_ROWS"]
+           "REUSED_JACOBIAN_MIN_ROWS", "STRUCTURED_JACOBIAN_MIN_ROWS"]
 
 #: More rows than this fraction failing the test is model misfit, not outliers.
 MISFIT_FRACTION = 0.05
@@ -50,6 +61,8 @@ MISFIT_FRACTION = 0.05
 ONE_AT_A_TIME_MAX_ROWS = 2000
 #: Above this many rows the checking refits keep the first fit's Jacobian (module doc).
 REUSED_JACOBIAN_MIN_ROWS = 10000
+#: Above this many rows a chain-structured robot's Jacobian is kept as its factors (module doc).
+STRUCTURED_JACOBIAN_MIN_ROWS = 10000
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,7 +80,8 @@ class OutlierReport:
         exceeding: rows whose statistic exceeds the threshold (in the last fit).
         verdict: the outcome in words.
         search: the backward search's form, in words (one row at a time, or all rows above the
-            threshold at once above :data:`ONE_AT_A_TIME_MAX_ROWS` rows).
+            threshold at once above :data:`ONE_AT_A_TIME_MAX_ROWS` rows; the checking refits'
+            Jacobian and the Jacobian's factored form where they apply).
     """
 
     deleted_residuals: np.ndarray
@@ -93,10 +107,18 @@ def hat_blocks(J: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return B @ np.swapaxes(B, 1, 2)
 
 
-def _whitened(robot: Robot, theta, joints, measured, noise):
+def _whitened(robot: Robot, theta, joints, measured, noise, idx=None, structured=False):
+    """``(r (N, D), J)``: the whitened residuals at ``theta`` (forward kinematics from the measured
+    poses) and their Jacobian by the free parameters ``idx`` (all: None): a (N, D, P) array, or,
+    with ``structured`` where the robot's closures allow it, its
+    :class:`~calib.robot.ChainJacobianFactors`."""
     std = noise.pose_std(robot.pose_units)
     pred = robot.forward_kinematics(theta, joints, initial=measured)
     r = (measured - pred) / std
+    if structured:
+        factors = chain_jacobian_factors(robot, theta, joints, pred, idx, 1.0 / std)
+        if factors is not None:
+            return r, factors
     J = pose_jacobian_of_parameters(robot, theta, joints, pred) / std[None, :, None]
     return r, J
 
@@ -143,25 +165,50 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
         search += (f"; the checking refits' residuals against the first fit's Jacobian ({n:,} rows > "
                    f"REUSED_JACOBIAN_MIN_ROWS = {REUSED_JACOBIAN_MIN_ROWS})")
     Jr = None
+    structured = n > STRUCTURED_JACOBIAN_MIN_ROWS
+    last = None  # (kept, cov, H, factors) of the last pass: reused while the Jacobian and the rows kept stay
     for _ in range(3):  # nonlinear refits: the first, and one check per linearised search
         fit = identify_forward(robot, joints[kept], measured[kept], noise, free=free, start=theta)
         theta = fit.theta
         if reuse and Jr is not None:  # the refit's residuals; its Jacobian is the last one's (module doc)
             r0 = (measured - robot.forward_kinematics(theta, joints, initial=measured)) / std
         else:
-            r0, J = _whitened(robot, theta, joints, measured, noise)
-            Jr = J if np.array_equal(idx, np.arange(J.shape[2])) else np.take(J, idx, axis=2)
+            r0, J = _whitened(robot, theta, joints, measured, noise, idx, structured)
+            last = None
+            if isinstance(J, ChainJacobianFactors):
+                Jr, gram_all = J, J.gram()
+                if "STRUCTURED_JACOBIAN_MIN_ROWS" not in search:
+                    search += (f"; the Jacobian kept as its chains' factors ({n:,} rows > "
+                               f"STRUCTURED_JACOBIAN_MIN_ROWS = {STRUCTURED_JACOBIAN_MIN_ROWS})")
+            else:
+                Jr = J if np.array_equal(idx, np.arange(J.shape[2])) else np.take(J, idx, axis=2)
         # Backward search on the model linearised at this fit: leaving rows out moves the
         # estimate by delta = (sum_kept Jr^T Jr)^-1 sum_kept Jr^T r0, in closed form.
         grown = False
         while True:
-            A = Jr.reshape(-1, p) if kept.all() else Jr[kept].reshape(-1, p)  # a view while every row is kept
-            cov = np.linalg.pinv(A.T @ A, hermitian=True)
-            delta = cov @ (A.T @ (r0.ravel() if kept.all() else r0[kept].ravel()))
-            r = r0 - Jr @ delta
-            H = hat_blocks(Jr, cov)  # (N, D, D) diagonal blocks of the hat matrix
-            sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
-            dw = BatchedLU(np.eye(d)[None] + sign * H).solve(r)
+            same = last is not None and np.array_equal(last[0], kept)
+            if isinstance(Jr, ChainJacobianFactors):
+                out = np.flatnonzero(~kept)
+                if not same:
+                    gram = gram_all - Jr.gram(out) if out.size else gram_all
+                    cov = np.linalg.pinv(gram, hermitian=True)
+                delta = cov @ Jr.rmatvec(r0 if out.size == 0 else np.where(kept[:, None], r0, 0.0))
+                r = r0 - Jr.matvec(delta)
+            else:
+                A = Jr.reshape(-1, p) if kept.all() else Jr[kept].reshape(-1, p)  # a view while every row is kept
+                if not same:
+                    cov = np.linalg.pinv(A.T @ A, hermitian=True)
+                delta = cov @ (A.T @ (r0.ravel() if kept.all() else r0[kept].ravel()))
+                r = r0 - Jr @ delta
+            if same:  # the same Jacobian and rows kept: the same covariance, blocks and factors
+                cov, H, factors = last[1:]
+            else:
+                # (N, D, D) diagonal blocks of the hat matrix
+                H = Jr.hat(cov) if isinstance(Jr, ChainJacobianFactors) else hat_blocks(Jr, cov)
+                sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
+                factors = BatchedLU(np.eye(d)[None] + sign * H)
+                last = (kept.copy(), cov, H, factors)
+            dw = factors.solve(r)
             stat = np.sum(r * dw, axis=1)
             cand = np.flatnonzero(kept)
             if at_once:

@@ -35,7 +35,7 @@ __all__ = ["KinematicsError", "Parameter", "ParameterTable", "ClosureJacobians",
            "solve_closure_parameters",
            "check_joint_limits", "pose_whitening", "SINGULAR_CONDITION", "NEWTON_BLOCK_ROWS", "CHORD_STEP_MM",
            "FORWARD_KINEMATICS_TOL_MM", "SINGULAR_BOUND_REFERENCES", "raise_if_singular", "JOINT_RANGES_KEY",
-           "checked_joint_ranges"]
+           "checked_joint_ranges", "ChainJacobianFactors", "chain_jacobian_factors", "HAT_BLOCK_ROWS"]
 
 #: Scaled condition number of the closure's pose Jacobian beyond which a configuration is singular.
 SINGULAR_CONDITION = 1e5
@@ -586,6 +586,121 @@ def solve_closure_parameters(robot: Robot, jac: ClosureJacobians) -> np.ndarray:
         # chain by chain in table order, k parameters each: one broadcast product, no gather
         return (inverse[:, :, :, None] * own.reshape(n, 1, c, k)).reshape(n, pose.shape[1], -1)
     return inverse[:, :, chains] * own[:, None, :]
+
+
+#: Rows of a block of :meth:`ChainJacobianFactors.hat` (a block's (B, m, P) products stay in cache).
+HAT_BLOCK_ROWS = 4096
+
+
+class ChainJacobianFactors:
+    """The pose Jacobian ``d pose / d theta`` of N rows by P parameters (row-scaled, e.g. whitened),
+    kept as its factors (:func:`chain_jacobian_factors`): row j's (D, P) block is ``M_j S_j``
+    with ``M`` (N, D, m) the scaled columns of ``-(dF/dpose)^-1`` of the m chains with
+    parameters and ``S_j`` block-diagonal, chain a's K parameters' own entries ``own`` (N, m, K)
+    (:attr:`ClosureJacobians.own`); the parameters are chain a's K in order, chain by chain.
+    Its products take about a fifth of the dense Jacobian's flops and never hold the (N, D, P)
+    array; they equal the dense ones to rounding."""
+
+    def __init__(self, M: np.ndarray, own: np.ndarray):
+        self.M, self.own = M, own
+        self.n, self.m, self.k = own.shape
+        self.p = self.m * self.k
+
+    def gram(self, rows=None) -> np.ndarray:
+        """(P, P) ``sum_j J_j^T J_j`` over ``rows`` (an index array; None: every row)."""
+        M, own = (self.M, self.own) if rows is None else (self.M[rows], self.own[rows])
+        W = np.einsum("nia,nib->nab", M, M)  # (N, m, m): M_j^T M_j
+        G = np.empty((self.p, self.p))
+        k = self.k
+        for a in range(self.m):
+            scaled = (W[:, a, :, None] * own).reshape(own.shape[0], -1)  # (N, P)
+            G[a * k:(a + 1) * k] = own[:, a].T @ scaled
+        return G
+
+    def rmatvec(self, r: np.ndarray) -> np.ndarray:
+        """(P,) ``sum_j J_j^T r_j`` of ``r`` (N, D)."""
+        t = np.einsum("nia,ni->na", self.M, r)
+        return np.einsum("nak,na->ak", self.own, t).ravel()
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """(N, D) ``J_j x`` of every row, ``x`` (P,)."""
+        s = np.einsum("nak,ak->na", self.own, x.reshape(self.m, self.k))
+        return np.einsum("nia,na->ni", self.M, s)
+
+    def hat(self, cov: np.ndarray) -> np.ndarray:
+        """(N, D, D) ``J_j cov J_j^T``, ``cov`` (P, P) symmetric positive semi-definite, through the
+        factors: with ``cov = L L^T`` (its eigenvectors scaled by the square roots of its
+        eigenvalues, negative rounding ones taken as zero, as :func:`calib.outliers.hat_blocks`),
+        ``V_j = S_j L`` (m, P) chain block by chain block, ``Q_j = V_j V_j^T`` (m, m), then
+        ``M_j Q_j M_j^T``; block by block of :data:`HAT_BLOCK_ROWS` rows."""
+        w, v = np.linalg.eigh(cov)
+        L = (v * np.sqrt(np.clip(w, 0.0, None))).reshape(self.m, self.k, self.p)  # chain a's rows of L
+        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
+        for start in range(0, self.n, HAT_BLOCK_ROWS):
+            rows = slice(start, start + HAT_BLOCK_ROWS)
+            own, M = self.own[rows], self.M[rows]
+            V = np.empty((own.shape[0], self.m, self.p))
+            for a in range(self.m):
+                V[:, a] = own[:, a] @ L[a]
+            Q = V @ np.swapaxes(V, 1, 2)  # (B, m, m)
+            out[rows] = (M @ Q) @ np.swapaxes(M, 1, 2)
+        return out
+
+    def sandwich(self, cov: np.ndarray) -> np.ndarray:
+        """(N, D, D) ``J_j cov J_j^T`` with ``cov`` (P, P) as given (no factor of it: where ``cov``
+        is large along directions the Jacobian nearly annihilates, e.g. a prior-held gauge, its
+        eigen-factor's rounding would leak into the rest), as ``J_j (cov J_j^T)``: ``U_j = S_j
+        cov`` (m, P) chain block by chain block, ``U_j S_j^T`` (m, m), then ``M_j (.) M_j^T``;
+        block by block of :data:`HAT_BLOCK_ROWS` rows."""
+        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
+        cov = np.asarray(cov, dtype=float).reshape(self.m, self.k, self.p)  # chain a's rows of cov
+        for start in range(0, self.n, HAT_BLOCK_ROWS):
+            rows = slice(start, start + HAT_BLOCK_ROWS)
+            own, M = self.own[rows], self.M[rows]
+            U = np.empty((own.shape[0], self.m, self.p))
+            for a in range(self.m):
+                U[:, a] = own[:, a] @ cov[a]
+            Q = np.einsum("nabl,nbl->nab", U.reshape(own.shape[0], self.m, self.m, self.k), own)
+            out[rows] = (M @ Q) @ np.swapaxes(M, 1, 2)
+        return out
+
+    def dense(self, rows) -> np.ndarray:
+        """(len(rows), D, P) the Jacobian's rows ``rows`` formed."""
+        M, own = self.M[rows], self.own[rows]
+        return (M[:, :, :, None] * own[:, None, :, :]).reshape(M.shape[0], M.shape[1], self.p)
+
+
+def _chain_blocks(robot: Robot, jac: ClosureJacobians, idx: np.ndarray):
+    """``(chains (m,), columns (m, K))`` where the free parameters ``idx`` come chain by chain, K
+    of each chain's, and ``jac`` gives their own entries (square pose blocks), else None."""
+    if jac.own is None or jac.pose.shape[1] != jac.pose.shape[2] or not np.array_equal(jac.chains, robot.table.chains):
+        return None
+    owner = robot.table.chains[idx]
+    chains = np.unique(owner)
+    k = idx.size // chains.size
+    if k * chains.size != idx.size or not np.array_equal(owner, np.repeat(owner[::k], k)) or \
+            np.unique(owner[::k]).size != chains.size:
+        return None
+    return owner[::k], idx.reshape(-1, k)
+
+
+def chain_jacobian_factors(robot: Robot, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray, idx=None,
+                           row_scale=None) -> ChainJacobianFactors | None:
+    """The pose Jacobian ``d pose / d theta[idx]`` (``idx`` default every parameter) at consistent
+    ``(joints, poses)`` (N, C), (N, D), each pose coordinate times ``row_scale`` (D,) (default 1),
+    as its :class:`ChainJacobianFactors`: ``pose_jacobian_of_parameters(...)[:, :, idx] *
+    row_scale[:, None]`` to rounding, never formed. None where the robot's closures give no own
+    entries, the pose block is not square, or ``idx`` does not come chain by chain, as many of
+    each chain's (then form the Jacobian)."""
+    jac = robot.closure_jacobians(theta, joints, poses)
+    blocks = _chain_blocks(robot, jac, np.arange(robot.n_parameters) if idx is None else np.asarray(idx))
+    if blocks is None:
+        return None
+    chains, columns = blocks
+    M = inverse_stacked(jac.pose)[:, :, chains]
+    scale = -np.ones(jac.pose.shape[2]) if row_scale is None else -np.asarray(row_scale, dtype=float)
+    M *= scale[None, :, None]
+    return ChainJacobianFactors(M, jac.own[:, columns])
 
 
 #: The description key of the joints' declared ranges: ``[[low, high], ...]``, one pair per joint

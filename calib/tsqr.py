@@ -29,12 +29,14 @@ def triangular_update(R: np.ndarray | None, A: np.ndarray) -> np.ndarray:
     return np.linalg.qr(A if R is None else np.concatenate([R, A], axis=-2), mode="r")
 
 
-def triangular_factor(A: np.ndarray, block_rows: int = TSQR_BLOCK_ROWS) -> np.ndarray:
+def triangular_factor(A: np.ndarray, block_rows: int = TSQR_BLOCK_ROWS, column_scale=None) -> np.ndarray:
     """(min(M, K), K) ``R`` with ``R^T R = A^T A`` for ``A`` (M, K): the same singular values and
     right singular vectors as ``A``, from :func:`triangular_update` over blocks of
-    ``block_rows`` rows (one LAPACK call when ``A`` has no more rows than a block)."""
+    ``block_rows`` rows (one LAPACK call when ``A`` has no more rows than a block). With
+    ``column_scale`` (K,) the factor of ``A / column_scale``, each block divided as it is taken
+    (the same numbers, without the scaled (M, K) copy)."""
     step = max(1, int(block_rows))
     R = None
     for a in range(0, max(A.shape[0], 1), step):
-        R = triangular_update(R, A[a:a + step])
+        R = triangular_update(R, A[a:a + step] if column_scale is None else A[a:a + step] / column_scale)
     return R

@@ -15,12 +15,42 @@ from pipeline.formats import forget_created_folders, one_line, take_back_created
 
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
            "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments",
-           "add_noise_arguments", "noise_from_arguments"]
+           "add_noise_arguments", "noise_from_arguments", "keep_freed_memory", "MALLOC_TRIM_THRESHOLD",
+           "MALLOC_MMAP_MAX", "KEPT_FREED_BYTES"]
 
 #: Exit status of a refused input, output or flag (argparse's own).
 EXIT_USAGE = 2
 #: Exit status of a run interrupted by Ctrl-C.
 EXIT_INTERRUPTED = 130
+
+
+#: glibc's ``mallopt`` parameter: free memory at the heap's top kept up to this many bytes.
+MALLOC_TRIM_THRESHOLD = -1
+#: glibc's ``mallopt`` parameter: most allocations served by their own ``mmap`` (0: none).
+MALLOC_MMAP_MAX = -4
+#: Freed memory a one-shot command keeps for its next arrays (:func:`keep_freed_memory`).
+KEPT_FREED_BYTES = 2 ** 30
+
+
+def keep_freed_memory() -> bool:
+    """Let this process reuse the memory of its freed arrays instead of asking the kernel for
+    fresh pages (glibc's ``mallopt``: no allocation by its own ``mmap``, up to
+    :data:`KEPT_FREED_BYTES` of freed memory kept). A one-shot command on 100,000 rows makes
+    and frees arrays of tens to hundreds of MB stage after stage; by default glibc serves each
+    above 32 MB by ``mmap`` and returns it on ``free``, so every next one is fresh pages, zeroed
+    by the kernel on first touch (on the 100,000-row hexapod recording: 174,000 page faults, 1.3
+    s of system time; kept: 126,000, 0.7 s; peak memory 0.58 -> 0.63 GB). Only for a process
+    that ends after its one run (the memory is kept until it exits). Returns whether it took
+    effect (False off glibc)."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return bool(mallopt(MALLOC_MMAP_MAX, 0)) and bool(mallopt(MALLOC_TRIM_THRESHOLD, KEPT_FREED_BYTES))
 
 
 class UsageError(ValueError):

@@ -18,7 +18,7 @@ from calib import paper
 from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
-from .cli import ArgumentParser, cli_main
+from .cli import ArgumentParser, cli_main, keep_freed_memory
 from .formats.report import build_report
 from .formats.report_text import terminal_lines
 
@@ -185,9 +185,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run; a bad input or output ends with one line on stderr and exit status 2.
 
     The command renders nothing: unless ``MUJOCO_GL`` says otherwise, MuJoCo is imported without
-    its OpenGL backend (a third of MuJoCo's import time).
+    its OpenGL backend (a third of MuJoCo's import time). The process ends after its run: freed
+    arrays' memory is reused, not handed back (:func:`pipeline.cli.keep_freed_memory`).
     """
     os.environ.setdefault("MUJOCO_GL", "disable")
+    keep_freed_memory()
     return cli_main(run, argv)
 
 

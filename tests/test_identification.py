@@ -209,3 +209,37 @@ def test_a_wrong_type_is_refused_by_name():
         calibrate(robot, q, m, 0.001)
     with pytest.raises(TypeError, match="tolerance"):
         calibrate(robot, q, m, NOISE, tolerance={"mm": 0.1})
+
+
+def test_above_the_size_the_prediction_check_takes_the_jacobians_chain_factors(monkeypatch):
+    """The hexapod's 20 validation rows judged with calib.outliers.STRUCTURED_JACOBIAN_MIN_ROWS
+    lowered to 10: ``J Sigma J^T`` through the Jacobian's chain factors (``form`` says so), the
+    same verdict, and the whitened ratio that of the check computed here with ``J Sigma J^T`` in
+    extended precision (``numpy.longdouble``, independent of both forms), as the dense form's is.
+    Bound: 100 P eps relative (9e-13). The noise dominates each row's covariance (``J Sigma
+    J^T`` is about P/N of it), so the ratio carries the rounding of the products' sums, P terms
+    each, not the ``|J_j|^2 |Sigma|`` of a gauge-like direction the fit's prior holds (Sigma
+    large where J nearly cancels it: measured 4e-14 dense, 1e-13 factored; the covariance's
+    eigen-factor, as the outlier test's hat blocks take it, measured 4e-8 here and fails).
+    """
+    import calib.outliers
+    from calib.robot import pose_jacobian_of_parameters
+
+    robot, _, q, m, qv, mv = machine("hexapod", seed=4)
+    outcome = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv)
+    dense = outcome.verdict.evidence["predictions"]
+    assert "form" not in dense
+    monkeypatch.setattr(calib.outliers, "STRUCTURED_JACOBIAN_MIN_ROWS", 10)
+    fast = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv).verdict.evidence["predictions"]
+    assert fast["form"] == "J Sigma J^T through the Jacobian's chain factors (20 rows > STRUCTURED_JACOBIAN_MIN_ROWS = 10)"
+    assert fast["agrees"] == dense["agrees"] and fast["rows"] == dense["rows"] == VALIDATION
+    result = outcome.result
+    J = pose_jacobian_of_parameters(robot, result.theta, qv, mv)
+    Jl, Sl = J.astype(np.longdouble), result.covariance.astype(np.longdouble)
+    cov = np.einsum("nip,pq,njq->nij", Jl, Sl, Jl) + np.diag(NOISE.pose_std(robot.pose_units) ** 2).astype(np.longdouble)
+    after = outcome.heldout[1]
+    chi2 = sum(float(np.asarray(np.linalg.solve(cov[j].astype(float), after[j]) @ after[j])) for j in range(VALIDATION))
+    truth = np.sqrt(chi2 / after.size)
+    bound = 100 * J.shape[2] * np.finfo(float).eps
+    for check in (dense, fast):
+        assert abs(check["ratio"] - truth) <= bound * truth, (check["ratio"], truth, bound)

@@ -18,6 +18,7 @@ from calib.measurement import (
     measurement_observability,
     measurement_settings,
     rigid_registration,
+    whitened_residuals,
 )
 from calib.noise import SensorNoise
 from calib.robots import ROBOTS, default_robot, reference_errors
@@ -252,3 +253,24 @@ def test_real_position_only_recording_round_trips_and_calibrates(hexapod_recordi
     s = run(["--real", str(out / "targets.csv"), "--out", str(out), "--name", "targets_cal", "--quiet"]).summary
     assert s["measurement_targets_estimated"] and "measurement_frame" not in s
     assert s["heldout_position_error_mm"]["after"] < 1.5 * base.summary["heldout_position_error_mm"]["after"]
+
+
+@pytest.mark.parametrize("targets", [None, np.array([[10.0, 0.0, 5.0], [0.0, 20.0, 3.0]])])
+def test_whitened_residuals_without_joint_noise_are_the_residuals_over_the_noise(targets):
+    """Without joint noise the whitening is each coordinate over its standard deviation (taken
+    without the measurement Jacobians); the independent truth: the covariance path run with a
+    joint noise of 1e-30 (its term 1e-60 relative, below rounding), through the Cholesky factor's
+    inverse; full poses and targets, in a frame: equal to a few eps relative."""
+    robot = default_robot("hexapod")
+    theta = robot.table.nominal + reference_errors(robot, 1)
+    poses = reachable_poses(robot, 40, 2)
+    joints = robot.inverse_kinematics(robot.table.nominal, poses)
+    frame = np.array([5.0, -3.0, 2.0, 0.01, -0.02, 0.03])
+    measured = instrument_measurements(robot, poses, frame, targets) + 1e-3
+    plain, model = whitened_residuals(robot, theta, joints, measured, SensorNoise(1e-3, 1e-6, "normal"), frame=frame,
+                                      targets=targets)
+    tiny, same = whitened_residuals(robot, theta, joints, measured, SensorNoise(1e-3, 1e-6, "normal", joint=1e-30),
+                                    frame=frame, targets=targets)
+    np.testing.assert_array_equal(model, same)
+    np.testing.assert_allclose(plain, tiny, rtol=1e-13, atol=1e-13 * np.abs(tiny).max())
+    assert np.abs(plain).max() > 1.0  # the residuals are not zero: the test could fail

@@ -9,6 +9,7 @@ import pytest
 import calib.outliers
 from calib.noise import SensorNoise
 from calib.outliers import find_outliers
+from calib.robot import pose_jacobian_of_parameters
 from calib.robots import ROBOTS, default_robot, reference_errors
 from calib.workspace import reachable_poses
 
@@ -82,3 +83,44 @@ def test_above_the_size_the_checking_refit_keeps_the_first_jacobian(name, monkey
     assert reused.flagged == recomputed.flagged == SPOILED, reused.verdict
     np.testing.assert_allclose(reused.statistic, recomputed.statistic, rtol=1e-3, atol=1e-3)
     assert not np.array_equal(reused.statistic, recomputed.statistic)  # the other form ran
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_above_the_size_the_jacobian_kept_as_its_chain_factors_gives_the_same_statistics(name, monkeypatch):
+    """60 rows, three 50 um off, the at-once search and the reused Jacobian (their constants lowered
+    to 40): with STRUCTURED_JACOBIAN_MIN_ROWS lowered to 40 as well the hexapod's and the 6-RUS's
+    Jacobian is kept as its chain factors (``search`` says so; the Delta's closures give no own
+    entries: the dense form runs and ``search`` does not say it). The two forms compute the same
+    numbers in another order (the kept rows' Gram product as every row's less the left-out rows'),
+    so every statistic agrees to rounding carried through the normal equations: relative to
+    ``1 + t``, below ``100 kappa eps`` with ``kappa`` the column-scaled condition number of the
+    whitened Gram product (measured here from the dense Jacobian of the flagged-free fit,
+    independent of the factored form)."""
+    robot = default_robot(name)
+    theta = robot.table.nominal + reference_errors(robot, 2)
+    poses = reachable_poses(robot, 60, 4, theta=theta)
+    joints = robot.inverse_kinematics(theta, poses)
+    measured = poses + NOISE.sample(60, 5, robot.pose_units)
+    measured[list(SPOILED), 0] += 0.05
+    for constant in ("ONE_AT_A_TIME_MAX_ROWS", "REUSED_JACOBIAN_MIN_ROWS"):
+        monkeypatch.setattr(calib.outliers, constant, 40)
+    dense = find_outliers(robot, joints, measured, NOISE)
+    assert "STRUCTURED_JACOBIAN_MIN_ROWS" not in dense.search
+    monkeypatch.setattr(calib.outliers, "STRUCTURED_JACOBIAN_MIN_ROWS", 40)
+    factored = find_outliers(robot, joints, measured, NOISE)
+    own = robot.closure_jacobians(theta, joints, poses).own is not None
+    assert factored.search.endswith("(60 rows > STRUCTURED_JACOBIAN_MIN_ROWS = 40)") == own, factored.search
+    assert factored.flagged == dense.flagged == SPOILED, factored.verdict
+    if not own:
+        np.testing.assert_array_equal(factored.statistic, dense.statistic)
+        return
+    assert not np.array_equal(factored.statistic, dense.statistic)  # the other form ran
+    std = NOISE.pose_std(robot.pose_units)
+    J = pose_jacobian_of_parameters(robot, theta, joints, poses).reshape(-1, robot.n_parameters) / np.tile(std, 60)[:, None]
+    scale = np.linalg.norm(J, axis=0)
+    kappa = np.linalg.cond(J / scale) ** 2
+    bound = 100 * kappa * np.finfo(float).eps
+    err = np.abs(factored.statistic - dense.statistic) / (1 + dense.statistic)
+    assert err.max() <= bound, (err.max(), bound)
+    np.testing.assert_allclose(factored.deleted_residuals, dense.deleted_residuals,
+                               atol=bound * np.abs(dense.deleted_residuals).max())

@@ -212,8 +212,9 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     default prior, 1 um / 1 urad normal noise), 3 rows at z = 1000 mm, run as recorded and with
     every size constant lowered below its rows: the summary names each scalable form (gross-row
     search on a subsample, 2-fold cross-validation, the outlier search at once and its checking refit
-    on the first fit's Jacobian, the diagnosis and the excitation check on subsamples, the 3D machines
-    decimated), the same gross rows are named, and the cross-validated
+    on the first fit's Jacobian, kept as its chain factors there and in the prediction check, the
+    diagnosis and the excitation check on subsamples, the 3D machines decimated), the same gross
+    rows are named, the same verdict is reached, and the cross-validated
     RMS position error agrees with the exact run's (10-fold) within its spread: 77 rows know an
     RMS to ~1/sqrt(2 * 77 * 3) = 5 %, and a fold model fitted to half of them adds at most
     P / (38 * 6) of the noise's variance (the hexapod's free parameters): a band of 0.8 to 1.3."""
@@ -239,9 +240,11 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     assert exact["rerun"]["machine_poses_drawn"] == 80
     assert exact["checks"]["excitation"] == "every calibration row"
     assert "REUSED_JACOBIAN_MIN_ROWS" not in exact["outliers"]["search"]
+    assert "form" not in exact["verdict"]["evidence"]["predictions"]
     for module, name, value in ((calib.robust, "SEARCH_MAX_ROWS", 50), (calib.crossval, "FEW_FOLDS_MIN_ROWS", 40),
                                 (calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40),
                                 (calib.outliers, "REUSED_JACOBIAN_MIN_ROWS", 40),
+                                (calib.outliers, "STRUCTURED_JACOBIAN_MIN_ROWS", 40),
                                 (pipeline.formats.checks, "EXCITATION_MAX_ROWS", 50),
                                 (calib.diagnosis, "DIAGNOSIS_MAX_ROWS", 50),
                                 (pipeline.views.run_view, "MAX_MACHINE_POSES", 30),
@@ -253,7 +256,11 @@ def test_above_the_size_constants_a_run_says_which_forms_it_used(tmp_path, monke
     assert s["crossvalidation"]["scheme"] == "2-fold (77 rows > FEW_FOLDS_MIN_ROWS = 40)"
     assert s["outliers"]["search"] == ("every row above the threshold at once (77 rows > ONE_AT_A_TIME_MAX_ROWS = 40); "
                                        "the checking refits' residuals against the first fit's Jacobian (77 rows > "
-                                       "REUSED_JACOBIAN_MIN_ROWS = 40)")
+                                       "REUSED_JACOBIAN_MIN_ROWS = 40); the Jacobian kept as its chains' factors (77 "
+                                       "rows > STRUCTURED_JACOBIAN_MIN_ROWS = 40)")
+    assert s["verdict"]["evidence"]["predictions"]["form"] == ("J Sigma J^T through the Jacobian's chain factors "
+                                                               "(77 rows > STRUCTURED_JACOBIAN_MIN_ROWS = 40)")
+    assert s["success"] == exact["success"] and s["verdict"]["cause"] == exact["verdict"]["cause"]
     assert s["checks"]["excitation"] == ("a seeded subsample of 50 of the 80 calibration rows (80 rows > "
                                          "EXCITATION_MAX_ROWS = 50)")
     assert "(80 rows > DIAGNOSIS_MAX_ROWS = 50)" in s["diagnosis"]["rows"]

@@ -43,3 +43,13 @@ def test_update_stacks_on_a_previous_factor():
     s0 = np.linalg.norm(both, 2)
     assert R.shape == (6, 6)
     assert np.max(np.abs(R.T @ R - both.T @ both)) <= 2 * 10 * 6 * 2 * EPS * s0 ** 2  # two blocks
+
+
+def test_a_column_scale_gives_the_factor_of_the_scaled_matrix_bit_for_bit():
+    """``column_scale`` divides each block as it is taken: the factor of ``A / scale`` formed whole,
+    to the bit (the same divisions, the same blocks), over several blocks and a ragged last one."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(2500, 9)) * np.logspace(-3, 3, 9)
+    scale = np.logspace(-3, 3, 9)
+    np.testing.assert_array_equal(triangular_factor(A, 1024, column_scale=scale), triangular_factor(A / scale, 1024))
+    assert not np.array_equal(triangular_factor(A, 1024, column_scale=scale), triangular_factor(A, 1024))
