@@ -161,3 +161,65 @@ def test_the_report_says_when_the_search_ran_on_a_subsample():
                                 effects=("lost_count", "thermal_warmup")))
     assert "(lost_count, thermal_warmup)" in words and "10,000 of the 99,893 rows" in words
     assert "above 20,000 rows" in words and "every row" in words
+
+
+def test_the_gram_form_of_an_orthonormal_basis_spans_what_the_svds_spans(monkeypatch):
+    """calib.effects.base's Gram form (above GRAM_MIN_RESIDUALS rows), the threshold lowered to 0:
+    orthonormal columns to rounding, the same span as the SVD's basis (projectors equal to
+    10 k eps cond, cond the scaled columns' condition number: Q = A W lies in A's span exactly, the
+    products' rounding amplified by the conditioning), and a dependent column dropped alike."""
+    import calib.effects.base as base
+    from linalg_tolerance import EPS, column_scaled_condition
+
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(3000, 8)) * np.logspace(0, -4, 8)
+    A[:, 3] = A[:, 2] - 2 * A[:, 5]  # rank 7
+    cond = column_scaled_condition(np.delete(A, 3, axis=1))
+    svd = base.orthonormal_columns(A)
+    monkeypatch.setattr(base, "GRAM_MIN_RESIDUALS", 0)
+    gram = base.orthonormal_columns(A)
+    assert svd.shape == gram.shape == (3000, 7)
+    np.testing.assert_allclose(gram.T @ gram, np.eye(7), atol=10 * 7 * EPS)
+    np.testing.assert_allclose(gram @ gram.T, svd @ svd.T, atol=10 * 7 * EPS * cond)
+
+
+def test_the_remainder_tests_in_the_gram_form_are_the_svds(monkeypatch):
+    """The remainder's F tests through the normal equations (GRAM_MIN_RESIDUALS lowered to 0 in
+    calib.effects.discovery and calib.effects.base: span bases as [design, held remainder], one
+    product with them per test) give the SVD form's p-values and t statistics: relative 1e-6, the
+    Gram matrices' squared conditioning (1e3 to 1e4 scaled, the docstring of GRAM_MIN_RESIDUALS)
+    times eps, far below any decision (alpha 0.01 Bonferroni-corrected)."""
+    import calib.effects.base as base
+    import calib.effects.discovery as disc_mod
+    from calib.effects import fit_effects, remainder_tests
+
+    data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
+    fit = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
+    svd = remainder_tests(data, fit)
+    monkeypatch.setattr(disc_mod, "GRAM_MIN_RESIDUALS", 0)
+    monkeypatch.setattr(base, "GRAM_MIN_RESIDUALS", 0)
+    gram = remainder_tests(data, fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3}))
+    assert gram["explained"] == svd["explained"]
+    for q, v in svd["structure"].items():
+        for key in ("p_value_proportional", "p_value_common_smooth", "p_value"):
+            assert gram["structure"][q][key] == pytest.approx(v[key], rel=1e-6, abs=1e-12), (q, key)
+        np.testing.assert_allclose(gram["structure"][q]["t_per_chain"], v["t_per_chain"], rtol=1e-6, atol=1e-9)
+
+
+def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square():
+    """_SearchSpace.costs (each point of a step time's window updated from the one before on the
+    row that changes) gives _SearchSpace.cost at every point: relative 1e-12 (a few updates'
+    rounding on sums of the whitened columns' products), and the same best point."""
+    from calib.effects.discovery import _Linear
+    from calib.effects import fit_effects
+
+    t = recording("none", [], None).t_s
+    data = recording("lost_count", [0.004], JointStep(2, float((t[300] + t[301]) / 2)))
+    lin = _Linear(data, fit_effects(data, ()), search_rows_max=THRESHOLD, search_subsample_rows=SUBSAMPLE)
+    _, full = lin._spaces([])
+    eff = EFFECTS["lost_count"]
+    window = eff.search_grid(data)[2 * 891 + 280:2 * 891 + 321]  # chain 3, around the step
+    one = np.array([full.cost(eff, u) for u in window])
+    updated = full.costs(eff, window)
+    np.testing.assert_allclose(updated, one, rtol=1e-12)
+    assert np.argmin(updated) == np.argmin(one) and window[np.argmin(one)].time_s == pytest.approx(float((t[300] + t[301]) / 2))

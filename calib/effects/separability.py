@@ -42,7 +42,7 @@ from ..observability import describe_combination
 from ..prior import DATA_SOURCE_RATIO
 
 __all__ = ["HELD_INFORMATION", "GRAM_MIN_RESIDUALS", "IN_CHAIN_COSINE", "FLAT_FRACTION", "GeometryBasis", "geometry_basis",
-           "unseparated_combinations", "flat_indices", "flat_coordinates", "pose_families"]
+           "unseparated_combinations", "unseparated_information", "flat_indices", "flat_coordinates", "pose_families"]
 
 #: A geometric combination is left to the prior (held at its mean) when the rows' information
 #: along it, in tolerance units, is at most this: its maximum a posteriori standard deviation
@@ -199,7 +199,13 @@ def unseparated_combinations(X_held: np.ndarray, X_free: np.ndarray, rtol: float
         geometry free (``ratio``, the two's quotient), least separable first. Combinations the
         rows do not determine even with the geometry held are no concern here.
     """
-    I_held, I_free = X_held.T @ X_held, X_free.T @ X_free
+    return unseparated_information(X_held.T @ X_held, X_free.T @ X_free, rtol)
+
+
+def unseparated_information(I_held: np.ndarray, I_free: np.ndarray, rtol: float = 1e-9) -> list[tuple[np.ndarray, float]]:
+    """:func:`unseparated_combinations` from the informations ``I_held`` and ``I_free`` (p, p) of
+    the effect's coefficients (``X_held^T X_held``, ``X_free^T X_free``): where the tall columns'
+    products are formed otherwise (:meth:`calib.effects.discovery._Remainder.f_test`)."""
     lam, V = np.linalg.eigh(0.5 * (I_held + I_held.T))
     keep = lam > rtol * max(float(lam.max(initial=0.0)), 1e-300)
     if not keep.any():

@@ -25,6 +25,7 @@ import numpy as np
 from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
                            registered_effect, effects_for, fit_effects)
 from calib.effects.discovery import MIN_ROWS
+from calib.effects.separability import GRAM_MIN_RESIDUALS
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
@@ -59,11 +60,13 @@ class DiscoveryReport:
     summary: dict
 
 
-def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, train_rows: np.ndarray) -> dict:
+def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, train_rows: np.ndarray,
+             start: np.ndarray | None = None) -> dict:
     """Held-out closure residual RMS (mm) of geometry only and geometry + the chosen effects,
-    both fitted on ``train_rows``, and the noise floor of the held-out residuals."""
+    both fitted on ``train_rows`` (the geometry's Gauss-Newton from ``start``, (P,), default the
+    nominal), and the noise floor of the held-out residuals."""
     train, test = data.subset(train_rows), data.subset(heldout_rows)
-    geo = fit_effects(train, ())
+    geo = fit_effects(train, (), start=start)
     before = geo.predict(test)[0]
     if chosen.models:
         extras = {m.name: e for m, e in zip(chosen.models, chosen.extras) if e is not None}
@@ -256,7 +259,12 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
     held, train, basis = heldout_split(rec, kept, val, heldout_fraction, seed, analysed_all)
-    h = _heldout(data, disc.chosen, held, train)
+    start = None
+    if train.size * robot.n_chains > GRAM_MIN_RESIDUALS:  # a tall fit: one Gauss-Newton pass saved
+        start = disc.geometry.theta
+        basis += (f"; the training rows' geometry fitted from that of every row (above {GRAM_MIN_RESIDUALS:,} "
+                  "residuals)")
+    h = _heldout(data, disc.chosen, held, train, start)
     scan = disc.outliers
     summary = {
         "robot": robot.name,
