@@ -34,9 +34,21 @@ def dask_two_workers():
         yield client
 
 
+def pytest_configure(config):
+    """Under pytest-xdist (``-n``) without a ``--dist`` of the caller's, work stealing
+    (``--dist worksteal``) instead of xdist's default ``load``: a worker that runs out of tests
+    takes half of another's queue. Set here, not in ``addopts``, so that pytest without xdist (or
+    with ``-p no:xdist``) still runs."""
+    chosen = [*config.invocation_params.args, *os.environ.get("PYTEST_ADDOPTS", "").split()]
+    if getattr(config.option, "dist", "no") == "load" and not any(
+            a == "--dist" or a.startswith("--dist=") or a == "-d" for a in chosen):
+        config.option.dist = "worksteal"
+
+
 def pytest_collection_modifyitems(config, items):
     """The modules holding slow tests first, each module's tests kept together and in their order:
-    under pytest-xdist (``--dist worksteal``) the long tests start first and the short ones fill the
-    other cores' time at the end, instead of one long test running alone last."""
+    under pytest-xdist (``--dist worksteal``, :func:`pytest_configure`) the long tests start first
+    and the short ones fill the other cores' time at the end, instead of one long test running
+    alone last."""
     slow_modules = {item.module.__name__ for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.module.__name__ not in slow_modules)
