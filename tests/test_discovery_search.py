@@ -206,20 +206,23 @@ def test_the_remainder_tests_in_the_gram_form_are_the_svds(monkeypatch):
         np.testing.assert_allclose(gram["structure"][q]["t_per_chain"], v["t_per_chain"], rtol=1e-6, atol=1e-9)
 
 
-def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square():
-    """_SearchSpace.costs (each point of a step time's window updated from the one before on the
-    row that changes) gives _SearchSpace.cost at every point: relative 1e-12 (a few updates'
-    rounding on sums of the whitened columns' products), and the same best point."""
-    from calib.effects.discovery import _Linear
-    from calib.effects import fit_effects
+def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square(monkeypatch):
+    """The subsampled search's window of step times on every row, each point's chi-square updated
+    from the point before on the row that changes (``SEARCH_UPDATE_ROWS``), finds what the same
+    window finds with a full pass at every point (``SEARCH_UPDATE_ROWS`` below one row): the same
+    step, and the same fit at it to the bit (the update's rounding, relative 1e-12 on sums of
+    products, is far below the gap between two step times' chi-squares)."""
+    import calib.effects.discovery as disc_mod
 
     t = recording("none", [], None).t_s
-    data = recording("lost_count", [0.004], JointStep(2, float((t[300] + t[301]) / 2)))
-    lin = _Linear(data, fit_effects(data, ()), search_rows_max=THRESHOLD, search_subsample_rows=SUBSAMPLE)
-    _, full = lin._spaces([])
-    eff = EFFECTS["lost_count"]
-    window = eff.search_grid(data)[2 * 891 + 280:2 * 891 + 321]  # chain 3, around the step
-    one = np.array([full.cost(eff, u) for u in window])
-    updated = full.costs(eff, window)
-    np.testing.assert_allclose(updated, one, rtol=1e-12)
-    assert np.argmin(updated) == np.argmin(one) and window[np.argmin(one)].time_s == pytest.approx(float((t[300] + t[301]) / 2))
+    truth = JointStep(2, float((t[300] + t[301]) / 2))
+    data = recording("lost_count", [0.004], truth)
+    kw = dict(candidates=["lost_count"], laws=False, search_rows_max=THRESHOLD, search_subsample_rows=SUBSAMPLE)
+    updated = discover_effects(data, **kw)
+    monkeypatch.setattr(disc_mod, "SEARCH_UPDATE_ROWS", -1)
+    full = discover_effects(data, **kw)
+    assert updated.search["form"] == full.search["form"] == "subsample"
+    assert updated.chosen.extras == full.chosen.extras
+    assert updated.chosen.extra == truth
+    assert updated.chosen.chi2 == full.chosen.chi2
+    np.testing.assert_array_equal(updated.chosen.coefficients, full.chosen.coefficients)
