@@ -635,7 +635,7 @@ def _chain_owners(robot, jac: ClosureJacobians, idx: np.ndarray) -> np.ndarray |
     exactly zero: what the chain-wise fit assumes); else None (a robot whose closures share
     parameters: the forward fit then takes the dense product)."""
     owners = np.asarray(robot.table.chains)[idx]
-    if jac.own is not None and np.array_equal(jac.chains, robot.table.chains):
+    if jac.own_for(robot.table.chains) is not None:
         return owners
     parameters = jac.parameters
     others = np.ones((parameters.shape[1], idx.size), dtype=bool)

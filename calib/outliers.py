@@ -123,6 +123,42 @@ def _whitened(robot: Robot, theta, joints, measured, noise, idx=None, structured
     return r, J
 
 
+def _leave_one_out(Jr, gram_all, r0: np.ndarray, kept: np.ndarray, last):
+    """One pass of the backward search on the model linearised at a fit: the estimate moved by
+    leaving the rows not ``kept`` out, ``delta = (sum_kept Jr^T Jr)^-1 sum_kept Jr^T r0``, in
+    closed form. ``Jr`` the whitened Jacobian of every row, (N, D, p) or its
+    :class:`~calib.robot.ChainJacobianFactors` (with ``gram_all`` its Gram product over every row:
+    the kept rows' is that less the left-out rows'); ``r0`` (N, D) the whitened residuals at the
+    fit; ``last`` ``(kept, cov, factors)`` of the pass before on the same Jacobian, or None: reused
+    when the same rows are kept. Returns ``(r, dw, last)``: ``r`` (N, D) the residuals after the
+    step, ``dw = (I -+ H_jj)^-1 r_j`` (a kept row's predicted without it, a left-out row's with the
+    fit's prediction error added; ``H_jj`` the hat matrix's diagonal block), and this pass's
+    ``last``."""
+    same = last is not None and np.array_equal(last[0], kept)
+    if same:  # the same Jacobian and rows kept: the same covariance, blocks and factors
+        cov, factors = last[1:]
+    if isinstance(Jr, ChainJacobianFactors):
+        out = np.flatnonzero(~kept)
+        if not same:
+            cov = np.linalg.pinv(gram_all - Jr.gram(out) if out.size else gram_all, hermitian=True)
+        delta = cov @ Jr.rmatvec(r0 if out.size == 0 else np.where(kept[:, None], r0, 0.0))
+        r = r0 - Jr.matvec(delta)
+    else:
+        p = Jr.shape[2]
+        A = Jr.reshape(-1, p) if kept.all() else Jr[kept].reshape(-1, p)  # a view while every row is kept
+        if not same:
+            cov = np.linalg.pinv(A.T @ A, hermitian=True)
+        delta = cov @ (A.T @ (r0.ravel() if kept.all() else r0[kept].ravel()))
+        r = r0 - Jr @ delta
+    if not same:
+        # (N, D, D) diagonal blocks of the hat matrix
+        H = Jr.hat(cov) if isinstance(Jr, ChainJacobianFactors) else hat_blocks(Jr, cov)
+        sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
+        factors = BatchedLU(np.eye(r0.shape[1])[None] + sign * H)
+        last = (kept.copy(), cov, factors)
+    return r, factors.solve(r), last
+
+
 def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=None,
                   alpha: float = 1e-3, max_fraction: float = MISFIT_FRACTION) -> OutlierReport:
     """Flag measured poses inconsistent with the rest (closed-form leave-one-out, chi-square).
@@ -164,9 +200,9 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
     if reuse:
         search += (f"; the checking refits' residuals against the first fit's Jacobian ({n:,} rows > "
                    f"REUSED_JACOBIAN_MIN_ROWS = {REUSED_JACOBIAN_MIN_ROWS})")
-    Jr = None
+    Jr = gram_all = None
     structured = n > STRUCTURED_JACOBIAN_MIN_ROWS
-    last = None  # (kept, cov, H, factors) of the last pass: reused while the Jacobian and the rows kept stay
+    last = None  # (kept, cov, factors) of the last pass: reused while the Jacobian and the rows kept stay
     for _ in range(3):  # nonlinear refits: the first, and one check per linearised search
         fit = identify_forward(robot, joints[kept], measured[kept], noise, free=free, start=theta)
         theta = fit.theta
@@ -182,33 +218,10 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
                                f"STRUCTURED_JACOBIAN_MIN_ROWS = {STRUCTURED_JACOBIAN_MIN_ROWS})")
             else:
                 Jr = J if np.array_equal(idx, np.arange(J.shape[2])) else np.take(J, idx, axis=2)
-        # Backward search on the model linearised at this fit: leaving rows out moves the
-        # estimate by delta = (sum_kept Jr^T Jr)^-1 sum_kept Jr^T r0, in closed form.
+        # Backward search on the model linearised at this fit (_leave_one_out).
         grown = False
         while True:
-            same = last is not None and np.array_equal(last[0], kept)
-            if isinstance(Jr, ChainJacobianFactors):
-                out = np.flatnonzero(~kept)
-                if not same:
-                    gram = gram_all - Jr.gram(out) if out.size else gram_all
-                    cov = np.linalg.pinv(gram, hermitian=True)
-                delta = cov @ Jr.rmatvec(r0 if out.size == 0 else np.where(kept[:, None], r0, 0.0))
-                r = r0 - Jr.matvec(delta)
-            else:
-                A = Jr.reshape(-1, p) if kept.all() else Jr[kept].reshape(-1, p)  # a view while every row is kept
-                if not same:
-                    cov = np.linalg.pinv(A.T @ A, hermitian=True)
-                delta = cov @ (A.T @ (r0.ravel() if kept.all() else r0[kept].ravel()))
-                r = r0 - Jr @ delta
-            if same:  # the same Jacobian and rows kept: the same covariance, blocks and factors
-                cov, H, factors = last[1:]
-            else:
-                # (N, D, D) diagonal blocks of the hat matrix
-                H = Jr.hat(cov) if isinstance(Jr, ChainJacobianFactors) else hat_blocks(Jr, cov)
-                sign = np.where(kept, -1.0, 1.0)[:, None, None]  # kept: I - H; left out: I + H
-                factors = BatchedLU(np.eye(d)[None] + sign * H)
-                last = (kept.copy(), cov, H, factors)
-            dw = factors.solve(r)
+            r, dw, last = _leave_one_out(Jr, gram_all, r0, kept, last)
             stat = np.sum(r * dw, axis=1)
             cand = np.flatnonzero(kept)
             if at_once:

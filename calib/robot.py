@@ -156,6 +156,11 @@ class ClosureJacobians:
         self.pose, self.joints, self.own, self.chains = pose, joints, own, chains
         self._parameters = parameters
 
+    def own_for(self, chains: np.ndarray) -> np.ndarray | None:
+        """The (N, P) ``own`` entries where they are declared for the parameters' chains
+        ``chains`` (P,) (a robot's ``table.chains``), else None."""
+        return self.own if self.own is not None and np.array_equal(self.chains, chains) else None
+
     @property
     def parameters(self) -> np.ndarray:
         if self._parameters is None:
@@ -571,8 +576,8 @@ def solve_closure_parameters(robot: Robot, jac: ClosureJacobians) -> np.ndarray:
     c = pose.shape[1]
     if pose.shape[1] != pose.shape[2] or c != robot.n_chains:
         return solve_stacked(pose, jac.parameters)
-    own = jac.own
-    if own is None or not np.array_equal(jac.chains, chains):
+    own = jac.own_for(chains)
+    if own is None:
         parameters = jac.parameters
         if chains.size != parameters.shape[2]:
             return solve_stacked(pose, parameters)
@@ -635,16 +640,12 @@ class ChainJacobianFactors:
         ``M_j Q_j M_j^T``; block by block of :data:`HAT_BLOCK_ROWS` rows."""
         w, v = np.linalg.eigh(cov)
         L = (v * np.sqrt(np.clip(w, 0.0, None))).reshape(self.m, self.k, self.p)  # chain a's rows of L
-        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
-        for start in range(0, self.n, HAT_BLOCK_ROWS):
-            rows = slice(start, start + HAT_BLOCK_ROWS)
-            own, M = self.own[rows], self.M[rows]
-            V = np.empty((own.shape[0], self.m, self.p))
-            for a in range(self.m):
-                V[:, a] = own[:, a] @ L[a]
-            Q = V @ np.swapaxes(V, 1, 2)  # (B, m, m)
-            out[rows] = (M @ Q) @ np.swapaxes(M, 1, 2)
-        return out
+
+        def inner(own):
+            V = self._chain_products(own, L)
+            return V @ np.swapaxes(V, 1, 2)
+
+        return self._sandwiched(inner)
 
     def sandwich(self, cov: np.ndarray) -> np.ndarray:
         """(N, D, D) ``J_j cov J_j^T`` with ``cov`` (P, P) as given (no factor of it: where ``cov``
@@ -652,16 +653,30 @@ class ChainJacobianFactors:
         eigen-factor's rounding would leak into the rest), as ``J_j (cov J_j^T)``: ``U_j = S_j
         cov`` (m, P) chain block by chain block, ``U_j S_j^T`` (m, m), then ``M_j (.) M_j^T``;
         block by block of :data:`HAT_BLOCK_ROWS` rows."""
-        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
         cov = np.asarray(cov, dtype=float).reshape(self.m, self.k, self.p)  # chain a's rows of cov
+
+        def inner(own):
+            U = self._chain_products(own, cov)
+            return np.einsum("nabl,nbl->nab", U.reshape(own.shape[0], self.m, self.m, self.k), own)
+
+        return self._sandwiched(inner)
+
+    def _chain_products(self, own: np.ndarray, F: np.ndarray) -> np.ndarray:
+        """(B, m, P) ``S_j F`` of a block's own entries ``own`` (B, m, K), ``F`` (m, K, P) chain
+        a's rows of a (P, P) matrix: chain block by chain block."""
+        out = np.empty((own.shape[0], self.m, self.p))
+        for a in range(self.m):
+            out[:, a] = own[:, a] @ F[a]
+        return out
+
+    def _sandwiched(self, inner) -> np.ndarray:
+        """(N, D, D) ``M_j inner(S_j) M_j^T``, ``inner`` mapping a block's own entries (B, m, K)
+        to (B, m, m); block by block of :data:`HAT_BLOCK_ROWS` rows."""
+        out = np.empty((self.n, self.M.shape[1], self.M.shape[1]))
         for start in range(0, self.n, HAT_BLOCK_ROWS):
             rows = slice(start, start + HAT_BLOCK_ROWS)
-            own, M = self.own[rows], self.M[rows]
-            U = np.empty((own.shape[0], self.m, self.p))
-            for a in range(self.m):
-                U[:, a] = own[:, a] @ cov[a]
-            Q = np.einsum("nabl,nbl->nab", U.reshape(own.shape[0], self.m, self.m, self.k), own)
-            out[rows] = (M @ Q) @ np.swapaxes(M, 1, 2)
+            M = self.M[rows]
+            out[rows] = (M @ inner(self.own[rows])) @ np.swapaxes(M, 1, 2)
         return out
 
     def dense(self, rows) -> np.ndarray:
@@ -673,7 +688,7 @@ class ChainJacobianFactors:
 def _chain_blocks(robot: Robot, jac: ClosureJacobians, idx: np.ndarray):
     """``(chains (m,), columns (m, K))`` where the free parameters ``idx`` come chain by chain, K
     of each chain's, and ``jac`` gives their own entries (square pose blocks), else None."""
-    if jac.own is None or jac.pose.shape[1] != jac.pose.shape[2] or not np.array_equal(jac.chains, robot.table.chains):
+    if jac.own_for(robot.table.chains) is None or jac.pose.shape[1] != jac.pose.shape[2]:
         return None
     owner = robot.table.chains[idx]
     chains = np.unique(owner)

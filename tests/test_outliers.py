@@ -18,18 +18,25 @@ NOISE = SensorNoise(1e-3, 1e-6, "normal")
 SPOILED = (3, 20, 41)
 
 
-@pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_above_the_size_every_row_above_the_threshold_goes_at_once(name, monkeypatch):
-    """60 rows, three of them 50 um off: the one-at-a-time search (the default at this size) and
-    the at-once search (the constant lowered to 40) flag the same rows, the three, and agree on
-    every row's statistic to the linearisation's order (both end at a fit without the three);
-    ``search`` says which ran."""
+def spoiled(name: str):
+    """``(robot, theta, poses, joints, measured)``: 60 reachable poses of the robot with its
+    reference errors, measured with NOISE, the rows SPOILED moved 50 um along x."""
     robot = default_robot(name)
     theta = robot.table.nominal + reference_errors(robot, 2)
     poses = reachable_poses(robot, 60, 4, theta=theta)
     joints = robot.inverse_kinematics(theta, poses)
     measured = poses + NOISE.sample(60, 5, robot.pose_units)
     measured[list(SPOILED), 0] += 0.05
+    return robot, theta, poses, joints, measured
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_above_the_size_every_row_above_the_threshold_goes_at_once(name, monkeypatch):
+    """60 rows, three of them 50 um off: the one-at-a-time search (the default at this size) and
+    the at-once search (the constant lowered to 40) flag the same rows, the three, and agree on
+    every row's statistic to the linearisation's order (both end at a fit without the three);
+    ``search`` says which ran."""
+    robot, theta, poses, joints, measured = spoiled(name)
     exact = find_outliers(robot, joints, measured, NOISE)
     assert exact.search == "one row at a time" and exact.flagged == SPOILED, exact.verdict
     monkeypatch.setattr(calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40)
@@ -68,12 +75,7 @@ def test_above_the_size_the_checking_refit_keeps_the_first_jacobian(name, monkey
     with the recomputed Jacobian's to the Jacobian's change over the refit's step (the refit moves
     the estimate by the three rows' pull, about 50 um over a machine of hundreds of mm: 1e-3
     relative bounds it)."""
-    robot = default_robot(name)
-    theta = robot.table.nominal + reference_errors(robot, 2)
-    poses = reachable_poses(robot, 60, 4, theta=theta)
-    joints = robot.inverse_kinematics(theta, poses)
-    measured = poses + NOISE.sample(60, 5, robot.pose_units)
-    measured[list(SPOILED), 0] += 0.05
+    robot, theta, poses, joints, measured = spoiled(name)
     monkeypatch.setattr(calib.outliers, "ONE_AT_A_TIME_MAX_ROWS", 40)
     recomputed = find_outliers(robot, joints, measured, NOISE)
     assert "REUSED_JACOBIAN_MIN_ROWS" not in recomputed.search
@@ -96,12 +98,7 @@ def test_above_the_size_the_jacobian_kept_as_its_chain_factors_gives_the_same_st
     ``1 + t``, below ``100 kappa eps`` with ``kappa`` the column-scaled condition number of the
     whitened Gram product (measured here from the dense Jacobian of the flagged-free fit,
     independent of the factored form)."""
-    robot = default_robot(name)
-    theta = robot.table.nominal + reference_errors(robot, 2)
-    poses = reachable_poses(robot, 60, 4, theta=theta)
-    joints = robot.inverse_kinematics(theta, poses)
-    measured = poses + NOISE.sample(60, 5, robot.pose_units)
-    measured[list(SPOILED), 0] += 0.05
+    robot, theta, poses, joints, measured = spoiled(name)
     for constant in ("ONE_AT_A_TIME_MAX_ROWS", "REUSED_JACOBIAN_MIN_ROWS"):
         monkeypatch.setattr(calib.outliers, constant, 40)
     dense = find_outliers(robot, joints, measured, NOISE)

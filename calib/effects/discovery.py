@@ -520,6 +520,8 @@ class _Linear:
         self.seed = seed
         self.searches: list = []  # the subsampled searches made (:meth:`search_form`)
         self._spaces_for: tuple = ((), None)
+        self._cv_folds: tuple = (None,)  # (key, ...) of _cv_rms_blocked's fold blocks
+        self._M = None  # the whitened closure per joint displacement, made by _spaces when first asked
         jac = robot.closure_jacobians(self.theta, data.joints, data.measured)
         self.winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
         self.dF_dq = jac.joints
@@ -581,13 +583,19 @@ class _Linear:
         e = self.b - A @ _solve(A, self.b)
         return float(e @ e)
 
+    @property
+    def above_search_rows(self) -> bool:
+        """More measurements than ``search_rows_max``: the searches on a subsample
+        (:meth:`_subsampled_search`), the cross-validation by blocks (:meth:`_cv_rms_blocked`)."""
+        return self.n // self.C > self.search_rows_max
+
     def search(self, eff: Effect, blocks: list) -> float:
         """The searched parameter minimising the chi-square with ``blocks`` fitted too: on the
         effect's grid of the search coordinate, refined by golden-section search between the
         best grid point's neighbours (unless the effect says its fit is constant between grid
         points: :attr:`Effect.refine_search`). Above ``search_rows_max`` measurements the grid is
         scanned on a subsample and confirmed and refined on every row (:meth:`_subsampled_search`)."""
-        if self.n // self.C > self.search_rows_max:
+        if self.above_search_rows:
             return self._subsampled_search(eff, blocks)
         Q = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         b = self.b - Q @ (Q.T @ self.b)
@@ -618,7 +626,7 @@ class _Linear:
         ``Qg_k^T Qg_k`` computed once for every call with the same ``folds`` and ``seed``; a call
         then costs a pass over the effects' few columns. The same deleted residuals."""
         key = (folds, seed)
-        if getattr(self, "_cv_folds", (None,))[0] != key:
+        if self._cv_folds[0] != key:
             m = self.n // self.C
             order = np.random.default_rng(seed).permutation(m)
             parts = [np.sort(order[k::folds]) for k in range(folds)]
@@ -649,7 +657,7 @@ class _Linear:
         if spaces is not None and len(kept) == len(blocks) and all(a is b for a, b in zip(kept, blocks)):
             return spaces
         C = self.C
-        if not hasattr(self, "_M"):
+        if self._M is None:
             self._M = -(self.winv @ self.dF_dq)  # whitened closure per joint displacement (closure_regressors)
         Qb = orthonormal_columns(np.hstack(blocks)) if blocks else np.zeros((self.n, 0))
         full = _SearchSpace(self.data, self.theta, self._M, np.hstack([self.Qg, Qb]), self.b - Qb @ (Qb.T @ self.b))
@@ -724,7 +732,7 @@ class _Linear:
         """Whitened RMS of the deleted residuals of ``folds``-fold cross-validation (whole
         measurements left out), closed form through the hat matrix. Above ``search_rows_max``
         measurements the folds' geometry blocks are computed once (:meth:`_cv_rms_blocked`)."""
-        if self.n // self.C > self.search_rows_max:
+        if self.above_search_rows:
             return self._cv_rms_blocked(blocks, folds, seed)
         Q = self.Qg if not blocks else np.hstack([self.Qg, orthonormal_columns(np.hstack(blocks))])
         e = self.b - Q @ (Q.T @ self.b)
