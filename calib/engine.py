@@ -468,7 +468,7 @@ def _gauss_newton(fun, jac, x0, max_iter, xtol):
 _CONVERGED_STEP = 1e-9
 
 
-def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None):
+def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None, max_fev=None):
     """Levenberg-Marquardt (Marquardt's scaling by the diagonal of ``J^T J``, Nielsen's damping
     update, started and kept near Gauss-Newton while steps succeed) on a small dense problem: one Jacobian and one ``(K, K)`` solve per iteration and no
     call-back layer, the fast path of :func:`identify_forward`. Stops when both the actual and
@@ -479,12 +479,14 @@ def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None):
     the cost. Returns ``(x, Jacobian evaluations, success, message)``. ``fixed_scale`` (K,): a
     fixed scaling instead of Marquardt's (a prior's inverse standard deviations: the damping is
     then negligible against every direction's curvature, the prior's at least, while steps are
-    taken, however ill-conditioned the data leave the columns)."""
+    taken, however ill-conditioned the data leave the columns). ``max_fev``: a budget of residual
+    evaluations besides the ``max_iter`` Jacobians (None: none)."""
     x = np.array(x0, dtype=float)
     f = fun(x)
     cost = float(f @ f)
     J = jac(x)
-    njev = 1
+    njev = nfev = 1
+    max_fev = np.inf if max_fev is None else max_fev
     A, g = J.T @ J, J.T @ f
     scale = np.sqrt(np.diag(A)).copy() if fixed_scale is None else np.array(fixed_scale, dtype=float)
     scale[scale == 0] = 1.0
@@ -504,7 +506,10 @@ def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None):
             return x, njev, True, f"the scaled step is below xtol = {xtol:g}"
         if pred <= 0.0:
             return x, njev, True, "no step reduces the cost any further (at the minimum to machine precision)"
+        if nfev >= max_fev:
+            return x, njev, False, f"Levenberg-Marquardt: {max_fev} residual evaluations reached"
         x_new = x + dx
+        nfev += 1
         try:
             f_new = fun(x_new)
             cost_new = float(f_new @ f_new)
@@ -537,16 +542,18 @@ def _levenberg_marquardt(fun, jac, x0, max_iter, xtol, ftol, fixed_scale=None):
             nu *= 2.0
 
 
-#: Residual entry returned to Levenberg-Marquardt for a trial point the robot cannot evaluate
-#: (out of reach, singular, impossible geometry): far above any real residual, so the step is
-#: rejected and the trust region shrinks, as for a step that increases the cost.
+#: Residual entry returned to MINPACK's Levenberg-Marquardt for a trial point the robot cannot
+#: evaluate (out of reach, singular, impossible geometry): far above any real residual, so the step
+#: is rejected and the trust region shrinks, as for a step that increases the cost.
 _REJECTED_RESIDUAL = 1e100
 
 
-def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
+def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history, cautious=False):
     """Run a solver; returns (x, iterations, success, message); never raises on a kinematics
-    failure: Levenberg-Marquardt rejects a trial point the robot cannot evaluate (the start
-    itself failing ends the fit, which returns the start), Gauss-Newton stops there."""
+    failure: Levenberg-Marquardt (:func:`_levenberg_marquardt`, or MINPACK's when ``cautious``;
+    a budget of ``max_iter`` times the unknowns plus one residual evaluations) rejects a trial
+    point the robot cannot evaluate (the start itself failing ends the fit, which returns the
+    start), Gauss-Newton stops there."""
     size = {}
 
     def logged(x):
@@ -563,22 +570,33 @@ def _least_squares(fun, jac, x0, solver, max_iter, xtol, ftol, history):
                 raise
             return np.full(size["m"], _REJECTED_RESIDUAL)
 
+    budget = max_iter * (x0.size + 1)
     try:
         if solver == "gn":
             return _gauss_newton(logged, jac, x0, max_iter, xtol)
+        if not cautious:
+            return _levenberg_marquardt(logged, jac, x0, budget, xtol, ftol, max_fev=budget)
         from scipy.optimize import least_squares  # imported here: ~0.3 s the default run never needs
 
         sol = least_squares(guarded, x0, jac=jac, method="lm", xtol=xtol, ftol=ftol, gtol=1e-15,
-                            max_nfev=max_iter * (x0.size + 1), x_scale="jac")
+                            max_nfev=budget, x_scale="jac")
         return sol.x, int(sol.njev or sol.nfev), bool(sol.success), str(sol.message)
     except (KinematicsError, np.linalg.LinAlgError) as exc:
         return x0, 0, False, f"the fit left the workspace: {exc}"
 
 
 def minimise(fun, jac, x0, *, solver: str = "lm", max_iter: int = 100, xtol: float = 1e-15,
-             ftol: float = 1e-15, history: list | None = None):
+             ftol: float = 1e-15, history: list | None = None, cautious: bool = False):
     """The engine's least-squares solver for any residual ``fun(x)`` with Jacobian ``jac(x)``
-    (used by :mod:`calib.measurement`): Levenberg-Marquardt (MINPACK) or Gauss-Newton.
+    (used by :mod:`calib.measurement`): Levenberg-Marquardt or Gauss-Newton.
+
+    Levenberg-Marquardt is :func:`_levenberg_marquardt`, started as Gauss-Newton (a fit from a
+    start far from its minimum takes the Gauss-Newton steps at once: 4 to 5 Jacobians where
+    MINPACK's trust region, started at 100 in its Jacobian-scaled units, grows for ten); with
+    ``cautious``, MINPACK's (scipy.optimize.least_squares): from a start that is already a minimum
+    along the well-determined combinations, its small first trust region moves the barely
+    determined ones only as far as steps that lower the cost lead, not the whole Gauss-Newton step
+    at once. Either has a budget of ``max_iter`` times the unknowns plus one residual evaluations.
 
     Returns:
         ``(x, iterations, success, message)``; ``history`` (if given) gets the cost of each
@@ -587,7 +605,7 @@ def minimise(fun, jac, x0, *, solver: str = "lm", max_iter: int = 100, xtol: flo
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     return _least_squares(fun, jac, np.asarray(x0, dtype=float), solver, max_iter, xtol, ftol,
-                          [] if history is None else history)
+                          [] if history is None else history, cautious)
 
 
 def _predicted(robot, theta, joints, measured) -> np.ndarray:

@@ -201,6 +201,17 @@ def measurement_units(robot: Robot, n_targets: int = 0) -> tuple[str, ...]:
     return robot.pose_units if n_targets == 0 else ("mm",) * (3 * n_targets)
 
 
+def _reports_the_pose(robot: Robot, poses: np.ndarray, frame: np.ndarray, targets) -> bool:
+    """Whether the instrument reports ``poses`` (N, D) themselves: no targets, the base frame (a
+    zero ``frame``) and every angle where :func:`calib.rotation.euler_from_matrix` returns it
+    (|alpha|, |gamma| < pi, |beta| < pi / 2); then the measurements are the poses and their pose
+    Jacobian the identity (what the general formulas give, to rounding)."""
+    if targets is not None or frame.any():
+        return False
+    angles = poses[:, robot.angle_pose_mask]
+    return not angles.size or bool(np.all(np.abs(angles) < np.array([np.pi, np.pi / 2, np.pi])))
+
+
 def instrument_measurements(robot: Robot, poses, frame=None, targets=None) -> np.ndarray:
     """(N, M) what the instrument reports at base-frame ``poses`` (N, D).
 
@@ -213,6 +224,8 @@ def instrument_measurements(robot: Robot, poses, frame=None, targets=None) -> np
     """
     poses = as_array(poses, "poses", (-1, robot.pose_dim))
     frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
+    if _reports_the_pose(robot, poses, frame, targets):
+        return poses.copy()
     RF = rotation_matrix(frame[3:])
     t, R = _pose_parts(robot, poses)
     if targets is not None:
@@ -242,8 +255,13 @@ def _vee(W: np.ndarray) -> np.ndarray:
     return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
 
 
-def measurement_jacobians(robot: Robot, poses, frame=None, targets=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def measurement_jacobians(robot: Robot, poses, frame=None, targets=None, *,
+                          with_frame: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Analytic derivatives of :func:`instrument_measurements`.
+
+    Args:
+        with_frame: False: ``H_frame`` is not wanted (zeros are returned where the instrument
+            reports the pose itself, the identity ``H_pose`` then taken without the formulas).
 
     Returns:
         ``(H_pose (N, M, D), H_frame (N, M, 6), H_targets (N, M, 3K))`` (K = 0 without targets).
@@ -251,6 +269,10 @@ def measurement_jacobians(robot: Robot, poses, frame=None, targets=None) -> tupl
     poses = as_array(poses, "poses", (-1, robot.pose_dim))
     frame = np.zeros(6) if frame is None else as_array(frame, "frame", (6,))
     n, d = poses.shape
+    if not with_frame and _reports_the_pose(robot, poses, frame, targets):
+        Hp = np.zeros((n, d, d))
+        Hp[:, np.arange(d), np.arange(d)] = 1.0
+        return Hp, np.zeros((n, d, 6)), np.zeros((n, d, 0))
     angle = robot.angle_pose_mask
     pos_cols, ang_cols = np.flatnonzero(~angle), np.flatnonzero(angle)
     RF = rotation_matrix(frame[3:])
@@ -494,7 +516,7 @@ def whitened_residuals(robot: Robot, theta, joints, measured, noise: SensorNoise
     r = measurement_residuals(robot, measured, instrument_measurements(robot, poses, frame, targets), k)
     if noise.joint_std == 0:  # a diagonal whitening: each coordinate over its std (the product's numbers)
         return r * (1.0 / noise.pose_std(measurement_units(robot, k))), poses
-    Hp, _, _ = measurement_jacobians(robot, poses, frame, targets)
+    Hp, _, _ = measurement_jacobians(robot, poses, frame, targets, with_frame=False)
     winv = _whitening(robot, theta, joints, poses, noise, Hp, k)
     return np.einsum("nij,nj->ni", winv, r), poses
 
@@ -565,14 +587,14 @@ def _session_jacobians(robot, poses, frames, targets, rows, estimated) -> tuple:
     frame; ``H_frames`` (N, M, 6E): the E sessions flagged in ``estimated`` (S,), six columns each,
     a row's block in its own session's columns (zero elsewhere)."""
     if len(rows) == 1:
-        Hp, HF, Ho = measurement_jacobians(robot, poses, frames[0], targets)
+        Hp, HF, Ho = measurement_jacobians(robot, poses, frames[0], targets, with_frame=bool(estimated[0]))
         return Hp, (HF if estimated[0] else HF[:, :, :0]), Ho
     m = robot.pose_dim if targets is None else 3 * len(targets)
     k3 = 0 if targets is None else 3 * len(targets)
     n, column = len(poses), np.cumsum(estimated) - 1
     Hp, HF, Ho = np.empty((n, m, robot.pose_dim)), np.zeros((n, m, 6 * int(np.sum(estimated)))), np.empty((n, m, k3))
     for s, r in enumerate(rows):
-        Hp[r], HFs, Ho[r] = measurement_jacobians(robot, poses[r], frames[s], targets)
+        Hp[r], HFs, Ho[r] = measurement_jacobians(robot, poses[r], frames[s], targets, with_frame=bool(estimated[s]))
         if estimated[s]:
             HF[r, :, 6 * column[s]:6 * column[s] + 6] = HFs
     return Hp, HF, Ho
@@ -596,7 +618,8 @@ class _JointProblem:
         self.groups = [np.arange(idx.size), idx.size + np.arange(self.nt), idx.size + self.nt + np.arange(self.nf)]
         tg_start = np.zeros(0) if targets0 is None else np.asarray(targets0, dtype=float).ravel()[:self.nt]
         self.start = np.concatenate([theta0[idx], tg_start, self.frames0[self.est_frames].ravel()])
-        self.poses0, self.state = poses0, {"poses": poses0}
+        self.poses0 = poses0
+        self.restart(poses0)
         Hp0, _, _ = _session_jacobians(robot, poses0, self.frames0, targets0, rows, self.est_frames)
         self.winv = _whitening(robot, theta0, joints, poses0, noise, Hp0, self.k)
         self.prior_rows = None if prior is None else np.zeros((idx.size, self.start.size))
@@ -613,10 +636,25 @@ class _JointProblem:
         frames[self.est_frames] = z[ni + nt:].reshape(-1, 6)
         return th, tg, frames
 
+    def restart(self, poses) -> None:
+        """Start the forward kinematics of the next evaluations from ``poses`` (N, D)."""
+        self.state = {"poses": poses, "theta": None, "anchor": None}
+
     def poses_of(self, th) -> np.ndarray:
-        if self.idx.size:
-            self.state["poses"] = self.robot.forward_kinematics(th, self.joints, initial=self.state["poses"])
-        return self.state["poses"]
+        """(N, D) the forward kinematics at ``th``: that of the last evaluation when ``th`` is its
+        (the Jacobian at a point just evaluated, the figures at the solution), else Newton's from
+        the poses at the last Jacobian moved to first order by its pose Jacobian (a trial point
+        starts from the point it steps from, never from a rejected trial's poses)."""
+        state = self.state
+        if not self.idx.size or (state["theta"] is not None and np.array_equal(state["theta"], th)):
+            return state["poses"]
+        initial = state["poses"]
+        if state["anchor"] is not None:
+            th_j, poses_j, dpose = state["anchor"]
+            initial = poses_j + dpose @ (th - th_j)[self.idx]
+        state["poses"] = self.robot.forward_kinematics(th, self.joints, initial=initial)
+        state["theta"] = th.copy()
+        return state["poses"]
 
     def residual(self, z) -> np.ndarray:
         th, tg, frames = self.unpack(z)
@@ -631,7 +669,9 @@ class _JointProblem:
         Hp, HF, Ho = _session_jacobians(self.robot, p, frames, tg, self.rows, self.est_frames)
         blocks = []
         if self.idx.size:
-            blocks.append(Hp @ pose_jacobian_of_parameters(self.robot, th, self.joints, p)[:, :, self.idx])
+            dpose = pose_jacobian_of_parameters(self.robot, th, self.joints, p)[:, :, self.idx]
+            self.state["anchor"] = (th.copy(), p, dpose)
+            blocks.append(Hp @ dpose)
         if self.nt:
             blocks.append(Ho)
         if self.nf:
@@ -646,7 +686,10 @@ def _fit(robot, joints, measured, noise, theta0, idx, frames0, targets0, est_fra
     """The joint fit of geometry ``idx``, the sessions' frames ``frames0`` (S, 6) (those flagged in
     ``est_frames`` (S,) estimated) and the targets; see :func:`identify_measured`. ``rows``: each
     session's rows (:func:`_session_rows`; default one session). With a ``prior``, its whitened rows
-    ``(theta[idx] - mean) / std`` follow the measurements' rows."""
+    ``(theta[idx] - mean) / std`` follow the measurements' rows. A gauge pass after the first starts
+    at its minimum in a gauge plane taken there (combinations the start's plane held exactly may be
+    free there, and barely determined): Levenberg-Marquardt then runs ``cautious``
+    (:func:`calib.engine.minimise`)."""
     rows = [slice(None)] if rows is None else rows
     pb = _JointProblem(robot, joints, measured, noise, theta0, idx, frames0, targets0, est_frames, est_targets,
                        poses0, rows, prior)
@@ -657,15 +700,15 @@ def _fit(robot, joints, measured, noise, theta0, idx, frames0, targets0, est_fra
     history: list[float] = []
     iters, ok, msg = 0, False, "not run"
     null = np.zeros((z.size, 0))
-    for _ in range(max(1, gauge_passes)):
+    for gauge_pass in range(max(1, gauge_passes)):
         null, C = gauge_null_space(pb.jacobian(z) / scale, pb.groups)
         Q = _complement(C, z.size)
         G = Q / scale[:, None]  # y (scaled) -> z
         base = z_ref + G @ (Q.T @ ((z - z_ref) * scale))  # the start, projected onto the gauge plane
-        pb.state["poses"] = poses0
+        pb.restart(poses0)
         y, it, ok, msg = minimise(lambda y: pb.residual(base + G @ y), lambda y: pb.jacobian(base + G @ y) @ G,
                                   np.zeros(Q.shape[1]), solver=solver, max_iter=max_iter, xtol=xtol,
-                                  ftol=ftol, history=history)
+                                  ftol=ftol, history=history, cautious=gauge_pass > 0)
         iters += it
         z = base + G @ y
         if null.shape[1] == 0:
@@ -1080,12 +1123,11 @@ def _measured_fit_result(robot, joints, measured, noise, fit: dict, data: dict, 
     k, est_targets, idx, theta0 = data["k"], data["est_targets"], data["idx"], data["theta0"]
     est_frame, detection, notes = begin["est_frame"], begin["detection"], begin["notes"]
     theta, est_frames = fit["theta"], fit["est_frames"]
-    try:
-        poses = robot.forward_kinematics(theta, joints, initial=fit["poses"])
-        res = measurement_residuals(robot, measured, _session_measurements(robot, poses, fit["frames"], fit["targets"],
-                                                                           data["rows"]), k)
-    except KinematicsError:
-        res = np.full(measured.shape, np.nan)
+    # The fit's own forward kinematics at its solution (converged there, and judged regular where
+    # the fit evaluated it): Newton's again from them could call a configuration the fit accepted
+    # singular (the condition number, near the threshold, taken at a slightly other point).
+    res = measurement_residuals(robot, measured, _session_measurements(robot, fit["poses"], fit["frames"],
+                                                                       fit["targets"], data["rows"]), k)
     cov = np.zeros((robot.n_parameters,) * 2)
     ni, nt = fit["n_theta"], fit["nt"]
     cov[np.ix_(idx, idx)] = fit["cov"][:ni, :ni]
