@@ -217,3 +217,35 @@ def test_fits_reading_the_own_entries_equal_the_fits_on_the_dense_jacobian(name,
         assert a.iterations == b.iterations
         np.testing.assert_array_equal(a.theta, b.theta)
         np.testing.assert_array_equal(a.covariance, b.covariance)
+
+
+def test_minimise_started_as_gauss_newton_finds_minpacks_minimum():
+    """calib.engine.minimise's Levenberg-Marquardt (started as Gauss-Newton) and MINPACK's
+    (``cautious``) end at one minimum of a nonlinear least-squares problem started far from it
+    (a decaying exponential and offset, noisy): the costs equal to rounding, the minimisers within
+    what their stopping rules leave: each stops where the cost left to gain is at most ftol (1e-15)
+    of it, |J dx|^2 <= ftol cost, so the two differ by at most 2 sqrt(ftol cost) / sigma_min(J)."""
+    from calib.engine import minimise
+
+    t = np.linspace(0.0, 4.0, 40)
+    rng = np.random.default_rng(3)
+    y = 3.0 * np.exp(-1.3 * t) + 0.5 + rng.normal(0.0, 1e-3, t.size)
+
+    def fun(x):
+        return x[0] * np.exp(-x[1] * t) + x[2] - y
+
+    def jac(x):
+        e = np.exp(-x[1] * t)
+        return np.column_stack([e, -x[0] * t * e, np.ones_like(t)])
+
+    x0 = np.array([1.0, 0.2, 0.0])
+    ours, n_ours, ok_ours, _ = minimise(fun, jac, x0)
+    theirs, _, ok_theirs, _ = minimise(fun, jac, x0, cautious=True)
+    assert ok_ours and ok_theirs
+    cost = lambda x: float(fun(x) @ fun(x))  # noqa: E731
+    sigma_min = np.linalg.svd(jac(theirs), compute_uv=False)[-1]
+    assert np.linalg.norm(ours - theirs) <= 2 * np.sqrt(1e-15 * cost(theirs)) / sigma_min
+    # each residual rounded to eps of the values it subtracts (|y|, ~1), its square to twice that
+    rounding = 8 * np.finfo(float).eps * float(np.abs(fun(theirs)) @ (np.abs(y) + 1.0))
+    assert abs(cost(ours) - cost(theirs)) <= 2e-15 * cost(theirs) + rounding
+    assert n_ours < 3 * 100  # within the budget: max_iter (100) times the unknowns plus one

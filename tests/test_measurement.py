@@ -81,6 +81,26 @@ def test_measurement_jacobians_match_finite_differences(name, targets):
             np.testing.assert_allclose(block[:, :, j], num, atol=1e-6)
 
 
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_in_the_base_frame_the_instrument_reports_the_pose_and_its_jacobian_is_the_identity(name):
+    """The shortcut taken where the instrument reports the pose itself (no targets, a zero frame):
+    the measurements are the poses, and the pose Jacobian asked without its frame columns is the
+    identity, which the general formulas (asked with the frame columns) give to rounding: products
+    of a few 3 x 3 rotations and one inverse of O(1) entries, a few tens of eps."""
+    robot = default_robot(name)
+    poses = reachable_poses(robot, 5, 2)
+    zero = np.zeros(6)
+    np.testing.assert_array_equal(instrument_measurements(robot, poses, zero), poses)
+    seen = compose(FAR_FRAME, robot, poses)  # the general formulas, there and back
+    np.testing.assert_allclose(compose(_invert(FAR_FRAME), robot, seen), instrument_measurements(robot, poses),
+                               atol=1e-10)
+    identity, frame_cols, _ = measurement_jacobians(robot, poses, zero, with_frame=False)
+    general, _, _ = measurement_jacobians(robot, poses, zero)
+    np.testing.assert_array_equal(identity, np.broadcast_to(np.eye(robot.pose_dim), general.shape))
+    np.testing.assert_allclose(general, identity, rtol=0, atol=64 * np.finfo(float).eps)
+    assert frame_cols.shape == (len(poses), robot.pose_dim, 6)
+
+
 def test_composition_is_the_frame_applied_to_the_pose():
     robot = default_robot("hexapod")
     pose = reachable_poses(robot, 1, 3)
