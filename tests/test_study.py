@@ -82,6 +82,7 @@ def test_results_independent_of_worker_count(name, dask_two_workers):
         assert a[m]["errors"].shape == (6, len(robot.free_default))
 
 
+@pytest.mark.slow  # starts a Dask cluster (kernel-independent: once, in CI's README run)
 def test_study_on_its_own_local_cluster():
     """A local cluster started by the study itself (``workers=2``), and the study here, agree."""
     robot, theta, poses, commanded = setup("hexapod")
