@@ -48,10 +48,9 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from .measurement import identify_measured
-from .noise import SensorNoise
+from .noise import SensorNoise, chi2_quantile
 from .prior import ParameterPrior
 from .robot import KinematicsError, Robot
 from .rotation import euler_from_matrix, rotation_matrix
@@ -101,7 +100,7 @@ CAUSES = ("none", "conversion", "unmeasured column", "gross rows", "left-out phy
 
 def chi2_limit(dof: int, alpha: float = FIT_ALPHA) -> float:
     """The chi-square(dof) ``1 - alpha`` quantile (inf for dof <= 0: nothing can be judged)."""
-    return float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha)) if dof > 0 else float("inf")
+    return chi2_quantile(1.0 - alpha, dof) if dof > 0 else float("inf")
 
 
 # --------------------------------------------------------------------------- motion

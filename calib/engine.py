@@ -28,7 +28,7 @@ import numpy as np
 from .batched_lu import BatchedLU, solve_stacked
 from .tsqr import triangular_update
 from .validation import as_array
-from .noise import SensorNoise
+from .noise import SensorNoise, chi2_quantile
 from .prior import ParameterPrior, parameter_sources
 from .robot import (
     FORWARD_KINEMATICS_TOL_MM,
@@ -1322,9 +1322,7 @@ def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
 
 def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:
     """Whether a chi-square of whitened residuals is at the declared noise, in words."""
-    from scipy.special import gammaincinv  # imported here: 0.15-0.2 s that --help and the engine's users need not pay
-
-    limit = float(2.0 * gammaincinv(dof / 2.0, 1.0 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, dof)
+    limit = chi2_quantile(1.0 - alpha, dof)
     ratio = np.sqrt(chi2 / dof)
     if chi2 <= limit:
         return (f"the residual is at the declared noise (chi-square {chi2:.4g} on {dof} degrees of "

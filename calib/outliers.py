@@ -45,11 +45,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from .batched_lu import BatchedLU
 from .engine import identify_forward
-from .noise import SensorNoise
+from .noise import SensorNoise, chi2_quantile
 from .robot import ChainJacobianFactors, Robot, chain_jacobian_factors, pose_jacobian_of_parameters
 
 __all__ = ["OutlierReport", "find_outliers", "hat_blocks", "MISFIT_FRACTION", "ONE_AT_A_TIME_MAX_ROWS",
@@ -186,7 +185,7 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
     if n * d <= p + d:
         raise ValueError(f"outlier detection needs more than {(p + d) // d} poses for {p} parameters "
                          f"(one left out), got {n}")
-    thr = float(2.0 * gammaincinv(d / 2.0, 1 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, d), bit for bit
+    thr = chi2_quantile(1 - alpha, d)
     most = max(1, math.floor(max_fraction * n))
     std = noise.pose_std(robot.pose_units)
     kept = np.ones(n, dtype=bool)

@@ -54,13 +54,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from .batched_lu import BatchedLU
 from .measurement import (FRAME_DETECTION_FRACTION, FRAME_DETECTION_RAD, GAUGE_RTOL, MeasuredFit,
                           checked_measured_inputs, detect_frame, identify_measured, instrument_measurements,
                           measurement_residuals, register_frame, whitened_jacobian, whitened_residuals)
-from .noise import SensorNoise
+from .noise import SensorNoise, chi2_quantile
 from .tsqr import triangular_factor
 from .robot import KinematicsError, Robot
 
@@ -216,7 +215,7 @@ def find_gross_rows(robot: Robot, joints, measured, noise: SensorNoise, *, frame
 def _search(problem: _Problem, mode: str, alpha: float, random_starts: int, seed: int) -> GrossRowResult:
     """The search over every row of ``problem`` (module doc)."""
     m = problem.measured.shape[1]
-    cutoff = float(2.0 * gammaincinv(m / 2.0, 1.0 - alpha))  # scipy.stats.chi2.ppf(1 - alpha, m)
+    cutoff = chi2_quantile(1.0 - alpha, m)
     counter = _Counter()
     n = len(problem.joints)
     if n < problem.min_rows + 1:
