@@ -4,8 +4,10 @@ errors of 1 to 3 mm, 0.3 mm / 1.5 mrad capture noise, a 5 mm tolerance declared 
 import json
 
 import numpy as np
+import pytest
 
 from calib.effects import EffectData
+from calib.effects.discovery import fit_effects, remainder_tests
 from calib.noise import SensorNoise
 from calib.robots import default_robot
 from pipeline.discover import main
@@ -56,6 +58,7 @@ def run(tmp_path, rec, capsys):
 def test_a_level_grid_runs_names_what_it_cannot_separate_and_claims_no_effect(tmp_path, capsys):
     s, out = run(tmp_path, level_grid_recording(6), capsys)
     assert s["effects"] == []  # nothing injected, nothing claimed
+    assert s["explained"] and out.startswith("Explained")  # and the verdict agrees with the remainder at the noise
     assert 0 < s["heldout_rms_after_mm"] < 2 * s["noise_floor_mm"]
     sep = s["separation"]
     # Per leg the plane shows only P - B in x and y and one mix of height and offset: 3 of 7.
@@ -66,6 +69,23 @@ def test_a_level_grid_runs_names_what_it_cannot_separate_and_claims_no_effect(tm
     assert "actuator_scale" in unsep and unsep["actuator_scale"]["separated_by"]
     assert "Cannot be separated on this pose set: actuator_scale" in out
     assert "Held-out residual RMS" in out
+
+
+@pytest.mark.parametrize("noise_seed", range(1, 11))
+def test_on_a_level_grid_with_nothing_left_out_the_remainder_is_the_noise(noise_seed):
+    """Geometry alone on a level grid whose rows are geometry and noise: the remainder's tests find
+    no structure. The columns of the combinations held (and what the geometry leaves of a
+    position or a load) are taken at the poses the model reaches: at the measured poses they were
+    built of the measured tilt's noise and every seed's remainder 'followed' stroke, load or a
+    position at p = 1e-9 to 1e-23 (the Bonferroni-corrected level is 0.01)."""
+    rec = level_grid_recording(noise_seed)
+    data = EffectData(ROBOT, ROBOT.table.nominal, rec.joints, rec.measured, rec.t_s, NOISE,
+                      tolerance=np.full(ROBOT.n_parameters, TOLERANCE["mm"]))
+    fit = fit_effects(data)
+    assert fit.basis is not None and fit.held_design.shape[1] == 24  # the plane leaves 24 to the prior
+    tests = remainder_tests(data, fit)
+    assert tests["noise"]["consistent"]
+    assert tests["explained"], {k: v["p_value"] for k, v in tests["structure"].items()}
 
 
 def test_a_dead_band_shows_on_a_plane_and_is_found(tmp_path, capsys):
