@@ -193,6 +193,11 @@ class EffectData:
             None (no prior: the fits take the geometry the rows determine, as plain least
             squares). With it, the combinations of the free parameters the rows leave to the
             prior are held at ``theta`` (:mod:`calib.effects.separability`).
+        model_poses: (N, D) the poses a fitted model reaches at the commands (the measured poses
+            less their noise), where the effects' regressors and the quantities read from a pose
+            are taken (:attr:`regressor_poses`); None: the measured poses. The discovery sets it
+            where the rows leave combinations to the prior (a level grid), whose regressors at
+            the measured poses are built of the noise (:mod:`calib.effects.discovery`).
     """
 
     robot: Robot
@@ -205,6 +210,7 @@ class EffectData:
     last_move: np.ndarray = field(default=None)
     payload_kg: np.ndarray | None = field(default=None)
     tolerance: np.ndarray | None = field(default=None)
+    model_poses: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         r = self.robot
@@ -231,6 +237,8 @@ class EffectData:
             if not np.all(np.isfinite(tol) & (tol > 0)):
                 raise ValueError("tolerance must be finite and > 0 for every parameter")
             object.__setattr__(self, "tolerance", tol)
+        if self.model_poses is not None:
+            object.__setattr__(self, "model_poses", as_array(self.model_poses, "model_poses", m.shape))
         if self.direction is None or self.last_move is None:
             direction, last_move = motion_history(r.inverse_kinematics(theta, r.home_pose[None])[0], q)
         if self.last_move is None:
@@ -253,6 +261,12 @@ class EffectData:
         return self.robot.joint_limits().mean(axis=1)
 
     @property
+    def regressor_poses(self) -> np.ndarray:
+        """(N, D) the poses effects' regressors are taken at: :attr:`model_poses`, else the
+        measured ones."""
+        return self.measured if self.model_poses is None else self.model_poses
+
+    @property
     def stroke(self) -> np.ndarray:
         """(N, C) commanded joint values from the centre of travel, joint unit."""
         return self.joints - self.travel_centre
@@ -261,7 +275,8 @@ class EffectData:
         """The same analysis restricted to ``rows`` (the motion history is kept)."""
         return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
                           self.noise, self.direction[rows], self.last_move[rows],
-                          None if self.payload_kg is None else self.payload_kg[rows], self.tolerance)
+                          None if self.payload_kg is None else self.payload_kg[rows], self.tolerance,
+                          None if self.model_poses is None else self.model_poses[rows])
 
     def with_measured(self, measured: np.ndarray) -> "EffectData":
         """The same commands with other measured poses."""
@@ -383,12 +398,12 @@ class Effect:
 
     def regressors(self, robot: Robot, theta: np.ndarray, data: EffectData,
                    extra: float | None = None) -> np.ndarray:
-        """(N, C, p) closure residual per unit coefficient, mm: ``-dF/dq Xq`` at the measured
-        poses and commanded joints."""
+        """(N, C, p) closure residual per unit coefficient, mm: ``-dF/dq Xq`` at the regressor
+        poses (:attr:`EffectData.regressor_poses`) and commanded joints."""
         Xq = self.joint_regressors(robot, theta, data, extra)
         if Xq.shape[-1] == 0:
             return Xq
-        return closure_regressors(robot.closure_jacobians(theta, data.joints, data.measured).joints, Xq)
+        return closure_regressors(robot.closure_jacobians(theta, data.joints, data.regressor_poses).joints, Xq)
 
     def search_grid(self, data: EffectData) -> np.ndarray:
         """(K,) grid of the search coordinate (effects with :attr:`searched`; a sequence of

@@ -149,11 +149,11 @@ class Compliance(Effect):
         return Q
 
     def joint_regressors(self, robot, theta, data, extra=None):
-        J = pose_jacobian_of_joints(robot, theta, data.joints, data.measured)  # (N, D, C)
-        X = np.einsum("ndc,ndp->ncp", J, self.generalised_weight(robot, data.measured))
+        J = pose_jacobian_of_joints(robot, theta, data.joints, data.regressor_poses)  # (N, D, C)
+        X = np.einsum("ndc,ndp->ncp", J, self.generalised_weight(robot, data.regressor_poses))
         if interior_points(robot) == 0:
             return X
-        return np.concatenate([X, -chain_point_height_gradient(robot, theta, data.joints, data.measured, J)], axis=2)
+        return np.concatenate([X, -chain_point_height_gradient(robot, theta, data.joints, data.regressor_poses, J)], axis=2)
 
     def machine_settings(self, coefficients, robot, context, extra=None):
         # dq [joint unit] = c0 * (J^T Q); in SI tau = W (J^T Q) m_per_mm / s and dq_SI = tau / k,

@@ -538,9 +538,8 @@ class _Linear:
     effect columns with the geometry projected out, so that a subset's fit is one small
     least-squares problem and its cross-validation closed form. Every free geometric combination
     is projected out, those a prior holds too: an effect earns its place only by what no
-    geometry explains (on a plane of poses the held combinations' columns are built of the
-    measured orientation, noise included, and would lend any effect that resembles them
-    evidence from the noise)."""
+    geometry explains. The columns are taken at ``data``'s regressor poses (on a plane of poses
+    the model's: :func:`_model_poses`)."""
 
     def __init__(self, data: EffectData, geometry: EffectFit, *, search_rows_max: int | None = None,
                  search_subsample_rows: int | None = None, seed: int = 0):
@@ -553,7 +552,7 @@ class _Linear:
         self._spaces_for: tuple = ((), None)
         self._cv_folds: tuple = (None,)  # (key, ...) of _cv_rms_blocked's fold blocks
         self._M = None  # the whitened closure per joint displacement, made by _spaces when first asked
-        jac = robot.closure_jacobians(self.theta, data.joints, data.measured)
+        jac = robot.closure_jacobians(self.theta, data.joints, data.regressor_poses)
         self.winv = np.linalg.inv(np.linalg.cholesky(_noise_covariance(robot, jac, data)))
         self.dF_dq = jac.joints
         free = _free_indices(robot)
@@ -1161,7 +1160,7 @@ def _features(data: EffectData, flat=()) -> list[tuple[str, str, np.ndarray]]:
         out.append(("load", "ordered", u))
     for k, name in enumerate(robot.pose_names):
         if name not in flat:
-            out.append((f"position {name}", "ordered", np.broadcast_to(data.measured[:, k:k + 1], (n, c))))
+            out.append((f"position {name}", "ordered", np.broadcast_to(data.regressor_poses[:, k:k + 1], (n, c))))
     return out
 
 
@@ -1302,15 +1301,14 @@ def _quantity_tests(rem: _Remainder, kind: str, values: np.ndarray, z: np.ndarra
             "p_per": p_per, "p_min": min(p_f, p_comb, p_smooth, float(p_per.min()))}
 
 
-def _structure(data: EffectData, quantities: EffectData, rem: _Remainder, z: np.ndarray,
-               alpha: float) -> tuple[dict, np.ndarray, bool]:
+def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -> tuple[dict, np.ndarray, bool]:
     """Every quantity's tests, Bonferroni over every statistic at ``alpha``: ``(structure, the
     pose drift's t per coordinate, whether the pose drift is time's strongest)``; the quantities
-    read from ``quantities``' poses (:func:`_model_poses`), the flat coordinates from ``data``'s."""
+    read from a pose at ``data``'s regressor poses."""
     robot = data.robot
     C = robot.n_chains
     R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if data.n > 2 else np.eye(C)
-    feats = _features(quantities, flat_coordinates(data) if rem.Q_det is not None else ())
+    feats = _features(data, flat_coordinates(data) if rem.Q_det is not None else ())
     n_ordered = sum(kind == "ordered" for _, kind, _ in feats)
     # per quantity: F, combined serial, per chain t and serial; per ordered quantity: common smooth;
     # the measured pose drifting with time
@@ -1417,8 +1415,8 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     rem = _Remainder(fit, jac, winv, Q, fit.whitened.ravel(), Q_det)
     # The quantities read from the poses (positions, the load) at the same poses: the flat
     # coordinates are still those the recorded poses did not vary.
-    quantities = data if poses is data.measured else replace(data, measured=poses)
-    structure, t_pose, pose_best = _structure(data, quantities, rem, z, alpha)
+    quantities = data if poses is data.measured else replace(data, model_poses=poses)
+    structure, t_pose, pose_best = _structure(quantities, rem, z, alpha)
     remaining = _remaining(robot, fit, std, z, noise, structure, t_pose, pose_best, alpha)
     return {"explained": not remaining["present"], "noise": noise, "structure": structure, "remaining": remaining}
 
@@ -1684,6 +1682,9 @@ def _nested_check(sub: EffectData, lin: _Linear, geo: EffectFit, models: dict, s
 def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int,
             search_rows_max: int | None = None, search_subsample_rows: int | None = None):
     geo = fit_effects(sub, ())
+    poses = _model_poses(sub.robot, geo.theta, sub.joints, sub.measured, geo.basis)
+    if poses is not sub.measured:  # combinations held: the effects' regressors at the model's poses
+        sub = replace(sub, model_poses=poses)
     lin = _Linear(sub, geo, search_rows_max=search_rows_max, search_subsample_rows=search_subsample_rows, seed=seed)
     sel = _select(lin, models, max_effects, min_delta_bic, folds, seed)
     _nested_check(sub, lin, geo, models, sel)
@@ -1700,7 +1701,7 @@ def _choose(sub: EffectData, models: dict, max_effects: int, min_delta_bic: floa
         sel.setdefault("insignificant", []).append(weak)
         fit = geo
     sel["search"] = lin.search_form()
-    return geo, fit, sel
+    return sub, geo, fit, sel
 
 
 def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
@@ -1749,7 +1750,7 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     flagged: list[int] = []
     for _ in range(max_rounds):
         sub = data.subset(kept)
-        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
+        sub, geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
                                 search_subsample_rows)
         scan = outlier_scan(sub, fit, alpha=outlier_alpha)
         new = scan["flagged"]
@@ -1762,7 +1763,7 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         kept = np.delete(kept, new)
     else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
         sub = data.subset(kept)
-        geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
+        sub, geo, fit, sel = _choose(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
                                 search_subsample_rows)
         scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
     tests = remainder_tests(sub, fit, alpha=alpha)

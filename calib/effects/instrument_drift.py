@@ -41,7 +41,7 @@ class InstrumentDrift(Effect):
         return tuple(Coefficient(f"drift_{c}", "mm/s") for c in POSITION_NAMES)
 
     def joint_regressors(self, robot, theta, data, extra=None):
-        J = pose_jacobian_of_joints(robot, theta, data.joints, data.measured)  # (N, D, C)
+        J = pose_jacobian_of_joints(robot, theta, data.joints, data.regressor_poses)  # (N, D, C)
         cols = [robot.pose_names.index(c) for c in POSITION_NAMES]
         return np.linalg.inv(J)[:, :, cols] * data.t_s[:, None, None]
 

@@ -75,7 +75,7 @@ class PeriodicScrewError(Effect):
         pitch = float(rng.uniform(2.0, 10.0))
         phase = rng.uniform(0, 2 * np.pi)
         # The largest possible contribution of chain i is |dF/dq_i| A.
-        dF_dq = np.abs(np.diagonal(robot.closure_jacobians(theta, data.joints, data.measured).joints, axis1=1, axis2=2))
+        dF_dq = np.abs(np.diagonal(robot.closure_jacobians(theta, data.joints, data.regressor_poses).joints, axis1=1, axis2=2))
         amplitude = magnitude_mm / np.max(dF_dq)
         return EffectScenario(np.array([amplitude * np.cos(phase), amplitude * np.sin(phase)]), pitch, context)
 
