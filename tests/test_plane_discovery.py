@@ -111,6 +111,17 @@ def test_a_dead_band_shows_on_a_plane_and_is_found(tmp_path, capsys):
     assert s["heldout_rms_after_mm"] < s["heldout_rms_before_mm"]
 
 
+def test_a_lost_count_on_a_plane_is_found_with_its_leg_row_and_step(tmp_path, capsys):
+    """3 mm lost on leg 3 from the 51st row of the grid (row 50, 0-based); before the columns were
+    taken at the model's poses, the plane's remainder 'followed' position y, time and stroke and
+    nothing was named."""
+    s, _ = run(tmp_path, level_grid_recording(6, lost=(2, 50, 3.0)), capsys)
+    assert s["effects"] == ["lost_count"] and s["explained"]
+    p = s["effect_parameters"]["lost_count"]
+    assert p["joint"]["value"] == 3 and p["from_row"]["value"] == 51
+    assert abs(p["step"]["value"] - 3.0) < 5 * p["step"]["std"]
+
+
 def test_a_lost_count_on_a_recording_without_time_is_placed_by_row(tmp_path, capsys):
     """A recording whose time is its rows' order (a lab export with ``[time] format = "none"``):
     the lost count is said from its row, never at a time."""
