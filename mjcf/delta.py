@@ -33,7 +33,7 @@ import numpy as np
 
 from calib.robots.delta import Delta
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, chain_values, new_spec
+from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values, new_spec
 from .units import mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "ARM_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD",
@@ -155,16 +155,19 @@ def _forearm_frame(geo: _Geometry, i: int, r_arm: np.ndarray) -> np.ndarray:
 
 
 def _add_chain(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOptions, step: float,
-               gear: float) -> None:
+               gear: float, stop: np.ndarray | None = None) -> None:
     """Chain i: the actuated arm, the forearm on its two-hinge universal joint, the closure to the
-    plate and the position servo (gear ``gear``: it holds the hinge at ctrl / gear)."""
+    plate and the position servo (gear ``gear``: it holds the hinge at ctrl / gear); ``stop``
+    (low, high) the arm's end stops, rad, or None."""
     k = i + 1
     r_arm = _rz(geo.p.theta[i]) @ _ry(geo.p.alpha[i])  # arm frame at q = 0
     elbow = geo.arms[i]
     arm = spec.worldbody.add_body(name=f"arm{k}", pos=geo.shoulders[i], quat=_quat(r_arm))
     friction = chain_values(options.joint_friction, 3, "joint_friction")
-    arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
-                  damping=ARM_DAMPING, frictionloss=float(friction[i]))
+    hinge = arm.add_joint(name=ARM_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0.0, 1.0, 0.0],
+                          damping=ARM_DAMPING, frictionloss=float(friction[i]))
+    if stop is not None:
+        add_end_stop(hinge, *stop, step)
     arm.explicitinertial = True
     arm.ipos, arm.mass, arm.inertia = elbow / 2, ARM_MASS_KG, [ARM_INERTIA] * 3
     arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=np.r_[np.zeros(3), elbow], size=[0.012, 0, 0],
@@ -210,7 +213,8 @@ def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = Machin
     _add_plate(spec.worldbody, geo, options)
     home_qpos = [0.0, 0.0, 0.0]
     for i in range(3):
-        _add_chain(spec, geo, i, options, step, 1.0 / (1.0 + scale[i]))
+        _add_chain(spec, geo, i, options, step, 1.0 / (1.0 + scale[i]),
+                   None if robot.joint_ranges is None else robot.joint_ranges[i])  # the arms' stops as built
         home_qpos += [float(geo.home_q[i]), 0.0, 0.0]
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)

@@ -38,7 +38,8 @@ import numpy as np
 from calib.robots.hexapod import Hexapod
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, chain_values, new_spec
+from .machine import (HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, add_end_stop, chain_values,
+                      new_spec)
 from .units import M_PER_MM, mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "servo_damping", "DEFAULT_XML",
@@ -148,8 +149,10 @@ def build_spec(robot: Hexapod, theta: np.ndarray, options: MachineOptions = Mach
         lower.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0, 0, half], size=[0.012, 0, 0],
                        mass=LEG_MASS_KG, rgba=[0.35, 0.4, 0.5, 1.0])
         upper = lower.add_body(name=f"leg{k}_upper")
-        upper.add_joint(name=f"leg{k}_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0.0, 0.0, 1.0],
-                        frictionloss=float(friction[i]))
+        slide = upper.add_joint(name=f"leg{k}_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0.0, 0.0, 1.0],
+                                frictionloss=float(friction[i]))
+        if robot.joint_ranges is not None:  # the legs' end stops as built, at the slide (m from home)
+            add_end_stop(slide, *mm_to_m(robot.joint_ranges[i] - robot.home_lengths[i]), step)
         upper.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, half, 0, 0, rest[i]], size=[0.008, 0, 0],
                        mass=LEG_MASS_KG, rgba=[0.8, 0.55, 0.2, 1.0])
         upper.add_site(name=f"leg{k}_tip", pos=[0.0, 0.0, rest[i]], size=[0.005, 0, 0])

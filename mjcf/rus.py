@@ -19,7 +19,8 @@ import numpy as np
 from calib.robots.rus import RotaryHexapod, crank_frames
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, chain_values, new_spec
+from .machine import (HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine, MachineOptions, add_end_stop, chain_values,
+                      new_spec)
 from .units import mm_to_m
 
 __all__ = ["build_machine", "build_spec", "MOTOR_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD", "MOTOR_ARMATURE_KG_M2", "DEFAULT_PLATFORM_MASS_KG"]
@@ -75,9 +76,10 @@ def _servo(o: MachineOptions, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, fl
     return kp, kv, step
 
 
-def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: MachineOptions) -> None:
-    """The base's disc and each chain's motor, crank and rod, the rod pointing at its platform
-    joint with the motor at ``q_home``."""
+def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: MachineOptions, step: float) -> None:
+    """The base's disc and each chain's motor (with its end stops where the description declares
+    joint ranges), crank and rod, the rod pointing at its platform joint with the motor at
+    ``q_home``."""
     home = robot.home_pose
     u, v, a = crank_frames(p["az"], p["el"])
     M, P = mm_to_m(p["M"]), mm_to_m(p["P"])
@@ -91,8 +93,10 @@ def _add_chains(world, robot: RotaryHexapod, p: dict, q_home: np.ndarray, o: Mac
         c, sn = np.cos(p["q0"][i]), np.sin(p["q0"][i])
         R_motor = np.column_stack([c * u[i] + sn * v[i], -sn * u[i] + c * v[i], a[i]])
         motor = world.add_body(name=f"motor{i + 1}", pos=M[i], quat=_quat(R_motor))
-        motor.add_joint(name=MOTOR_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
-                        armature=MOTOR_ARMATURE_KG_M2, frictionloss=float(friction[i]))
+        hinge = motor.add_joint(name=MOTOR_JOINTS[i], type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1],
+                                armature=MOTOR_ARMATURE_KG_M2, frictionloss=float(friction[i]))
+        if robot.joint_ranges is not None:  # the motors' end stops as built, rad
+            add_end_stop(hinge, *robot.joint_ranges[i], step)
         motor.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, r[i], 0, 0], size=[0.006, 0, 0],
                        mass=CRANK_MASS_KG, contype=0, conaffinity=0, rgba=[0.35, 0.4, 0.5, 1])
         # The rod's frame points its z axis at the platform joint when the motor is at q_home.
@@ -159,7 +163,7 @@ def build_spec(robot: RotaryHexapod, theta: np.ndarray, options: MachineOptions 
     q_home = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
     kp, kv, step = _servo(o, mm_to_m(p["r"]))
     spec = new_spec(name, step, o.gravity)
-    _add_chains(spec.worldbody, robot, p, q_home, o)
+    _add_chains(spec.worldbody, robot, p, q_home, o, step)
     _add_platform(spec.worldbody, robot, p, o)
     _add_closures_and_servos(spec, scale, kp, kv, step)
     model = spec.compile()  # the keyframe's qpos: the compiled layout, the motors at q_home
