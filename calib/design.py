@@ -19,7 +19,10 @@ calibration workspace :meth:`Robot.workspace_bounds` (the hexapod paper's Table 
 z 200-210 mm, +-3 degrees; the Delta paper's box), and ``"full"``, the box
 :meth:`Robot.full_workspace_bounds` cut by the checks above (hexapod: x, y within +-80 mm,
 z 150-260 mm, angles within +-25 degrees; stroke +-50 mm, cones 45 degrees, scaled condition
-<= 10, 2.4 at home; for a robot without a wider box, the default one).
+<= 10, 2.4 at home; for a robot without a wider box, the default one). Where the description
+declares its joints' ranges (a machine as built), the "full" box is widened along each pose
+coordinate as far as those ranges keep the poses feasible (:func:`widened_to_joint_ranges`): a
+hexapod whose legs extend 150 mm above home reaches z = 362 mm (the default box: 260 mm).
 
 Pose selection works on the noise-whitened identification Jacobian of each candidate pose,
 ``A_c`` (D, F), columns scaled to mm (:func:`calib.observability.parameter_scale`), linearised at
@@ -55,6 +58,9 @@ __all__ = [
     "DEFAULT_MAX_CONDITION",
     "DEFAULT_PASSIVE_JOINT_LIMIT_RAD",
     "robot_workspace",
+    "widened_to_joint_ranges",
+    "WIDENING_FACTOR",
+    "WIDENING_STEPS",
     "scaled_condition",
     "reachable_joints",
     "feasibility",
@@ -80,6 +86,11 @@ DEFAULT_PASSIVE_JOINT_LIMIT_RAD = float(np.deg2rad(45.0))
 BOUNDS_TOLERANCE = 1e-6
 # Rows per inverse-kinematics call while locating unreachable candidates.
 IK_CHUNK = 256
+#: Where a description declares its joints' ranges, the "full" box is widened along each pose
+#: coordinate through the home pose as far as the poses stay feasible, up to this many times the
+#: box's own half-width from home, in steps of :data:`WIDENING_STEPS` per side.
+WIDENING_FACTOR = 4.0
+WIDENING_STEPS = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,10 +151,40 @@ def robot_workspace(robot: Robot, name: str) -> Workspace:
     """The robot's ``"full"`` or ``"default"`` workspace (see the module docstring)."""
     _check_robot(robot)
     if name == "full":
-        return Workspace(bounds=robot.full_workspace_bounds(), name="full")
+        bounds = robot.full_workspace_bounds()
+        if robot.joint_ranges is not None:
+            bounds = widened_to_joint_ranges(robot, bounds)
+        return Workspace(bounds=bounds, name="full")
     if name == "default":
         return Workspace(bounds=robot.workspace_bounds(), name="default")
     raise ValueError(f"workspace must be one of {', '.join(WORKSPACES)}, got {name!r}")
+
+
+def widened_to_joint_ranges(robot: Robot, bounds: np.ndarray) -> np.ndarray:
+    """(D, 2) ``bounds`` widened to what the robot's joints as built allow: along each pose
+    coordinate, through the home pose, both ways, out to the last pose of an unbroken run of
+    feasible ones from home (reach, :meth:`Robot.joint_limits`, the default passive-joint and
+    singularity limits, the nominal parameters), at most :data:`WIDENING_FACTOR` times the box's
+    half-width from home. A machine whose legs reach past the robot's default box (one-sided
+    strokes, long legs) gets a box its design can use; one whose ranges stop short keeps the box
+    (the design's checks cut it, as before). Deterministic: a grid of :data:`WIDENING_STEPS`
+    poses a side."""
+    bounds = np.array(bounds, dtype=float)
+    home = robot.home_pose
+    half = 0.5 * np.ptp(bounds, axis=1)
+    reach_box = home[:, None] + WIDENING_FACTOR * np.stack([-half, half], axis=1)  # holds every pose tried
+    checks = Workspace(bounds=reach_box)
+    t = np.linspace(0.0, WIDENING_FACTOR, WIDENING_STEPS + 1)[1:]
+    for k in range(robot.pose_dim):
+        for side, end in ((-1.0, 0), (1.0, 1)):
+            poses = np.tile(home, (t.size, 1))
+            poses[:, k] = home[k] + side * t * half[k]
+            ok = _checks(robot, robot.table.nominal, poses, checks, every=False)["feasible"]
+            run = t.size if ok.all() else int(np.argmin(ok))  # feasible poses before the first that is not
+            if run:
+                reach = home[k] + side * t[run - 1] * half[k]
+                bounds[k, end] = min(bounds[k, end], reach) if side < 0 else max(bounds[k, end], reach)
+    return bounds
 
 
 def _poses(robot: Robot, poses, name: str = "poses") -> np.ndarray:

@@ -315,3 +315,46 @@ def test_selection_validation(call, match):
 def test_type_validation(call, match):
     with pytest.raises(TypeError, match=match):
         call()
+
+
+def _with_ranges(robot, low, high):
+    """``robot`` with its joints' ranges declared as ``home joint value + [low, high]`` (joint unit)."""
+    home = robot.inverse_kinematics(robot.table.nominal, robot.home_pose[None])[0]
+    description = dict(robot.description(), joint_ranges=np.stack([home + low, home + high], axis=1).tolist())
+    return type(robot).from_description(description)
+
+
+def test_the_full_workspace_reaches_as_far_as_legs_declared_longer_allow():
+    """Legs that extend 150 mm above home (one-sided, as a machine built by hand): the "full" box
+    widens along each coordinate to the last feasible pose through home; the pose one grid step
+    further out is not feasible (or the widening's cap was reached)."""
+    from calib.design import WIDENING_FACTOR, WIDENING_STEPS, widened_to_joint_ranges
+
+    plain = default_robot("hexapod")
+    robot = _with_ranges(plain, -20.0, 150.0)
+    box = plain.full_workspace_bounds()
+    wide = robot_workspace(robot, "full").bounds
+    assert np.all(wide[:, 0] <= box[:, 0]) and np.all(wide[:, 1] >= box[:, 1])  # never narrower
+    assert wide[2, 1] > box[2, 1] + 50.0  # the platform goes higher than the default box allows
+    np.testing.assert_array_equal(widened_to_joint_ranges(robot, box), wide)
+    home, half = robot.home_pose, 0.5 * np.ptp(box, axis=1)
+    step = WIDENING_FACTOR / WIDENING_STEPS * half
+    ws = Workspace(bounds=home[:, None] + WIDENING_FACTOR * np.stack([-half, half], axis=1) + [-1.0, 1.0])
+    for k in range(robot.pose_dim):
+        for end, side in ((0, -1.0), (1, 1.0)):
+            if wide[k, end] == box[k, end]:
+                continue
+            at = np.tile(home, (2, 1))
+            at[:, k] = [wide[k, end], wide[k, end] + side * step[k]]
+            ok = feasibility(robot, robot.table.nominal, at, ws)["feasible"]
+            capped = abs(wide[k, end] - home[k]) >= WIDENING_FACTOR * half[k] * (1 - 1e-12)
+            assert ok[0] and (capped or not ok[1]), (robot.pose_names[k], end, wide[k, end], ok)
+
+
+def test_the_full_workspace_is_the_robots_box_without_declared_ranges_or_with_narrow_ones():
+    for name in ("hexapod", "delta", "rus"):
+        robot = default_robot(name)
+        np.testing.assert_array_equal(robot_workspace(robot, "full").bounds, robot.full_workspace_bounds())
+    # Ranges that stop short of the box: the box stays (the design's checks cut it).
+    narrow = _with_ranges(default_robot("hexapod"), -5.0, 5.0)
+    np.testing.assert_array_equal(robot_workspace(narrow, "full").bounds, narrow.full_workspace_bounds())
