@@ -322,8 +322,9 @@ class EffectFit:
     @property
     def span(self) -> np.ndarray:
         """(N C, k) the columns whatever the model could explain lies in: :attr:`design` and,
-        with held geometric combinations, theirs (the remainder's tests and the outlier scan
-        project them out: what a held combination could explain is no evidence of anything else)."""
+        with held geometric combinations, theirs (the remainder's tests project them out: what a
+        held combination could explain is no evidence of anything else; the outlier scan takes
+        :attr:`design` alone, the columns fitted)."""
         return self.design if self.held_design is None else np.hstack([self.design, self.held_design])
 
     def slices(self) -> dict:
@@ -1511,8 +1512,11 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
                  max_bad_fraction: float = MAX_BAD_FRACTION) -> dict:
     """Rows that are gross and isolated (closed-form leave-one-out, no refits).
 
-    With ``Q`` an orthonormal basis of the fit's whitened design, the hat matrix's block of row
-    j is ``H_jj = Q_j Q_j^T`` (C x C); the row's deleted residual (predicted by the model fitted
+    With ``Q`` an orthonormal basis of the fit's whitened design (the columns it fitted: a
+    combination held at its prior is not fitted and lends no row leverage; with its small column
+    made a unit vector, a row it alone moves, the first row of a level grid, the move from home,
+    had leverage near one and a 2 mm dead band's first row was flagged, and the dead band lost),
+    the hat matrix's block of row j is ``H_jj = Q_j Q_j^T`` (C x C); the row's deleted residual (predicted by the model fitted
     without it) is ``d_j = (I - H_jj)^-1 w_j`` and ``t_j = w_j^T (I - H_jj)^-1 w_j`` is
     chi-square with C degrees of freedom for a consistent row. ``t`` is divided by a robust
     scale (its median over the median of chi-square(C), at least 1), so that "gross" means
@@ -1531,7 +1535,9 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
         ``model_wrong`` (bool).
     """
     n, C = data.n, data.robot.n_chains
-    Q = _span_bases(fit)[0]
+    Q, Q_det = _span_bases(fit)
+    if Q_det is not None:
+        Q = Q_det
     w = fit.whitened
     stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
     scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))
