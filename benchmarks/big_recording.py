@@ -12,7 +12,7 @@ The last ``--validation`` rows are validation rows (default none: the run cross-
 
 Then ``python -m pipeline.run --real REC.csv`` as a subprocess (one BLAS thread, the commands'
 default), its process wall time and the summary's ``wall_time_split_s``; ``--discover`` also
-times ``python -m pipeline.discover --real REC.csv``; ``--snapshot`` renders the run's ``.rrd``
+times ``python -m pipeline.discover --real REC.csv --no-resim`` (and prints its verdict); ``--snapshot`` renders the run's ``.rrd``
 with ``python -m pipeline.snapshot`` (headless) and prints the ``.rrd``'s size. Figures are of
 one run on a shared machine (noise: the load of the other sessions).
 """
@@ -105,8 +105,9 @@ def main() -> None:
         print(f"pipeline.snapshot: {wall:.1f} s, {png} {png.stat().st_size / 1e3:.0f} kB")
     if args.discover:
         wall, done = timed([sys.executable, "-m", "pipeline.discover", "--real", str(rec), "--out", str(args.out),
-                            "--overwrite", "--quiet"])
-        print(f"pipeline.discover --real: {wall:.1f} s process wall time")
+                            "--overwrite", "--no-resim"])
+        print(f"pipeline.discover --real --no-resim: {wall:.1f} s process wall time; "
+              f"{done.stdout.strip().splitlines()[0] if done.stdout.strip() else '(nothing printed)'}")
 
 
 if __name__ == "__main__":
