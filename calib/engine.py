@@ -42,7 +42,7 @@ from .workspace import reachable_poses
 
 __all__ = ["IdentificationResult", "identify_forward", "identify_chainwise", "integrated_error",
            "SOLVERS", "METHODS", "identify", "noise_verdict", "gauge_representative",
-           "minimise"]
+           "minimise", "newton_offset"]
 
 #: Solvers of both methods.
 SOLVERS = ("lm", "gn")
@@ -392,7 +392,7 @@ def _chain_steps(gram: np.ndarray, g: np.ndarray, prior=None, factors=None) -> n
 class _ChainEvaluation:
     """The chain-wise fit at one vector, evaluated block by block over the rows: the closure ``r``
     (N, C) at the measured poses, ``offset`` (N, D) one Newton step of the forward kinematics
-    from them (:func:`_newton_offset`), ``systems`` per chain group ``(A^T A (M, K, K), A^T b (M,
+    from them (:func:`newton_offset`), ``systems`` per chain group ``(A^T A (M, K, K), A^T b (M,
     K))`` of the (weighted) chain systems (:func:`_chain_systems`), and ``std`` (N, C) the
     closure residuals' standard deviations from the declared noise (None: none asked for)."""
 
@@ -414,7 +414,7 @@ def _chain_evaluation(robot, theta, joints, measured, groups, w, noise=None) -> 
     for rows in _row_blocks(n):
         rb, jac = robot.closure_with_jacobians(theta, joints[rows], measured[rows])
         r[rows] = rb
-        offset[rows] = _newton_offset(jac, rb)
+        offset[rows] = newton_offset(jac.pose, rb)
         if std is not None:
             std[rows] = _closure_std(robot, jac, noise)
         for (chains, params), (gram, g) in zip(groups, systems):
@@ -1310,14 +1310,15 @@ def _chainwise_result(robot, free, idx, theta0, joints, measured, groups, w, noi
         condition_numbers=cond, prior=prior)
 
 
-def _newton_offset(jac: ClosureJacobians, r: np.ndarray) -> np.ndarray:
+def newton_offset(pose_jacobian: np.ndarray, r: np.ndarray) -> np.ndarray:
     """(N, D) one Newton step of the forward kinematics from the measured poses, ``(dF/dpose)^-1
-    F``: the measured poses minus the corrected ones, exact to ``|dQ|^2 / machine size``
-    (``inf`` where the pose Jacobian is singular)."""
+    F`` (``pose_jacobian`` (N, C, D) at those poses, ``r`` (N, C) the closure there): the measured
+    poses minus the corrected ones, exact to ``|dQ|^2 / machine size`` (``inf`` where the pose
+    Jacobian is singular)."""
     try:
-        return BatchedLU(jac.pose).solve(r)
+        return BatchedLU(pose_jacobian).solve(r)
     except np.linalg.LinAlgError:
-        return np.full(r.shape[:1] + jac.pose.shape[2:], np.inf)
+        return np.full(r.shape[:1] + pose_jacobian.shape[2:], np.inf)
 
 
 def noise_verdict(chi2: float, dof: int, alpha: float = 0.01) -> str:

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import chi2 as chi2_dist, norm
 
-from ..batched_lu import BatchedLU
+from ..engine import newton_offset
 from ..observability import describe_combination
 from ..robot import KinematicsError, Robot, check_joint_limits
 from .registry import EFFECTS, effect as registered, effect_family, effects_for, nested_in
@@ -415,7 +415,7 @@ def _joint_regressors(models, theta, data: EffectData, extras) -> np.ndarray:
 
 
 def _model_poses(robot: Robot, theta: np.ndarray, joints: np.ndarray, measured: np.ndarray,
-                 basis: GeometryBasis | None) -> np.ndarray:
+                 basis: GeometryBasis | None, r: np.ndarray | None = None) -> np.ndarray:
     """(N, D) the poses the discovery's columns and quantities are taken at: the poses the model
     ``theta`` reaches at ``joints`` where ``basis`` holds combinations, else ``measured`` itself.
 
@@ -431,14 +431,16 @@ def _model_poses(robot: Robot, theta: np.ndarray, joints: np.ndarray, measured: 
     model reaches are the measured ones moved by one Newton step of the closure,
     ``m - (dF/dpose)^-1 F``: the noise removed to first order (what is left is of order
     ``noise^2 / machine size``). A pose set that determines every combination keeps the measured
-    poses (its columns dwarf their noise)."""
+    poses (its columns dwarf their noise). ``r``: the closure at ``measured``, where the caller
+    has it."""
     if basis is None or basis.held.shape[1] == 0:
         return measured
-    r, pose_jacobian = robot.closure_and_pose_jacobian(theta, joints, measured)
-    try:
-        return measured - BatchedLU(np.ascontiguousarray(pose_jacobian)).solve(r)
-    except np.linalg.LinAlgError:  # a singular pose: the measured poses
-        return measured
+    if r is None:
+        r, pose_jacobian = robot.closure_and_pose_jacobian(theta, joints, measured)
+    else:
+        pose_jacobian = robot.closure_pose_jacobian(theta, joints, measured)
+    offset = newton_offset(pose_jacobian, r)
+    return measured - offset if np.all(np.isfinite(offset)) else measured  # a singular pose: as measured
 
 
 def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras, basis: GeometryBasis | None = None):
@@ -450,7 +452,7 @@ def _design(models, theta, coef, data: EffectData, free: np.ndarray, extras, bas
     Xq = _joint_regressors(models, theta, data, extras)
     joints = data.joints + Xq @ coef
     r = robot.closure(theta, joints, data.measured)
-    jac = robot.closure_jacobians(theta, joints, _model_poses(robot, theta, joints, data.measured, basis))
+    jac = robot.closure_jacobians(theta, joints, _model_poses(robot, theta, joints, data.measured, basis, r))
     geo = jac.parameters[:, :, free] if basis is None else jac.parameters[:, :, free] @ basis.step
     return r, np.concatenate([geo, jac.joints @ Xq], axis=-1), jac
 
@@ -1536,8 +1538,7 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
     """
     n, C = data.n, data.robot.n_chains
     Q, Q_det = _span_bases(fit)
-    if Q_det is not None:
-        Q = Q_det
+    Q = Q if Q_det is None else Q_det
     w = fit.whitened
     stat, clean, u = _deleted(Q, w, np.zeros(0, dtype=int))
     scale = max(1.0, float(np.median(stat) / chi2_dist.median(C)))
