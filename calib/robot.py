@@ -206,6 +206,11 @@ class Robot(ABC):
     #: for sizes of 30-400 mm, and about 0.1 mm at 100 mm for an angle) is for robots that
     #: declare none; every registered robot declares its own, with its reasons.
     default_parameter_tolerance: ClassVar[dict[str, float]] = {"mm": 0.1, "rad": 1e-3}
+    #: Each chain's joint zero, one parameter a chain in chain order: the parameter that adds to the
+    #: joint reading (the closure at joints ``q + d e_i`` with ``theta`` is the closure at ``q`` with
+    #: that parameter of chain ``i`` moved by ``d``). A re-homing, an encoder re-zeroed or a spool
+    #: re-wound moves these and nothing else (:mod:`calib.session_shift`).
+    joint_zero_names: ClassVar[tuple[str, ...]] = ()
 
     # -- description ----------------------------------------------------------------------
     @property

@@ -615,6 +615,7 @@ class Delta(Robot):
     pose_units = ("mm", "mm", "mm")
     joint_unit = "rad"
     joint_symbol = "q"
+    joint_zero_names = ("alpha1", "alpha2", "alpha3")
     chain_word = "chain"
     gauge_fixed = ("Lay1", "Lay2", "Lay3")
     #: Tolerance of the parameters, the default prior's standard deviation: 0.5 mm on lengths

@@ -65,6 +65,7 @@ class Hexapod(Robot):
     pose_units = ("mm", "mm", "mm", "rad", "rad", "rad")
     joint_unit = "mm"
     joint_symbol = "l"
+    joint_zero_names = tuple(f"dl{i}" for i in range(1, 7))
     chain_word = "leg"
     #: Tolerance of every parameter (all lengths), mm: the default prior's standard deviation.
     #: 0.1 mm: the joint centres of a machined base and platform and a leg's length offset, as

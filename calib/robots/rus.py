@@ -70,6 +70,7 @@ class RotaryHexapod(Robot):
     pose_units = ("mm", "mm", "mm", "rad", "rad", "rad")
     joint_unit = "rad"
     joint_symbol = "q"
+    joint_zero_names = tuple(f"q0_{i}" for i in range(1, 7))
     chain_word = "chain"
     #: Tolerance of the parameters, the default prior's standard deviation: 0.2 mm on lengths
     #: and 5e-3 rad on angles. Motor mounts, crank and rod lengths and joint centres of a
