@@ -1438,6 +1438,11 @@ def _remaining_words(rem: dict, chain: str, explained: bool) -> str:
                 f"no structure in time, motion, stroke, load or workspace")
     size = (f"a remainder of RMS {1e3 * rem['rms_mm']:.2f} um against a noise floor of "
             f"{1e3 * rem['noise_floor_mm']:.2f} um (whitened: {rem['noise_ratio']:.1f} x the declared noise)")
+    if rem["noise_ratio"] < 1.0:  # structure, not size: say that the rows' own noise is smaller
+        size = (f"structure in a remainder of RMS {1e3 * rem['rms_mm']:.2f} um, below the noise floor of "
+                f"{1e3 * rem['noise_floor_mm']:.2f} um the declared noise gives: the declared noise is larger than "
+                f"the rows show (they show {rem['noise_ratio']:.2f} x it), and the structure is judged at the rows' "
+                f"own noise")
     where = _chain_list(chain, rem["chains"]) or f"every {chain} alike"
     if rem["follows"]:
         what = "following " + ", ".join(rem["follows"][:3])

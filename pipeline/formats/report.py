@@ -235,6 +235,8 @@ class Heldout:
     iso_standard: str = ""
     noise_floor_mm: float | None = None
     crossvalidation: CrossValidation | None = None
+    session_shifts: tuple[str, ...] = ()
+    as_predicted_mm: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -457,6 +459,7 @@ class Effects:
     law: Law | None = None
     resimulation: Resimulation | None = None
     search: Search | None = None
+    not_named: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -720,8 +723,11 @@ def _discovery_heldout(s: dict) -> Heldout:
     if cv and cv.get("rms") is not None:
         rows.append(FigureRow("position", "mm", Figures.of(cv), None, crossvalidated=True))
         info = _crossvalidation(s)
+    shifts = tuple(v["words"] for v in (s.get("session_shifts") or {}).values())
+    raw = s.get("heldout_rms_as_predicted_mm")
     return Heldout(basis=s.get("heldout_basis") or "", poses=len(per["rows"]) if per else 0, figures=tuple(rows),
-                   per_pose=per_pose, noise_floor_mm=s.get("noise_floor_mm"), crossvalidation=info)
+                   per_pose=per_pose, noise_floor_mm=s.get("noise_floor_mm"), crossvalidation=info,
+                   session_shifts=shifts, as_predicted_mm=None if not raw or not shifts else (raw["before"], raw["after"]))
 
 
 def _frames(s: dict) -> Frames | None:
@@ -830,7 +836,7 @@ def _effects(s: dict) -> Effects:
                    cv_whitened_rms_geometry=(ev.get("none") or {}).get("cv_whitened_rms"),
                    cv_whitened_rms_chosen=ev.get("cv_whitened_rms_chosen"), aliases=_aliases(s),
                    separation=_separation(s), law=_law(s.get("proposed_law")), resimulation=_resimulation(s),
-                   search=_search(s))
+                   search=_search(s), not_named=tuple(r["words"] for r in s.get("not_named") or ()))
 
 
 def _flagged(s: dict, kind: str) -> Flagged:

@@ -230,6 +230,11 @@ def _heldout(r: Report) -> str:
     if h.noise_floor_mm is not None:
         parts.append(f'<p>noise floor: <span data-figure="heldout/noise floor" data-unit="um">'
                      f'{e(fmt(h.noise_floor_mm, 1e3))}</span> um</p>')
+    if h.as_predicted_mm is not None:
+        parts.append(f"<p>as predicted, the sessions' shifts left in: {e(fmt(h.as_predicted_mm[0], 1e3))} um -> "
+                     f"{e(fmt(h.as_predicted_mm[1], 1e3))} um; the figures above take each shifted session's shift "
+                     f"out</p>")
+    parts += [f'<p class="shift"><b>Shift between sessions</b>: {e(w)}.</p>' for w in h.session_shifts]
     for pp in h.per_pose:
         shown, scale = display(pp.unit)
         label = per_pose_label(pp.quantity)
@@ -284,6 +289,8 @@ def _effects(r: Report) -> str:
         words = no_effect_words(x)
         parts.append(f"<p>{e(words[0].upper() + words[1:])}.</p>")
     parts.append(f"<p>What remains: {e(remaining_words(x))}</p>")
+    if x.not_named:
+        parts.append("<ul class=\"not-named\">" + "".join(f"<li>Not named: {e(w)}</li>" for w in x.not_named) + "</ul>")
     notes = effect_notes(x)
     if notes:
         parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in notes) + "</ul>")

@@ -414,6 +414,7 @@ def _discovery_lines(r: Report) -> list[str]:
                     continue
                 unc = f" +- {c.std:.2g}" if _finite(c.std) else ""
                 lines.append(f"    {c.name} = {c.value:.6g}{unc} {c.unit}")
+    lines += [f"Not named: {w}." for w in x.not_named]
     for a in x.aliases:
         if a.nested:
             lines.append(f"Cannot tell apart on this recording: {a.named} and {a.rival}, which contains it (its extra "
@@ -430,10 +431,14 @@ def _discovery_lines(r: Report) -> list[str]:
     closure = h.figures[0]
     lines.append(f"Held-out residual RMS: {_f(closure.before.rms, '.3f', 1e3)} um -> {_f(closure.after.rms, '.3f', 1e3)} "
                  f"um (noise floor {_f(h.noise_floor_mm, '.3f', 1e3)} um; {h.basis}).")
+    if h.as_predicted_mm is not None:
+        lines.append(f"  as predicted, the sessions' shifts left in: {_f(h.as_predicted_mm[0], '.3f', 1e3)} um -> "
+                     f"{_f(h.as_predicted_mm[1], '.3f', 1e3)} um; the figures above take each shifted session's shift out")
     if closure.before.mean is not None:
         lines.append(f"  mean {_f(closure.before.mean, '.3f', 1e3)} um -> {_f(closure.after.mean, '.3f', 1e3)} um, "
                      f"max {_f(closure.before.max, '.3f', 1e3)} um -> {_f(closure.after.max, '.3f', 1e3)} um "
                      f"(RMS over the joints, per held-out row)")
+    lines += [f"Shift between sessions: {w}." for w in h.session_shifts]
     rs = x.resimulation
     if rs is not None:
         lines.append(f"MuJoCo machine re-simulated: position RMS {rs.before_um:.3f} um -> {rs.after_um:.3f} um")
@@ -642,6 +647,8 @@ def _discovery_markdown(r: Report) -> list[str]:
     for a in x.aliases:
         within = "contains it; the simpler one named" if a.nested else f"within {a.delta_bic:.1f} BIC"
         lines += ["", f"Cannot tell apart: {a.named} and {a.rival} ({within})."]
+    lines += [f"\nNot named: {w}." for w in x.not_named]
+    lines += [f"\nShift between sessions: {w}." for w in (r.heldout.session_shifts if r.heldout else ())]
     if x.resimulation is not None:
         lines += ["", f"MuJoCo re-simulation, position RMS: {x.resimulation.before_um:.2f} -> "
                       f"{x.resimulation.after_um:.2f} um."]

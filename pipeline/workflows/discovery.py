@@ -27,6 +27,8 @@ from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, 
 from calib.effects.discovery import MIN_ROWS
 from calib.effects.separability import GRAM_MIN_RESIDUALS
 from calib.effects.base import PAYLOAD_CHANNEL
+from calib.effects.heldout import HeldoutJudgement, RejectedEffect, TIME_BLOCKS, heldout_folds, judge_effects
+from calib.session_shift import SessionShift
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from calib.diagnosis import no_motion_words
@@ -60,29 +62,62 @@ class DiscoveryReport:
     summary: dict
 
 
-def _heldout(data: EffectData, chosen: EffectFit, heldout_rows: np.ndarray, train_rows: np.ndarray,
-             start: np.ndarray | None = None) -> dict:
-    """Held-out closure residual RMS (mm) of geometry only and geometry + the chosen effects,
-    both fitted on ``train_rows`` (the geometry's Gauss-Newton from ``start``, (P,), default the
-    nominal), and the noise floor of the held-out residuals."""
-    train, test = data.subset(train_rows), data.subset(heldout_rows)
-    geo = fit_effects(train, (), start=start)
-    before = geo.predict(test)[0]
-    if chosen.models:
-        extras = {m.name: e for m, e in zip(chosen.models, chosen.extras) if e is not None}
-        after = fit_effects(train, chosen.models, extras=extras, start=geo.theta).predict(test)[0]
-    else:
-        after = before
-    floor = float(np.sqrt(np.mean(closure_noise_std(data.robot, data.theta, test) ** 2)))
-    rms_b = float(np.sqrt(np.mean(before ** 2)))
-    rms_a = float(np.sqrt(np.mean(after ** 2)))
-    row_b, row_a = np.sqrt(np.mean(before ** 2, axis=1)), np.sqrt(np.mean(after ** 2, axis=1))
-    per_row = {"rows": [int(i) + 1 for i in heldout_rows], "before_mm": row_b.tolist(), "after_mm": row_a.tolist(),
-               "before_mean_mm": float(row_b.mean()), "before_max_mm": float(row_b.max()),
-               "after_mean_mm": float(row_a.mean()), "after_max_mm": float(row_a.max()),
-               "what": "closure residual RMS over the joints of each held-out row (1-based data rows)"}
-    return {"heldout_rms_before_mm": rms_b, "heldout_rms_after_mm": rms_a, "noise_floor_mm": floor,
-            "after_over_floor": rms_a / floor, "heldout_rows": [int(i) for i in heldout_rows], "per_row": per_row}
+def heldout_block(judgement: HeldoutJudgement) -> dict:
+    """The summary's held-out figures (closure residual RMS, mm) of the geometry alone and of the
+    effects named, both fitted on the training rows, with each shifted session's shift taken out;
+    the noise floor; each row's RMS over the joints; the shifts found by session; the effects the
+    held-out rows did not confirm; every fold's figures."""
+    g, m = judgement.geometry, judgement.model
+    held = judgement.fold.held
+    per_row = {"rows": [int(i) + 1 for i in held], "before_mm": g.per_row_mm.tolist(), "after_mm": m.per_row_mm.tolist(),
+               "before_mean_mm": float(g.per_row_mm.mean()), "before_max_mm": float(g.per_row_mm.max()),
+               "after_mean_mm": float(m.per_row_mm.mean()), "after_max_mm": float(m.per_row_mm.max()),
+               "what": "closure residual RMS over the joints of each held-out row (1-based data rows), each shifted "
+                       "session's shift taken out"}
+    return {"heldout_rms_before_mm": g.unshifted_rms_mm, "heldout_rms_after_mm": m.unshifted_rms_mm,
+            "heldout_rms_as_predicted_mm": {"before": g.rms_mm, "after": m.rms_mm},
+            "noise_floor_mm": judgement.floor_mm, "after_over_floor": m.unshifted_rms_mm / judgement.floor_mm,
+            "heldout_rows": [int(i) for i in held], "per_row": per_row,
+            "heldout_folds": [{"kind": k, "rows": n, "geometry_rms_mm": gb, "model_rms_mm": mb}
+                              for k, n, gb, mb in judgement.folds],
+            "not_named": [{"effect": r.name, "delta_bic": r.delta_bic, "geometry_rms_mm": r.geometry_mm,
+                           "with_effect_rms_mm": r.with_effect_mm, "judged_on": r.fold, "why": r.why,
+                           "words": not_named_words(r)} for r in judgement.rejected]}
+
+
+def not_named_words(r: RejectedEffect) -> str:
+    """Why an effect the calibration rows chose is not named, with its figures."""
+    bic = "" if r.delta_bic is None else f" (BIC {r.delta_bic:+.0f})"
+    rows = "the validation rows" if r.fold == "validation" else f"rows held out ({r.fold})"
+    if r.why == "not separable":
+        return (f"{r.name} fits the calibration rows{bic} but cannot be separated from the geometry on this pose set: "
+                f"not named")
+    if r.why == "worse re-simulated":
+        return (f"{r.name} fits the calibration rows{bic} but its MuJoCo re-simulation fits worse than the geometry "
+                f"alone ({1e3 * r.geometry_mm:.1f} -> {1e3 * r.with_effect_mm:.1f} um): not named")
+    return (f"{r.name} fits the calibration rows{bic} but predicts {rows} worse ({r.geometry_mm:.3g} -> "
+            f"{r.with_effect_mm:.3g} mm): not named")
+
+
+def shift_words(session: str, shift: SessionShift, unit: str) -> str:
+    """A session's shift said as a person sees it: how far its rows sit from the prediction and
+    which way, what moved, and what to do."""
+    e = shift.mean_position_error_mm
+    size = float(np.linalg.norm(e))
+    axis = int(np.argmax(np.abs(e)))
+    way = ("below the prediction" if e[2] < 0 else "above the prediction") if axis == 2 else \
+        f"off the prediction along {'+-'[int(e[axis] < 0)]}{'xyz'[axis]}"
+    way += f" (mean error {', '.join(f'{v:+.2f}' for v in e)} mm in x, y, z)"
+    p = f"p = {shift.p_no_shift:.2g}" if shift.p_no_shift > 0 else "p < 1e-300"
+    what = {"joint zeros": "the machine re-homed (each joint's zero moved: "
+                           + ", ".join(f"{v:+.3g} +- {s:.2g}" for v, s in zip(shift.zeros, shift.zeros_std))
+                           + f" {unit})",
+            "instrument frame": "the instrument moved or was re-calibrated (its frame moved by "
+                                + ", ".join(f"{v:+.3g}" for v in shift.frame_motion[:3]) + " mm)",
+            "joint zeros and instrument frame": "the machine re-homed and the instrument moved"}[shift.chosen]
+    return (f"the rows of session {session!r} sit {size:.2f} mm {way}, uniformly ({p} that nothing "
+            f"moved): {what} between sessions; re-measure at least 6 poses at "
+            f"the start of a session and re-reference (pipeline.run --from)")
 
 
 def _with(settings: dict, section: str, field: str, value: float) -> dict:
@@ -196,19 +231,73 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
     return _with(settings, param.section, name, xs), report
 
 
-def heldout_split(rec: Recording, kept: np.ndarray, val: np.ndarray, heldout_fraction: float, seed: int,
-                  analysed_all: bool) -> tuple[np.ndarray, np.ndarray, str]:
-    """``(held-out rows, training rows, what they are in words)``: the recording's validation rows,
-    or ``heldout_fraction`` of the rows kept, drawn with ``seed``."""
-    if val.size:
-        return val, kept, "recorded validation rows"
-    order = np.random.default_rng(seed).permutation(kept.size)
-    n_held = max(1, int(round(heldout_fraction * kept.size)))
-    basis = f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed})"
+def judged_discovery(rec: Recording, data: EffectData, disc: Discovery, cal: np.ndarray, val: np.ndarray, *,
+                     heldout_fraction: float, seed: int, analysed_all: bool, candidates) -> tuple:
+    """``(discovery, judgement, basis in words)``: what the calibration rows chose, judged by held-out
+    rows (:func:`calib.effects.heldout.judge_effects`: the validation rows, or folds at random, in
+    blocks of time and by session); where the held-out rows reject an effect (or the separability
+    screen set it aside), the discovery is run again without it, and judged again.
+
+    ``disc`` indexes the recording's rows (its ``kept`` and ``flagged``); ``cal`` the rows it analysed."""
+    robot = rec.robot
+    rejected: list = []
+    for round_ in range(MAX_REDISCOVERIES + 1):
+        folds = heldout_folds(rec.t_s, rec.sessions, disc.kept, val, random_fraction=heldout_fraction, seed=seed)
+        start = disc.geometry.theta if folds[0].train.size * robot.n_chains > GRAM_MIN_RESIDUALS else None
+        unseparated = {u["effect"] for u in disc.separation.get("unseparated", [])} if disc.separation else set()
+        delta_bic = {n: disc.evidence.get(n, {}).get("delta_bic_when_added") for n in disc.effects}
+        judgement = judge_effects(data, disc.chosen, folds, rec.sessions, unseparated=unseparated,
+                                  delta_bic=delta_bic, start=start)
+        if not judgement.rejected:
+            break
+        rejected += judgement.rejected
+        out = {r.name for r in rejected}
+        # the last round: the geometry alone, which the held-out rows cannot reject
+        narrowed = [] if round_ == MAX_REDISCOVERIES - 1 else \
+            [c for c in candidates if registered_effect(c).name not in out]
+        disc = rediscovered(data, disc, cal, narrowed, seed, rec)
+    judgement = replace(judgement, rejected=tuple(rejected))
+    judgement, disc = judged_law(data, disc, judgement, folds, rec.sessions, start)
+    basis = "recorded validation rows" if val.size else (
+        f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed}) for the figures; every "
+        f"effect also judged on {TIME_BLOCKS} contiguous blocks in time"
+        + (" and session by session" if len(set(rec.sessions[disc.kept].tolist())) > 1 else ""))
     if analysed_all:
         basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
                   f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
-    return np.sort(kept[order[:n_held]]), np.sort(kept[order[n_held:]]), basis
+    if start is not None:
+        basis += (f"; the training rows' geometry fitted from that of every row (above {GRAM_MIN_RESIDUALS:,} "
+                  "residuals)")
+    return disc, judgement, basis
+
+
+#: How many times a discovery is run again without the effects the held-out rows rejected (the
+#: last time with the geometry alone).
+MAX_REDISCOVERIES = 3
+
+
+def rediscovered(data: EffectData, disc: Discovery, cal: np.ndarray, candidates, seed: int, rec: Recording) -> Discovery:
+    """The discovery on the same rows with ``candidates`` (rows indexed as the recording's)."""
+    again = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
+                             channels={k: v[cal] for k, v in rec.extras.items()} or None)
+    return replace(again, kept=cal[again.kept], flagged=tuple(int(cal[i]) for i in again.flagged))
+
+
+def judged_law(data: EffectData, disc: Discovery, judgement: HeldoutJudgement, folds, sessions, start) -> tuple:
+    """A proposed law judged as an effect is (:func:`calib.effects.heldout.judge_effects`): one that
+    predicts the held-out rows worse is dropped and reported."""
+    law = disc.proposed_law
+    if law is None:
+        return judgement, disc
+    try:
+        j = judge_effects(data, law.fit, folds, sessions, start=start)
+    except (ValueError, IndexError, np.linalg.LinAlgError):  # a law bound to the analysed rows' channels
+        return judgement, disc
+    law_name = law.fit.models[-1].name
+    dropped = [r for r in j.rejected if r.name == law_name]
+    if not dropped:
+        return judgement, disc
+    return replace(judgement, rejected=judgement.rejected + tuple(dropped)), replace(disc, proposed_law=None)
 
 
 def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
@@ -258,13 +347,9 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     kept = cal[disc.kept]
     flagged = [int(cal[i]) for i in disc.flagged]
     disc = replace(disc, kept=kept, flagged=tuple(flagged))
-    held, train, basis = heldout_split(rec, kept, val, heldout_fraction, seed, analysed_all)
-    start = None
-    if train.size * robot.n_chains > GRAM_MIN_RESIDUALS:  # a tall fit: one Gauss-Newton pass saved
-        start = disc.geometry.theta
-        basis += (f"; the training rows' geometry fitted from that of every row (above {GRAM_MIN_RESIDUALS:,} "
-                  "residuals)")
-    h = _heldout(data, disc.chosen, held, train, start)
+    disc, judgement, basis = judged_discovery(rec, data, disc, cal, val, heldout_fraction=heldout_fraction, seed=seed,
+                                              analysed_all=analysed_all, candidates=candidates)
+    h = heldout_block(judgement)
     scan = disc.outliers
     summary = {
         "robot": robot.name,
@@ -281,6 +366,11 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "noise_floor_mm": h["noise_floor_mm"],
         "heldout_basis": basis,
         "heldout_per_row": h["per_row"],
+        "heldout_rms_as_predicted_mm": h["heldout_rms_as_predicted_mm"],
+        "heldout_folds": h["heldout_folds"],
+        "not_named": h["not_named"],
+        "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
+                           for s, shift in judgement.shifts.items() if shift.shifted},
         "flagged_poses": [i + 1 for i in flagged],
         "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
                      "model_wrong": bool(scan["model_wrong"]),
