@@ -26,6 +26,7 @@ import numpy as np
 from ..session_shift import shift_of_residuals
 from ..measurement import compose
 from .base import EffectData
+from .granularity import form_key
 from .discovery import EffectFit, closure_noise_covariance, fit_effects
 
 __all__ = ["HeldoutFold", "HeldoutFigures", "HeldoutJudgement", "RejectedEffect", "heldout_folds", "session_shifts",
@@ -274,7 +275,8 @@ def judge_effects(data: EffectData, chosen: EffectFit, folds: list[HeldoutFold],
         chosen: the model the calibration rows chose (its effects and searched parameters).
         folds: :func:`heldout_folds`.
         sessions: (N,) each row's session.
-        unseparated: names of effects the rows cannot separate from the geometry.
+        unseparated: the forms (:func:`calib.effects.granularity.form_key`: ``name`` or
+            ``name[per_chain]``) the rows cannot separate from the geometry.
         delta_bic: ``{effect: BIC gain when it entered}`` for the words.
         start: (P,) the geometry the training fits start from (default ``data.theta``).
     """
@@ -291,7 +293,7 @@ def judge_effects(data: EffectData, chosen: EffectFit, folds: list[HeldoutFold],
         rejected.append(RejectedEffect(m.name, delta_bic.get(m.name), fold.geometry.unshifted_rms_mm, after,
                                        fold.fold.kind, why))
 
-    for m in [m for m in models if m.name in set(unseparated)]:
+    for m in [m for m in models if form_key(m) in set(unseparated)]:
         reject(m, "not separable", first)
         models = tuple(x for x in models if x is not m)
     while models:

@@ -244,7 +244,7 @@ def judged_discovery(rec: Recording, data: EffectData, disc: Discovery, cal: np.
     for round_ in range(MAX_REDISCOVERIES + 1):
         folds = heldout_folds(rec.t_s, rec.sessions, disc.kept, val, random_fraction=heldout_fraction, seed=seed)
         start = disc.geometry.theta if folds[0].train.size * robot.n_chains > GRAM_MIN_RESIDUALS else None
-        unseparated = {u["effect"] for u in disc.separation.get("unseparated", [])} if disc.separation else set()
+        unseparated = {u["form"] for u in disc.separation.get("unseparated", [])} if disc.separation else set()
         delta_bic = {n: disc.evidence.get(n, {}).get("delta_bic_when_added") for n in disc.effects}
         judgement = judge_effects(data, disc.chosen, folds, rec.sessions, unseparated=unseparated,
                                   delta_bic=delta_bic, start=start)
