@@ -106,3 +106,36 @@ def test_without_validation_rows_every_effect_is_judged_at_random_in_time_blocks
     assert np.array_equal(np.concatenate(blocks), rows), "contiguous blocks in the recording's order"
     only = heldout_folds(t, sessions, rows, np.arange(40, 50), random_fraction=0.25, seed=1)
     assert [f.kind for f in only] == ["validation"]
+
+
+@pytest.mark.slow
+def test_an_effect_whose_resimulation_fits_worse_is_reported_not_named():
+    """The second witness's rule, on a discovery that names a dead band (a level grid with 1 mm
+    in every leg): told that its MuJoCo machine fits worse than the geometry alone's, the
+    discovery falls back to the geometry and says both figures."""
+    from pipeline.workflows.discovery import discover, witnessed
+    from tests.test_plane_discovery import level_grid_recording
+
+    rec = level_grid_recording(6, dead_band=1.0)
+    named = discover(rec, resim=False)
+    assert named.discovery.effects == ("joint_friction",)
+    # what the judgement saw, rebuilt as discover() builds it
+    from pipeline.workflows.discovery import judged_discovery
+    from pipeline.workflows.calibration import machine_tolerance
+
+    tolerance, _ = machine_tolerance(rec.robot, rec.meta, "sidecar")
+    data = EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
+                      tolerance=tolerance.std)
+    cal = np.arange(len(rec.sets))
+    disc, judgement, _ = judged_discovery(rec, data, named.discovery, cal, np.zeros(0, int), heldout_fraction=0.25,
+                                          seed=0, analysed_all=False, candidates=["joint_friction"])
+    sim = {"mujoco_resimulation": {"before": {"position_um": 300.0, "orientation_urad": 1.0},
+                                   "after": {"position_um": 900.0, "orientation_urad": 1.0}}}
+    disc2, j2, block = witnessed(rec, data, disc, cal, judgement, sim, 0)
+    assert disc2.effects == () and [r.name for r in j2.rejected] == ["joint_friction"]
+    r = j2.rejected[0]
+    assert r.why == "worse re-simulated" and (r.geometry_mm, r.with_effect_mm) == (0.3, 0.9)
+    assert block["mujoco_resimulation"]["after"] == block["mujoco_resimulation"]["before"]
+    kept = witnessed(rec, data, disc, cal, judgement, {"mujoco_resimulation": {
+        "before": {"position_um": 900.0}, "after": {"position_um": 300.0}}}, 0)
+    assert kept[0].effects == ("joint_friction",)
