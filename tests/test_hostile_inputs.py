@@ -9,6 +9,7 @@ result as the clean file. The cases are listed in docs/real_data.md.
 
 import json
 import os
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -875,3 +876,55 @@ def test_a_closing_cluster_prints_no_closed_connection(capsys):
             raise ValueError("not a closed connection")
     finally:
         root.removeHandler(handler)
+
+
+# --------------------------------------------------------------------------- metres, off the nominal geometry
+
+def _reference_machine_recording(robot_name, seed=0):
+    """A recording of ``robot_name`` as ``pipeline.run --robot NAME`` makes it, kinematically (no
+    MuJoCo): the reference errors injected (up to 2.5 tolerances on the 6-RUS), the reference
+    experiment's calibration poses and 50 held-out ones, 1 um position noise, commands of the nominal
+    geometry."""
+    from calib.robots import default_robot, reference_errors
+
+    robot = default_robot(robot_name)
+    seeds = np.random.SeedSequence(seed).spawn(4)
+    actual = robot.table.nominal + reference_errors(robot, int(seeds[3].generate_state(1)[0]))
+    targets = np.vstack([reachable_poses(robot, 20, seeds[0]), reachable_poses(robot, 50, seeds[1])])
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    noise = SensorNoise(0.001, 0.0)
+    rng = np.random.default_rng(seeds[2])
+    measured = robot.forward_kinematics(actual, joints, initial=targets) + noise.sample(len(targets), rng,
+                                                                                       robot.pose_units)
+    return Recording(robot=robot, noise=noise, t_s=np.arange(70.0), joints=joints, measured=measured,
+                     sets=np.array(["calibration"] * 20 + ["validation"] * 50), meta={})
+
+
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_positions_in_metres_off_the_nominal_geometry_are_refused_before_any_fit(robot_name, tmp_path, capsys,
+                                                                                 monkeypatch):
+    """A machine off its nominal geometry (the reference errors) with its positions in metres: refused
+    by the checks, naming the columns and the unit, before the run's first fit (before: the 6-RUS
+    went on to the instrument fit, "forward kinematics met a singular configuration at row 12").
+    On the Delta and the 6-RUS (revolute joints) a machine a thousand times smaller fits the file
+    as written: the message says it fits only implausibly, its chi-square within the limit beside
+    that claim, never "it does not" beside a chi-square that fits."""
+    import calib.identification
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the run fitted the file before its checks refused it")
+
+    monkeypatch.setattr(calib.identification, "instrument_fit", no_fit)
+    rec = _reference_machine_recording(robot_name)
+    measured = rec.measured.copy()
+    measured[:, :3] /= 1000.0
+    path, _ = write_recording(tmp_path / "rec.csv", replace(rec, measured=measured))
+    out = tmp_path / "out"
+    out.mkdir()
+    line = refused(["--real", str(path)], out, capsys, "rec.csv: columns x_mm, y_mm, z_mm",
+                   "the positions seem to be in metres", "(positions times 1000)", "a recording holds mm")
+    written = line.split(" and as written ", 1)[1]
+    chi2, limit = (float(v) for v in
+                   re.search(r"chi-square (\S+) per degree of freedom \(limit ([^)]+)\)", written).groups())
+    assert written.startswith("it does not (" if chi2 > limit else "it fits only implausibly ("), line
+    assert chi2 > limit or "moved" in written, line

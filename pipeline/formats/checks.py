@@ -359,9 +359,13 @@ def _units_and_conventions(rec: Recording, poses: _PoseColumns, path: Path, diag
     if diagnosis.cause == "conversion":
         conv = diagnosis.conversion
         cols = _conversion_columns(rec, poses, conv)
+        # The figures quoted support the claim: as written the file misfits (its chi-square beyond
+        # the limit) or fits only with a parameter moved far beyond its tolerance (a Delta or a
+        # 6-RUS in metres fits a machine a thousand times smaller).
+        how = "it does not" if not diagnosis.written.fits else "it fits only implausibly"
         raise RecordingError(f"{path}: column{'s' if len(cols) > 1 else ''} {', '.join(cols)}: {conv.finding}: "
                              f"converted ({conv.fix}) the file fits the {rec.robot.name} at the declared noise "
-                             f"({diagnosis.converted.words()}) and as written it does not ({diagnosis.written.words()}); "
+                             f"({diagnosis.converted.words()}) and as written {how} ({diagnosis.written.words()}); "
                              f"a recording holds {_holds(rec, conv.kind)}")
     if diagnosis.cause == "unmeasured column":
         name = diagnosis.column
