@@ -928,3 +928,51 @@ def test_positions_in_metres_off_the_nominal_geometry_are_refused_before_any_fit
                    re.search(r"chi-square (\S+) per degree of freedom \(limit ([^)]+)\)", written).groups())
     assert written.startswith("it does not (" if chi2 > limit else "it fits only implausibly ("), line
     assert chi2 > limit or "moved" in written, line
+
+
+# --------------------------------------------------------------------------- absurd noise flags
+
+NOISE_COMMANDS = {"pipeline.run": lambda out: ["--out", str(out), "--quiet"],
+                  "pipeline.study": lambda out: ["--trials", "2", "--summary-json", str(out / "s.json")],
+                  "pipeline.design": lambda out: ["--poses", "12", "--out", str(out / "d.csv")]}
+
+
+@pytest.mark.parametrize("command", list(NOISE_COMMANDS))
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+@pytest.mark.parametrize("flag", ["--noise-mm", "--noise-rad", "--noise-joint"])
+@pytest.mark.parametrize("value", ["1e300", "above"])
+def test_an_absurd_noise_flag_is_refused_naming_the_range_that_fits(command, robot_name, flag, value, tmp_path,
+                                                                   capsys):
+    """A sensor noise no measurement of the machine can have (1e300; just above the bound of
+    :func:`pipeline.workflows.options.noise_limits`): exit 2, one line naming the flag and the
+    range that would fit, nothing written (before, ``pipeline.run --noise-mm 1e300``: LAPACK's
+    "illegal value" twice on stdout, an overflow warning, "SVD did not converge"; ``--noise-joint
+    1e300``: an OverflowError's traceback)."""
+    import importlib
+
+    from calib.robots import default_robot
+    from pipeline.workflows.options import noise_limits
+
+    limit, unit, _ = noise_limits(default_robot(robot_name))[flag]
+    text = value if value == "1e300" else repr(limit * (1 + 1e-9))
+    out = tmp_path / "out"
+    out.mkdir()
+    code = importlib.import_module(command).main(["--robot", robot_name, flag, text] + NOISE_COMMANDS[command](out))
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in captured.err, captured.err
+    assert "DLASCL" not in captured.out and "Warning" not in captured.err
+    assert lines[0].startswith(f"error: {flag} {float(text):g}: ") and f"between 0 and {limit:.4g} {unit} would fit" \
+        in lines[0], lines[0]
+    assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_noise_at_its_bound_is_accepted(robot_name):
+    """The bound itself is no refusal: every flag at its limit passes the check."""
+    from calib.robots import default_robot
+    from pipeline.workflows.options import check_noise_flags, noise_limits
+
+    robot = default_robot(robot_name)
+    limits = {flag: lim for flag, (lim, _, _) in noise_limits(robot).items()}
+    check_noise_flags(robot, SensorNoise(limits["--noise-mm"], limits["--noise-rad"], joint=limits["--noise-joint"]))

@@ -11,8 +11,8 @@ recording).
 from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
-    "checks": ("EXCITATION_MAX_ROWS", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "ROTATION_CONVENTION", "WARNED_CONDITION",
-               "RecordingChecks", "plausibility", "recording_checks"),
+    "checks": ("EXCITATION_MAX_ROWS", "JOINT_LIMIT_TOLERANCE", "MAX_ANGLE_RAD", "REACH_FACTOR", "REFUSED_CONDITION",
+               "ROTATION_CONVENTION", "WARNED_CONDITION", "RecordingChecks", "plausibility", "recording_checks"),
     "calibration_file": ("ABSURD_TOLERANCES", "CALIBRATION_FORMAT", "CALIBRATION_SUFFIX", "CALIBRATION_VERSION",
                          "Calibration", "CalibrationFileError", "calibration_text", "check_plausible_parameters",
                          "read_calibration", "recording_source", "validity_domain", "write_calibration"),

@@ -32,6 +32,8 @@ from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, build_report, command_columns, command_csv,
                               output_folder, frame_session, render_html, row_message, session_measurement)
 
+from .options import check_noise_flags
+
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "default_name", "OUTPUT_EXTENSIONS"]
@@ -289,7 +291,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     split: dict[str, float] = {}
     warnings: list[str] = []
     rec = diagnosis = checks = None
-    if settings.real is not None:
+    if settings.real is None:
+        check_noise_flags(default_robot(settings.robot or DEFAULT_ROBOT), simulated_noise(settings))
+    else:
         rec = read_recording(settings.real)
         split["read"] = time.perf_counter() - t0
         if settings.robot is not None and settings.robot != rec.robot.name:
@@ -611,10 +615,15 @@ def session_index(rec: Recording) -> np.ndarray:
     return frame_groups(rec)[1]
 
 
+def simulated_noise(settings: RunSettings) -> SensorNoise:
+    """The sensor noise of a simulated run (``--noise-mm``, ``--noise-rad``, ``--noise-dist``, ``--noise-joint``)."""
+    return SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
+
+
 def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     """The calibration input of a simulated machine (the reference errors injected, MuJoCo)."""
     robot = default_robot(settings.robot or DEFAULT_ROBOT)
-    noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
+    noise = simulated_noise(settings)
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))

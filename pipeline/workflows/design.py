@@ -46,7 +46,7 @@ from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_desc
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
 from pipeline.formats import atomic_write, check_outputs, command_columns, sidecar_path, write_command_file
 
-from .options import ToolOptions
+from .options import ToolOptions, check_noise_flags
 
 __all__ = ["DEFAULT_NOISE", "DEFAULT_CANDIDATES", "PROBE_POSES", "optimal_poses", "DesignSearch", "criterion_value",
            "design_search", "design_start", "start_seed", "load_robot", "DesignSettings", "DesignOutcome",
@@ -248,6 +248,7 @@ def check_design_settings(settings: DesignSettings, robot: Robot) -> None:
         ValueError: too few poses or candidates, an output that cannot be written;
         FileExistsError: an output exists and ``overwrite`` is off.
     """
+    check_noise_flags(robot, settings.noise)
     fewest = minimum_poses(robot)
     if settings.poses < fewest:
         raise ValueError(f"--poses must be >= {fewest} ({len(robot.free_default)} parameters, "

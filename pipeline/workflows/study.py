@@ -46,7 +46,7 @@ from pipeline.execution import run_tasks, worker_count
 from pipeline.formats import atomic_write, check_outputs, read_command_file
 
 from .design import DEFAULT_NOISE, load_robot
-from .options import ToolOptions
+from .options import ToolOptions, check_noise_flags
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
            "compensation_errors", "run_trials", "monte_carlo", "summarize", "StudySettings", "StudyOutcome",
@@ -345,6 +345,7 @@ def check_study_settings(settings: StudySettings, robot: Robot) -> None:
     check_outputs({"--summary-json": settings.summary_json, "--rrd": settings.rrd}, overwrite=settings.overwrite)
     if settings.trials < 2:
         raise ValueError(f"--trials must be >= 2, got {settings.trials}")
+    check_noise_flags(robot, settings.noise)
     fewest = minimum_poses(robot)
     if settings.poses in ("designed", "random") and settings.n_poses < fewest:
         raise ValueError(f"--n-poses must be >= {fewest}, got {settings.n_poses}")
