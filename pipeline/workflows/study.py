@@ -340,6 +340,53 @@ def study_poses(settings: StudySettings, robot: Robot, ws) -> tuple[np.ndarray, 
         raise ValueError(f"--poses: {exc}") from None
 
 
+#: Bisection steps of the largest random errors that fit (:func:`true_machine_poses`): the
+#: scale to 2**-12 of the asked one.
+FITTING_SCALE_STEPS = 12
+
+
+def true_machine_poses(robot: Robot, errors, kind: str, settings: StudySettings, commanded, targets,
+                       heldout) -> np.ndarray:
+    """(N, D) the poses the true machine (nominal + ``errors``) reaches at the ``commanded`` joints.
+
+    Random errors this large may make no machine (a Delta's arm of negative length) or one that
+    cannot reach the study's poses (calibration or held-out, commanded by the nominal model):
+    refused naming ``--error-mm`` and ``--error-rad``, with the largest errors of the same draw
+    that fit (the draw scaled down, by bisection to 2**-:data:`FITTING_SCALE_STEPS`).
+
+    Raises:
+        ValueError: naming the flags and the errors that would fit.
+    """
+    nominal = robot.table.nominal
+    check = [commanded] if heldout is None else [commanded, robot.inverse_kinematics(nominal, heldout)]
+
+    def reached(scale: float) -> np.ndarray:
+        theta = nominal + scale * errors
+        for q in check[1:]:
+            robot.forward_kinematics(theta, q)
+        return robot.forward_kinematics(theta, check[0], initial=targets)
+
+    try:
+        return reached(1.0)
+    except ValueError as exc:
+        if kind != "random":
+            raise ValueError(f"--errors {kind}: the {robot.name} with its reference errors cannot reach the study's "
+                             f"poses: {exc}") from None
+        reason = exc
+    fits, fails = 0.0, 1.0
+    for _ in range(FITTING_SCALE_STEPS):
+        mid = (fits + fails) / 2
+        try:
+            reached(mid)
+            fits = mid
+        except ValueError:
+            fails = mid
+    raise ValueError(f"--error-mm {settings.error_mm:g}, --error-rad {settings.error_rad:g}: the {robot.name} with "
+                     f"random errors this large (--seed {settings.seed}) cannot reach the study's poses ({reason}); "
+                     f"errors up to --error-mm {fits * settings.error_mm:.3g} --error-rad "
+                     f"{fits * settings.error_rad:.3g} would fit (this draw scaled by {fits:.3g})")
+
+
 def check_study_settings(settings: StudySettings, robot: Robot) -> None:
     """Refuse, naming the flag, a study that cannot run or write its outputs, before any work."""
     check_outputs({"--summary-json": settings.summary_json, "--rrd": settings.rrd}, overwrite=settings.overwrite)
@@ -375,7 +422,7 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         commanded = robot.inverse_kinematics(nominal, targets)
     heldout = sample_feasible_poses(robot, nominal, ws, settings.heldout, [settings.seed, 1]) if settings.heldout \
         else None
-    reached = robot.forward_kinematics(theta_true, commanded, initial=targets)
+    reached = true_machine_poses(robot, theta_true - nominal, kind, settings, commanded, targets, heldout)
     analysis = analyze_observability(robot, theta_true, reached, noise, joints=commanded)
     predicted = None
     if heldout is not None:
