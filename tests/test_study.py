@@ -257,3 +257,22 @@ def test_study_on_an_existing_cluster_by_address(dask_two_workers):
     a = monte_carlo(robot, theta, commanded, NOISE, 4, 3, workers=1, initial=poses)
     b = monte_carlo(robot, theta, commanded, NOISE, 4, 3, scheduler=dask_two_workers.scheduler.address, initial=poses)
     np.testing.assert_array_equal(a["forward"]["errors"], b["forward"]["errors"])
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_a_recordings_sidecar_as_geometry_is_read_and_said(name, tmp_path, capsys):
+    """``--geometry REC.json``, a recording's sidecar: the study reads its nominal geometry and
+    says so (before: "cannot read a hexapod description: 'base_joints_mm'")."""
+    from pipeline.formats import Recording, write_recording
+
+    robot = default_robot(name)
+    poses = np.repeat(robot.home_pose[None], 2, axis=0)
+    rec = Recording(robot=robot, noise=NOISE, t_s=np.arange(2.0), joints=robot.inverse_kinematics(robot.table.nominal,
+                                                                                                 poses),
+                    measured=poses, sets=np.array(["calibration"] * 2), meta={})
+    _, side = write_recording(tmp_path / "rec.csv", rec)
+    summary = tmp_path / "s.json"
+    assert main(["--robot", name, "--trials", "2", "--poses", "random", "--n-poses", str(max(10, minimum_poses(robot))),
+                 "--heldout", "3", "--workers", "1", "--geometry", str(side), "--summary-json", str(summary)]) == 0
+    note = f"--geometry {side} is a recording's sidecar: read the {name} its field 'nominal_geometry' describes"
+    assert note in capsys.readouterr().out and json.loads(summary.read_text())["geometry_note"] == note

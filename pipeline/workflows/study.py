@@ -407,7 +407,7 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         ValueError: a refused setting (the message names the flag); FileExistsError: an output
             exists and ``overwrite`` is off.
     """
-    robot = load_robot(settings.robot, settings.geometry)
+    robot, note = load_robot(settings.robot, settings.geometry)
     check_study_settings(settings, robot)
     nominal, noise = robot.table.nominal, settings.noise
     kind = settings.errors or ("reference" if reference_poses(robot) is not None else "random")
@@ -451,6 +451,8 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         "methods": figures,
         "elapsed_s": time.perf_counter() - t0,
     }
+    if note:
+        summary["geometry_note"] = note
     if settings.summary_json:
         atomic_write(settings.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=settings.overwrite)
     if settings.rrd:
