@@ -689,6 +689,31 @@ def test_noise_that_drowns_the_geometry_is_no_success(robot_name, tmp_path):
     assert "the rows determine nothing beyond the tolerance" in s["verdict"]["words"]
 
 
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_poses_suggested_under_noise_that_drowns_the_geometry_are_said_rightly(robot_name, tmp_path):
+    """1000 mm of noise: the poses suggested must determine at least one direction more than the
+    measured ones (calib's effective number of parameters), else none is suggested and the line
+    says why in a whole sentence; a suggestion names its file (before, on the Delta: "suggested:
+    measure 0 more poses (none suggested: configuration 0: position [825.87, -102.24, -201.78] is
+    outside the workspace (chain 2 cannot reach it)): ", the noisy measured pose taken for the
+    machine's)."""
+    from pipeline.formats import build_report, terminal_lines
+    from pipeline.workflows.calibration import DETERMINED_DIRECTION
+
+    s = run(["--robot", robot_name, "--noise-mm", "1000", "--heldout", "3", "--out", str(tmp_path), "--quiet"]).summary
+    sp = s["suggested_poses"]
+    (line,) = [ln for ln in terminal_lines(build_report(s)) if ln.strip().startswith("suggested:")]
+    if sp["poses"] == 0:
+        added = float(re.search(r"would determine (\S+) more of the", sp["what"]).group(1))
+        assert added < DETERMINED_DIRECTION and sp["what"].endswith("measure with less noise"), sp
+        assert line == f"  suggested: no poses: {sp['what']}" and "suggested_poses_path" not in s, line
+        assert not list(tmp_path.glob("*.suggested_poses.*"))
+    else:  # the hexapod's angles, declared exact (--noise-rad 0), still determine directions
+        assert sp["poses"] > 0 and line.endswith(f": {s['suggested_poses_path']}"), line
+        assert Path(s["suggested_poses_path"]).is_file()
+    assert "none suggested" not in line and "failed" not in line and not line.endswith(": "), line
+
+
 def _another_machines_description(side_path, robot_name, factor=1.1):
     """Scale the sidecar's base joints (their x and y) by ``factor``: another machine's description."""
     side = json.loads(side_path.read_text())
