@@ -585,8 +585,16 @@ def _preference(figures: FitFigures) -> tuple:
 def _conversions(problem: _Problem, joints, measured, written: FitFigures, counter: list) -> dict:
     """Screen every conversion on a subset of rows; fit on all rows the best :data:`SCREEN_KEEP`
     of those within :data:`MIN_IMPROVEMENT` times the smaller of the best screened chi-square per
-    degree of freedom and the data's as written (at least 1: a conversion must beat both);
-    ``{"screened": ((name, chi2/dof), ...), "named": [(Conversion, FitFigures), ...]}`` best first."""
+    degree of freedom and the data's as written (at least 1: a conversion must beat both), or,
+    where the data as written fit (only implausibly), the best screened alone;
+    ``{"screened": ((name, chi2/dof), ...), "named": [(Conversion, FitFigures), ...]}`` best first.
+
+    Data that fit only implausibly set no chi-square for a conversion to beat: it is named on
+    plausibility. A machine of revolute joints (Delta, 6-RUS) in metres fits as written, a
+    thousand times smaller, and its screen (two Gauss-Newton steps from the nominal geometry, an
+    upper bound) stops far above the limit where the full fit reaches it: a 6-RUS recording of
+    errors of 2.5 tolerances, positions in metres, screened 3.9e4 per degree of freedom and fitted
+    0.55 converted."""
     k = 0 if problem.targets is None else len(problem.targets)
     rows = _screen_rows(problem, *measured.shape)
     sub = _on_rows(problem, rows)
@@ -597,7 +605,7 @@ def _conversions(problem: _Problem, joints, measured, written: FitFigures, count
         counter[0] += 1
     screened.sort(key=lambda cf: cf[1].chi2_dof)
     best = screened[0][1].chi2_dof if screened else float("inf")
-    window = MIN_IMPROVEMENT * max(1.0, min(written.chi2_dof, best))
+    window = MIN_IMPROVEMENT * max(1.0, best if written.fits else min(written.chi2_dof, best))
     # Of those within the window, the ones that fit as they are (no frame, or the least turned)
     # first: with a frame every mirror image of positions fits, and the screen's chi-squares
     # differ by the frame's degrees of freedom alone.

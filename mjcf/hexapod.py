@@ -24,8 +24,9 @@ actuator's gear ``g = 1 / (1 + s_i)`` (the slide moves ``1 + s_i`` times the com
 is written as the slides' ``frictionloss`` (for the viewer and the dynamics); the testbed adds
 its quasi-static limit itself (:mod:`pipeline.testbed`).
 
-``python -m mjcf.hexapod`` regenerates :data:`DEFAULT_XML` (the paper's machine, Table 2 +
-Table 3, default options) for MuJoCo's viewer.
+``python -m mjcf.hexapod --overwrite`` regenerates :data:`DEFAULT_XML` (the paper's machine,
+Table 2 + Table 3, default options) for MuJoCo's viewer (``--out PATH`` writes it elsewhere;
+``--help``; an existing file is replaced only with ``--overwrite``).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from .machine import (HOME_KEY, PLATFORM_SITE, SENSOR_POS, SENSOR_QUAT, Machine,
 from .units import M_PER_MM, mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "servo_damping", "DEFAULT_XML",
-           "DEFAULT_STIFFNESS_N_PER_M", "DEFAULT_PLATFORM_MASS_KG", "LEG_MASS_KG", "save_default_xml"]
+           "DEFAULT_STIFFNESS_N_PER_M", "DEFAULT_PLATFORM_MASS_KG", "LEG_MASS_KG", "save_default_xml", "main"]
 
 #: The default machine (Table 2 + Table 3), saved for MuJoCo's viewer.
 DEFAULT_XML = Path(__file__).with_name("hexapod_paper_actual.xml")
@@ -198,17 +199,43 @@ def build_machine(robot: Hexapod, theta: np.ndarray, options: MachineOptions = M
                    actuated_joints=tuple(f"leg{i + 1}_slide" for i in range(6)))
 
 
-def save_default_xml(path: Path = DEFAULT_XML) -> Path:
-    """Write the paper's machine (Table 2 + Table 3, default options) for MuJoCo's viewer."""
+def save_default_xml(path: Path = DEFAULT_XML, *, overwrite: bool = False) -> Path:
+    """Write the paper's machine (Table 2 + Table 3, default options) for MuJoCo's viewer, atomically.
+
+    Raises:
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
+    """
+    from calib.files import atomic_write
+
     from calib.paper import TABLE3_ERRORS
     from calib.robots.hexapod import paper_hexapod
 
     robot = paper_hexapod()
     spec = build_spec(robot, robot.table.nominal + TABLE3_ERRORS.ravel(), name="hexapod_paper_actual")
     spec.compile()
-    path.write_text(spec.to_xml())
-    return path
+    return atomic_write(path, spec.to_xml(), overwrite=overwrite)
 
 
-if __name__ == "__main__":  # python -m mjcf.hexapod regenerates the saved default model
-    print(save_default_xml())
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mjcf.hexapod [--out PATH] [--overwrite]``: :func:`save_default_xml`, the path
+    written on stdout; a refused flag or output is one line on stderr, exit status 2."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m mjcf.hexapod",
+                                description="Write the hexapod paper's machine (Table 2 + Table 3, default "
+                                            "options) as MJCF for MuJoCo's viewer.")
+    p.add_argument("--out", type=Path, default=DEFAULT_XML, help=f"the MJCF file (default {DEFAULT_XML.name} beside this module)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing file (the saved default included)")
+    p.error = lambda message: p.exit(2, f"error: {p.prog}: {' '.join(message.split())} (see --help)\n")
+    args = p.parse_args(argv)
+    try:
+        print(save_default_xml(args.out, overwrite=args.overwrite))
+    except OSError as exc:  # FileExistsError included
+        print(f"error: --out: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -64,7 +64,9 @@ def run(argv: list[str] | None = None) -> DesignOutcome:
     settings = settings_from_args(build_parser().parse_args(argv))
     each = f" in each of {settings.starts} starts" if settings.starts > 1 else ""
 
-    def announce(robot, ws):
+    def announce(robot, ws, note):
+        if note:
+            print(note, file=sys.stderr)
         print(f"designing {settings.poses} {settings.criterion.upper()}-optimal poses for the {robot.name} in its "
               f"{ws.name} workspace from {settings.candidates} candidates{each} (seed {settings.seed})...",
               file=sys.stderr)

@@ -71,6 +71,8 @@ def run(argv: list[str] | None = None) -> StudyOutcome:
     """Parse ``argv``, run the study, print one line a method; raises on bad input (see :func:`main`)."""
     outcome = run_study(settings_from_args(build_parser().parse_args(argv)), display=ProgressDisplay("study"))
     predicted = outcome.predicted_heldout_mm
+    if "geometry_note" in outcome.summary:
+        print(outcome.summary["geometry_note"])
     for m, f in outcome.figures.items():
         held = f["heldout_position_mm"]
         print(f"{m}: parameter error RMS {f['parameter_error_rms_mm']:.4g} mm (CRB {outcome.crb_rms_mm:.4g} mm); "

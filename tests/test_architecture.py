@@ -156,3 +156,41 @@ def test_the_report_and_its_words_import_no_rerun_and_no_numpy():
         imported = third_party(ROOT / "pipeline" / "formats" / f"{module}.py")
         assert not imported & {"rerun", "numpy"}, (module, sorted(imported))
     assert "rerun" in third_party(ROOT / "pipeline" / "views" / "run_view.py")  # the check sees an import
+
+
+def runnable_modules() -> list[str]:
+    """The project's modules with an ``if __name__ == "__main__"`` block (``python -m`` runs them)."""
+    def is_main_block(node) -> bool:
+        return (isinstance(node, ast.If) and isinstance(node.test, ast.Compare)
+                and isinstance(node.test.left, ast.Name) and node.test.left.id == "__name__"
+                and any(isinstance(c, ast.Constant) and c.value == "__main__" for c in node.test.comparators))
+
+    return sorted(name for name, path in project_modules().items()
+                  if any(is_main_block(node) for node in ast.parse(path.read_text()).body))
+
+
+def test_the_runnable_modules_are_found():
+    found = runnable_modules()
+    assert "mjcf.hexapod" in found and "pipeline.run" in found and "calib.engine" not in found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("module", runnable_modules())
+def test_a_runnable_module_has_a_command_line_whose_help_writes_nothing(module, tmp_path):
+    """Every module ``python -m`` runs has a command line: ``--help`` prints its usage, exits 0
+    and writes nothing, neither where it runs nor in the repository (before: ``python -m
+    mjcf.hexapod --help`` ignored --help and rewrote the tracked mjcf/hexapod_paper_actual.xml)."""
+    import os
+    import subprocess
+    import sys
+
+    def files():
+        return {p: p.stat().st_mtime_ns for pkg in PACKAGES for p in (ROOT / pkg).rglob("*") if p.is_file()
+                and "__pycache__" not in p.parts}
+
+    before = files()
+    env = dict(os.environ, PYTHONPATH=str(ROOT), HOME=str(tmp_path))
+    done = subprocess.run([sys.executable, "-m", module, "--help"], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.startswith(f"usage: python -m {module}"), done.stderr
+    assert list(tmp_path.iterdir()) == [] and files() == before

@@ -9,6 +9,7 @@ result as the clean file. The cases are listed in docs/real_data.md.
 
 import json
 import os
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -688,6 +689,31 @@ def test_noise_that_drowns_the_geometry_is_no_success(robot_name, tmp_path):
     assert "the rows determine nothing beyond the tolerance" in s["verdict"]["words"]
 
 
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_poses_suggested_under_noise_that_drowns_the_geometry_are_said_rightly(robot_name, tmp_path):
+    """1000 mm of noise: the poses suggested must determine at least one direction more than the
+    measured ones (calib's effective number of parameters), else none is suggested and the line
+    says why in a whole sentence; a suggestion names its file (before, on the Delta: "suggested:
+    measure 0 more poses (none suggested: configuration 0: position [825.87, -102.24, -201.78] is
+    outside the workspace (chain 2 cannot reach it)): ", the noisy measured pose taken for the
+    machine's)."""
+    from pipeline.formats import build_report, terminal_lines
+    from pipeline.workflows.calibration import DETERMINED_DIRECTION
+
+    s = run(["--robot", robot_name, "--noise-mm", "1000", "--heldout", "3", "--out", str(tmp_path), "--quiet"]).summary
+    sp = s["suggested_poses"]
+    (line,) = [ln for ln in terminal_lines(build_report(s)) if ln.strip().startswith("suggested:")]
+    if sp["poses"] == 0:
+        added = float(re.search(r"would determine (\S+) more of the", sp["what"]).group(1))
+        assert added < DETERMINED_DIRECTION and sp["what"].endswith("measure with less noise"), sp
+        assert line == f"  suggested: no poses: {sp['what']}" and "suggested_poses_path" not in s, line
+        assert not list(tmp_path.glob("*.suggested_poses.*"))
+    else:  # the hexapod's angles, declared exact (--noise-rad 0), still determine directions
+        assert sp["poses"] > 0 and line.endswith(f": {s['suggested_poses_path']}"), line
+        assert Path(s["suggested_poses_path"]).is_file()
+    assert "none suggested" not in line and "failed" not in line and not line.endswith(": "), line
+
+
 def _another_machines_description(side_path, robot_name, factor=1.1):
     """Scale the sidecar's base joints (their x and y) by ``factor``: another machine's description."""
     side = json.loads(side_path.read_text())
@@ -875,3 +901,103 @@ def test_a_closing_cluster_prints_no_closed_connection(capsys):
             raise ValueError("not a closed connection")
     finally:
         root.removeHandler(handler)
+
+
+# --------------------------------------------------------------------------- metres, off the nominal geometry
+
+def _reference_machine_recording(robot_name, seed=0):
+    """A recording of ``robot_name`` as ``pipeline.run --robot NAME`` makes it, kinematically (no
+    MuJoCo): the reference errors injected (up to 2.5 tolerances on the 6-RUS), the reference
+    experiment's calibration poses and 50 held-out ones, 1 um position noise, commands of the nominal
+    geometry."""
+    from calib.robots import default_robot, reference_errors
+
+    robot = default_robot(robot_name)
+    seeds = np.random.SeedSequence(seed).spawn(4)
+    actual = robot.table.nominal + reference_errors(robot, int(seeds[3].generate_state(1)[0]))
+    targets = np.vstack([reachable_poses(robot, 20, seeds[0]), reachable_poses(robot, 50, seeds[1])])
+    joints = robot.inverse_kinematics(robot.table.nominal, targets)
+    noise = SensorNoise(0.001, 0.0)
+    rng = np.random.default_rng(seeds[2])
+    measured = robot.forward_kinematics(actual, joints, initial=targets) + noise.sample(len(targets), rng,
+                                                                                       robot.pose_units)
+    return Recording(robot=robot, noise=noise, t_s=np.arange(70.0), joints=joints, measured=measured,
+                     sets=np.array(["calibration"] * 20 + ["validation"] * 50), meta={})
+
+
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_positions_in_metres_off_the_nominal_geometry_are_refused_before_any_fit(robot_name, tmp_path, capsys,
+                                                                                 monkeypatch):
+    """A machine off its nominal geometry (the reference errors) with its positions in metres: refused
+    by the checks, naming the columns and the unit, before the run's first fit (before: the 6-RUS
+    went on to the instrument fit, "forward kinematics met a singular configuration at row 12").
+    On the Delta and the 6-RUS (revolute joints) a machine a thousand times smaller fits the file
+    as written: the message says it fits only implausibly, its chi-square within the limit beside
+    that claim, never "it does not" beside a chi-square that fits."""
+    import calib.identification
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the run fitted the file before its checks refused it")
+
+    monkeypatch.setattr(calib.identification, "instrument_fit", no_fit)
+    rec = _reference_machine_recording(robot_name)
+    measured = rec.measured.copy()
+    measured[:, :3] /= 1000.0
+    path, _ = write_recording(tmp_path / "rec.csv", replace(rec, measured=measured))
+    out = tmp_path / "out"
+    out.mkdir()
+    line = refused(["--real", str(path)], out, capsys, "rec.csv: columns x_mm, y_mm, z_mm",
+                   "the positions seem to be in metres", "(positions times 1000)", "a recording holds mm")
+    written = line.split(" and as written ", 1)[1]
+    chi2, limit = (float(v) for v in
+                   re.search(r"chi-square (\S+) per degree of freedom \(limit ([^)]+)\)", written).groups())
+    assert written.startswith("it does not (" if chi2 > limit else "it fits only implausibly ("), line
+    assert chi2 > limit or "moved" in written, line
+
+
+# --------------------------------------------------------------------------- absurd noise flags
+
+NOISE_COMMANDS = {"pipeline.run": lambda out: ["--out", str(out), "--quiet"],
+                  "pipeline.study": lambda out: ["--trials", "2", "--summary-json", str(out / "s.json")],
+                  "pipeline.design": lambda out: ["--poses", "12", "--out", str(out / "d.csv")]}
+
+
+@pytest.mark.parametrize("command", list(NOISE_COMMANDS))
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+@pytest.mark.parametrize("flag", ["--noise-mm", "--noise-rad", "--noise-joint"])
+@pytest.mark.parametrize("value", ["1e300", "above"])
+def test_an_absurd_noise_flag_is_refused_naming_the_range_that_fits(command, robot_name, flag, value, tmp_path,
+                                                                   capsys):
+    """A sensor noise no measurement of the machine can have (1e300; just above the bound of
+    :func:`pipeline.workflows.options.noise_limits`): exit 2, one line naming the flag and the
+    range that would fit, nothing written (before, ``pipeline.run --noise-mm 1e300``: LAPACK's
+    "illegal value" twice on stdout, an overflow warning, "SVD did not converge"; ``--noise-joint
+    1e300``: an OverflowError's traceback)."""
+    import importlib
+
+    from calib.robots import default_robot
+    from pipeline.workflows.options import noise_limits
+
+    limit, unit, _ = noise_limits(default_robot(robot_name))[flag]
+    text = value if value == "1e300" else repr(limit * (1 + 1e-9))
+    out = tmp_path / "out"
+    out.mkdir()
+    code = importlib.import_module(command).main(["--robot", robot_name, flag, text] + NOISE_COMMANDS[command](out))
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "Traceback" not in captured.err, captured.err
+    assert "DLASCL" not in captured.out and "Warning" not in captured.err
+    assert lines[0].startswith(f"error: {flag} {float(text):g}: ") and f"between 0 and {limit:.4g} {unit} would fit" \
+        in lines[0], lines[0]
+    assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("robot_name", ROBOT_NAMES)
+def test_noise_at_its_bound_is_accepted(robot_name):
+    """The bound itself is no refusal: every flag at its limit passes the check."""
+    from calib.robots import default_robot
+    from pipeline.workflows.options import check_noise_flags, noise_limits
+
+    robot = default_robot(robot_name)
+    limits = {flag: lim for flag, (lim, _, _) in noise_limits(robot).items()}
+    check_noise_flags(robot, SensorNoise(limits["--noise-mm"], limits["--noise-rad"], joint=limits["--noise-joint"]))

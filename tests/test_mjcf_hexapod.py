@@ -123,3 +123,23 @@ def test_units_round_trip():
     x = np.array([1.0, 250.0])
     np.testing.assert_allclose(m_to_mm(mm_to_m(x)), x)
     assert mm_to_m(1000.0) == pytest.approx(1.0)
+
+
+def test_the_command_line_writes_only_where_asked_and_replaces_only_with_overwrite(tmp_path, capsys):
+    """``python -m mjcf.hexapod``: --out writes the builder's machine there; an existing file (the
+    saved default included) is refused without --overwrite, one line, untouched (before: the
+    command took no flags, ignored --help and rewrote mjcf/hexapod_paper_actual.xml)."""
+    from mjcf.hexapod import main
+
+    out = tmp_path / "h.xml"
+    assert main(["--out", str(out)]) == 0 and capsys.readouterr().out.strip() == str(out)
+    assert out.read_text() == DEFAULT_XML.read_text()  # the saved default is current, and this is it
+    out.write_text("an earlier file")
+    for argv in (["--out", str(out)], []):
+        before = (out.read_text(), DEFAULT_XML.stat().st_mtime_ns)
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: --out: ") and "--overwrite" in err[0], err
+        assert (out.read_text(), DEFAULT_XML.stat().st_mtime_ns) == before
+    assert main(["--out", str(out), "--overwrite"]) == 0
+    assert out.read_text() == DEFAULT_XML.read_text()

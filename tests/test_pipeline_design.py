@@ -306,3 +306,65 @@ def test_observability_markdown_names_the_delta_null_directions():
     md = observability_markdown(a)
     assert "## Not identifiable" in md and "| 2 | 1 Lay2 + 0.00385 alpha2 |" in md
     assert "| rank | 21 / 24 |" in md and "| alpha1 |" in md
+
+
+def _recording_sidecar(name, folder):
+    """The sidecar of a recording of ``name`` whose nominal geometry is another machine's (the
+    base joints' x and y 1.02 times the default's), and that machine."""
+    from pipeline.formats import Recording, read_sidecar_geometry, write_recording
+
+    robot = default_robot(name)
+    desc = robot.description()
+    if "base_joints_mm" in desc:
+        desc["base_joints_mm"] = [[1.02 * b[0], 1.02 * b[1], b[2]] for b in desc["base_joints_mm"]]
+    else:
+        prefix = {"delta": "D", "rus": "M"}[name]
+        desc["parameters"] = {k: v * (1.02 if k.startswith(prefix) and k[-2:] in (".x", ".y") else 1.0)
+                              for k, v in desc["parameters"].items()}
+    other = robot_from_description(name, desc)
+    poses = reference_poses(other)
+    poses = np.repeat(other.home_pose[None], 2, axis=0) if poses is None else poses[:2]
+    rec = Recording(robot=other, noise=SensorNoise(1e-3), t_s=np.arange(2.0),
+                    joints=other.inverse_kinematics(other.table.nominal, poses), measured=poses,
+                    sets=np.array(["calibration"] * 2), meta={})
+    _, side = write_recording(folder / "rec.csv", rec)
+    return side, read_sidecar_geometry(side)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_a_recordings_sidecar_as_geometry_is_read_and_said(name, tmp_path, capsys):
+    """``--geometry REC.json``, a recording's sidecar instead of a description: its field
+    'nominal_geometry' is read, as the recording reader reads it, and the command says so (before:
+    "cannot read a hexapod description: 'base_joints_mm'"); the commands are that machine's."""
+    side, machine = _recording_sidecar(name, tmp_path)
+    out = tmp_path / "p.csv"
+    summary = tmp_path / "s.json"
+    assert main(["--robot", name, "--poses", str(minimum_poses(machine)), "--candidates", "100", "--geometry",
+                 str(side), "--out", str(out), "--summary-json", str(summary)]) == 0
+    err = capsys.readouterr().err
+    note = f"--geometry {side} is a recording's sidecar: read the {name} its field 'nominal_geometry' describes"
+    assert note in err and json.loads(summary.read_text())["geometry_note"] == note
+    poses, joints = read_command_file(out, machine)
+    np.testing.assert_allclose(joints, machine.inverse_kinematics(machine.table.nominal, poses), atol=1e-9)
+    default = default_robot(name)
+    assert not np.allclose(joints, default.inverse_kinematics(default.table.nominal, poses), atol=1e-3)
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_another_robots_sidecar_as_geometry_names_the_robot(name, tmp_path, capsys):
+    side, _ = _recording_sidecar(name, tmp_path)
+    other = "delta" if name != "delta" else "hexapod"
+    out = tmp_path / "p.csv"
+    assert main(["--robot", other, "--poses", "12", "--geometry", str(side), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == (f"error: --geometry {side}: the sidecar of a {name} recording, and --robot is {other}: "
+                           f"give --robot {name}"), err
+    assert not out.exists()
+
+
+def test_a_description_lacking_a_key_names_it(tmp_path, capsys):
+    geometry = tmp_path / "g.json"
+    geometry.write_text(json.dumps({"robot": "hexapod"}))
+    assert main(["--poses", "8", "--geometry", str(geometry), "--out", str(tmp_path / "p.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().startswith(f"error: --geometry {geometry}: not a hexapod description (no key "), err

@@ -214,6 +214,28 @@ def test_cli_random_poses_and_random_errors(tmp_path):
     assert s["n_poses"] == 8 and s["true_errors"] == "random" and s["criterion"] is None
 
 
+@pytest.mark.parametrize("name", ROBOTS)
+def test_random_errors_no_machine_can_have_name_their_flags_and_what_fits(name, tmp_path, capsys):
+    """Random errors of 1000 mm make no machine (a Delta's arm of negative length) or one that
+    cannot reach the study's poses: exit 2, one line naming --error-mm and --error-rad and the
+    errors that fit, nothing written (before: "error: Lb must be positive, got [...]"); the study
+    with the errors named runs."""
+    summary = tmp_path / "s.json"
+    n_poses = str(max(10, minimum_poses(default_robot(name))))
+    argv = ["--robot", name, "--errors", "random", "--trials", "2", "--heldout", "5", "--n-poses", n_poses,
+            "--poses", "random", "--workers", "1", "--summary-json", str(summary)]
+    assert main(argv + ["--error-mm", "1000"]) == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith("error: --error-mm 1000, --error-rad 0.001: ") and "would fit" in lines[0], lines[0]
+    assert not summary.exists()
+    fits = re.search(r"errors up to --error-mm (\S+) --error-rad (\S+) would fit", lines[0]).groups()
+    assert 0 < float(fits[0]) < 1000
+    assert main(argv + ["--error-mm", fits[0], "--error-rad", fits[1]]) == 0, capsys.readouterr().err
+    assert json.loads(summary.read_text())["true_errors"] == "random"
+
+
 @pytest.mark.parametrize("argv, match", [
     (["--trials", "1"], "--trials must be >= 2"),
     (["--n-poses", "6"], "--n-poses must be >= 7"),
@@ -235,3 +257,22 @@ def test_study_on_an_existing_cluster_by_address(dask_two_workers):
     a = monte_carlo(robot, theta, commanded, NOISE, 4, 3, workers=1, initial=poses)
     b = monte_carlo(robot, theta, commanded, NOISE, 4, 3, scheduler=dask_two_workers.scheduler.address, initial=poses)
     np.testing.assert_array_equal(a["forward"]["errors"], b["forward"]["errors"])
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_a_recordings_sidecar_as_geometry_is_read_and_said(name, tmp_path, capsys):
+    """``--geometry REC.json``, a recording's sidecar: the study reads its nominal geometry and
+    says so (before: "cannot read a hexapod description: 'base_joints_mm'")."""
+    from pipeline.formats import Recording, write_recording
+
+    robot = default_robot(name)
+    poses = np.repeat(robot.home_pose[None], 2, axis=0)
+    rec = Recording(robot=robot, noise=NOISE, t_s=np.arange(2.0), joints=robot.inverse_kinematics(robot.table.nominal,
+                                                                                                 poses),
+                    measured=poses, sets=np.array(["calibration"] * 2), meta={})
+    _, side = write_recording(tmp_path / "rec.csv", rec)
+    summary = tmp_path / "s.json"
+    assert main(["--robot", name, "--trials", "2", "--poses", "random", "--n-poses", str(max(10, minimum_poses(robot))),
+                 "--heldout", "3", "--workers", "1", "--geometry", str(side), "--summary-json", str(summary)]) == 0
+    note = f"--geometry {side} is a recording's sidecar: read the {name} its field 'nominal_geometry' describes"
+    assert note in capsys.readouterr().out and json.loads(summary.read_text())["geometry_note"] == note

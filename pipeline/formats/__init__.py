@@ -11,8 +11,8 @@ recording).
 from calib.lazy import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
-    "checks": ("EXCITATION_MAX_ROWS", "JOINT_LIMIT_TOLERANCE", "REFUSED_CONDITION", "ROTATION_CONVENTION", "WARNED_CONDITION",
-               "RecordingChecks", "plausibility", "recording_checks"),
+    "checks": ("EXCITATION_MAX_ROWS", "JOINT_LIMIT_TOLERANCE", "MAX_ANGLE_RAD", "REACH_FACTOR", "REFUSED_CONDITION",
+               "ROTATION_CONVENTION", "WARNED_CONDITION", "RecordingChecks", "plausibility", "recording_checks"),
     "calibration_file": ("ABSURD_TOLERANCES", "CALIBRATION_FORMAT", "CALIBRATION_SUFFIX", "CALIBRATION_VERSION",
                          "Calibration", "CalibrationFileError", "calibration_text", "check_plausible_parameters",
                          "read_calibration", "recording_source", "validity_domain", "write_calibration"),
@@ -32,6 +32,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "report_html": ("render_html", "write_report"),
     "recording": ("DEFAULT_SESSION", "FORMAT", "FORMAT_VERSION", "MIN_ROBOT_SIZE_MM", "READABLE_VERSIONS",
                   "SESSION_KEYS", "SESSION_TIMES", "SETS", "SIDECAR_FIELDS", "Recording", "RecordingError",
-                  "columns", "frame_session", "read_json_file", "read_recording", "recording_texts", "row_message",
+                  "columns", "frame_session", "read_json_file", "read_recording", "read_sidecar_geometry", "recording_texts", "row_message",
                   "row_words", "session_measurement", "sidecar_path", "write_recording"),
 })

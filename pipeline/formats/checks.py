@@ -23,7 +23,7 @@ from calib.measurement import measurement_settings, target_names
 from .recording import Recording, RecordingError, columns, row_frame_groups, sidecar_path
 
 __all__ = ["plausibility", "recording_checks", "RecordingChecks", "REFUSED_CONDITION", "WARNED_CONDITION",
-           "EXCITATION_MAX_ROWS",
+           "EXCITATION_MAX_ROWS", "REACH_FACTOR", "MAX_ANGLE_RAD",
            "ROTATION_CONVENTION", "JOINT_LIMIT_TOLERANCE"]
 
 
@@ -47,6 +47,13 @@ EXCITATION_MAX_ROWS = 5000
 #: the declared stroke. The sidecar's ``meta.joint_limit_tolerance`` replaces it: a number in the
 #: joint unit, or ``{"fraction": f}`` of the range.
 JOINT_LIMIT_TOLERANCE = 0.01
+
+#: A recorded position beyond this many times the robot's size (``Robot.length_scale_mm``) is
+#: refused: far beyond any workspace.
+REACH_FACTOR = 100.0
+
+#: A recorded angle beyond this (rad) is refused: not an angle in rad.
+MAX_ANGLE_RAD = 2 * np.pi
 
 #: Rows a warning names before it says "and N more".
 LISTED_ROWS = 10
@@ -218,9 +225,10 @@ def _suspicions(rec: Recording, poses: _PoseColumns, path: Path) -> list[str]:
 
 
 def _check_magnitudes(rec: Recording, poses: _PoseColumns, path: Path) -> None:
-    """Refuse an angle beyond 2 pi rad and a position beyond 100 times the robot's size (mm)."""
+    """Refuse an angle beyond :data:`MAX_ANGLE_RAD` and a position beyond :data:`REACH_FACTOR`
+    times the robot's size (mm)."""
     robot, m, angle = rec.robot, rec.measured, poses.angle
-    bound = np.where(angle, 2 * np.pi, 100.0 * robot.length_scale_mm)
+    bound = np.where(angle, MAX_ANGLE_RAD, REACH_FACTOR * robot.length_scale_mm)
     far = np.abs(m) > bound
     if far.any():
         r, c = np.argwhere(far)[0]
@@ -359,9 +367,13 @@ def _units_and_conventions(rec: Recording, poses: _PoseColumns, path: Path, diag
     if diagnosis.cause == "conversion":
         conv = diagnosis.conversion
         cols = _conversion_columns(rec, poses, conv)
+        # The figures quoted support the claim: as written the file misfits (its chi-square beyond
+        # the limit) or fits only with a parameter moved far beyond its tolerance (a Delta or a
+        # 6-RUS in metres fits a machine a thousand times smaller).
+        how = "it does not" if not diagnosis.written.fits else "it fits only implausibly"
         raise RecordingError(f"{path}: column{'s' if len(cols) > 1 else ''} {', '.join(cols)}: {conv.finding}: "
                              f"converted ({conv.fix}) the file fits the {rec.robot.name} at the declared noise "
-                             f"({diagnosis.converted.words()}) and as written it does not ({diagnosis.written.words()}); "
+                             f"({diagnosis.converted.words()}) and as written {how} ({diagnosis.written.words()}); "
                              f"a recording holds {_holds(rec, conv.kind)}")
     if diagnosis.cause == "unmeasured column":
         name = diagnosis.column

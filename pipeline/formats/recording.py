@@ -50,7 +50,8 @@ from calib.robots import ROBOTS, robot_from_description
 
 from .outputs import ResultSet
 
-__all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "columns", "recording_texts",
+__all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "read_sidecar_geometry", "columns",
+           "recording_texts",
            "sidecar_path", "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
            "check_session_name", "check_channel_name", "read_text_file", "frame_session", "shared_frame_error",
@@ -389,6 +390,16 @@ def _read_sidecar(json_path: Path) -> tuple[Robot, SensorNoise, dict, dict]:
     if sim is not None and not isinstance(sim, dict):
         raise RecordingError(f"{json_path}: field 'meta.simulation' must be an object, got {type(sim).__name__}")
     return robot, noise, meta, side
+
+
+def read_sidecar_geometry(json_path: str | Path) -> Robot:
+    """The robot of a recording's sidecar: its nominal geometry, read and checked as
+    :func:`read_recording` reads it (the sidecar alone; no CSV needed).
+
+    Raises:
+        RecordingError: naming the sidecar and the field at fault.
+    """
+    return _read_sidecar(Path(json_path))[0]
 
 
 def _sidecar_layout(json_path: Path, side: dict,

@@ -373,7 +373,8 @@ def _determination_lines(r: Report) -> list[str]:
         lines.append(f"    ... {len(d.combinations) - COMBINATION_LINES} more combination(s) in the summary JSON")
     if d.suggested is not None:
         sp = d.suggested
-        lines.append(f"  suggested: measure {sp.poses} more poses ({sp.what}): {sp.path}")
+        lines.append(f"  suggested: measure {sp.poses} more poses ({sp.what}): {sp.path}" if sp.poses else
+                     f"  suggested: no poses: {sp.what}")
     return lines
 
 

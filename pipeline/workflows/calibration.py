@@ -24,7 +24,8 @@ from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification
 from calib.measurement import frame_to_dict, measured_gauge_representative
 from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
 from calib.noise import SensorNoise
-from calib.prior import ParameterPrior
+from calib.observability import identification_jacobian
+from calib.prior import DATA_SOURCE_RATIO, ParameterPrior
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.robust import GROSS_ALPHA
@@ -32,9 +33,11 @@ from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, build_report, command_columns, command_csv,
                               output_folder, frame_session, render_html, row_message, session_measurement)
 
+from .options import check_noise_flags
+
 __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
-           "default_name", "OUTPUT_EXTENSIONS"]
+           "default_name", "OUTPUT_EXTENSIONS", "DETERMINED_DIRECTION", "directions_added"]
 
 #: Calibration poses of a robot whose reference experiment names none.
 DEFAULT_CONFIGURATIONS = 20
@@ -289,7 +292,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
     split: dict[str, float] = {}
     warnings: list[str] = []
     rec = diagnosis = checks = None
-    if settings.real is not None:
+    if settings.real is None:
+        check_noise_flags(default_robot(settings.robot or DEFAULT_ROBOT), simulated_noise(settings))
+    else:
         rec = read_recording(settings.real)
         split["read"] = time.perf_counter() - t0
         if settings.robot is not None and settings.robot != rec.robot.name:
@@ -611,10 +616,15 @@ def session_index(rec: Recording) -> np.ndarray:
     return frame_groups(rec)[1]
 
 
+def simulated_noise(settings: RunSettings) -> SensorNoise:
+    """The sensor noise of a simulated run (``--noise-mm``, ``--noise-rad``, ``--noise-dist``, ``--noise-joint``)."""
+    return SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
+
+
 def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     """The calibration input of a simulated machine (the reference errors injected, MuJoCo)."""
     robot = default_robot(settings.robot or DEFAULT_ROBOT)
-    noise = SensorNoise(settings.noise_mm, settings.noise_rad, settings.noise_dist, joint=settings.noise_joint)
+    noise = simulated_noise(settings)
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
     empty = np.zeros((0, robot.pose_dim))
@@ -881,22 +891,66 @@ def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings
     """``(command file CSV text, its sidecar JSON text)``: :data:`SUGGESTED_POSES` poses that
     determine what the measured ones left to the prior (:func:`calib.design.augment_poses`, over
     the robot's full workspace), with the joints the nominal controller commands for them, ready to
-    measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words."""
+    measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words. None where
+    they would determine less than one direction more (:func:`directions_added`: noise that
+    drowns the geometry), ``summary["suggested_poses"]`` saying so with its figures.
+
+    The measured rows inform at the configurations the machine was in: the identified geometry's
+    poses at the joints read (a measured pose carries its noise: 1000 mm puts a Delta's outside
+    its workspace, where no Jacobian is)."""
     ident = outcome.identification
     robot, result = inp.robot, ident.result
     measured = ident.measured[ident.used]
-    poses = augment_poses(robot, result.theta, measured, SUGGESTED_POSES, inp.noise, outcome.data.prior.std,
+    at = machine_poses(robot, result.theta, inp.joints[ident.used], measured)
+    prior_std = outcome.data.prior.std
+    poses = augment_poses(robot, result.theta, at, SUGGESTED_POSES, inp.noise, prior_std,
                           free=result.free_names, seed=settings.seed)
+    why = f"the measured poses leave {len(summary['left_to_prior'])} parameter combination(s) to the prior"
+    added = directions_added(robot, result, at, poses, inp.noise, prior_std)
+    if added < DETERMINED_DIRECTION:
+        summary["suggested_poses"] = {
+            "poses": 0, "why": why,
+            "what": (f"{len(poses)} more poses at the declared noise would determine {added:.2g} more of the "
+                     f"{len(result.free_names)} free directions, not one (a direction determined counts "
+                     f"{DETERMINED_DIRECTION:g} at least): measure with less noise")}
+        return None
     joints = robot.inverse_kinematics(robot.table.nominal, poses)
     words = pose_kind_words(robot, measured, poses)
-    summary["suggested_poses"] = {"poses": int(len(poses)), "what": words,
-                                  "why": f"the measured poses leave {len(summary['left_to_prior'])} parameter "
-                                         "combination(s) to the prior"}
+    summary["suggested_poses"] = {"poses": int(len(poses)), "what": words, "why": why}
     meta = {"robot": robot.name, "kind": "calibration command file", "purpose": "suggested calibration poses",
             "columns": list(command_columns(robot)),
             "units": "pose and joint units in the column names; joints are the nominal controller's commands",
-            "why": summary["suggested_poses"]["why"], "what": words, "left_to_prior": summary["left_to_prior"]}
+            "why": why, "what": words, "left_to_prior": summary["left_to_prior"]}
     return command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"
+
+
+def machine_poses(robot: Robot, theta, joints, measured) -> np.ndarray:
+    """(N, D) the poses the machine ``theta`` is in at ``joints``: its forward kinematics from the
+    measured poses, or from home where a measurement is too far off to start from (its noise)."""
+    try:
+        return robot.forward_kinematics(theta, joints, initial=measured)
+    except KinematicsError:
+        return robot.forward_kinematics(theta, joints, initial=np.repeat(robot.home_pose[None], len(joints), axis=0))
+
+
+#: A direction of the parameters counts as determined when the data shrink its variance below
+#: ``DATA_SOURCE_RATIO ** 2`` of the prior's (:data:`calib.prior.DATA_SOURCE_RATIO`): it then adds
+#: at least ``1 - DATA_SOURCE_RATIO ** 2`` to MacKay's effective number of parameters.
+DETERMINED_DIRECTION = 1.0 - DATA_SOURCE_RATIO ** 2
+
+
+def directions_added(robot: Robot, result, measured_at, suggested, noise: SensorNoise, prior_std) -> float:
+    """How many more directions of the free parameters the ``suggested`` poses (K, D) determine
+    beside the measured ones (at ``measured_at`` (N, D)): the rise of MacKay's effective number of
+    parameters ``trace(I - S^-1 Sigma_post)`` (``S`` the prior's covariance) they bring."""
+    idx = result.free_indices
+    whitened = np.diag(prior_std[idx])  # the information in the prior's units: the prior is I
+
+    def effective(poses) -> float:
+        A = identification_jacobian(robot, result.theta, poses, noise, free=result.free_names) @ whitened
+        return float(np.trace(np.linalg.solve(np.eye(idx.size) + A.T @ A, A.T @ A)))
+
+    return effective(np.vstack([measured_at, suggested])) - effective(measured_at)
 
 
 def pose_kind_words(robot: Robot, measured: np.ndarray, suggested: np.ndarray) -> str:
@@ -1008,7 +1062,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         try:
             summary["_suggested_poses"] = suggested_poses(inp, outcome, settings, summary)
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
-            summary["suggested_poses"] = {"poses": 0, "what": f"none suggested: {exc}", "why": ""}
+            summary["suggested_poses"] = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
     if inp.rec is not None:
         try:
             summary["_as_read"] = as_read(inp, outcome)

@@ -44,13 +44,15 @@ from calib.observability import analyze_observability, pose_uncertainty
 from calib.robot import Robot, check_joint_limits
 from calib.robots import ROBOTS, default_robot, reference_poses, robot_from_description
 from pipeline.execution import ProgressDisplay, run_tasks, worker_count
-from pipeline.formats import atomic_write, check_outputs, command_columns, sidecar_path, write_command_file
+from pipeline.formats import FORMAT as RECORDING_FORMAT
+from pipeline.formats import (RecordingError, atomic_write, check_outputs, command_columns, read_sidecar_geometry,
+                              sidecar_path, write_command_file)
 
-from .options import ToolOptions
+from .options import ToolOptions, check_noise_flags
 
 __all__ = ["DEFAULT_NOISE", "DEFAULT_CANDIDATES", "PROBE_POSES", "optimal_poses", "DesignSearch", "criterion_value",
-           "design_search", "design_start", "start_seed", "load_robot", "DesignSettings", "DesignOutcome",
-           "run_design", "check_design_settings", "predicted_uncertainty", "design_records"]
+           "design_search", "design_start", "start_seed", "load_robot", "sidecar_robot", "DesignSettings",
+           "DesignOutcome", "run_design", "check_design_settings", "predicted_uncertainty", "design_records"]
 
 #: Declared noise the designs are weighted with by default: Gaussian, 1 um on positions,
 #: 1e-6 rad on angles (standard deviations), exact joints.
@@ -196,9 +198,10 @@ def optimal_poses(robot: Robot, n: int, criterion: str = "d", workspace: str | W
                          scheduler=scheduler, client=client).design.poses
 
 
-def load_robot(name: str, geometry: str | None) -> Robot:
-    """The registered robot ``name``: its default machine, or the nominal geometry of a
-    ``Robot.description()`` JSON file.
+def load_robot(name: str, geometry: str | None) -> tuple[Robot, str]:
+    """``(robot, note)``: the registered robot ``name``'s default machine, or the nominal geometry
+    of ``geometry``: a ``Robot.description()`` JSON file, or a recording's sidecar (its field
+    ``nominal_geometry``, read as the recording reader reads it; ``note`` then says so, '' otherwise).
 
     Raises:
         ValueError: naming the option at fault (``--robot``, ``--geometry``).
@@ -206,11 +209,38 @@ def load_robot(name: str, geometry: str | None) -> Robot:
     if name not in ROBOTS:
         raise ValueError(f"--robot: unknown robot {name!r}; registered robots are {', '.join(sorted(ROBOTS))}")
     if geometry is None:
-        return default_robot(name)
+        return default_robot(name), ""
     try:
-        return robot_from_description(name, json.loads(Path(geometry).read_text()))
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+        description = json.loads(Path(geometry).read_text())
+    except (OSError, ValueError) as exc:
         raise ValueError(f"--geometry {geometry}: cannot read a {name} description: {exc}") from None
+    if isinstance(description, dict) and description.get("format") == RECORDING_FORMAT:
+        return sidecar_robot(name, geometry)
+    try:
+        return robot_from_description(name, description), ""
+    except KeyError as exc:
+        raise ValueError(f"--geometry {geometry}: not a {name} description (no key {exc.args[0]!r}; a description "
+                         "is what Robot.description() writes, or a recording's sidecar)") from None
+    except (ValueError, TypeError, IndexError, AttributeError) as exc:
+        raise ValueError(f"--geometry {geometry}: cannot read a {name} description: {exc}") from None
+
+
+def sidecar_robot(name: str, sidecar: str) -> tuple[Robot, str]:
+    """``(robot, note)`` of a recording's sidecar given as ``--geometry``: its nominal geometry,
+    read and checked as :func:`pipeline.formats.read_recording` does (its ``robot`` must be ``name``).
+
+    Raises:
+        ValueError: naming ``--geometry`` (and ``--robot`` when the sidecar is another robot's).
+    """
+    try:
+        robot = read_sidecar_geometry(sidecar)
+    except RecordingError as exc:
+        raise ValueError(f"--geometry: {exc}") from None
+    if robot.name != name:
+        raise ValueError(f"--geometry {sidecar}: the sidecar of a {robot.name} recording, and --robot is {name}: "
+                         f"give --robot {robot.name}")
+    return robot, (f"--geometry {sidecar} is a recording's sidecar: read the {name} its field 'nominal_geometry' "
+                   "describes")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -241,6 +271,7 @@ class DesignOutcome:
     paths: dict
 
 
+
 def check_design_settings(settings: DesignSettings, robot: Robot) -> None:
     """Refuse, naming the flag, what cannot be designed or written, before any work.
 
@@ -248,6 +279,7 @@ def check_design_settings(settings: DesignSettings, robot: Robot) -> None:
         ValueError: too few poses or candidates, an output that cannot be written;
         FileExistsError: an output exists and ``overwrite`` is off.
     """
+    check_noise_flags(robot, settings.noise)
     fewest = minimum_poses(robot)
     if settings.poses < fewest:
         raise ValueError(f"--poses must be >= {fewest} ({len(robot.free_default)} parameters, "
@@ -315,19 +347,20 @@ def design_records(settings: DesignSettings, robot: Robot, ws: Workspace, search
 def run_design(settings: DesignSettings, display=None, announce=None) -> DesignOutcome:
     """Design ``settings.poses`` optimal poses, write the command file (and the summary JSON and
     the ``.rrd`` where asked); ``display`` shows the search's progress (a
-    :class:`pipeline.execution.ProgressDisplay`, or None); ``announce(robot, workspace)`` is
-    called once the settings are accepted, before the search.
+    :class:`pipeline.execution.ProgressDisplay`, or None); ``announce(robot, workspace, note)`` is
+    called once the settings are accepted, before the search, with the note of a recording's sidecar
+    read as ``--geometry`` (:func:`load_robot`; '' otherwise); the summary keeps it (``geometry_note``).
 
     Raises:
         ValueError: a refused setting (the message names the flag); FileExistsError: an output
             exists and ``overwrite`` is off.
     """
-    robot = load_robot(settings.robot, settings.geometry)
+    robot, note = load_robot(settings.robot, settings.geometry)
     check_design_settings(settings, robot)
     theta = robot.table.nominal
     ws = robot_workspace(robot, settings.workspace)
     if announce is not None:
-        announce(robot, ws)
+        announce(robot, ws, note)
     try:
         search = design_search(robot, theta, settings.poses, ws, settings.noise, criterion=settings.criterion,
                                seed=settings.seed, n_candidates=settings.candidates, starts=settings.starts,
@@ -342,6 +375,8 @@ def run_design(settings: DesignSettings, display=None, announce=None) -> DesignO
     reference = analyze_observability(robot, theta, published, settings.noise) if published is not None else None
     probe, pu, uncertainty = predicted_uncertainty(robot, theta, ws, analysis, settings.seed)
     meta, summary = design_records(settings, robot, ws, search, analysis, reference, uncertainty)
+    if note:
+        summary["geometry_note"] = note
     csv_path, side = write_command_file(settings.out, robot, poses, joints, meta, overwrite=settings.overwrite)
     if settings.summary_json:
         atomic_write(settings.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=settings.overwrite)

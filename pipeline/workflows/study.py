@@ -46,7 +46,7 @@ from pipeline.execution import run_tasks, worker_count
 from pipeline.formats import atomic_write, check_outputs, read_command_file
 
 from .design import DEFAULT_NOISE, load_robot
-from .options import ToolOptions
+from .options import ToolOptions, check_noise_flags
 
 __all__ = ["METHODS", "ERROR_KINDS", "DEFAULT_ERROR_MM", "DEFAULT_ERROR_RAD", "trial_noise", "true_errors",
            "compensation_errors", "run_trials", "monte_carlo", "summarize", "StudySettings", "StudyOutcome",
@@ -340,11 +340,59 @@ def study_poses(settings: StudySettings, robot: Robot, ws) -> tuple[np.ndarray, 
         raise ValueError(f"--poses: {exc}") from None
 
 
+#: Bisection steps of the largest random errors that fit (:func:`true_machine_poses`): the
+#: scale to 2**-12 of the asked one.
+FITTING_SCALE_STEPS = 12
+
+
+def true_machine_poses(robot: Robot, errors, kind: str, settings: StudySettings, commanded, targets,
+                       heldout) -> np.ndarray:
+    """(N, D) the poses the true machine (nominal + ``errors``) reaches at the ``commanded`` joints.
+
+    Random errors this large may make no machine (a Delta's arm of negative length) or one that
+    cannot reach the study's poses (calibration or held-out, commanded by the nominal model):
+    refused naming ``--error-mm`` and ``--error-rad``, with the largest errors of the same draw
+    that fit (the draw scaled down, by bisection to 2**-:data:`FITTING_SCALE_STEPS`).
+
+    Raises:
+        ValueError: naming the flags and the errors that would fit.
+    """
+    nominal = robot.table.nominal
+    check = [commanded] if heldout is None else [commanded, robot.inverse_kinematics(nominal, heldout)]
+
+    def reached(scale: float) -> np.ndarray:
+        theta = nominal + scale * errors
+        for q in check[1:]:
+            robot.forward_kinematics(theta, q)
+        return robot.forward_kinematics(theta, check[0], initial=targets)
+
+    try:
+        return reached(1.0)
+    except ValueError as exc:
+        if kind != "random":
+            raise ValueError(f"--errors {kind}: the {robot.name} with its reference errors cannot reach the study's "
+                             f"poses: {exc}") from None
+        reason = exc
+    fits, fails = 0.0, 1.0
+    for _ in range(FITTING_SCALE_STEPS):
+        mid = (fits + fails) / 2
+        try:
+            reached(mid)
+            fits = mid
+        except ValueError:
+            fails = mid
+    raise ValueError(f"--error-mm {settings.error_mm:g}, --error-rad {settings.error_rad:g}: the {robot.name} with "
+                     f"random errors this large (--seed {settings.seed}) cannot reach the study's poses ({reason}); "
+                     f"errors up to --error-mm {fits * settings.error_mm:.3g} --error-rad "
+                     f"{fits * settings.error_rad:.3g} would fit (this draw scaled by {fits:.3g})")
+
+
 def check_study_settings(settings: StudySettings, robot: Robot) -> None:
     """Refuse, naming the flag, a study that cannot run or write its outputs, before any work."""
     check_outputs({"--summary-json": settings.summary_json, "--rrd": settings.rrd}, overwrite=settings.overwrite)
     if settings.trials < 2:
         raise ValueError(f"--trials must be >= 2, got {settings.trials}")
+    check_noise_flags(robot, settings.noise)
     fewest = minimum_poses(robot)
     if settings.poses in ("designed", "random") and settings.n_poses < fewest:
         raise ValueError(f"--n-poses must be >= {fewest}, got {settings.n_poses}")
@@ -359,7 +407,7 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         ValueError: a refused setting (the message names the flag); FileExistsError: an output
             exists and ``overwrite`` is off.
     """
-    robot = load_robot(settings.robot, settings.geometry)
+    robot, note = load_robot(settings.robot, settings.geometry)
     check_study_settings(settings, robot)
     nominal, noise = robot.table.nominal, settings.noise
     kind = settings.errors or ("reference" if reference_poses(robot) is not None else "random")
@@ -374,7 +422,7 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         commanded = robot.inverse_kinematics(nominal, targets)
     heldout = sample_feasible_poses(robot, nominal, ws, settings.heldout, [settings.seed, 1]) if settings.heldout \
         else None
-    reached = robot.forward_kinematics(theta_true, commanded, initial=targets)
+    reached = true_machine_poses(robot, theta_true - nominal, kind, settings, commanded, targets, heldout)
     analysis = analyze_observability(robot, theta_true, reached, noise, joints=commanded)
     predicted = None
     if heldout is not None:
@@ -403,6 +451,8 @@ def run_study(settings: StudySettings, display=None) -> StudyOutcome:
         "methods": figures,
         "elapsed_s": time.perf_counter() - t0,
     }
+    if note:
+        summary["geometry_note"] = note
     if settings.summary_json:
         atomic_write(settings.summary_json, json.dumps(summary, indent=2) + "\n", overwrite=settings.overwrite)
     if settings.rrd:
