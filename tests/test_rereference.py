@@ -287,6 +287,22 @@ def test_the_delta_and_the_6rus_are_re_referenced(name, tmp_path):
     assert "joint zeros" in rr.shift.chosen
     assert np.all(np.abs(error_in_sigma) < SIGMAS)
     assert rr.validation_after.position_mm["rms"] < FLOOR_RATIO * floor
+    if name == "delta":  # rotarydeltakins: each joint's offset in the joint map (the comp tables' trims), degrees
+        _the_delta_export_carries_the_zeros(cal, rr, tmp_path)
+
+
+def _the_delta_export_carries_the_zeros(cal, rr, tmp_path):
+    """The fitted rotarydeltakins joint offsets of the re-referenced calibration are the held one's
+    plus the zeros (degrees); the fit's lengths and frame unchanged (the zeros are a
+    reparametrisation of the projection: to its least-squares tolerance, 1e-6 deg here)."""
+    from pipeline.export import main as export_main
+
+    record = {}
+    for name, path in (("today", tmp_path / "day2_rereferenced.calibration.json"), ("held", cal)):
+        assert export_main(["--calibration", str(path), "--to", "linuxcnc", "--out", str(tmp_path / name)]) == 0
+        record[name] = json.loads((tmp_path / name / "export.json").read_text())
+    offset = {k: np.array(r["joint_map"]["offset"]) for k, r in record.items()}
+    assert np.allclose(offset["today"] - offset["held"], np.degrees(rr.shift.zeros), rtol=0, atol=1e-6)
 
 
 # ------------------------------------------------------------------ the library, in memory
