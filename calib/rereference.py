@@ -155,20 +155,25 @@ def frame_response(cal: Calibration, frame=None) -> np.ndarray:
     return -np.linalg.lstsq(A, B, rcond=None)[0]
 
 
-def held_prediction_covariance(cal: Calibration, joints, frame=None) -> np.ndarray:
-    """(N, D, D) the covariance of ``cal``'s prediction at ``joints`` seen in the instrument ``frame``
-    (None: base frame), from its free parameters' covariance ``C``: ``M C M'`` with ``M = H J + H_F
-    L``, ``J`` the pose Jacobian of the free parameters (:func:`calib.robot.pose_jacobian_of_parameters`),
-    ``H`` and ``H_F`` the instrument's derivatives by the pose and by its frame
-    (:func:`calib.measurement.measurement_jacobians`) and ``L`` the frame's response to the
-    parameters (:func:`frame_response`): the geometry and the frame were estimated together, and a
-    change of the one is taken up by the other (without ``L`` a 100-pose level grid's prediction
-    of its own plane would be said uncertain by 4.4 mm, the gauge's and the prior's share)."""
+def held_prediction_covariance(cal: Calibration, joints, frame_session: str | None = None) -> np.ndarray:
+    """(N, D, D) the covariance of ``cal``'s prediction at ``joints`` seen in its instrument frame of
+    ``frame_session`` (None: the base frame), from its free parameters' covariance ``C``: ``M C M'``
+    with ``M = H J + H_F L``, ``J`` the pose Jacobian of the free parameters
+    (:func:`calib.robot.pose_jacobian_of_parameters`), ``H`` and ``H_F`` the instrument's derivatives
+    by the pose and by its frame (:func:`calib.measurement.measurement_jacobians`) and ``L`` the
+    frame's response to the parameters (:func:`frame_response`): the geometry and the frame were
+    estimated together, and a change of the one is taken up by the other (without ``L`` a 100-pose
+    level grid's prediction of its own plane would be said uncertain by 4.4 mm, the gauge's and the
+    prior's share). In the base frame (``cal`` has no frame) ``M = J``."""
     robot = cal.robot
     joints = np.asarray(joints, dtype=float)
     poses, J = _free_pose_jacobian(cal, joints)
-    H, HF, _ = measurement_jacobians(robot, poses, frame)
-    M = H @ J + HF @ frame_response(cal, frame)
+    if frame_session is None:
+        M = J
+    else:
+        frame = cal.frames[frame_session]
+        H, HF, _ = measurement_jacobians(robot, poses, frame)
+        M = H @ J + HF @ frame_response(cal, frame)
     return np.einsum("nij,jk,nlk->nil", M, np.asarray(cal.covariance, dtype=float), M)
 
 
@@ -319,7 +324,7 @@ def rereference(cal: Calibration, joints, measured, noise: SensorNoise, *, sessi
     seen = np.asarray(cal.frames.get(frame_session, np.zeros(6)), dtype=float)
     machine = held_machine(cal, t_s, channels)
     shift = fit_session_shift(robot, machine, joints, measured, noise, frame=seen,
-                              prediction_covariance=held_prediction_covariance(cal, joints, seen), models=models)
+                              prediction_covariance=held_prediction_covariance(cal, joints, frame_session), models=models)
     new = rereferenced_calibration(cal, shift, session, frame_session, noise=noise, recording=dict(recording or {}),
                                    origin=dict(origin or {}), produced_by=produced_by)
     new_frame = new.frames.get(session, np.zeros(6))

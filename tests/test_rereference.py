@@ -384,3 +384,22 @@ def test_the_provenance_key_is_written_read_and_checked(tmp_path):
     (tmp_path / "bad.calibration.json").write_text(json.dumps(d))
     with pytest.raises(CalibrationFileError, match="rereferenced_from"):
         Calibration.read(tmp_path / "bad.calibration.json")
+
+
+def test_a_rigid_motion_of_the_base_is_taken_up_by_the_frame_in_the_prediction():
+    """The file keeps the geometry's covariance, not its correlation with the frame's: a geometry
+    uncertain only by a translation of its base joints together (the gauge an instrument frame
+    takes up) predicts the instrument's rows exactly, and the base frame's rows by that translation."""
+    from dataclasses import replace
+
+    from calib.rereference import held_prediction_covariance
+
+    cal = _held("hexapod")
+    robot = cal.robot
+    v = np.array([1.0 if n.startswith("B") and n.endswith(".x") else 0.0 for n in cal.free])
+    cal = replace(cal, covariance=np.outer(v, v))
+    q = robot.inverse_kinematics(cal.theta, reachable_poses(robot, 5, 8))
+    seen = held_prediction_covariance(cal, q, "lab")
+    base = held_prediction_covariance(cal, q, None)
+    assert np.allclose(base[:, 0, 0], 1.0, rtol=1e-6) and np.allclose(base[:, 1:, 1:], 0.0, atol=1e-9)
+    assert np.max(np.abs(seen)) < 1e-9

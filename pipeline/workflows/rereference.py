@@ -22,7 +22,7 @@ import numpy as np
 
 from calib.calibration import CALIBRATION_SUFFIX
 from calib.measurement import measurement_settings
-from calib.rereference import Rereference, check_same_machine, held_frame, rereference
+from calib.rereference import MIN_REREFERENCE_ROWS, Rereference, check_same_machine, held_frame, rereference
 from calib.robot import KinematicsError
 from pipeline.formats import (NameReservation, ResultSet, calibration_text, output_folder, read_calibration,
                               read_recording, recording_source, row_message, session_measurement)
@@ -85,7 +85,7 @@ def _inputs(settings: RereferenceSettings):
     session = _session(rec, where)
     if not len(rec.rows("calibration")):
         raise ValueError(f"{where}, column 'set': no calibration rows: --from estimates the session's shift from its "
-                         "calibration rows (at least 6 poses spread over the workspace)")
+                         f"calibration rows (at least {MIN_REREFERENCE_ROWS} poses spread over the workspace)")
     return cal, rec, session
 
 
