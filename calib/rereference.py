@@ -232,6 +232,8 @@ class Rereference:
         noise_floor: :func:`noise_floor` of the session's declared noise.
         warnings: what the user must know (few rows; offsets the rows leave to their prior).
         seconds: the work's wall time, s.
+        session: the session's name (its frame's key in ``calibration``).
+        frame_session: the session of ``held`` whose frame the rows were read in (None: base).
     """
 
     shift: SessionShift
@@ -245,6 +247,36 @@ class Rereference:
     noise_floor: dict
     warnings: tuple = ()
     seconds: float = 0.0
+    session: str = ""
+    frame_session: str | None = None
+
+    def errors(self, joints, measured, t_s=None, channels: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(before, after)``: (N, D) the errors of rows of the session (measured minus predicted,
+        the instrument's frame) with the held calibration as it was and re-referenced.
+
+        Raises:
+            KinematicsError: a row the held geometry cannot assemble at (names the row).
+        """
+        robot = self.held.robot
+        joints = np.asarray(joints, dtype=float).reshape(-1, robot.n_chains)
+        out = []
+        for cal, frame in ((self.held, self.held.frames.get(self.frame_session, np.zeros(6))),
+                           (self.calibration, self.calibration.frames.get(self.session, np.zeros(6)))):
+            out.append(_errors(robot, measured, compose(frame, robot, held_machine(cal, t_s, channels)(joints))))
+        return out[0], out[1]
+
+    def with_validation(self, joints, measured, t_s=None, channels: dict | None = None) -> "Rereference":
+        """This re-reference with the session's validation rows predicted (none: unchanged).
+
+        Raises:
+            KinematicsError: a row the held geometry cannot assemble at (names the row).
+        """
+        if not len(joints):
+            return self
+        before, after = self.errors(joints, measured, t_s, channels)
+        robot = self.held.robot
+        return replace(self, validation_before=error_figures_of(robot, before),
+                       validation_after=error_figures_of(robot, after))
 
     def to_dict(self) -> dict:
         """JSON-ready: the shift (:meth:`calib.session_shift.SessionShift.to_dict`), the figures
@@ -306,7 +338,8 @@ def rereference(cal: Calibration, joints, measured, noise: SensorNoise, *, sessi
         frame_session: the session of ``cal`` whose instrument frame the rows were measured in
             (:func:`held_frame`; None: the base frame).
         t_s, channels: the calibration rows' times (s) and recorded channels, for the effects.
-        validation: ``(joints, measured, t_s, channels)`` of the session's validation rows, or None.
+        validation: ``(joints, measured, t_s, channels)`` of the session's validation rows, or None
+            (:meth:`Rereference.with_validation` predicts them later).
         origin: the new calibration's ``rereferenced_from`` (the held file's path and SHA-256).
         recording, produced_by: the new calibration's provenance.
         models: the shift's models chosen among (:data:`calib.session_shift.SHIFT_MODELS`).
@@ -327,20 +360,12 @@ def rereference(cal: Calibration, joints, measured, noise: SensorNoise, *, sessi
                               prediction_covariance=held_prediction_covariance(cal, joints, frame_session), models=models)
     new = rereferenced_calibration(cal, shift, session, frame_session, noise=noise, recording=dict(recording or {}),
                                    origin=dict(origin or {}), produced_by=produced_by)
-    new_frame = new.frames.get(session, np.zeros(6))
-
-    def errors(calibration, instrument, j, m, times, chans):
-        return _errors(robot, m, compose(instrument, robot, held_machine(calibration, times, chans)(j)))
-
-    before = error_figures_of(robot, errors(cal, seen, joints, measured, t_s, channels))
-    after = error_figures_of(robot, errors(new, new_frame, joints, measured, t_s, channels))
-    val_before = val_after = None
-    if validation is not None and len(validation[0]):
-        vj, vm, vt, vc = validation
-        val_before = error_figures_of(robot, errors(cal, seen, np.asarray(vj, dtype=float), vm, vt, vc))
-        val_after = error_figures_of(robot, errors(new, new_frame, np.asarray(vj, dtype=float), vm, vt, vc))
-    return Rereference(shift=shift, held=cal, calibration=new,
-                       frame_source=frame_words(cal, frame_session), calibration_before=before,
-                       calibration_after=after, validation_before=val_before, validation_after=val_after,
-                       noise_floor=noise_floor(robot, noise), warnings=tuple(_shift_warnings(shift, len(joints))),
-                       seconds=time.perf_counter() - t0)
+    rr = Rereference(shift=shift, held=cal, calibration=new, frame_source=frame_words(cal, frame_session),
+                     calibration_before=None, calibration_after=None, validation_before=None, validation_after=None,
+                     noise_floor=noise_floor(robot, noise), warnings=tuple(_shift_warnings(shift, len(joints))),
+                     session=session, frame_session=frame_session)
+    before, after = rr.errors(joints, measured, t_s, channels)
+    rr = replace(rr, calibration_before=error_figures_of(robot, before), calibration_after=error_figures_of(robot, after))
+    if validation is not None:
+        rr = rr.with_validation(*validation)
+    return replace(rr, seconds=time.perf_counter() - t0)

@@ -241,6 +241,16 @@ def test_bad_input_is_refused_in_one_line_with_nothing_written(twin, tmp_path, c
     _refused(capsys, ["--real", str(tmp_path / "validation_only.csv"), "--out", str(out), "--from", str(cal)],
              "no calibration rows", out=out)
     _refused(capsys, ["--from", str(cal), "--out", str(out)], "--from", "--real", out=out)
+    # a calibration row the held geometry cannot assemble at: named by its data row
+    from pipeline.formats import read_recording
+
+    day2 = read_recording(today)
+    joints = day2.joints.copy()
+    joints[3, 0] += 5000.0
+    write_recording(tmp_path / "far.csv", Recording(robot=robot, noise=CAPTURE_NOISE, t_s=day2.t_s, joints=joints,
+                                                    measured=day2.measured, sets=day2.sets, meta={}))
+    _refused(capsys, ["--real", str(tmp_path / "far.csv"), "--out", str(out), "--from", str(cal)], "row 4 (line 5)",
+             out=out)
     assert not out.exists()
 
 

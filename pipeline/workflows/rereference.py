@@ -110,10 +110,13 @@ def run_rereference(settings: RereferenceSettings) -> RereferenceResult:
     try:
         rr = rereference(cal, joints, measured, rec.noise, session=session,
                          frame_session=None if base else held_frame(cal, session), t_s=t_s, channels=channels,
-                         validation=_rows(rec, "validation"), origin=origin, recording=recording_source(settings.real),
-                         produced_by=PRODUCED_BY)
+                         origin=origin, recording=recording_source(settings.real), produced_by=PRODUCED_BY)
     except KinematicsError as exc:
         raise ValueError(row_message(exc, settings.real, rec.rows("calibration"))) from None
+    try:
+        rr = rr.with_validation(*_rows(rec, "validation"))
+    except KinematicsError as exc:
+        raise ValueError(row_message(exc, settings.real, rec.rows("validation"))) from None
     out = Path(settings.out)
     output_folder(out)
     base_name = settings.name if settings.name is not None else Path(settings.real).stem + "_rereferenced"
