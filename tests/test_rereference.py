@@ -413,3 +413,15 @@ def test_a_rigid_motion_of_the_base_is_taken_up_by_the_frame_in_the_prediction()
     base = held_prediction_covariance(cal, q, None)
     assert np.allclose(base[:, 0, 0], 1.0, rtol=1e-6) and np.allclose(base[:, 1:, 1:], 0.0, atol=1e-9)
     assert np.max(np.abs(seen)) < 1e-9
+
+
+@pytest.mark.slow
+def test_the_library_function_equals_the_command(twin, tmp_path):
+    """pipeline.workflows.run_rereference from Python writes what the command writes."""
+    from pipeline.workflows import RereferenceSettings, run_rereference
+
+    result, _ = _from(twin, "level_rehomed", "--overwrite")
+    got = run_rereference(RereferenceSettings(real=twin["folder"] / "level_rehomed.csv", calibration=twin["cal"],
+                                              out=tmp_path, name="python"))
+    assert (tmp_path / "python.calibration.json").read_text() == open(result.paths["calibration"]).read()
+    assert got.summary["rereference"]["shift"] == result.summary["rereference"]["shift"]

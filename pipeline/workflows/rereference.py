@@ -24,9 +24,8 @@ from calib.calibration import CALIBRATION_SUFFIX
 from calib.measurement import measurement_settings
 from calib.rereference import MIN_REREFERENCE_ROWS, Rereference, check_same_machine, held_frame, rereference
 from calib.robot import KinematicsError
-from pipeline.formats import (NameReservation, ResultSet, calibration_text, output_folder, read_calibration,
-                              read_recording, recording_source, row_message, session_measurement)
-from pipeline.formats.calibration_file import check_plausible_parameters
+from pipeline.formats import (NameReservation, ResultSet, calibration_text, check_plausible_parameters, output_folder,
+                              read_calibration, read_recording, recording_source, row_message, session_measurement)
 
 __all__ = ["RereferenceSettings", "RereferenceResult", "run_rereference", "summary_lines", "PRODUCED_BY"]
 
