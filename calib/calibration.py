@@ -27,7 +27,9 @@ which holds
   coordinate: the platform poses of the calibration rows in the base frame, by the identified
   model's forward kinematics, not what the instrument reported), joint ranges (``joint_min``/``joint_max``), time span ``t_s``;
 - ``declared_noise``; ``recording``: the input's file name and SHA-256 (CSV and sidecar), or the
-  simulated scenario in words; ``produced_by``: the command.
+  simulated scenario in words; ``produced_by``: the command; ``rereferenced_from`` (only in a
+  calibration re-referenced from another, :mod:`calib.rereference`): the calibration it holds the
+  geometry of, ``{"path", "sha256"}`` (a file without the key reads as before).
 
 A file of another format, version or robot, or one lacking a key, is refused with one line
 naming the file and the key (:class:`CalibrationFileError`). Floats are written with ``repr``'s
@@ -151,6 +153,9 @@ class Calibration:
         noise: the declared noise of the recording.
         recording: where the data came from.
         produced_by: the command that wrote it.
+        rereferenced_from: ``{"path", "sha256"}`` of the calibration whose geometry and effects
+            this one holds with its joint zeros and frames re-referenced to a later session
+            (:mod:`calib.rereference`); None for a calibration of its own.
         source: the file it was read from (None: made in memory); not written to the file.
     """
 
@@ -167,6 +172,7 @@ class Calibration:
     noise: SensorNoise = field(default_factory=SensorNoise)
     recording: dict = field(default_factory=dict)
     produced_by: str = ""
+    rereferenced_from: dict | None = None
     source: Path | None = None
 
     # ------------------------------------------------------------------ the file edge
@@ -217,7 +223,8 @@ class Calibration:
                 "measurement_frames": {s: {**frame_to_dict(f), "std": frame_to_dict(self.frames_std.get(s, np.zeros(6)))}
                                        for s, f in self.frames.items()},
                 "targets": None if self.targets is None else np.asarray(self.targets, dtype=float).tolist(),
-                "effects": [e.to_dict() for e in self.effects], "validity": self.validity}
+                "effects": [e.to_dict() for e in self.effects], "validity": self.validity,
+                **({} if self.rereferenced_from is None else {"rereferenced_from": self.rereferenced_from})}
 
 
     # ------------------------------------------------------------------ the machine
@@ -492,13 +499,25 @@ def read_calibration(path, robot: str | None = None) -> Calibration:
         raise CalibrationFileError(f"{path}: key {exc}") from None
     cal = Calibration(robot=rob, theta=theta, std=std, free=free, covariance=cov, frames=frames, frames_std=frames_std,
                       targets=targets, effects=effects, validity=d["validity"], noise=noise,
-                      recording=d["recording"], produced_by=str(d["produced_by"]), source=path)
+                      recording=d["recording"], produced_by=str(d["produced_by"]),
+                      rereferenced_from=_origin(d, path), source=path)
     try:  # every record rebuilt once on the robot (a law's channels are not needed to check its terms)
         cal.fitted_effects(where="effects")
     except ValueError as exc:
         raise CalibrationFileError(f"{path}: key {exc}") from None
     _validity(cal, path)
     return cal
+
+
+def _origin(d: dict, path: Path) -> dict | None:
+    """The optional key ``rereferenced_from``: ``{"path", "sha256"}`` strings, or absent."""
+    origin = d.get("rereferenced_from")
+    if origin is None:
+        return None
+    if not isinstance(origin, dict) or not all(isinstance(origin.get(k), str) for k in ("path", "sha256")):
+        raise CalibrationFileError(f"{path}: key 'rereferenced_from': expected an object with the strings path and "
+                                   "sha256 (the calibration re-referenced)")
+    return origin
 
 
 def _validity(cal: Calibration, path: Path) -> None:

@@ -25,7 +25,7 @@ from .formats.report_text import terminal_lines
 if TYPE_CHECKING:
     from pipeline.workflows.calibration import RunResult, RunSettings
 
-__all__ = ["main", "build_parser", "settings_from_args", "run", "print_summary"]
+__all__ = ["main", "build_parser", "settings_from_args", "rereference_settings", "run", "print_summary", "NOT_WITH_FROM"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,6 +80,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "poses, flagged rows, instrument frames)")
     p.add_argument("--real", type=Path, default=None,
                    help="analyse this recording (.csv with its .json sidecar, any robot) instead of simulating")
+    p.add_argument("--from", dest="from_calibration", type=Path, default=None, metavar="CAL.calibration.json",
+                   help="with --real: re-reference this calibration to the recording (docs/commands.md): its geometry "
+                        "and effects held, only what changes between sessions (each joint's zero, the instrument's "
+                        "frame) estimated from the recording's calibration rows (as few as 6), its validation rows "
+                        "predicted before and after; writes NAME.calibration.json (NAME: the recording's stem + "
+                        "'_rereferenced') and --summary-json")
     p.add_argument("--keep-outliers", action="store_true",
                    help="identify from every calibration row, the ones the outlier test flags included "
                         "(default: flagged rows are left out; the summary gives both results)")
@@ -125,7 +131,7 @@ def settings_from_args(args: argparse.Namespace) -> RunSettings:
                                                      else "file not found"))
     from pipeline.workflows.calibration import RunSettings
 
-    fields = {k: v for k, v in vars(args).items() if k != "quiet"}
+    fields = {k: v for k, v in vars(args).items() if k not in ("quiet", "from_calibration")}
     fields["tolerance"] = None if args.tolerance is None else tolerance_argument(args.tolerance)
     return RunSettings(**fields)
 
@@ -168,9 +174,37 @@ def print_summary(s: dict) -> None:
         print(line)
 
 
-def run(argv: list[str] | None = None) -> RunResult:
-    """Parse ``argv`` and run (for Python callers and tests); raises on bad input."""
+#: Flags a re-reference (``--from``) does not take, with their defaults.
+NOT_WITH_FROM = ("report", "export_mjcf")
+
+
+def rereference_settings(args: argparse.Namespace):
+    """The settings of ``--from`` (``ValueError`` naming the flag)."""
+    if args.real is None:
+        raise ValueError(f"--from {args.from_calibration}: needs --real TODAY.csv, the session to re-reference to")
+    for flag in NOT_WITH_FROM:
+        if getattr(args, flag) is not None:
+            raise ValueError(f"--{flag.replace('_', '-')} with --from: not written by a re-reference (run "
+                             "python -m pipeline.export on the calibration it writes)")
+    settings_from_args(args)  # the flags --real and --from share, checked as a run checks them
+    from pipeline.workflows.rereference import RereferenceSettings
+
+    return RereferenceSettings(real=args.real, calibration=args.from_calibration, out=args.out, name=args.name,
+                               overwrite=args.overwrite, summary_json=args.summary_json)
+
+
+def run(argv: list[str] | None = None):
+    """Parse ``argv`` and run (for Python callers and tests); raises on bad input. Returns the
+    :class:`pipeline.workflows.calibration.RunResult`, or with ``--from`` the
+    :class:`pipeline.workflows.rereference.RereferenceResult`."""
     args = build_parser().parse_args(argv)
+    if args.from_calibration is not None:
+        from pipeline.workflows.rereference import run_rereference, summary_lines
+
+        result = run_rereference(rereference_settings(args))
+        if not args.quiet:
+            print("\n".join(summary_lines(result.summary)))
+        return result
     from pipeline.workflows.calibration import run_calibration
 
     result = run_calibration(settings_from_args(args), progress=_progress(not args.quiet))

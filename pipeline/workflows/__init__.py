@@ -13,6 +13,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "blind": ("run_blind_suite", "blind_cases", "blind_case", "rates_table", "failure_lines", "KINDS"),
     "convert": ("ConvertSettings", "ConvertResult", "run_convert"),
     "compensate": ("CompensateSettings", "CompensationReport", "run_compensation"),
+    "rereference": ("RereferenceSettings", "RereferenceResult", "run_rereference"),
     "export": ("ExportSettings", "ExportReport", "run_export", "EXPORTERS"),
     "fleet": ("run_fleet", "FleetReport", "calibrate_machine", "fleet_inputs", "input_hash"),
 })
