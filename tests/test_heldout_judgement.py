@@ -139,3 +139,27 @@ def test_an_effect_whose_resimulation_fits_worse_is_reported_not_named():
     kept = witnessed(rec, data, disc, cal, judgement, {"mujoco_resimulation": {
         "before": {"position_um": 900.0}, "after": {"position_um": 300.0}}}, 0)
     assert kept[0].effects == ("joint_friction",)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("moved", [True, False])
+def test_a_rehoming_within_the_calibration_rows_is_fitted_with_the_geometry(tmp_path, moved):
+    """Day 2 with 20 calibration rows (the other 40 validation): the re-homing is fitted jointly
+    with the geometry (``session_zeros``), each zero within 3 of its standard deviations, and the validation rows predicted better than by the geometry alone; nothing moved,
+    nothing named. The calibration file holds the first session's zeros (no effect recorded)."""
+    from calib.calibration import Calibration
+
+    twin = rehomed_twin(tmp_path, moved=moved, day2_calibration_rows=20)
+    s = _discover(twin.csv, tmp_path)
+    if not moved:
+        assert s["effects"] == [] and s["session_shifts"] == {}
+        return
+    assert s["effects"] == ["session_zeros"]
+    p = s["effect_parameters"]["session_zeros"]
+    found = np.array([p[f"zero.l{i + 1}@day2"]["value"] for i in range(6)])
+    std = np.array([p[f"zero.l{i + 1}@day2"]["std"] for i in range(6)])
+    assert np.all(np.abs(found - twin.zero_moves) < 3 * std), (found, std, twin.zero_moves)
+    assert s["heldout_rms_after_mm"] < 0.6 * s["heldout_rms_before_mm"]
+    assert "re-homed before session 'day2'" in s["session_shifts"]["day2"]["words"]
+    cal = Calibration.read(s["calibration"])
+    assert cal.effects == ()

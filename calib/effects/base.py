@@ -198,6 +198,9 @@ class EffectData:
             are taken (:attr:`regressor_poses`); None: the measured poses. The discovery sets it
             where the rows leave combinations to the prior (a level grid), whose regressors at
             the measured poses are built of the noise (:mod:`calib.effects.discovery`).
+        sessions: (N,) int, each row's session (0, 1, ... in the order of the sessions' first
+            rows), or None: one session (what a shift between sessions reads,
+            :mod:`calib.effects.session_zeros`).
     """
 
     robot: Robot
@@ -211,6 +214,7 @@ class EffectData:
     payload_kg: np.ndarray | None = field(default=None)
     tolerance: np.ndarray | None = field(default=None)
     model_poses: np.ndarray | None = field(default=None)
+    sessions: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         r = self.robot
@@ -239,6 +243,11 @@ class EffectData:
             object.__setattr__(self, "tolerance", tol)
         if self.model_poses is not None:
             object.__setattr__(self, "model_poses", as_array(self.model_poses, "model_poses", m.shape))
+        if self.sessions is not None:
+            sessions = np.asarray(self.sessions)
+            if sessions.shape != (q.shape[0],) or not np.issubdtype(sessions.dtype, np.integer) or np.any(sessions < 0):
+                raise ValueError(f"sessions must be ({q.shape[0]},) non-negative integers")
+            object.__setattr__(self, "sessions", sessions)
         if self.direction is None or self.last_move is None:
             direction, last_move = motion_history(r.inverse_kinematics(theta, r.home_pose[None])[0], q)
         if self.last_move is None:
@@ -276,18 +285,19 @@ class EffectData:
         return EffectData(self.robot, self.theta, self.joints[rows], self.measured[rows], self.t_s[rows],
                           self.noise, self.direction[rows], self.last_move[rows],
                           None if self.payload_kg is None else self.payload_kg[rows], self.tolerance,
-                          None if self.model_poses is None else self.model_poses[rows])
+                          None if self.model_poses is None else self.model_poses[rows],
+                          None if self.sessions is None else self.sessions[rows])
 
     def with_measured(self, measured: np.ndarray) -> "EffectData":
         """The same commands with other measured poses."""
         return EffectData(self.robot, self.theta, self.joints, measured, self.t_s, self.noise, self.direction,
-                          self.last_move, self.payload_kg, self.tolerance)
+                          self.last_move, self.payload_kg, self.tolerance, sessions=self.sessions)
 
     def with_robot(self, robot: Robot, theta: np.ndarray | None = None) -> "EffectData":
         """The same measurements read with another nominal robot (motion history kept; no prior:
         a tolerance belongs to the robot it was declared for)."""
         return EffectData(robot, robot.table.nominal if theta is None else theta, self.joints, self.measured,
-                          self.t_s, self.noise, self.direction, self.last_move, self.payload_kg)
+                          self.t_s, self.noise, self.direction, self.last_move, self.payload_kg, sessions=self.sessions)
 
 
 def closure_regressors(dF_dq: np.ndarray, joint_regressors: np.ndarray) -> np.ndarray:

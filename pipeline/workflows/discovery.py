@@ -27,6 +27,7 @@ from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, 
 from calib.effects.discovery import MIN_ROWS
 from calib.effects.separability import GRAM_MIN_RESIDUALS
 from calib.effects.base import PAYLOAD_CHANNEL
+from calib.effects.session_zeros import SessionZeros, session_codes, session_zeros_effect
 from calib.effects.heldout import HeldoutJudgement, RejectedEffect, TIME_BLOCKS, heldout_folds, judge_effects
 from calib.session_shift import SessionShift
 from calib.compensation import compensated_commands
@@ -165,6 +166,7 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     sl = fit.slices()
     settings = effects_settings(robot, context, [(m, fit.coefficients[sl[m.name]], e)
                                                  for m, e in zip(fit.models, fit.extras)])
+    rec = rehomed(rec, fit)  # a re-homing is in the readings: each session's joints moved by its zeros
     after = replay(rec, fit.theta, settings, rows)
     out["after_calib_fit"] = rms(after)
     # The first named effect that carries a machine parameter is re-fitted there.
@@ -178,6 +180,38 @@ def resimulate(rec: Recording, disc: Discovery, *, sysid: bool = True, max_nfev:
     out["machine"] = {section: {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()}
                       for section, values in settings.items()}
     return out
+
+
+def rehomed(rec: Recording, fit) -> Recording:
+    """``rec`` with each later session's joints moved by the zeros a named
+    :class:`calib.effects.session_zeros.SessionZeros` found (``rec`` itself without one)."""
+    for m in fit.models:
+        if isinstance(m, SessionZeros):
+            zeros = m.zeros(fit.coefficients[fit.slices()[m.name]], rec.robot)
+            moved = rec.joints.copy()
+            for session, d in zeros.items():
+                moved[rec.sessions == session] += d
+            return replace(rec, joints=moved)
+    return rec
+
+
+def calibration_session_shifts(rec: Recording, fit) -> dict:
+    """``{session: {shift, words}}`` of the later sessions a named ``session_zeros`` moved (fitted
+    with the geometry from the calibration rows of every session)."""
+    for m in fit.models:
+        if isinstance(m, SessionZeros):
+            sl = fit.slices()[m.name]
+            zeros, stds = m.zeros(fit.coefficients[sl], rec.robot), m.zeros(fit.coefficient_std[sl], rec.robot)
+            unit = rec.robot.joint_unit
+            return {s: {"model": "joint zeros", "fitted_with": "the geometry, on the calibration rows of every session",
+                        "shift": {f"zero.{j}": {"value": float(v), "std": float(e), "unit": unit}
+                                  for j, v, e in zip(rec.robot.joint_names, d, stds[s])},
+                        "words": f"the machine re-homed before session {s!r}: each joint's zero moved by "
+                                 + ", ".join(f"{v:+.3g} +- {e:.2g}" for v, e in zip(d, stds[s]))
+                                 + f" {unit} (fitted with the geometry); the calibration file holds the first "
+                                   f"session's zeros: re-reference a later session (pipeline.run --from)"}
+                    for s, d in zeros.items()}
+    return {}
 
 
 def replay(rec: Recording, theta: np.ndarray, settings: dict, which: np.ndarray, history: bool = True) -> np.ndarray:
@@ -360,8 +394,11 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     if still is not None:
         raise ValueError(f"{still}: nothing to discover")
     tolerance, tolerance_source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
+    codes, session_names = session_codes(rec.sessions)
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
-                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL), tolerance=tolerance.std)
+                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL), tolerance=tolerance.std, sessions=codes)
+    if np.unique(codes[cal]).size > 1:  # rows of several sessions analysed: each later one may have re-homed
+        candidates = list(candidates) + [session_zeros_effect(session_names)]
     disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
                             channels={k: v[cal] for k, v in rec.extras.items()} or None)
     kept = cal[disc.kept]
@@ -394,7 +431,8 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         "heldout_folds": h["heldout_folds"],
         "not_named": h["not_named"],
         "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
-                           for s, shift in judgement.shifts.items() if shift.shifted},
+                           for s, shift in judgement.shifts.items() if shift.shifted}
+        | calibration_session_shifts(rec, disc.chosen),
         "flagged_poses": [i + 1 for i in flagged],
         "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
                      "model_wrong": bool(scan["model_wrong"]),
@@ -636,7 +674,8 @@ def discovery_calibration(rec: Recording, report: DiscoveryReport, block: dict, 
     reference = None if payload is None else float(np.mean(payload[rows]))  # a compliance at several payloads
     return Calibration(robot=robot, theta=fit.theta, std=np.sqrt(np.clip(np.diag(cov), 0.0, None)), free=free,
                        covariance=cov[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
-                       effects=tuple(EffectRecord.from_fitted(fe, robot, reference) for fe in fitted_effects(fit)),
+                       effects=tuple(EffectRecord.from_fitted(fe, robot, reference) for fe in fitted_effects(fit)
+                                     if not isinstance(fe.effect, SessionZeros)),  # a re-homing: re-referenced
                        validity=validity_domain(robot, rec.measured[rows], rec.joints[rows], rec.t_s[rows]),
                        noise=rec.noise, recording=source, produced_by="pipeline.discover")
 
