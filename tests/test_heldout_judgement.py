@@ -163,3 +163,25 @@ def test_a_rehoming_within_the_calibration_rows_is_fitted_with_the_geometry(tmp_
     assert "re-homed before session 'day2'" in s["session_shifts"]["day2"]["words"]
     cal = Calibration.read(s["calibration"])
     assert cal.effects == ()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("moved", [True, False])
+def test_a_run_names_the_shift_of_a_validation_session(tmp_path, moved, capsys):
+    """``pipeline.run --real`` on the two days: day 2's rows (validation, no calibration rows) are
+    tested for a shift against the calibration and, where they moved, it is named in the summary and
+    the terminal with each joint's zero; nothing moved, nothing said."""
+    from pipeline.run import run
+
+    twin = rehomed_twin(tmp_path, moved=moved)
+    summary = tmp_path / "run.json"
+    run(["--real", str(twin.csv), "--out", str(tmp_path), "--summary-json", str(summary)])
+    s, out = json.loads(summary.read_text()), capsys.readouterr().out
+    if not moved:
+        assert "session_shifts" not in s and "shift between sessions" not in out
+        return
+    shift = s["session_shifts"]["day2"]
+    assert shift["model"] == "joint zeros"
+    found = np.array([shift["shift"][f"zero.l{i + 1}"]["value"] for i in range(6)])
+    assert np.all(np.abs(found - twin.zero_moves) <= SHIFT_WITHIN * np.abs(twin.zero_moves)), (found, twin.zero_moves)
+    assert "shift between sessions: the rows of session 'day2' sit" in out

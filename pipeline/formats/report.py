@@ -697,7 +697,8 @@ def _calibration_heldout(s: dict) -> Heldout | None:
             rows.append(FigureRow("orientation", "rad", Figures.of(o["before_figures"]), Figures.of(o["after_figures"])))
         iso, standard = _iso(s)
         return Heldout(basis=s.get("heldout_basis") or "", poses=int(s.get("heldout_poses") or 0), figures=tuple(rows),
-                       per_pose=_per_pose(s), iso9283=iso, iso_standard=standard)
+                       per_pose=_per_pose(s), iso9283=iso, iso_standard=standard,
+                       session_shifts=tuple(v["words"] for v in (s.get("session_shifts") or {}).values()))
     cv, info = s.get("crossvalidated_position_error_mm"), _crossvalidation(s)
     if not cv or cv.get("rms") is None or info is None:
         return None

@@ -352,6 +352,7 @@ def _heldout_lines(h: Heldout | None) -> list[str]:
     pos = h.figures[0]
     if pos.after.mean and pos.before.mean is not None:
         lines.append(f"  improvement of mean position error: {pos.before.mean / pos.after.mean:.1f}x  ({h.basis})")
+    lines += [f"  shift between sessions: {w}" for w in h.session_shifts]
     return lines
 
 

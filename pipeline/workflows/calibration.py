@@ -664,6 +664,38 @@ def flagged_rows(inp: CalibrationInput, ident: Identification) -> list[int]:
     return [int(inp.rows[i]) + 1 for i in ident.flagged_idx]
 
 
+def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
+    """``{session: shift}`` of each recorded session with validation rows and no calibration rows
+    (at least :data:`calib.effects.heldout.MIN_SESSION_ROWS`) whose rows show a shift against the
+    calibration (:func:`calib.session_shift.fit_session_shift`: each joint's zero and the
+    instrument frame, by evidence), with its words; empty when none shifted or nothing was read."""
+    from calib.effects.heldout import MIN_SESSION_ROWS
+    from calib.session_shift import fit_session_shift
+    from pipeline.workflows.discovery import shift_words
+
+    cal, rec = outcome.calibration, inp.rec
+    if rec is None or cal is None or not len(inp.val_joints) or any(m.n_targets for m in inp.measurement or ()):
+        return {}
+    robot = rec.robot
+    val_rows = rec.rows("validation")
+    trained = set(rec.sessions[rec.rows("calibration")].tolist())
+    out = {}
+    for name in dict.fromkeys(rec.sessions[val_rows].tolist()):
+        at = rec.sessions[val_rows] == name
+        if name in trained or at.sum() < MIN_SESSION_ROWS:
+            continue
+        group = int(inp.val_sessions[at][0])
+        frame = cal.frames.get(inp.frame_sessions[group]) if 0 <= group < len(inp.frame_sessions) else None
+        try:
+            shift = fit_session_shift(robot, lambda q: robot.forward_kinematics(cal.theta, q), inp.val_joints[at],
+                                      inp.val_meas[at], inp.noise, frame=frame)
+        except KinematicsError:  # a row the identified machine cannot reach: said by the held-out figures
+            continue
+        if shift.shifted:
+            out[str(name)] = dict(shift.to_dict(), words=shift_words(str(name), shift, robot.joint_unit))
+    return out
+
+
 def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.ndarray | None, settings: RunSettings,
                warnings: list) -> dict:
     """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found
@@ -1054,6 +1086,9 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         split["crossvalidation"] = seconds["crossvalidation"]
     summary.update(verdict_block(inp, outcome))
     split["verdict"] = seconds["verdict"]
+    shifts = validation_session_shifts(inp, outcome)
+    if shifts:
+        summary["session_shifts"] = shifts
     if inp.sim is not None:
         summary["_recording"] = simulated_recording(inp, settings)
     summary["_calibration"] = outcome.calibration
