@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 __all__ = ["terminal_lines", "report_markdown", "verdict_words", "model_words", "report_title", "verdict_text",
            "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes",
            "tolerance_verdict", "determined_by", "effect_evidence", "effect_notes", "law_words", "no_effect_words",
-           "remaining_words", "search_words",
+           "remaining_words", "search_words", "shift_words",
            "flagged_words", "DISPLAY_SCALE",
            "IMPLAUSIBLE_LINES", "DISCOVERY_IMPLAUSIBLE_LINES", "COMBINATION_LINES", "PRIOR_NAMES",
            "MARKDOWN_PRIOR_NAMES", "SEPARATION_LINES"]
@@ -78,6 +78,27 @@ def verdict_words(explained: bool, effects: list, remaining: dict) -> str:
 
 
 # ----------------------------------------------------------------------------------- the phrases
+
+def shift_words(session: str, shift, unit: str) -> str:
+    """A session's shift (:class:`calib.session_shift.SessionShift`) said as a person sees it: how
+    far its rows sit from the prediction and which way, what moved, and what to do."""
+    e = [float(v) for v in shift.mean_position_error_mm]
+    size = math.sqrt(sum(v * v for v in e))
+    axis = max(range(3), key=lambda k: abs(e[k]))
+    way = ("below the prediction" if e[2] < 0 else "above the prediction") if axis == 2 else \
+        f"off the prediction along {'+-'[int(e[axis] < 0)]}{'xyz'[axis]}"
+    way += f" (mean error {', '.join(f'{v:+.2f}' for v in e)} mm in x, y, z)"
+    p = f"p = {shift.p_no_shift:.2g}" if shift.p_no_shift > 0 else "p < 1e-300"
+    what = {"joint zeros": "the machine re-homed (each joint's zero moved: "
+                           + ", ".join(f"{v:+.3g} +- {s:.2g}" for v, s in zip(shift.zeros, shift.zeros_std))
+                           + f" {unit})",
+            "instrument frame": "the instrument moved or was re-calibrated (its frame moved by "
+                                + ", ".join(f"{v:+.3g}" for v in shift.frame_motion[:3]) + " mm)",
+            "joint zeros and instrument frame": "the machine re-homed and the instrument moved"}[shift.chosen]
+    return (f"the rows of session {session!r} sit {size:.2f} mm {way}, uniformly ({p} that nothing "
+            f"moved): {what} between sessions; re-measure at least 6 poses at "
+            f"the start of a session and re-reference (pipeline.run --from)")
+
 
 def report_title(r: Report) -> str:
     """``Calibration of the hexapod`` / ``Discovery on the delta``."""

@@ -669,13 +669,12 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
     (at least :data:`calib.effects.heldout.MIN_SESSION_ROWS`) whose rows show a shift against the
     calibration (:func:`calib.session_shift.fit_session_shift`: each joint's zero and the
     instrument frame, by evidence), with its words; empty when none shifted or nothing was read."""
-    from calib.effects.heldout import MIN_SESSION_ROWS
-    from calib.session_shift import fit_session_shift
-    from pipeline.workflows.discovery import shift_words
-
     cal, rec = outcome.calibration, inp.rec
     if rec is None or cal is None or not len(inp.val_joints) or any(m.n_targets for m in inp.measurement or ()):
         return {}
+    from calib.effects.heldout import MIN_SESSION_ROWS  # a recording's run only: the default run loads no discovery
+    from calib.session_shift import fit_session_shift
+    from pipeline.formats.report_text import shift_words
     robot = rec.robot
     val_rows = rec.rows("validation")
     trained = set(rec.sessions[rec.rows("calibration")].tolist())

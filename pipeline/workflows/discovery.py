@@ -29,7 +29,6 @@ from calib.effects.separability import GRAM_MIN_RESIDUALS
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.effects.session_zeros import SessionZeros, session_codes, session_zeros_effect
 from calib.effects.heldout import HeldoutJudgement, RejectedEffect, TIME_BLOCKS, heldout_folds, judge_effects
-from calib.session_shift import SessionShift
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from calib.diagnosis import no_motion_words
@@ -41,7 +40,7 @@ from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic
                               validity_domain, write_calibration, write_report)
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
-from pipeline.formats.report_text import verdict_words
+from pipeline.formats.report_text import shift_words, verdict_words
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
@@ -98,27 +97,6 @@ def not_named_words(r: RejectedEffect) -> str:
                 f"alone ({1e3 * r.geometry_mm:.1f} -> {1e3 * r.with_effect_mm:.1f} um): not named")
     return (f"{r.name} fits the calibration rows{bic} but predicts {rows} worse ({r.geometry_mm:.3g} -> "
             f"{r.with_effect_mm:.3g} mm): not named")
-
-
-def shift_words(session: str, shift: SessionShift, unit: str) -> str:
-    """A session's shift said as a person sees it: how far its rows sit from the prediction and
-    which way, what moved, and what to do."""
-    e = shift.mean_position_error_mm
-    size = float(np.linalg.norm(e))
-    axis = int(np.argmax(np.abs(e)))
-    way = ("below the prediction" if e[2] < 0 else "above the prediction") if axis == 2 else \
-        f"off the prediction along {'+-'[int(e[axis] < 0)]}{'xyz'[axis]}"
-    way += f" (mean error {', '.join(f'{v:+.2f}' for v in e)} mm in x, y, z)"
-    p = f"p = {shift.p_no_shift:.2g}" if shift.p_no_shift > 0 else "p < 1e-300"
-    what = {"joint zeros": "the machine re-homed (each joint's zero moved: "
-                           + ", ".join(f"{v:+.3g} +- {s:.2g}" for v, s in zip(shift.zeros, shift.zeros_std))
-                           + f" {unit})",
-            "instrument frame": "the instrument moved or was re-calibrated (its frame moved by "
-                                + ", ".join(f"{v:+.3g}" for v in shift.frame_motion[:3]) + " mm)",
-            "joint zeros and instrument frame": "the machine re-homed and the instrument moved"}[shift.chosen]
-    return (f"the rows of session {session!r} sit {size:.2f} mm {way}, uniformly ({p} that nothing "
-            f"moved): {what} between sessions; re-measure at least 6 poses at "
-            f"the start of a session and re-reference (pipeline.run --from)")
 
 
 def _with(settings: dict, section: str, field: str, value: float) -> dict:
