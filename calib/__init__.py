@@ -31,7 +31,7 @@ lazily_exported, __getattr__, __dir__ = lazy_exports(__name__, {
                       "identification_jacobian", "pose_uncertainty"),
     "prior": ("ParameterPrior",),
     "crossval": ("CrossValidation", "crossvalidate", "crossvalidate_model"),
-    "calibration": ("Calibration", "CalibrationFileError", "register_delivery"),
+    "calibration": ("Calibration", "CalibrationFileError"),
     "identification": ("CalibrationOutcome", "calibrate"),
 })
 __all__ = ["paper", *lazily_exported]

@@ -6,7 +6,7 @@ objects, rebuilt as :class:`calib.effects.records.FittedEffect` ones by
 :meth:`Calibration.fitted_effects`), the validity domain, the declared noise and the provenance. ``pipeline.run`` and ``pipeline.discover`` make it; it gives the compensated
 commands (:meth:`Calibration.commands`), where the identified machine goes
 (:meth:`Calibration.predict`), and its deliveries (:meth:`Calibration.to_linuxcnc`,
-:meth:`Calibration.to_mjcf`, :meth:`Calibration.report`: plug-ins, :data:`DELIVERIES`).
+:meth:`Calibration.to_mjcf`, :meth:`Calibration.report`: :data:`DELIVERY_PACKAGE`).
 
 The file edge (:meth:`Calibration.read`, :meth:`Calibration.write`): ``NAME.calibration.json``,
 which holds
@@ -35,10 +35,11 @@ A file of another format, version or robot, or one lacking a key, is refused wit
 naming the file and the key (:class:`CalibrationFileError`). Floats are written with ``repr``'s
 precision: a file read and written again is the same text.
 
-Deliveries are found by name in :data:`DELIVERIES`: a package registers its own with
-:func:`register_delivery` when imported, and names them in its entry points (group
-:data:`DELIVERY_GROUP`; ``pip install -e .`` installs ``pipeline``'s), which are loaded when a
-delivery asked for is not registered yet: calib imports nothing of the packages that deliver it.
+Deliveries (:meth:`Calibration.deliver`, ``to_linuxcnc``, ``to_mjcf``, ``report``) are written by
+the one registry of deliveries, :data:`DELIVERY_PACKAGE` (``pipeline.deliveries``, which
+``python -m pipeline.export`` uses too), looked up by that name when a delivery is asked for:
+calib imports nothing of pipeline, and says so in one line where pipeline is not installed. The
+controllers' mathematics stays in calib (:mod:`calib.linuxcnc`).
 """
 
 from __future__ import annotations
@@ -47,9 +48,8 @@ import json
 import re
 import warnings
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
+from importlib import import_module
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -63,8 +63,8 @@ from .robot import KinematicsError, Robot
 from .robots import ROBOTS, robot_from_description
 
 __all__ = ["CALIBRATION_FORMAT", "CALIBRATION_VERSION", "CALIBRATION_SUFFIX", "Calibration", "CalibrationFileError",
-           "write_calibration", "read_calibration", "calibration_text", "validity_domain", "DELIVERIES",
-           "DELIVERY_GROUP", "register_delivery", "delivery"]
+           "write_calibration", "read_calibration", "calibration_text", "validity_domain",
+           "DELIVERY_PACKAGE", "delivery_registry"]
 
 #: The format's name, written and checked.
 CALIBRATION_FORMAT = "parallel-calib calibration"
@@ -75,61 +75,30 @@ CALIBRATION_SUFFIX = ".calibration.json"
 #: The keys every calibration file has.
 KEYS = ("format", "version", "robot", "nominal_geometry", "produced_by", "recording", "declared_noise", "parameters",
         "measurement_frames", "targets", "effects", "validity")
-#: The entry-point group of the deliveries (``[project.entry-points."parallel_calib.deliveries"]``).
-DELIVERY_GROUP = "parallel_calib.deliveries"
-#: The deliveries registered: ``{name: deliver(cal, out, *, overwrite=False) -> the delivery's report}``.
-DELIVERIES: dict[str, Callable] = {}
-#: Entry points of :data:`DELIVERY_GROUP` already loaded (each once).
-LOADED_ENTRY_POINTS: set = set()
+#: The package holding the one registry of deliveries, looked up by name when a delivery is asked
+#: for (:func:`delivery_registry`): the one name of pipeline in calib (tests/test_architecture.py).
+DELIVERY_PACKAGE = "pipeline.deliveries"
 
 
 class CalibrationFileError(ValueError):
     """A calibration file cannot be used; the message names the file and the key."""
 
 
-def register_delivery(name: str, fn: Callable) -> None:
-    """Register ``fn`` as the delivery ``name`` (``cal.deliver(name, out)``): called as
-    ``fn(cal, out, overwrite=False)``, it writes ``cal`` to ``out`` and returns what it wrote.
-    A name registered again is replaced (a module imported twice registers the same).
+def delivery_registry():
+    """The package of the deliveries' registry (:data:`DELIVERY_PACKAGE`), imported by name: its
+    ``DELIVERIES`` and ``deliver_calibration(cal, to, out, overwrite=...)``.
 
     Raises:
-        ValueError: ``name`` is not a non-empty string or ``fn`` is not callable.
+        ValueError: pipeline, which holds the deliveries, is not installed (one line saying so).
     """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"a delivery's name must be a non-empty string, got {name!r}")
-    if not callable(fn):
-        raise ValueError(f"delivery {name!r}: expected a callable, got {type(fn).__name__}")
-    DELIVERIES[name] = fn
-
-
-def _load_entry_points() -> None:
-    """Load the deliveries' entry points not loaded yet: loading one imports its module (which may
-    register deliveries of its own); a callable is registered under the entry point's name unless
-    that name is registered already."""
-    for ep in entry_points(group=DELIVERY_GROUP):
-        if ep.name in LOADED_ENTRY_POINTS:
-            continue
-        LOADED_ENTRY_POINTS.add(ep.name)
-        obj = ep.load()
-        if callable(obj) and ep.name not in DELIVERIES:
-            register_delivery(ep.name, obj)
-
-
-def delivery(name: str) -> Callable:
-    """The delivery registered as ``name`` (:data:`DELIVERIES`), its entry points loaded first if
-    it is not registered yet.
-
-    Raises:
-        ValueError: no delivery ``name`` (the message names it and the ones installed).
-    """
-    if name not in DELIVERIES:
-        _load_entry_points()
-    if name not in DELIVERIES:
-        installed = ", ".join(sorted(DELIVERIES)) or "none"
-        raise ValueError(f"no delivery {name!r} is registered (installed: {installed}); a package registers its "
-                         f"deliveries with calib.calibration.register_delivery when imported, or in the entry points "
-                         f"of {DELIVERY_GROUP!r} (pipeline's: pip install -e .)")
-    return DELIVERIES[name]
+    try:
+        return import_module(DELIVERY_PACKAGE)
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("pipeline", DELIVERY_PACKAGE):
+            raise
+        raise ValueError(f"the deliveries of a calibration are written by {DELIVERY_PACKAGE}, which is not "
+                         "installed (calib alone computes commands and predictions; pip install parallel-calib "
+                         "installs both)") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,15 +272,18 @@ class Calibration:
     # ------------------------------------------------------------------ deliveries
 
     def deliver(self, to: str, out, *, overwrite: bool = False):
-        """Write the delivery ``to`` (a name in :data:`DELIVERIES`: ``linuxcnc``, ``mjcf``,
-        ``report``) of the calibration to ``out``; returns the delivery's report.
+        """Write the delivery ``to`` (a name in ``pipeline.deliveries.DELIVERIES``, the registry
+        ``python -m pipeline.export`` offers: ``linuxcnc``, ``mjcf``, ``report``) of the
+        calibration to ``out``; returns the delivery's report (the files ``pipeline.export --to
+        TO`` writes of the file it was read from).
 
         Raises:
-            ValueError: no delivery ``to`` is registered (names it and the ones installed), or
-                the delivery refuses the calibration (a robot it has no kinematics for).
+            ValueError: no delivery ``to`` is registered (names it and the ones installed), the
+                delivery refuses the calibration (a robot it does not accept, in its one line), or
+                pipeline is not installed.
             FileExistsError: an output exists and ``overwrite`` is False.
         """
-        return delivery(to)(self, out, overwrite=overwrite)
+        return delivery_registry().deliver_calibration(self, to, out, overwrite=overwrite)
 
     def to_linuxcnc(self, folder, *, overwrite: bool = False):
         """The LinuxCNC configuration in ``folder`` (the files ``python -m pipeline.export --to

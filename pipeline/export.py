@@ -1,10 +1,10 @@
 """``python -m pipeline.export --calibration C.calibration.json --to FORMAT --out DIR``: a
 calibration delivered where it is used.
 
-A thin front end of :func:`pipeline.workflows.export.run_export`; the formats are the keys of
-:data:`pipeline.workflows.export.EXPORTERS`. ``--to linuxcnc``: the robot's LinuxCNC kinematics
-with its identified parameters (HAL file), an INI fragment, one compensation file per joint, and
-a NOTES.md; what LinuxCNC cannot hold is named on stderr with the accuracy given up. A bad file or
+A thin front end of :func:`pipeline.workflows.export.run_export`; the formats are the deliveries
+of :data:`pipeline.deliveries.DELIVERIES`, the one registry ``Calibration.deliver`` uses too.
+``--to linuxcnc``: the robot's LinuxCNC kinematics with its identified parameters (HAL file), an
+INI fragment, one compensation file per joint, and a NOTES.md; what LinuxCNC cannot hold is named on stderr with the accuracy given up. A bad file or
 flag, or a robot the format has no kinematics for: exit 2 and one line.
 """
 
@@ -15,7 +15,8 @@ import sys
 from pathlib import Path
 
 from pipeline.cli import ArgumentParser, cli_main
-from pipeline.workflows.export import EXPORTERS, ExportReport, ExportSettings, run_export
+from pipeline.deliveries import DELIVERIES
+from pipeline.workflows.export import ExportReport, ExportSettings, run_export
 
 __all__ = ["build_parser", "settings_from_args", "run", "main"]
 
@@ -26,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "tables.")
     p.add_argument("--calibration", required=True, help="calibration file (NAME.calibration.json, written by "
                                                           "pipeline.run or pipeline.discover)")
-    p.add_argument("--to", required=True, choices=list(EXPORTERS), help="the format to write")
+    p.add_argument("--to", required=True, choices=list(DELIVERIES), help="the format to write")
     p.add_argument("--out", required=True, help="where to write (linuxcnc: a folder, created if missing; mjcf: the .xml file)")
     p.add_argument("--summary", default=None, type=Path,
                    help="report: the summary JSON of the run that wrote the calibration (--summary-json): its "

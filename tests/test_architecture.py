@@ -17,6 +17,7 @@ PACKAGES = ("calib", "mjcf", "pipeline")
 LAYERS = (
     ("commands",),
     ("pipeline.workflows",),
+    ("pipeline.deliveries",),
     ("pipeline.views", "pipeline.simulation"),
     ("pipeline.formats", "pipeline.execution"),
     ("mjcf",),
@@ -117,13 +118,61 @@ def test_the_checks_see_a_planted_upward_import_and_circle(tmp_path):
 
 
 @pytest.mark.parametrize("package", ["pipeline.formats", "pipeline.views", "pipeline.simulation",
-                                     "pipeline.execution", "pipeline.workflows"])
+                                     "pipeline.execution", "pipeline.workflows", "pipeline.deliveries"])
 def test_every_room_exports_what_it_names(package):
     import importlib
 
     mod = importlib.import_module(package)
     for name in mod.__all__:
         assert getattr(mod, name) is not None, f"{package}.{name}"
+
+
+def imported_by_name(path: Path) -> set[str]:
+    """What a module hands ``import_module`` / ``__import__`` (imports made at call time, which no
+    ``import`` statement shows): a module's name, from a string or a module-level constant;
+    ``"relative"`` for a name inside its own package (an f-string starting with ``.`` or
+    ``__package__``); ``"unread"`` for anything else."""
+    tree = ast.parse(path.read_text())
+    constants = {t.id: node.value.value for node in tree.body if isinstance(node, ast.Assign)
+                 and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)
+                 for t in node.targets if isinstance(t, ast.Name)}
+
+    def named(arg) -> str:
+        if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+            return arg.value
+        if isinstance(arg, ast.Name) and arg.id in constants:
+            return constants[arg.id]
+        if isinstance(arg, ast.JoinedStr) and arg.values:
+            first = arg.values[0]
+            if isinstance(first, ast.Constant) and str(first.value).startswith("."):
+                return "relative"
+            if isinstance(first, ast.FormattedValue) and isinstance(first.value, ast.Name) \
+                    and first.value.id in ("__package__", "__name__"):
+                return "relative"
+        return "unread"
+
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call) and node.args
+             and ((isinstance(node.func, ast.Name) and node.func.id in ("import_module", "__import__"))
+                  or (isinstance(node.func, ast.Attribute) and node.func.attr == "import_module"))]
+    return {named(call.args[0]) for call in calls}
+
+
+#: The one arrow against the layers, made by name at call time: ``Calibration.deliver`` looks up
+#: the deliveries' one registry (calib.calibration.DELIVERY_PACKAGE; docs/architecture.md).
+NAMED_UPWARD = {("calib.calibration", "pipeline.deliveries")}
+
+
+def test_the_only_import_by_name_against_the_layers_is_the_registry_of_deliveries():
+    """An import made by name at call time counts as an arrow too: every one in the project is
+    read (none left unread), and the only one against the layers is calib.calibration's lookup
+    of the registry of deliveries (made when a delivery is asked for, calib loaded by then)."""
+    by_name = {(a, b) for a, p in project_modules().items() for b in imported_by_name(p) if b != "relative"}
+    assert not {a for a, b in by_name if b == "unread"}, "imports by name the check cannot read"
+    upward = {(a, b) for a, b in by_name if layer_of(b) < layer_of(a)}
+    assert upward == NAMED_UPWARD
+    from calib.calibration import DELIVERY_PACKAGE
+
+    assert ("calib.calibration", DELIVERY_PACKAGE) in by_name  # the check sees the arrow it allows
 
 
 @pytest.mark.slow

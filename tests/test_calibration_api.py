@@ -2,8 +2,8 @@
 round trip, other versions refused), ``cal.commands`` (the numbers ``python -m
 pipeline.compensate`` writes), ``cal.predict`` (where the identified machine goes: the commands
 land on their targets; a dead band checked by hand), the deliveries (the files ``python -m
-pipeline.export`` writes; the registry and its entry points), and docs/api.md's example run as
-written.
+pipeline.export`` writes, through the one registry of deliveries; calib without pipeline), and
+docs/api.md's example run as written.
 
 The calibrations are made here (identified errors and effects drawn by the test, not fitted by the
 product): a geometry off nominal, a dead band per joint, an actuator scale per joint, a
@@ -19,10 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import pipeline.workflows.export  # noqa: F401  (registers pipeline's deliveries; pip install -e . gives its entry points)
-from calib import calibration as calibration_module
-from calib.calibration import (CALIBRATION_VERSION, DELIVERY_GROUP, Calibration, CalibrationFileError, delivery,
-                               validity_domain)
+from calib.calibration import CALIBRATION_VERSION, DELIVERY_PACKAGE, Calibration, CalibrationFileError, validity_domain
 from calib.compensation import COMPENSATION_TOLERANCE
 from calib.effects import EFFECTS, EffectData
 from calib.effects.compliance import LoadedCompliance
@@ -345,43 +342,23 @@ def test_a_linuxcnc_export_of_a_calibration_made_in_memory_asks_for_its_file(tmp
     assert not (tmp_path / "out").exists()
 
 
-@pytest.fixture
-def empty_registry(monkeypatch):
-    """The registry as a fresh process has it: nothing registered, no entry point loaded."""
-    monkeypatch.setattr(calibration_module, "DELIVERIES", {})
-    monkeypatch.setattr(calibration_module, "LOADED_ENTRY_POINTS", set())
-
-
-def test_a_delivery_not_registered_is_refused_naming_it_and_the_installed_ones(empty_registry, monkeypatch):
-    monkeypatch.setattr(calibration_module, "entry_points", lambda group: [])
+def test_a_delivery_not_registered_is_refused_naming_it_and_the_registered_ones(tmp_path):
     cal = made_calibration(default_robot("delta"))
-    calibration_module.register_delivery("mjcf", lambda cal, out, overwrite=False: out)
-    with pytest.raises(ValueError, match=r"no delivery 'report' is registered \(installed: mjcf\)"):
-        cal.report("lab.html")
-    with pytest.raises(ValueError, match=r"no delivery 'pdf' is registered \(installed: mjcf\)"):
-        cal.deliver("pdf", "x.pdf")
-    assert cal.to_mjcf("m.xml") == "m.xml"
-    with pytest.raises(ValueError, match="callable"):
-        calibration_module.register_delivery("x", 3)
+    with pytest.raises(ValueError, match=r"no delivery 'pdf' is registered \(installed: linuxcnc, mjcf, report\)"):
+        cal.deliver("pdf", tmp_path / "x.pdf")
+    assert list(tmp_path.iterdir()) == []
 
 
-def test_the_entry_points_in_pyproject_give_pipelines_deliveries(empty_registry, tmp_path, monkeypatch):
-    """pyproject.toml's entry points, installed as pip installs them (a distribution's
-    entry_points.txt on the path), are found by name without an import of pipeline by calib."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
-    from pipeline.workflows.export import deliver_linuxcnc, deliver_mjcf
-
-    eps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"][DELIVERY_GROUP]
-    dist = tmp_path / "calib_delivery_check-0.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: calib-delivery-check\nVersion: 0\n")
-    (dist / "entry_points.txt").write_text(f"[{DELIVERY_GROUP}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items()))
-    monkeypatch.setattr(sys, "path", [str(tmp_path), *sys.path])
-    assert delivery("linuxcnc") is deliver_linuxcnc and delivery("mjcf") is deliver_mjcf
-    assert {"linuxcnc", "mjcf"} <= set(calibration_module.DELIVERIES)
+def test_without_pipeline_a_delivery_says_so_in_one_line(tmp_path, monkeypatch):
+    """calib alone (the registry's package not importable, as where pipeline is not installed):
+    the commands work, a delivery is refused in one line naming what is missing."""
+    cal = made_calibration(default_robot("hexapod"))
+    monkeypatch.setitem(sys.modules, DELIVERY_PACKAGE, None)  # an import of it fails as a missing one does
+    with pytest.raises(ValueError, match=r"written by pipeline\.deliveries, which is not installed") as refused:
+        cal.to_mjcf(tmp_path / "m.xml")
+    assert "\n" not in str(refused.value) and list(tmp_path.iterdir()) == []
+    targets, t_s, payload = targets_of(cal, 3)
+    assert cal.commands(targets, t_s=t_s, payload_kg=payload).shape == (3, cal.robot.n_chains)
 
 
 @pytest.mark.slow

@@ -357,10 +357,11 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_accuracy_given_up(tmp_path,
 
 
 def test_the_library_function_exports_from_python(exported, tmp_path):
-    from pipeline.workflows import EXPORTERS, ExportSettings, run_export
+    from pipeline.deliveries import DELIVERIES
+    from pipeline.workflows import ExportSettings, run_export
 
     report = run_export(ExportSettings(exported["calibration"], "linuxcnc", tmp_path / "py"))
-    assert "linuxcnc" in EXPORTERS and report.robot == "hexapod" and report.messages == []
+    assert "linuxcnc" in DELIVERIES and report.robot == "hexapod" and report.messages == []
     assert sorted(report.paths) == sorted(p.name for p in exported["dir"].iterdir())
     for name in report.paths:  # the same calibration, the same files (but the record's path)
         if name != "export.json":

@@ -14,6 +14,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "convert": ("ConvertSettings", "ConvertResult", "run_convert"),
     "compensate": ("CompensateSettings", "CompensationReport", "run_compensation"),
     "rereference": ("RereferenceSettings", "RereferenceResult", "run_rereference"),
-    "export": ("ExportSettings", "ExportReport", "run_export", "EXPORTERS"),
+    "export": ("ExportSettings", "ExportReport", "run_export"),
     "fleet": ("run_fleet", "FleetReport", "calibrate_machine", "fleet_inputs", "input_hash"),
 })
