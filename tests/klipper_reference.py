@@ -157,25 +157,36 @@ class Measurements:
     distance_steps: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
 
-def calibration_error(p: DeltaParams, m: Measurements) -> float:
-    """DELTA_CALIBRATE's error: the squared height errors of the touches and manual heights, times
-    ``len(distances) / (MEASURE_WEIGHT * len(touches))`` when there are distances, plus the squared
-    distance errors."""
+def calibration_residuals(p: DeltaParams, m: Measurements) -> np.ndarray:
+    """The residuals whose squares DELTA_CALIBRATE sums: the height errors of the manual heights and
+    touches, times the square root of ``len(distances) / (MEASURE_WEIGHT * len(touches))`` when
+    there are distances (1 without), then the distance errors."""
     z = np.concatenate([m.manual_z, m.touch_z])
     steps = np.concatenate([m.manual_steps, m.touch_steps]).reshape(-1, 3)
-    heights = np.sum((position_from_stable(p, steps)[:, 2] - z) ** 2)
+    heights = position_from_stable(p, steps)[:, 2] - z
     if not len(m.distances):
-        return float(heights)
+        return heights
     ends = position_from_stable(p, m.distance_steps)
     lengths = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=-1)
     weight = len(m.distances) / (MEASURE_WEIGHT * len(m.touch_z))
-    return float(weight * heights + np.sum((lengths - m.distances) ** 2))
+    return np.concatenate([np.sqrt(weight) * heights, lengths - m.distances])
+
+
+def calibration_error(p: DeltaParams, m: Measurements) -> float:
+    """DELTA_CALIBRATE's error: the sum of the squared :func:`calibration_residuals`."""
+    return float(np.sum(calibration_residuals(p, m) ** 2))
+
+
+def adjusted_params(m: Measurements) -> tuple:
+    """The parameters Klipper's fit adjusts: radius, angles a and b, the three endstops, and the
+    three arms when there are distances."""
+    return CALIBRATE_PARAMS + (EXTENDED_PARAMS if len(m.distances) else ())
 
 
 def delta_calibrate(p: DeltaParams, m: Measurements) -> tuple[DeltaParams, int]:
-    """Klipper's fit from ``p``: radius, angles a and b, the three endstops, and the three arms when
-    there are distances. The parameters found and the descent's rounds."""
-    names = CALIBRATE_PARAMS + (EXTENDED_PARAMS if len(m.distances) else ())
+    """Klipper's fit from ``p`` (:func:`adjusted_params`): the parameters found and the descent's
+    rounds."""
+    names = adjusted_params(m)
     found, rounds = coordinate_descent(names, p.as_dict(), lambda d: calibration_error(DeltaParams.from_dict(d), m))
     return DeltaParams.from_dict(found), rounds
 
