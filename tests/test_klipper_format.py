@@ -16,34 +16,8 @@ LINEAR = DATA / "delta_printer.cfg"
 ROTARY = DATA / "rotary_delta_printer.cfg"
 
 #: A small linear Delta config every refusal below changes in one place.
-BASE = """[printer]
-kinematics: delta
-delta_radius: 140
-
-[stepper_a]
-microsteps: 16
-rotation_distance: 40
-arm_length: 250
-position_endstop: 300
-
-[stepper_b]
-microsteps: 16
-rotation_distance: 40
-
-[stepper_c]
-microsteps: 16
-rotation_distance: 40
-
-[delta_calibrate]
-radius: 60
-height0: 0.2
-height0_pos: 1000,1000,1000
-height1: 0.2
-height1_pos: 1100,1000,900
-distance0: 60.5
-distance0_pos1: 1000,1000,1000
-distance0_pos2: 1200,1000,800
-"""
+SMALL = DATA / "small_delta.cfg"
+BASE = SMALL.read_text()
 
 END = "distance0_pos2: 1200,1000,800\n"
 
@@ -235,16 +209,21 @@ REFUSALS = [
 ]
 
 
-@pytest.mark.parametrize("old, new, words", [r[1:] for r in REFUSALS], ids=[r[0] for r in REFUSALS])
-def test_every_refusal_is_one_line_naming_the_file_and_what_is_wrong(tmp_path, old, new, words):
-    assert old in BASE
-    path = written(tmp_path, BASE.replace(old, new, 1))
+def assert_refused(tmp_path, base, old, new, words):
+    """``base`` with ``old`` replaced by ``new`` is refused in one line naming the file, with ``words``."""
+    assert old in base
+    path = written(tmp_path, base.replace(old, new, 1))
     with pytest.raises(KlipperError) as caught:
         read_klipper_printer(path)
     message = str(caught.value)
     assert "\n" not in message and message.startswith(str(path))
     for w in words:
         assert w in message
+
+
+@pytest.mark.parametrize("old, new, words", [r[1:] for r in REFUSALS], ids=[r[0] for r in REFUSALS])
+def test_every_refusal_is_one_line_naming_the_file_and_what_is_wrong(tmp_path, old, new, words):
+    assert_refused(tmp_path, BASE, old, new, words)
 
 
 ROTARY_REFUSALS = [
@@ -259,14 +238,7 @@ ROTARY_REFUSALS = [
 
 @pytest.mark.parametrize("old, new, words", [r[1:] for r in ROTARY_REFUSALS], ids=[r[0] for r in ROTARY_REFUSALS])
 def test_every_rotary_refusal_is_one_line(tmp_path, old, new, words):
-    assert old in ROTARY_BASE
-    path = written(tmp_path, ROTARY_BASE.replace(old, new, 1))
-    with pytest.raises(KlipperError) as caught:
-        read_klipper_printer(path)
-    message = str(caught.value)
-    assert "\n" not in message and message.startswith(str(path))
-    for w in words:
-        assert w in message
+    assert_refused(tmp_path, ROTARY_BASE, old, new, words)
 
 
 def test_the_rotary_base_is_read(tmp_path):
@@ -281,3 +253,13 @@ def test_a_file_that_is_not_there_or_not_text_is_refused_by_name(tmp_path, fixtu
     Path(binary).write_bytes(fixture.read_bytes() + b"\0")
     with pytest.raises(KlipperError, match="NUL"):
         read_klipper_printer(binary)
+
+
+@pytest.mark.parametrize("fixture", [LINEAR, ROTARY], ids=["delta", "rotary_delta"])
+def test_windows_line_ends_and_a_byte_order_mark_read_the_same(tmp_path, fixture):
+    path = tmp_path / fixture.name
+    path.write_bytes(b"\xef\xbb\xbf" + fixture.read_bytes().replace(b"\n", b"\r\n"))
+    a, b = read_klipper_printer(path), read_klipper_printer(fixture)
+    np.testing.assert_array_equal(a.machine.angles_rad, b.machine.angles_rad)
+    np.testing.assert_array_equal(a.machine.endstops_mm, b.machine.endstops_mm)
+    np.testing.assert_array_equal(a.probe.touch_steps, b.probe.touch_steps)

@@ -2,6 +2,7 @@
 and DELTA_CALIBRATE fit the workbench is compared against: checked on its own."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,27 +164,9 @@ def test_the_distances_weigh_the_heights_by_klipper_s_measure_weight():
     np.testing.assert_allclose(ratio, math.sqrt(len(m.distances) / (kr.MEASURE_WEIGHT * len(m.touch_z))), rtol=1e-14)
 
 
-REGULAR_CONFIG = """[printer]
-kinematics: delta
-delta_radius: 140
-
-[stepper_a]
-microsteps: 16
-rotation_distance: 40
-arm_length: 250
-position_endstop: 300
-
-[stepper_b]
-microsteps: 16
-rotation_distance: 40
-
-[stepper_c]
-microsteps: 16
-rotation_distance: 40
-
-[delta_calibrate]
-radius: 80
-"""
+#: A printer's hand-written config (tests/data/klipper/small_delta.cfg) and its own [delta_calibrate] radius.
+REGULAR_CONFIG = ((Path(__file__).resolve().parent / "data" / "klipper" / "small_delta.cfg").read_text()
+                  .partition("[delta_calibrate]")[0] + "[delta_calibrate]\nradius: 80\n")
 
 
 def test_the_written_block_is_read_back_by_the_format_reader_as_written(tmp_path):
