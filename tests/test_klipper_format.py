@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.formats.klipper import (SAVE_CONFIG_HEADER, KlipperDelta, KlipperError, KlipperRotaryDelta,
-                                      parse_klipper_text, read_klipper_config, read_klipper_printer)
+                                      klipper_printer, parse_klipper_text, read_klipper_config, read_klipper_printer)
 
 DATA = Path(__file__).resolve().parent / "data" / "klipper"
 LINEAR = DATA / "delta_printer.cfg"
@@ -144,13 +144,7 @@ def test_a_config_without_delta_calibrate_has_no_probe_data(tmp_path):
 
 def test_parse_klipper_text_names_the_path_it_is_given():
     with pytest.raises(KlipperError, match=r"^somewhere\.cfg: no \[printer\] section"):
-        read_klipper_printer_text("[stepper_a]\n", "somewhere.cfg")
-
-
-def read_klipper_printer_text(text, name):
-    from pipeline.formats.klipper import klipper_printer
-
-    return klipper_printer(parse_klipper_text(text, name))
+        klipper_printer(parse_klipper_text("[stepper_a]\n", "somewhere.cfg"))
 
 
 #: (what is wrong, the base config's text replaced, its replacement, the message's words).

@@ -197,7 +197,7 @@ def resolve_includes(numbered: list, path: Path, visited: frozenset) -> list:
     return out
 
 
-def parse_lines(lines: list, path: Path) -> dict:
+def parse_lines(lines: list) -> dict:
     """``{section: {key: Entry}}`` of ``(where, line)`` pairs, later keys overriding earlier ones."""
     sections: dict = {}
     section = key = None
@@ -233,7 +233,7 @@ def parse_klipper_text(text: str, path) -> KlipperConfig:
     regular, block = split_save_config(text, path)
     lines = resolve_includes(regular, path, frozenset({path.resolve()}))
     lines += [(f"{path}: line {n} (SAVE_CONFIG)", line) for n, line in block]
-    return KlipperConfig(path, parse_lines(lines, path))
+    return KlipperConfig(path, parse_lines(lines))
 
 
 def read_klipper_config(path) -> KlipperConfig:
