@@ -1,6 +1,6 @@
 """File formats: the recording (CSV + JSON sidecar), the checks a recording passes before
 anything is fitted to it, lab exports turned into recordings, command files, the report (its
-model, its words, its HTML), the LinuxCNC files, and safe writing of every output (atomic files,
+model, its words, its HTML), the LinuxCNC files, Klipper's printer.cfg, and safe writing of every output (atomic files,
 sets published together, locks on names).
 
 The names below are imported from their modules when first used: a command loads the formats
@@ -22,6 +22,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "lab_export": ("LabExportError", "LabMap", "convert_lab_files", "joint_readings", "read_map",
                    "session_joint_mapping"),
     "lab_checks": ("MapReading", "lab_checks", "map_readings"),
+    "klipper": ("KlipperConfig", "KlipperDelta", "KlipperError", "KlipperPrinter", "KlipperRotaryDelta", "ProbeData",
+                "klipper_printer", "parse_klipper_text", "read_klipper_config", "read_klipper_printer"),
     "outputs": ("FileLock", "LockHeld", "NameReservation", "OutputError", "ResultSet", "atomic_write",
                 "check_outputs", "forget_created_folders", "make_folder", "one_line", "output_folder", "publish",
                 "remove_dead_writers_temporaries", "remove_stale_temporaries", "take_back_created_folders",
