@@ -365,6 +365,14 @@ def calibrate(robot: Robot, joints, measured, noise: SensorNoise, *, measurement
         return CalibrationOutcome(calibration=None, identification=ident, data=data, heldout=None,
                                   heldout_with_flagged=None, heldout_without_flagged=None, crossvalidation=None,
                                   verdict=None, warnings=tuple(warnings), seconds=seconds)
+    return assessed(data, ident, options, heldout, diagnosis, warnings, seconds)
+
+
+def assessed(data: CalibrationData, ident: Identification, options: IdentificationOptions, heldout: Callable | None,
+             diagnosis, warnings: list, seconds: dict) -> CalibrationOutcome:
+    """:func:`calibrate`'s steps after the identification: the held-out errors (of the fit used, and
+    of the fits with and without the flagged rows), the cross-validation where nothing is held out,
+    the verdict and the calibration; ``seconds`` gets each step's wall time."""
     t1 = time.perf_counter()
     errors = heldout if heldout is not None else (lambda theta: validation_errors(data, ident, theta))
     held = errors(ident.result.theta)
@@ -404,6 +412,29 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
     Raises:
         TypeError, ValueError: naming the argument that is wrong.
     """
+    _check_scalars(robot, noise, method, solver, heldout, seed, where)
+    per, joints, measured, sessions, names, frames_of = _checked_groups(robot, joints, measured, measurement, sessions,
+                                                                        session_names, session_frames)
+    n = joints.shape[0]
+    rows = np.arange(n) if rows is None else _int_array(rows, "rows", n)
+    t_s = np.zeros(n) if t_s is None else as_array(t_s, "t_s", (n,))
+    v_joints, v_measured, v_sessions, v_rows = _checked_validation(robot, per, measured.shape[1], len(names), rows,
+                                                                   validation_joints, validation_measured,
+                                                                   validation_sessions, validation_rows, heldout)
+    tolerance, declared, tolerance_source = _checked_tolerance(robot, tolerance, tolerance_declared, tolerance_source)
+    data = CalibrationData(robot=robot, noise=noise, joints=joints, measured=measured, rows=rows, t_s=t_s,
+                           measurement=per, sessions=sessions, session_names=names, session_frames=frames_of,
+                           validation_joints=v_joints, validation_measured=v_measured, validation_sessions=v_sessions,
+                           validation_rows=v_rows, tolerance=tolerance, prior=tolerance if prior else None,
+                           tolerance_declared=declared, tolerance_source=str(tolerance_source), where=where,
+                           geometry_source=geometry_source)
+    options = IdentificationOptions(method=method, solver=solver, weighted=bool(weighted),
+                                    keep_outliers=bool(keep_outliers), search_gross_rows=bool(search_gross_rows),
+                                    cross_validate=bool(cross_validate), seed=int(seed))
+    return data, options
+
+
+def _check_scalars(robot, noise, method, solver, heldout, seed, where) -> None:
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
     if not isinstance(noise, SensorNoise):
@@ -418,7 +449,10 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
         raise ValueError(f"seed must be an integer, got {seed!r}")
     if not isinstance(where, str):
         raise ValueError(f"where must be a string, got {type(where).__name__}")
-    # frame groups
+
+
+def _checked_groups(robot, joints, measured, measurement, sessions, session_names, session_frames) -> tuple:
+    """``(per-group settings or None, joints, measured, sessions, names, session frames)`` checked."""
     per = None
     if measurement is not None:
         per = (measurement,) if isinstance(measurement, MeasurementSettings) else tuple(measurement)
@@ -452,9 +486,12 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
     if bad:
         raise ValueError(f"session_frames must map session names to a frame group 0..{n_groups - 1} or BASE_FRAME "
                          f"({BASE_FRAME}), got {bad}")
-    rows = np.arange(n) if rows is None else _int_array(rows, "rows", n)
-    t_s = np.zeros(n) if t_s is None else as_array(t_s, "t_s", (n,))
-    # validation rows
+    return per, joints, measured, sessions, names, frames_of
+
+
+def _checked_validation(robot, per, width: int, n_groups: int, rows, validation_joints, validation_measured,
+                        validation_sessions, validation_rows, heldout) -> tuple:
+    """``(joints, measured, frame groups, row numbers)`` of the validation rows, checked."""
     if (validation_joints is None) != (validation_measured is None):
         raise ValueError("validation_joints and validation_measured must be given together")
     if validation_joints is None:
@@ -474,7 +511,11 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
         raise ValueError("validation_sessions: BASE_FRAME needs measurement (every row is in the base frame without)")
     v_rows = np.arange(m) + int(rows.max()) + 1 if validation_rows is None else \
         _int_array(validation_rows, "validation_rows", m)
-    # tolerance
+    return v_joints, v_measured, v_sessions, v_rows
+
+
+def _checked_tolerance(robot, tolerance, tolerance_declared, tolerance_source) -> tuple:
+    """``(tolerance, declared, its source in words)`` checked (default the robot's)."""
     declared = tolerance is not None if tolerance_declared is None else bool(tolerance_declared)
     if tolerance is None:
         tolerance = ParameterPrior.default(robot)
@@ -485,16 +526,7 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
                          f"{tolerance.std.shape[0]}")
     if tolerance_source is None:
         tolerance_source = "the tolerance declared" if declared else f"the {robot.name}'s default tolerance"
-    data = CalibrationData(robot=robot, noise=noise, joints=joints, measured=measured, rows=rows, t_s=t_s,
-                           measurement=per, sessions=sessions, session_names=names, session_frames=frames_of,
-                           validation_joints=v_joints, validation_measured=v_measured, validation_sessions=v_sessions,
-                           validation_rows=v_rows, tolerance=tolerance, prior=tolerance if prior else None,
-                           tolerance_declared=declared, tolerance_source=str(tolerance_source), where=where,
-                           geometry_source=geometry_source)
-    options = IdentificationOptions(method=method, solver=solver, weighted=bool(weighted),
-                                    keep_outliers=bool(keep_outliers), search_gross_rows=bool(search_gross_rows),
-                                    cross_validate=bool(cross_validate), seed=int(seed))
-    return data, options
+    return tolerance, declared, tolerance_source
 
 
 # --------------------------------------------------------------------------- identification

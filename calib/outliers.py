@@ -158,6 +158,44 @@ def _leave_one_out(Jr, gram_all, r0: np.ndarray, kept: np.ndarray, last):
     return r, factors.solve(r), last
 
 
+def _backward_search(Jr, gram_all, r0, kept: np.ndarray, last, removed: list, most: int, thr: float, d: int, p: int,
+                     at_once: bool) -> tuple:
+    """The backward search of :func:`find_outliers` on the model linearised at one fit: rows above
+    the threshold removed (the worst first, one at a time or all at once), ``kept`` and ``removed``
+    updated in place; ``(r, dw, stat, last, grown, misfit)`` of the last pass."""
+    grown = misfit = False
+    while True:
+        r, dw, last = _leave_one_out(Jr, gram_all, r0, kept, last)
+        stat = np.sum(r * dw, axis=1)
+        cand = np.flatnonzero(kept)
+        if at_once:
+            over = cand[stat[cand] > thr]
+            if over.size == 0:
+                break
+            if len(removed) == most:
+                misfit = True
+                break
+            over = over[np.argsort(-stat[over], kind="stable")][:most - len(removed)]  # the worst first
+            if (cand.size - over.size) * d <= p + d:
+                break
+            removed.extend(int(i) for i in over)
+            kept[over] = False
+            grown = True
+            continue
+        worst = int(cand[np.argmax(stat[cand])])
+        if stat[worst] <= thr:
+            break
+        if len(removed) == most:
+            misfit = True
+            break
+        if (cand.size - 1) * d <= p + d:
+            break
+        removed.append(worst)
+        kept[worst] = False
+        grown = True
+    return r, dw, stat, last, grown, misfit
+
+
 def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=None,
                   alpha: float = 1e-3, max_fraction: float = MISFIT_FRACTION) -> OutlierReport:
     """Flag measured poses inconsistent with the rest (closed-form leave-one-out, chi-square).
@@ -218,36 +256,8 @@ def find_outliers(robot: Robot, joints, measured, noise: SensorNoise, *, free=No
             else:
                 Jr = J if np.array_equal(idx, np.arange(J.shape[2])) else np.take(J, idx, axis=2)
         # Backward search on the model linearised at this fit (_leave_one_out).
-        grown = False
-        while True:
-            r, dw, last = _leave_one_out(Jr, gram_all, r0, kept, last)
-            stat = np.sum(r * dw, axis=1)
-            cand = np.flatnonzero(kept)
-            if at_once:
-                over = cand[stat[cand] > thr]
-                if over.size == 0:
-                    break
-                if len(removed) == most:
-                    misfit = True
-                    break
-                over = over[np.argsort(-stat[over], kind="stable")][:most - len(removed)]  # the worst first
-                if (cand.size - over.size) * d <= p + d:
-                    break
-                removed.extend(int(i) for i in over)
-                kept[over] = False
-                grown = True
-                continue
-            worst = int(cand[np.argmax(stat[cand])])
-            if stat[worst] <= thr:
-                break
-            if len(removed) == most:
-                misfit = True
-                break
-            if (cand.size - 1) * d <= p + d:
-                break
-            removed.append(worst)
-            kept[worst] = False
-            grown = True
+        r, dw, stat, last, grown, misfit = _backward_search(Jr, gram_all, r0, kept, last, removed, most, thr, d, p,
+                                                            at_once)
         if misfit or not grown:
             break
     deleted = np.where(kept[:, None], dw, r) * std

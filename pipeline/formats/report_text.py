@@ -409,6 +409,44 @@ def _discovery_lines(r: Report) -> list[str]:
                      f"({'consistent with' if t.p_value > t.alpha else 'NOT explained by'} the declared noise by this "
                      f"omnibus test).")
     lines += ["Where the geometry-only mismatch is: " + w for w in x.located]
+    lines += _flagged_discovery_lines(fl)
+    lines += _named_effect_lines(r)
+    for a in x.aliases:
+        if a.nested:
+            lines.append(f"Cannot tell apart on this recording: {a.named} and {a.rival}, which contains it (its extra "
+                         f"parameters gain {a.delta_bic:.1f} BIC, less than {_f(a.nested_min_delta_bic, '.0f')}); the "
+                         f"simpler {a.named} fitted.")
+        else:
+            lines.append(f"Cannot tell apart on this recording: {a.named} and {a.rival} (evidence within "
+                         f"{a.delta_bic:.1f} BIC, regressor correlation {_f(a.correlation, '.2f')}); {a.named} fitted.")
+    lines += _separation_lines(x)
+    lines += _law_lines(x.law)
+    words = search_words(x.search)
+    if words is not None:
+        lines.append(f"Search: {words}.")
+    lines += _discovery_heldout_lines(h, x.resimulation)
+    cv = [row for row in h.figures if row.crossvalidated]
+    if cv and h.crossvalidation is not None:
+        b = cv[0].before
+        lines.append(f"Cross-validated prediction error ({h.crossvalidation.scheme}, {h.crossvalidation.model}): position "
+                     f"RMS {_f(b.rms, '.3f', 1e3)} um, mean {_f(b.mean, '.3f', 1e3)} um, max {_f(b.max, '.3f', 1e3)} um")
+    imp = r.implausible
+    lines += [f"Implausible with the geometry alone, back within tolerance with the effects: {w}"
+              for w in imp.words[:DISCOVERY_IMPLAUSIBLE_LINES]]
+    if len(imp.words) > DISCOVERY_IMPLAUSIBLE_LINES:
+        lines.append(f"... and {len(imp.words) - DISCOVERY_IMPLAUSIBLE_LINES} more parameters (summary JSON: "
+                     "implausible_parameters)")
+    lines += [f"Still implausible with the effects: {w}" for w in imp.with_effects]
+    if r.outputs.law_asked:
+        lines.append(f"kept the proposed law in {r.outputs.law_kept}" if r.outputs.law_kept
+                     else "no law proposed: nothing kept (--law)")
+    lines += [f"wrote {path}" for _, path in r.outputs.files]
+    return lines
+
+
+def _flagged_discovery_lines(fl) -> list[str]:
+    """A discovery's outlier rows, its bad rows, the large residuals kept."""
+    lines: list[str] = []
     if fl.rows:
         lines.append(f"Outlier rows (gross and isolated: not shared by neighbours in time, workspace or direction), "
                      f"left out: {', '.join(map(str, fl.rows))} (1-based data rows)")
@@ -418,6 +456,13 @@ def _discovery_lines(r: Report) -> list[str]:
     elif fl.shared:
         lines.append("Rows with large residuals kept as evidence (shared by their neighbours): "
                      + "; ".join(f"{k} ({', '.join(v)})" for k, v in fl.shared))
+    return lines
+
+
+def _named_effect_lines(r: Report) -> list[str]:
+    """The effects named (each with its evidence and coefficients), or why none is."""
+    x = r.effects
+    lines: list[str] = []
     if not x.effects:
         if r.verdict.success:
             lines.append("Left-out physics: none. The geometric model explains the recording to the noise.")
@@ -438,19 +483,13 @@ def _discovery_lines(r: Report) -> list[str]:
                 unc = f" +- {c.std:.2g}" if _finite(c.std) else ""
                 lines.append(f"    {c.name} = {c.value:.6g}{unc} {c.unit}")
     lines += [f"Not named: {w}." for w in x.not_named]
-    for a in x.aliases:
-        if a.nested:
-            lines.append(f"Cannot tell apart on this recording: {a.named} and {a.rival}, which contains it (its extra "
-                         f"parameters gain {a.delta_bic:.1f} BIC, less than {_f(a.nested_min_delta_bic, '.0f')}); the "
-                         f"simpler {a.named} fitted.")
-        else:
-            lines.append(f"Cannot tell apart on this recording: {a.named} and {a.rival} (evidence within "
-                         f"{a.delta_bic:.1f} BIC, regressor correlation {_f(a.correlation, '.2f')}); {a.named} fitted.")
-    lines += _separation_lines(x)
-    lines += _law_lines(x.law)
-    words = search_words(x.search)
-    if words is not None:
-        lines.append(f"Search: {words}.")
+    return lines
+
+
+def _discovery_heldout_lines(h, rs) -> list[str]:
+    """The held-out residual RMS (as predicted, the shifts between sessions) and the MuJoCo
+    re-simulation."""
+    lines: list[str] = []
     closure = h.figures[0]
     lines.append(f"Held-out residual RMS: {_f(closure.before.rms, '.3f', 1e3)} um -> {_f(closure.after.rms, '.3f', 1e3)} "
                  f"um (noise floor {_f(h.noise_floor_mm, '.3f', 1e3)} um; {h.basis}).")
@@ -462,29 +501,12 @@ def _discovery_lines(r: Report) -> list[str]:
                      f"max {_f(closure.before.max, '.3f', 1e3)} um -> {_f(closure.after.max, '.3f', 1e3)} um "
                      f"(RMS over the joints, per held-out row)")
     lines += [f"Shift between sessions: {w}." for w in h.session_shifts]
-    rs = x.resimulation
     if rs is not None:
         lines.append(f"MuJoCo machine re-simulated: position RMS {rs.before_um:.3f} um -> {rs.after_um:.3f} um")
         if rs.sysid is not None:
             y = rs.sysid
             lines.append(f"  mujoco.sysid re-fit {y.parameter}: {y.start:.6g} -> {y.value:.6g} +- {y.interval_95:.2g} "
                          f"{y.unit} (95%)")
-    cv = [row for row in h.figures if row.crossvalidated]
-    if cv and h.crossvalidation is not None:
-        b = cv[0].before
-        lines.append(f"Cross-validated prediction error ({h.crossvalidation.scheme}, {h.crossvalidation.model}): position "
-                     f"RMS {_f(b.rms, '.3f', 1e3)} um, mean {_f(b.mean, '.3f', 1e3)} um, max {_f(b.max, '.3f', 1e3)} um")
-    imp = r.implausible
-    lines += [f"Implausible with the geometry alone, back within tolerance with the effects: {w}"
-              for w in imp.words[:DISCOVERY_IMPLAUSIBLE_LINES]]
-    if len(imp.words) > DISCOVERY_IMPLAUSIBLE_LINES:
-        lines.append(f"... and {len(imp.words) - DISCOVERY_IMPLAUSIBLE_LINES} more parameters (summary JSON: "
-                     "implausible_parameters)")
-    lines += [f"Still implausible with the effects: {w}" for w in imp.with_effects]
-    if r.outputs.law_asked:
-        lines.append(f"kept the proposed law in {r.outputs.law_kept}" if r.outputs.law_kept
-                     else "no law proposed: nothing kept (--law)")
-    lines += [f"wrote {path}" for _, path in r.outputs.files]
     return lines
 
 
