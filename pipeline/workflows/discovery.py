@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.effects import (Discovery, EffectData, EffectFit, closure_noise_std, discover_effects, effect as
-                           registered_effect, effects_for, fit_effects)
+from calib.effects import Discovery, EffectData, discover_effects, effect as registered_effect, effects_for
 from calib.effects.discovery import MIN_ROWS
 from calib.effects.separability import GRAM_MIN_RESIDUALS
 from calib.effects.base import PAYLOAD_CHANNEL
@@ -361,13 +360,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     if kept_law is not None:
         candidates = list(candidates) + [kept_law_effect(kept_law, rec)]
     names = [registered_effect(c).name for c in candidates]
-    cal = np.flatnonzero(rec.sets == "calibration")
-    val = np.flatnonzero(rec.sets == "validation")
-    exclude = np.asarray(exclude, dtype=int)
-    cal, val = np.setdiff1d(cal, exclude), np.setdiff1d(val, exclude)
-    analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
-    if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
-        cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
+    cal, val, analysed_all = analysed_rows(rec, exclude)
     still = no_motion_words(robot, rec.joints[cal], rec.noise.joint_std)
     if still is not None:
         raise ValueError(f"{still}: nothing to discover")
@@ -388,6 +381,30 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
     if resim:  # the second witness: an effect whose MuJoCo machine fits worse is not presented as found
         resimulated = resimulation_block(rec, disc, sysid, seed)
         disc, judgement, resimulated = witnessed(rec, data, disc, cal, judgement, resimulated, seed)
+    summary = discovery_summary(rec, disc, judgement, basis, names, tolerance_source, resimulated)
+    summary["wall_time_s"] = time.perf_counter() - t0
+    return DiscoveryReport(discovery=disc, summary=summary)
+
+
+def analysed_rows(rec: Recording, exclude) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(rows analysed, validation rows, whether every row is analysed)``: the calibration rows
+    and the validation rows less ``exclude``; where the calibration rows alone are fewer than
+    discovery needs, every row (the validation rows then none)."""
+    cal = np.flatnonzero(rec.sets == "calibration")
+    val = np.flatnonzero(rec.sets == "validation")
+    exclude = np.asarray(exclude, dtype=int)
+    cal, val = np.setdiff1d(cal, exclude), np.setdiff1d(val, exclude)
+    analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
+    if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
+        cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
+    return cal, val, analysed_all
+
+
+def discovery_summary(rec: Recording, disc: Discovery, judgement: HeldoutJudgement, basis: str, names: list,
+                      tolerance_source: str, resimulated: dict | None) -> dict:
+    """The summary (``--summary-json``) of a discovery judged by its held-out rows."""
+    robot = rec.robot
+    flagged = list(disc.flagged)
     h = heldout_block(judgement)
     scan = disc.outliers
     summary = {
@@ -436,8 +453,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resimulated is not None:
         summary.update(resimulated)
-    summary["wall_time_s"] = time.perf_counter() - t0
-    return DiscoveryReport(discovery=disc, summary=summary)
+    return summary
 
 
 def row_order(rec: Recording) -> bool:
