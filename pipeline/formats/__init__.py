@@ -19,7 +19,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "command_file": ("TIME_COLUMN", "command_columns", "command_csv", "read_command_file", "write_command_file"),
     "linuxcnc": ("HAL_NAME", "INI_NAME", "NOTES_NAME", "RECORD_NAME", "check_export_folder", "comp_file_name",
                  "comp_text", "genhex_hal_text", "kins_ini_text", "rotarydelta_hal_text", "write_export_folder"),
-    "lab_export": ("LabExportError", "LabMap", "convert_lab_files", "joint_readings", "read_map",
+    "lab_export": ("LabExportError", "LabMap", "import_lab_files", "joint_readings", "read_map",
                    "session_joint_mapping"),
     "lab_checks": ("MapReading", "lab_checks", "map_readings"),
     "outputs": ("FileLock", "LockHeld", "NameReservation", "OutputError", "ResultSet", "atomic_write",
