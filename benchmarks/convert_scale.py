@@ -2,12 +2,9 @@
 
     PYTHONPATH=. python benchmarks/convert_scale.py [--rows 10000 100000 300000 1000000] [--out /tmp/convert_scale]
 
-The export, as ``tests/test_convert.py``'s lab style "metres, quaternion scalar last, revolutions"
-writes it: ``--rows`` reachable poses of the hexapod (:func:`calib.workspace.reachable_poses`), the
-nominal machine's legs for them (:meth:`Robot.inverse_kinematics`), positions in metres and
-quaternions (SciPy, scalar last) with 1 um / 1 urad normal noise, legs as motor revolutions
-(``(length - zero) / scale``), time in seconds; the TOML map declares it so. The file is written
-in blocks (the generator's memory does not grow with the rows).
+The export: ``tests/test_convert.py``'s :func:`write_motion_capture_export` (its lab style "metres,
+quaternion scalar last, revolutions" for ``--rows`` reachable poses of the hexapod, with the tests'
+0.01 mm / 0.1 mrad normal noise, written in blocks) and its map.
 
 Each size is converted once by ``python -m pipeline.convert`` in a child process; its wall time,
 CPU time and peak resident memory (``ru_maxrss`` of that child alone, :func:`os.wait4`) are
@@ -24,64 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
-#: Rows generated and written at a time.
-BLOCK_ROWS = 50_000
-NOISE_MM, NOISE_RAD = 0.001, 1e-6
-MM_PER_M = 1000.0
-#: The lab's motor encoding: mm per revolution and the leg's length at 0 revolutions, per leg.
-SCALE_MM = 2.0 + 0.05 * np.arange(6)
-ZERO_MM = 180.0 + np.arange(6)
-HEADER = ["Time", "X", "Y", "Z", "QX", "QY", "QZ", "QW"] + [f"M{i + 1}" for i in range(6)]
-MAP = """[robot]
-name = "hexapod"
-[noise]
-position_mm = {noise_mm}
-orientation_rad = {noise_rad}
-distribution = "normal"
-[time]
-format = "seconds"
-column = "Time"
-[position]
-columns = ["X", "Y", "Z"]
-unit = "m"
-[orientation]
-kind = "quaternion"
-scalar = "last"
-columns = ["QX", "QY", "QZ", "QW"]
-[joints]
-columns = ["M1", "M2", "M3", "M4", "M5", "M6"]
-reading = "revolutions"
-unit = "mm"
-scale = {scale}
-zero = {zero}
-"""
-
-
-def write_export(folder: Path, rows: int, seed: int = 0) -> tuple[Path, Path]:
-    """Write the export of ``rows`` rows and its map into ``folder``; returns ``(csv, map)``."""
-    from scipy.spatial.transform import Rotation
-
-    from calib.robots import default_robot
-    from calib.workspace import reachable_poses
-
-    robot = default_robot("hexapod")
-    rng = np.random.default_rng(seed)
-    csv_path, map_path = folder / f"lab{rows}.csv", folder / "map.toml"
-    map_path.write_text(MAP.format(noise_mm=NOISE_MM, noise_rad=NOISE_RAD, scale=SCALE_MM.tolist(),
-                                   zero=ZERO_MM.tolist()))
-    with open(csv_path, "w") as f:
-        f.write(",".join(HEADER) + "\n")
-        for start in range(0, rows, BLOCK_ROWS):
-            n = min(BLOCK_ROWS, rows - start)
-            poses = reachable_poses(robot, n, rng)
-            legs = robot.inverse_kinematics(robot.table.nominal, poses)
-            seen = poses + np.concatenate([rng.normal(0, NOISE_MM, (n, 3)), rng.normal(0, NOISE_RAD, (n, 3))], axis=1)
-            block = np.column_stack([0.01 * np.arange(start, start + n), seen[:, :3] / MM_PER_M,
-                                     Rotation.from_euler("xyz", seen[:, 3:]).as_quat(), (legs - ZERO_MM) / SCALE_MM])
-            np.savetxt(f, block, fmt="%.17g", delimiter=",")
-    return csv_path, map_path
+from tests.test_convert import write_motion_capture_export
 
 
 def timed_convert(csv_path: Path, map_path: Path, out: Path) -> dict:
@@ -112,7 +52,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"{'rows':>9} {'export MB':>9} {'wall s':>7} {'CPU s':>6} {'peak MB':>8}  checked on")
     for rows in args.rows:
-        csv_path, map_path = write_export(args.out, rows)
+        csv_path, map_path = write_motion_capture_export(args.out, rows)
         r = timed_convert(csv_path, map_path, args.out / f"rec{rows}")
         checked = next((ln.strip() for ln in r["stdout"].splitlines() if "checked" in ln), "")
         print(f"{rows:>9} {csv_path.stat().st_size / 1e6:>9.1f} {r['wall_s']:>7.2f} {r['cpu_s']:>6.2f} "

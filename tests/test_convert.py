@@ -124,25 +124,62 @@ def angle_bound(rec: Recording, other_middle=None) -> np.ndarray:
     return np.broadcast_to((ANGLE_ROUNDINGS * U / cos)[:, None], (len(cos), 3))
 
 
+def metres_quaternion_revolutions_map(robot, description: str | None = None) -> tuple[list, str]:
+    """``(header, map)`` of the lab style of metres, quaternions scalar last, motor revolutions."""
+    unit, _, scale, zero = joint_encoding(robot, "revolutions")
+    header = ["Time", "X", "Y", "Z"] + (["QX", "QY", "QZ", "QW"] if has_angles(robot) else []) + \
+        [f"M{i + 1}" for i in range(robot.n_chains)]
+    orientation = '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
+    mapping = (robot_table(robot, description) + '[time]\nformat = "seconds"\ncolumn = "Time"\n'
+               '[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\n' + (orientation if has_angles(robot) else "")
+               + f'[joints]\ncolumns = {toml_list(header[-robot.n_chains:])}\nreading = "revolutions"\n'
+                 f'unit = "{unit}"\nscale = {toml_list(scale)}\nzero = {toml_list(zero)}\n')
+    return header, mapping
+
+
 def style_metres_quaternion_revolutions(robot, tmp_path):
     """Metres, quaternions scalar last, motor revolutions; the geometry from a description file."""
     rec = original(robot, 1)
-    unit, f, scale, zero = joint_encoding(robot, "revolutions")
+    _, f, scale, zero = joint_encoding(robot, "revolutions")
     (tmp_path / "geometry.json").write_text(json.dumps(robot.description()))
-    header = ["Time", "X", "Y", "Z"] + (["QX", "QY", "QZ", "QW"] if has_angles(robot) else []) + \
-        [f"M{i + 1}" for i in range(robot.n_chains)]
+    header, mapping = metres_quaternion_revolutions_map(robot, "geometry.json")
     rows = []
     for k in range(ROWS):
         q = list(Rotation.from_euler("xyz", angles(rec)[k]).as_quat()) if has_angles(robot) else []
         rows.append([rec.t_s[k], *(rec.measured[k, :3] / MM_PER_M), *q, *((rec.joints[k] / f - zero) / scale)])
-    orientation = '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
-    mapping = (robot_table(robot, "geometry.json") + '[time]\nformat = "seconds"\ncolumn = "Time"\n'
-               '[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\n' + (orientation if has_angles(robot) else "")
-               + f'[joints]\ncolumns = {toml_list(header[-robot.n_chains:])}\nreading = "revolutions"\n'
-                 f'unit = "{unit}"\nscale = {toml_list(scale)}\nzero = {toml_list(zero)}\n')
     bounds = {"t_s": np.zeros(ROWS), "joints": joint_bound(rec.joints, f, zero),
               "position": SECOND_ORDER * 2 * U * np.abs(rec.measured[:, :3])}
     return rec, mapping, {"lab.csv": lab_csv(header, rows)}, bounds
+
+
+#: Rows a large export is generated and written at a time (:func:`write_motion_capture_export`).
+EXPORT_BLOCK_ROWS = 50_000
+
+
+def write_motion_capture_export(folder, rows: int, seed: int = 0, robot_name: str = "hexapod"):
+    """A large motion-capture export in the lab style of :func:`style_metres_quaternion_revolutions`
+    (positions in metres, quaternions scalar last, legs as motor revolutions, time in s, 10 ms
+    apart): ``rows`` reachable poses of the nominal machine measured with :data:`NOISE`, written
+    :data:`EXPORT_BLOCK_ROWS` at a time (the generator's memory does not grow with the rows), and
+    its map. Returns ``(folder / f"lab{rows}.csv", folder / "map.toml")``."""
+    robot = default_robot(robot_name)
+    rng = np.random.default_rng(seed)
+    _, f, scale, zero = joint_encoding(robot, "revolutions")
+    header, mapping = metres_quaternion_revolutions_map(robot)
+    csv_path, map_path = folder / f"lab{rows}.csv", folder / "map.toml"
+    map_path.write_text(mapping)
+    with open(csv_path, "w") as out:
+        out.write(",".join(header) + "\n")
+        for start in range(0, rows, EXPORT_BLOCK_ROWS):
+            n = min(EXPORT_BLOCK_ROWS, rows - start)
+            poses = reachable_poses(robot, n, rng)
+            legs = robot.inverse_kinematics(robot.table.nominal, poses)
+            seen = poses + NOISE.sample(n, rng, robot.pose_units)
+            q = Rotation.from_euler("xyz", seen[:, 3:]).as_quat() if has_angles(robot) else np.zeros((n, 0))
+            block = np.column_stack([0.01 * np.arange(start, start + n), seen[:, :3] / MM_PER_M, q,
+                                     (legs / f - zero) / scale])
+            np.savetxt(out, block, fmt="%.17g", delimiter=",")
+    return csv_path, map_path
 
 
 def style_inches_matrix_counts_iso(robot, tmp_path):
