@@ -34,5 +34,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "recording": ("DEFAULT_SESSION", "FORMAT", "FORMAT_VERSION", "MIN_ROBOT_SIZE_MM", "READABLE_VERSIONS",
                   "SESSION_KEYS", "SESSION_TIMES", "SETS", "SIDECAR_FIELDS", "Recording", "RecordingError",
                   "columns", "frame_session", "read_json_file", "read_recording", "recording_texts", "row_message",
+                  "recording_header", "sidecar_text", "write_recording_rows",
                   "row_words", "session_measurement", "sidecar_path", "write_recording"),
 })

@@ -16,8 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.formats import (Recording, ResultSet, import_lab_files, lab_checks, read_map, read_recording,
-                              sidecar_path)
-from pipeline.formats.recording import sidecar_text
+                              sidecar_path, sidecar_text)
 
 __all__ = ["ConvertSettings", "ConvertResult", "run_convert", "output_paths"]
 
