@@ -35,6 +35,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from calib.files import atomic_write
 from calib.robots.hexapod import Hexapod
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
@@ -206,7 +207,7 @@ def save_default_xml(path: Path = DEFAULT_XML) -> Path:
     robot = paper_hexapod()
     spec = build_spec(robot, robot.table.nominal + TABLE3_ERRORS.ravel(), name="hexapod_paper_actual")
     spec.compile()
-    path.write_text(spec.to_xml())
+    atomic_write(path, spec.to_xml(), overwrite=True)  # an interrupted run leaves the earlier file
     return path
 
 
