@@ -586,8 +586,8 @@ class LabFile:
     time: iterating gives :class:`LabTable` chunks (header line after ``skip_lines``, trailing
     blank lines dropped); :attr:`data_rows`, once read, the number of data rows."""
 
-    def __init__(self, path: str | Path, lab_map: LabMap, chunk_rows: int = CHUNK_ROWS):
-        self.path, self.dialect, self.chunk_rows = Path(path), lab_map.tables["csv"], chunk_rows
+    def __init__(self, path: str | Path, lab_map: LabMap, chunk_rows: int | None = None):
+        self.path, self.dialect, self.chunk_rows = Path(path), lab_map.tables["csv"], chunk_rows or CHUNK_ROWS
         self.data_rows = 0
 
     def _header(self, row: list, line: int) -> tuple[str, ...]:
@@ -809,8 +809,9 @@ class CheckSample:
     :data:`CHECK_ROWS_PER_GROUP` (or all) of each group; every row when there are no more than
     :data:`CHECK_ROWS`."""
 
-    def __init__(self, seed: int = CHECK_SEED, size: int = CHECK_ROWS):
-        self.seed, self.size, self.rng = seed, size, np.random.default_rng(seed)
+    def __init__(self, seed: int = CHECK_SEED, size: int | None = None):
+        self.seed, self.size, self.rng = seed, size or CHECK_ROWS, np.random.default_rng(seed)
+        self.kept = max(self.size, CHECK_ROWS_PER_GROUP)  # the most rows a group may give
         self.groups: dict = {}  # (session, set) -> [keys, [(row number, cells, line, time)], rows seen]
         self.files: dict = {}  # session -> a table of its file (its path, header, decimal)
 
@@ -822,15 +823,15 @@ class CheckSample:
             mine = np.flatnonzero(sets == name)
             group = self.groups.setdefault((session, name), [np.empty(0), [], 0])
             group[2] += mine.size
-            if len(group[0]) >= self.size:  # only rows that can enter
+            if len(group[0]) >= self.kept:  # only rows that can enter
                 mine = mine[keys[mine] < group[0].max()]
             if not mine.size:
                 continue
             group[0] = np.concatenate([group[0], keys[mine]])
             group[1] += [(table.numbers_of_rows[kept[k]], table.rows[kept[k]], table.lines[kept[k]], float(t_s[k]))
                          for k in mine]
-            if len(group[0]) > self.size:
-                best = np.argpartition(group[0], self.size)[:self.size]
+            if len(group[0]) > self.kept:
+                best = np.argpartition(group[0], self.kept)[:self.kept]
                 group[0], group[1] = group[0][best], [group[1][b] for b in best]
 
     def rows(self) -> int:
