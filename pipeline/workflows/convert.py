@@ -15,8 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.formats import (Recording, ResultSet, import_lab_files, lab_checks, read_map, read_recording,
-                              sidecar_path, sidecar_text)
+from pipeline.formats import (Recording, ResultSet, import_lab_files, read_map, read_recording, sidecar_path,
+                              sidecar_text)
+from pipeline.formats.lab_checks import lab_checks  # the function: the package's name is also the module's
 
 __all__ = ["ConvertSettings", "ConvertResult", "run_convert", "output_paths"]
 
