@@ -42,30 +42,43 @@ def _temporaries(path):
     return sorted(path.parent.glob(f".{path.name}.*"))
 
 
+def _writing(path) -> bool:
+    """Whether a temporary file of output ``path`` has content."""
+    for t in _temporaries(path):
+        try:
+            if t.suffix == ".tmp" and t.stat().st_size > 0:
+                return True
+        except FileNotFoundError:  # gone between the listing and now
+            continue
+    return False
+
+
 def _interrupt_while_writing(argv: list[str], output, signum: int) -> subprocess.Popen:
     """Start ``python -m`` ``argv``, send ``signum`` once output ``output``'s temporary file has
     content, and wait for the process to end; fails if it ended before that."""
     proc = subprocess.Popen([sys.executable, "-m", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + PATIENCE_S
-    while not any(t.stat().st_size > 0 for t in _temporaries(output) if t.suffix == ".tmp" and t.exists()):
+    while not _writing(output):
         assert proc.poll() is None, f"ended before writing: {proc.communicate()}"
         assert time.monotonic() < deadline, "did not start writing in time"
         time.sleep(0.005)
     proc.send_signal(signum)
-    proc.communicate(timeout=PATIENCE_S)
+    proc.stdout_text, proc.stderr_text = (b.decode() for b in proc.communicate(timeout=PATIENCE_S))
     return proc
 
 
 def _check_left_as_before(proc, signum: int, before: dict) -> None:
     """The outputs are byte for byte the earlier run's; SIGINT and SIGTERM: the process said so and
     left no temporary (a SIGKILL may leave one, hidden, never under the output's name)."""
+    said = (proc.returncode, proc.stdout_text, proc.stderr_text)
     for path, data in before.items():
-        assert path.read_bytes() == data, f"{path} changed"
+        assert path.read_bytes() == data, (f"{path} changed", said)
     if signum == signal.SIGKILL:
-        assert proc.returncode == -signal.SIGKILL
+        assert proc.returncode == -signal.SIGKILL, said
         return
-    assert proc.returncode == EXIT_INTERRUPTED - signal.SIGINT + signum, proc.returncode
+    assert proc.returncode == EXIT_INTERRUPTED - signal.SIGINT + signum, said
+    assert proc.stderr_text.startswith("error: interrupted") and proc.stderr_text.count("\n") == 1, said
     for path in before:
         assert _temporaries(path) == [], _temporaries(path)
 
