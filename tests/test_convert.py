@@ -883,7 +883,8 @@ def _convert_files(tmp_path, files, mapping, out) -> tuple[int, str, str]:
 
     stdout, stderr = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        code = main([str(tmp_path / n) for n in files] + ["--map", str(tmp_path / mapping), "--out", str(tmp_path / out)])
+        code = main([str(tmp_path / n) for n in files]
+                    + ["--map", str(tmp_path / mapping), "--out", str(tmp_path / out)])
     return code, stdout.getvalue(), stderr.getvalue()
 
 
