@@ -36,6 +36,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from calib.files import atomic_write
 from calib.robots.hexapod import Hexapod
 from calib.rotation import quaternion_from_euler, rotation_matrix
 
@@ -205,7 +206,6 @@ def save_default_xml(path: Path = DEFAULT_XML, *, overwrite: bool = False) -> Pa
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False.
     """
-    from calib.files import atomic_write
 
     from calib.paper import TABLE3_ERRORS
     from calib.robots.hexapod import paper_hexapod

@@ -2,19 +2,26 @@
 
 :func:`cli_main` runs a command's ``run(argv)``; a refused input or output (``ValueError``,
 ``KeyError``, ``FileExistsError``, ``OSError``, :class:`UsageError`) and argparse's own usage
-errors end with exit status 2, an interruption with 130, and never with a Python traceback.
+errors end with exit status 2, an interruption with 128 + the signal's number (130 for Ctrl-C,
+143 for SIGTERM), and never with a Python traceback. SIGTERM is turned into the same interruption as
+Ctrl-C while the command runs, so that either leaves the outputs as they were: the temporary files
+being written are removed on the way out and nothing is moved into place (a SIGKILL, which no
+process sees, may leave a hidden temporary file, never a partial file under an output's name; the
+next writer of that name removes it).
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 
 from calib.noise import SensorNoise
 from pipeline.formats import forget_created_folders, one_line, take_back_created_folders
 
 __all__ = ["UsageError", "ArgumentParser", "cli_main", "one_line", "nonnegative_int", "positive_int",
-           "EXIT_USAGE", "EXIT_INTERRUPTED", "scheduler_address", "add_executor_arguments",
+           "EXIT_USAGE", "EXIT_INTERRUPTED", "Interrupted", "scheduler_address", "add_executor_arguments",
            "add_noise_arguments", "noise_from_arguments", "keep_freed_memory", "MALLOC_TRIM_THRESHOLD",
            "MALLOC_MMAP_MAX", "KEPT_FREED_BYTES"]
 
@@ -53,6 +60,18 @@ def keep_freed_memory() -> bool:
     return bool(mallopt(MALLOC_MMAP_MAX, 0)) and bool(mallopt(MALLOC_TRIM_THRESHOLD, KEPT_FREED_BYTES))
 
 
+class Interrupted(KeyboardInterrupt):
+    """The command received a termination signal (``signum``) while it ran."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _interrupt(signum, frame) -> None:
+    raise Interrupted(signum)
+
+
 class UsageError(ValueError):
     """A command-line value is refused; the message names the flag."""
 
@@ -61,6 +80,8 @@ def cli_main(run, argv: list[str] | None = None) -> int:
     """``run(argv)``, with refusals turned into one line on stderr and exit status 2; a refused or
     interrupted command leaves no output folder it created (those still empty are removed)."""
     forget_created_folders()
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _interrupt) if main_thread else None
     try:
         run(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2, already printed)
@@ -69,14 +90,19 @@ def cli_main(run, argv: list[str] | None = None) -> int:
             print(f"error: {' '.join(exc.code.split())}", file=sys.stderr)
             return EXIT_USAGE
         return exc.code if isinstance(exc.code, int) else EXIT_USAGE
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         take_back_created_folders()
-        print("error: interrupted; nothing was written", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        signum = exc.signum if isinstance(exc, Interrupted) else signal.SIGINT
+        by = f" ({signal.Signals(signum).name})" if signum != signal.SIGINT else ""
+        print(f"error: interrupted{by}; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED - signal.SIGINT + signum
     except (ValueError, KeyError, FileExistsError, OSError) as exc:
         take_back_created_folders()
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
     forget_created_folders()
     return 0
 

@@ -36,17 +36,17 @@ def settings_from_args(args: argparse.Namespace) -> ConvertSettings:
 def run(argv: list[str] | None = None) -> ConvertResult:
     """Parse ``argv``, convert, print what was written; raises on bad input (see :func:`main`)."""
     result = run_convert(settings_from_args(build_parser().parse_args(argv)))
-    rec = result.recording
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    extras = f"; extra channels {', '.join(rec.extras)}" if rec.extras else ""
-    print(f"wrote {result.csv_path} and {result.json_path}: {rec.robot.name}, {len(rec.t_s)} rows in "
+    extras = f"; extra channels {', '.join(result.extras)}" if result.extras else ""
+    print(f"wrote {result.csv_path} and {result.json_path}: {result.robot}, {result.rows} rows in "
           f"{len(result.sessions)} session(s){extras}")
     for s in result.sessions:
-        frame = rec.session_info[s["session"]].get("measurement", rec.meta.get("measurement", {})).get("frame", "auto")
         print(f"  session {s['session']}: {s['kept_rows']} of {s['data_rows']} rows of {s['file']} "
-              f"({int((rec.sets[rec.session_rows(s['session'])] == 'validation').sum())} validation), "
-              f"instrument frame: {frame}")
+              f"({s['validation_rows']} validation), instrument frame: {s['frame']}")
+    judged = "all" if result.checked_rows == result.rows else \
+        f"a seeded subsample (seed {result.check_seed}) of {result.checked_rows} of the"
+    print(f"map checked on evidence on {judged} {result.rows} rows")
     return result
 
 

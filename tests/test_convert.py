@@ -124,25 +124,62 @@ def angle_bound(rec: Recording, other_middle=None) -> np.ndarray:
     return np.broadcast_to((ANGLE_ROUNDINGS * U / cos)[:, None], (len(cos), 3))
 
 
+def metres_quaternion_revolutions_map(robot, description: str | None = None) -> tuple[list, str]:
+    """``(header, map)`` of the lab style of metres, quaternions scalar last, motor revolutions."""
+    unit, _, scale, zero = joint_encoding(robot, "revolutions")
+    header = ["Time", "X", "Y", "Z"] + (["QX", "QY", "QZ", "QW"] if has_angles(robot) else []) + \
+        [f"M{i + 1}" for i in range(robot.n_chains)]
+    orientation = '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
+    mapping = (robot_table(robot, description) + '[time]\nformat = "seconds"\ncolumn = "Time"\n'
+               '[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\n' + (orientation if has_angles(robot) else "")
+               + f'[joints]\ncolumns = {toml_list(header[-robot.n_chains:])}\nreading = "revolutions"\n'
+                 f'unit = "{unit}"\nscale = {toml_list(scale)}\nzero = {toml_list(zero)}\n')
+    return header, mapping
+
+
 def style_metres_quaternion_revolutions(robot, tmp_path):
     """Metres, quaternions scalar last, motor revolutions; the geometry from a description file."""
     rec = original(robot, 1)
-    unit, f, scale, zero = joint_encoding(robot, "revolutions")
+    _, f, scale, zero = joint_encoding(robot, "revolutions")
     (tmp_path / "geometry.json").write_text(json.dumps(robot.description()))
-    header = ["Time", "X", "Y", "Z"] + (["QX", "QY", "QZ", "QW"] if has_angles(robot) else []) + \
-        [f"M{i + 1}" for i in range(robot.n_chains)]
+    header, mapping = metres_quaternion_revolutions_map(robot, "geometry.json")
     rows = []
     for k in range(ROWS):
         q = list(Rotation.from_euler("xyz", angles(rec)[k]).as_quat()) if has_angles(robot) else []
         rows.append([rec.t_s[k], *(rec.measured[k, :3] / MM_PER_M), *q, *((rec.joints[k] / f - zero) / scale)])
-    orientation = '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
-    mapping = (robot_table(robot, "geometry.json") + '[time]\nformat = "seconds"\ncolumn = "Time"\n'
-               '[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\n' + (orientation if has_angles(robot) else "")
-               + f'[joints]\ncolumns = {toml_list(header[-robot.n_chains:])}\nreading = "revolutions"\n'
-                 f'unit = "{unit}"\nscale = {toml_list(scale)}\nzero = {toml_list(zero)}\n')
     bounds = {"t_s": np.zeros(ROWS), "joints": joint_bound(rec.joints, f, zero),
               "position": SECOND_ORDER * 2 * U * np.abs(rec.measured[:, :3])}
     return rec, mapping, {"lab.csv": lab_csv(header, rows)}, bounds
+
+
+#: Rows a large export is generated and written at a time (:func:`write_motion_capture_export`).
+EXPORT_BLOCK_ROWS = 50_000
+
+
+def write_motion_capture_export(folder, rows: int, seed: int = 0, robot_name: str = "hexapod"):
+    """A large motion-capture export in the lab style of :func:`style_metres_quaternion_revolutions`
+    (positions in metres, quaternions scalar last, legs as motor revolutions, time in s, 10 ms
+    apart): ``rows`` reachable poses of the nominal machine measured with :data:`NOISE`, written
+    :data:`EXPORT_BLOCK_ROWS` at a time (the generator's memory does not grow with the rows), and
+    its map. Returns ``(folder / f"lab{rows}.csv", folder / "map.toml")``."""
+    robot = default_robot(robot_name)
+    rng = np.random.default_rng(seed)
+    _, f, scale, zero = joint_encoding(robot, "revolutions")
+    header, mapping = metres_quaternion_revolutions_map(robot)
+    csv_path, map_path = folder / f"lab{rows}.csv", folder / "map.toml"
+    map_path.write_text(mapping)
+    with open(csv_path, "w") as out:
+        out.write(",".join(header) + "\n")
+        for start in range(0, rows, EXPORT_BLOCK_ROWS):
+            n = min(EXPORT_BLOCK_ROWS, rows - start)
+            poses = reachable_poses(robot, n, rng)
+            legs = robot.inverse_kinematics(robot.table.nominal, poses)
+            seen = poses + NOISE.sample(n, rng, robot.pose_units)
+            q = Rotation.from_euler("xyz", seen[:, 3:]).as_quat() if has_angles(robot) else np.zeros((n, 0))
+            block = np.column_stack([0.01 * np.arange(start, start + n), seen[:, :3] / MM_PER_M, q,
+                                     (legs / f - zero) / scale])
+            np.savetxt(out, block, fmt="%.17g", delimiter=",")
+    return csv_path, map_path
 
 
 def style_inches_matrix_counts_iso(robot, tmp_path):
@@ -835,3 +872,88 @@ def test_too_few_rows_to_judge_the_map_are_converted_with_a_warning(name, tmp_pa
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{keep} rows ({keep * robot.pose_dim} pose values) are too few" in err, err
     assert "rows to identify" in err and "converted as written" in err and (tmp_path / "r.csv").exists()
+
+
+# --------------------------------------------------------------------------- streamed in chunks, judged on a subsample
+
+def _convert_files(tmp_path, files, mapping, out) -> tuple[int, str, str]:
+    """``(exit status, stdout, stderr)`` of the command on the files written in ``tmp_path``."""
+    import contextlib
+    import io
+
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main([str(tmp_path / n) for n in files]
+                    + ["--map", str(tmp_path / mapping), "--out", str(tmp_path / out)])
+    return code, stdout.getvalue(), stderr.getvalue()
+
+
+@pytest.mark.parametrize("style", ["inches, matrix, counts, ISO time", "two files, two sessions",
+                                   "temperature, sets, rows kept"])
+def test_chunks_of_any_size_write_the_same_recording(style, tmp_path, monkeypatch):
+    """The files converted 1 and 5 rows at a time (ISO origin, time order, rows kept and dropped,
+    sets and sessions carried across chunks): the same CSV and sidecar, byte for byte."""
+    from pipeline.formats import lab_export
+
+    _, mapping, files, _ = STYLES[style](default_robot("hexapod"), tmp_path)
+    (tmp_path / "map.toml").write_text(mapping)
+    for n, text in files.items():
+        (tmp_path / n).write_text(text)
+    assert _convert_files(tmp_path, files, "map.toml", "whole")[0] == 0
+    for rows in (1, 5):
+        monkeypatch.setattr(lab_export, "CHUNK_ROWS", rows)
+        assert _convert_files(tmp_path, files, "map.toml", f"by{rows}")[0] == 0
+        for ext in ("csv", "json"):
+            assert (tmp_path / f"by{rows}.{ext}").read_bytes() == (tmp_path / f"whole.{ext}").read_bytes(), (rows, ext)
+
+
+@pytest.mark.parametrize("case", ["text cell", "empty cell", "not a quaternion", "time backwards", "short row"])
+def test_a_fault_is_named_alike_whatever_the_chunk(case, tmp_path, monkeypatch):
+    """A lab file's fault met in a chunk of one row (time going back from the previous chunk's
+    row): the same line as in one chunk."""
+    from pipeline.formats import lab_export
+
+    _, mapping, files, _ = style_metres_quaternion_revolutions(default_robot("hexapod"), tmp_path)
+    (tmp_path / "map.toml").write_text(mapping)
+    (tmp_path / "lab.csv").write_text(files["lab.csv"])
+    REFUSED[case][0](tmp_path)
+    code, _, whole = _convert_files(tmp_path, files, "map.toml", "r")
+    monkeypatch.setattr(lab_export, "CHUNK_ROWS", 1)
+    assert (code, whole) == _convert_files(tmp_path, files, "map.toml", "r")[::2] and code == 2
+
+
+@pytest.mark.slow
+def test_the_map_is_judged_on_a_seeded_subsample_said_in_the_output(tmp_path, monkeypatch):
+    """500 rows, the checks' subsample 300 (seed 0): they judge 300 drawn, and say so; a wrong
+    unit is refused on them as on every row, the refusal saying which rows it judged; the draw is
+    the same however the file is chunked (the refusal's figures, of the rows drawn, too)."""
+    from pipeline.formats import lab_export
+
+    rows, drawn = 500, 300
+    monkeypatch.setattr(lab_export, "CHECK_ROWS", drawn)
+    lab, mapping = write_motion_capture_export(tmp_path, rows)
+    code, out, err = _convert_files(tmp_path, [lab.name], mapping.name, "r")
+    assert code == 0 and err == "", err
+    assert f"map checked on evidence on a seeded subsample (seed 0) of {drawn} of the {rows} rows" in out, out
+    (tmp_path / "wrong.toml").write_text(mapping.read_text().replace('unit = "m"', 'unit = "mm"', 1))
+    code, _, err = _convert_files(tmp_path, [lab.name], "wrong.toml", "w")
+    assert code == 2 and err.count("\n") == 1, err
+    for needle in ("key position.unit = 'mm'", "did you mean position.unit = 'm'?",
+                   f"(judged on a seeded subsample of {drawn} of the {rows} rows)"):
+        assert needle in err, (needle, err)
+    monkeypatch.setattr(lab_export, "CHUNK_ROWS", 70)
+    assert _convert_files(tmp_path, [lab.name], "wrong.toml", "w") == (code, "", err)
+
+
+def test_every_session_and_set_is_in_the_subsample(tmp_path, monkeypatch):
+    """A subsample of 10 rows of the two days (40 calibration rows, 15 validation rows of another
+    session): each (session, set) keeps at least CHECK_ROWS_PER_GROUP rows (or all), so that the
+    second day, which names the first's frame, is judged in it."""
+    from pipeline.formats import lab_export
+
+    two_days(tmp_path)
+    monkeypatch.setattr(lab_export, "CHECK_ROWS", 10)
+    code, out, err = _convert_files(tmp_path, ["grid.csv", "feb12.csv"], "map.toml", "days")
+    floor = lab_export.CHECK_ROWS_PER_GROUP
+    assert code == 0, err
+    assert f"a seeded subsample (seed 0) of {min(40, floor) + min(15, floor)} of the 55 rows" in out, out

@@ -18,7 +18,8 @@ from calib.robots import ROBOTS, default_robot
 from .outputs import atomic_write
 from .recording import finite_number, sidecar_path
 
-__all__ = ["TIME_COLUMN", "command_columns", "command_csv", "write_command_file", "read_command_file"]
+__all__ = ["TIME_COLUMN", "command_columns", "command_csv", "write_command_rows", "write_command_file",
+           "read_command_file"]
 
 
 def command_columns(robot: Robot) -> tuple[str, ...]:
@@ -41,19 +42,25 @@ def _check_rows(robot: Robot, poses, joints) -> tuple[np.ndarray, np.ndarray]:
 TIME_COLUMN = "t_s"
 
 
-def command_csv(robot: Robot, poses, joints, t_s=None, extra: dict | None = None) -> str:
-    """CSV text of a command file (full float64 precision); ``t_s`` (N,) adds the time column;
-    ``extra`` (``{column: (N,) values}``) columns after it (the commands in a controller's units)."""
+def write_command_rows(file, robot: Robot, poses, joints, t_s=None, extra: dict | None = None) -> None:
+    """Write a command file's CSV (full float64 precision) to the open text file ``file``, row by
+    row (its size grows as it is written); ``t_s`` (N,) adds the time column; ``extra``
+    (``{column: (N,) values}``) columns after it (the commands in a controller's units)."""
     poses, joints = _check_rows(robot, poses, joints)
     extra = extra or {}
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
+    w = csv.writer(file, lineterminator="\n")
     w.writerow(command_columns(robot) + (() if t_s is None else (TIME_COLUMN,)) + tuple(extra))
     rows = np.c_[poses, joints] if t_s is None else np.c_[poses, joints, np.asarray(t_s, dtype=float)]
     if extra:
         rows = np.c_[rows, np.column_stack([np.asarray(v, dtype=float) for v in extra.values()])]
     for row in rows:
         w.writerow([repr(float(v)) for v in row])
+
+
+def command_csv(robot: Robot, poses, joints, t_s=None, extra: dict | None = None) -> str:
+    """CSV text of a command file (:func:`write_command_rows`)."""
+    buf = io.StringIO()
+    write_command_rows(buf, robot, poses, joints, t_s, extra)
     return buf.getvalue()
 
 

@@ -3,8 +3,10 @@ joints are fitted to the nominal machine as the map reads them and as the map wo
 with one key changed, by the diagnosis ``pipeline.run`` makes (:func:`calib.diagnosis.compare_readings`,
 the fits and the rule of :func:`calib.diagnosis.diagnose`).
 
-The other readings (:func:`map_readings`) are the mapping file re-read with one key changed, the
-lab's files converted again through it: ``position.unit`` (m, mm, in), ``joints.unit`` (and a
+The rows judged are a seeded subsample of the rows kept (:class:`pipeline.formats.lab_export.LabSample`,
+at most about :data:`pipeline.formats.lab_export.CHECK_ROWS`; every row of a smaller export), as the
+lab wrote them. The other readings (:func:`map_readings`) are the mapping file re-read with one key
+changed, those rows converted again through it: ``position.unit`` (m, mm, in), ``joints.unit`` (and a
 session's own ``sessions.NAME.joints.unit``: metres for mm, degrees for rad...),
 ``orientation.unit`` (deg, rad), ``orientation.sequence`` (fixed axes for moving ones),
 ``orientation.scalar`` (first, last), ``orientation.order`` (row, column), ``orientation.rotation``
@@ -31,8 +33,7 @@ import numpy as np
 
 from calib.robot import KinematicsError
 
-from .lab_export import (ANGLE_UNITS, LENGTH_UNITS, ROTATION_DIRECTIONS, LabExportError, LabMap,
-                         convert_lab_files)
+from .lab_export import ANGLE_UNITS, LENGTH_UNITS, ROTATION_DIRECTIONS, LabExportError, LabMap, LabSample
 from .recording import Recording, row_frame_groups
 
 __all__ = ["MapReading", "map_readings", "lab_checks", "TOO_FEW_ROWS"]
@@ -214,17 +215,23 @@ def _what_it_makes(reading: MapReading, rec: Recording) -> str:
 # --------------------------------------------------------------------------- the checks
 
 
-def _same_within_noise(rec: Recording, other: Recording) -> bool:
-    """Whether another reading changes no pose value by more than its declared standard deviation
-    and no joint by more than its own (or 1e-9 of its magnitude)."""
+def _same_within_noise(rec: Recording, joints: np.ndarray, measured: np.ndarray) -> bool:
+    """Whether another reading (``joints``, ``measured``) changes no pose value by more than its
+    declared standard deviation and no joint by more than its own (or 1e-9 of its magnitude)."""
     std = rec.noise.pose_std(rec.robot.pose_units)
     joint = max(rec.noise.joint_std, 1e-9 * float(np.max(np.abs(rec.joints), initial=1.0)))
-    return bool(np.all(np.abs(other.measured - rec.measured) <= std) and np.all(np.abs(other.joints - rec.joints)
-                                                                                 <= joint))
+    return bool(np.all(np.abs(measured - rec.measured) <= std) and np.all(np.abs(joints - rec.joints) <= joint))
 
 
-def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
-    """Check the recording ``rec`` that ``lab_map`` made of ``files`` on evidence (module doc).
+def _rows_words(sample: LabSample) -> str:
+    """``12 rows``, or ``2000 rows (a seeded subsample of the 300000)``: the rows judged."""
+    n = len(sample.recording.t_s)
+    return f"{n} rows" + ("" if sample.all_rows else f" (a seeded subsample of the {sample.rows})")
+
+
+def lab_checks(lab_map: LabMap, sample: LabSample) -> list[str]:
+    """Check the rows ``sample`` of the recording ``lab_map`` made of a lab's files on evidence
+    (module doc): each other reading of the map converts the same rows again.
 
     Returns:
         Warnings, one line each, naming the map and the key.
@@ -235,25 +242,28 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
     """
     from calib.diagnosis import compare_readings
 
+    rec = sample.recording
     robot = rec.robot
     sessions, frame = row_frame_groups(rec)
     readings, alternatives = {}, {}
     for reading in map_readings(lab_map):
         try:
-            other = convert_lab_files(reading.lab_map, files)
+            joints, measured = sample.read_as(reading.lab_map)
         except LabExportError:  # the files cannot be read so: not a reading of them
             continue
-        if _same_within_noise(rec, other):  # the key makes no difference these rows could show
+        if _same_within_noise(rec, joints, measured):  # the key makes no difference these rows could show
             continue
-        readings[reading.name] = (other.joints, other.measured)
+        readings[reading.name] = (joints, measured)
         alternatives[reading.name] = reading
     c = compare_readings(rec.robot, rec.joints, rec.measured, rec.noise, readings, frame=frame, sessions=sessions,
                          tolerance=rec.meta.get("parameter_tolerance"))
     path, written = lab_map.path, c.written
+    judged = "" if sample.all_rows else f" (judged on a seeded subsample of {len(rec.t_s)} of the {sample.rows} rows)"
     if TOO_FEW_ROWS in written.error or (not written.error and written.dof <= 0):
         few = written.words() if written.error else "a fit of the geometry leaves no degree of freedom"
-        return [f"{path}: {len(rec.t_s)} rows ({len(rec.t_s) * robot.pose_dim} pose values) are too few to check the "
-                f"map's units and conventions against the {robot.name} ({few}): converted as written, unchecked"]
+        return [f"{path}: {_rows_words(sample)} ({len(rec.t_s) * robot.pose_dim} pose values) are too few to "
+                f"check the map's units and conventions against the {robot.name} ({few}): converted as written, "
+                "unchecked"]
     as_read = written.words() if written.error else f"{_residual_words(robot, written)}; {written.words()}"
     if c.named:
         r, f = alternatives[c.named[0]], c.figures[c.named[0]]
@@ -262,10 +272,10 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
         raise LabExportError(
             f"{path}: key {r.key} = {r.written!r}{' ' + effect if effect else ''}: as the map reads them the data "
             f"{how} ({as_read}); as {r.value!r} they fit to {_residual_words(robot, f)} ({f.words()}): did you mean "
-            f"{r.key} = {r.value!r}?")
+            f"{r.key} = {r.value!r}?{judged}")
     if c.also_fit:
         r, f = alternatives[c.also_fit[0]], c.figures[c.also_fit[0]]
-        return [f"{path}: key {r.key} = {r.written!r}: the {len(rec.t_s)} rows fit the {robot.name} as the map reads "
+        return [f"{path}: key {r.key} = {r.written!r}: the {_rows_words(sample)} fit the {robot.name} as the map reads "
                 f"them ({as_read}) and with {r.key} = {r.value!r} as well ({_residual_words(robot, f)}; {f.words()}): "
                 "too few or too alike to tell; converted as written, check the key"]
     if written.fits:
@@ -275,9 +285,9 @@ def lab_checks(lab_map: LabMap, files, rec: Recording) -> list[str]:
         r, f = alternatives[fitting[0]], c.figures[fitting[0]]
         return [f"{path}: key {r.key} = {r.written!r}: as the map reads them the data do not fit the {robot.name} "
                 f"({as_read}); with {r.key} = {r.value!r} they do ({_residual_words(robot, f)}; {f.words()}), but not "
-                "by enough to be sure: converted as written, check the key"]
+                f"by enough to be sure{judged}: converted as written, check the key"]
     best = f"; the best other reading, {c.screened[0][0]}, screens at chi-square {c.screened[0][1]:.3g} per degree " \
            "of freedom" if c.screened else ""
     return [f"{path}: the converted data do not fit the {robot.name} at the declared noise ({as_read}), nor with any "
-            f"of {len(readings)} map keys changed{best}: converted as written (pipeline.run --real diagnoses the "
-            "recording)"]
+            f"of {len(readings)} map keys changed{best}{judged}: converted as written (pipeline.run --real diagnoses "
+            "the recording)"]

@@ -44,15 +44,18 @@ The map says which lab column is which joint and pose coordinate and how to conv
   ``scale``, ``zero``) that differ for that session's file, each overriding ``[joints]``'s.
 
 Every key is checked (an unknown one is named); every fault of a lab file names the file, the
-row (1-based data row and its line) and the column. The converted data are then checked on
-evidence against the nominal machine, with one key changed at a time
-(:mod:`pipeline.formats.lab_checks`): a unit or convention key the data prove wrong is named.
+row (1-based data row and its line) and the column. The files are read, converted and written
+:data:`CHUNK_ROWS` rows at a time (:func:`import_lab_files`): memory is bounded by a chunk, not by
+the files. The converted data are then checked on evidence against the nominal machine, with one
+key changed at a time (:mod:`pipeline.formats.lab_checks`), on a seeded subsample of the rows
+(:class:`CheckSample`, at most about :data:`CHECK_ROWS`): a unit or convention key the data prove
+wrong is named.
 """
 
 from __future__ import annotations
 
+import codecs
 import csv
-import io
 import json
 import math
 import sys
@@ -71,14 +74,17 @@ from calib.rotation import euler_from_matrix, euler_from_quaternion
 from mjcf.units import M_PER_MM
 
 from .recording import (DEFAULT_SESSION, MIN_ROBOT_SIZE_MM, SESSION_NAME, SETS, Recording, check_channel_name,
-                        check_session_name, columns, finite_number, read_text_file)
+                        check_session_name, columns, finite_number, read_text_file, recording_header,
+                        write_recording_rows)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10 (pyproject installs tomli there)
     import tomli as tomllib
 
-__all__ = ["LabExportError", "LabMap", "read_map", "convert_lab_files", "session_joint_mapping", "joint_readings",
+__all__ = ["LabExportError", "LabMap", "read_map", "import_lab_files", "LabImport", "LabSample", "LabFile", "LabTable",
+           "CheckSample", "poses_and_joints", "session_joint_mapping", "joint_readings", "CHUNK_ROWS", "CHECK_ROWS",
+           "CHECK_ROWS_PER_GROUP", "CHECK_SEED", "LAB_FILE",
            "LENGTH_UNITS", "ANGLE_UNITS", "TIME_UNITS", "TIME_FORMATS", "ORIENTATION_COLUMNS", "JOINT_READINGS",
            "MAP_SCHEMA", "SESSION_JOINT_KEYS", "ROTATION_DIRECTIONS"]
 
@@ -477,10 +483,24 @@ def _timestamp(value, fail) -> datetime:
 
 # --------------------------------------------------------------------------- the lab's files
 
+#: What a lab file is called in messages.
+LAB_FILE = "lab file (CSV)"
+#: Data rows of a lab file read, converted and written at a time: the importer's memory is bounded
+#: by this many rows, not by the file's.
+CHUNK_ROWS = 20_000
+#: The checks on evidence (:mod:`pipeline.formats.lab_checks`) judge the map on a seeded subsample
+#: of about this many rows (all of them when there are no more) ...
+CHECK_ROWS = 2_000
+#: ... with at least this many (or all) of each session's calibration rows, and of its validation rows.
+CHECK_ROWS_PER_GROUP = 20
+#: The seed of that subsample.
+CHECK_SEED = 0
+
 
 @dataclass(frozen=True, eq=False)
 class LabTable:
-    """A lab file's header and data rows (cells as text), each row's line in the file."""
+    """Data rows of a lab file (all, a chunk of them, or a subsample), cells as text, with each
+    row's number (0-based data row of the file) and line in the file, and the file's header."""
 
     path: Path
     header: tuple[str, ...]
@@ -488,10 +508,11 @@ class LabTable:
     rows: list
     lines: list
     decimal: str
+    numbers_of_rows: range | list
 
     def where(self, i: int) -> str:
-        """How messages name 0-based data row ``i``: file, row (1-based) and line."""
-        return f"{self.path}: row {i + 1} (line {self.lines[i]})"
+        """How messages name row ``i`` of this table: file, data row (1-based) and line."""
+        return f"{self.path}: row {self.numbers_of_rows[i] + 1} (line {self.lines[i]})"
 
     def index(self, name: str, key: str) -> int:
         """The place of column ``name`` (given by map key ``key``) in the header."""
@@ -524,55 +545,110 @@ class LabTable:
                 finite_number(text, f"{self.where(i)}, column {name!r}: {cell!r} is", LabExportError)
         return out
 
+    def subset(self, rows) -> "LabTable":
+        """The table of rows ``rows`` (indices into this one) alone."""
+        return LabTable(self.path, self.header, self.header_line, [self.rows[i] for i in rows],
+                        [self.lines[i] for i in rows], self.decimal, [self.numbers_of_rows[i] for i in rows])
 
-def read_lab_table(path: str | Path, lab_map: LabMap) -> LabTable:
-    """A lab file split by the map's ``[csv]`` dialect: header line after ``skip_lines``, data rows
-    (trailing blank lines dropped)."""
-    path = Path(path)
-    text = read_text_file(path, "lab file (CSV)", LabExportError)
-    dialect = lab_map.tables["csv"]
-    skip = dialect["skip_lines"]
-    lines = text.splitlines(keepends=True)
-    reader = csv.reader(io.StringIO("".join(lines[skip:]), newline=""), delimiter=dialect["delimiter"])
-    rows, ends = [], []
+
+def _text_lines(path: Path):
+    """The lines of a lab file (UTF-8, a byte-order mark accepted), read one at a time; a folder,
+    a missing or unreadable file, NUL bytes or bytes that are not UTF-8 refused naming it."""
+    if path.is_dir():
+        raise LabExportError(f"{path}: is a folder, not a {LAB_FILE}")
+    if not path.exists():
+        raise LabExportError(f"{path}: {LAB_FILE} not found")
     try:
-        for row in reader:
-            rows.append(row)
-            ends.append(reader.line_num + skip)
-    except csv.Error as exc:
-        raise LabExportError(f"{path}: line {reader.line_num + skip}: not readable as CSV: {exc}") from None
-    while rows and not any(c.strip() for c in rows[-1]):
-        rows.pop()
-        ends.pop()
-    if len(rows) < 2:
-        raise LabExportError(f"{path}: {'no header line' if not rows else 'no data rows'} after the "
-                             f"{skip} line(s) skipped (key csv.skip_lines)")
-    header = tuple(h.strip() for h in rows[0])
-    others = [d for d in ",;\t" if d != dialect["delimiter"] and len(header) == 1 and d in header[0]]
-    if others:
-        raise LabExportError(f"{path}: line {ends[0]}: the fields seem separated by {others[0]!r}, not "
-                             f"{dialect['delimiter']!r} (key csv.delimiter)")
-    return LabTable(path, header, ends[0], rows[1:], ends[1:], dialect["decimal"])
+        stream = open(path, "rb")
+    except OSError as exc:
+        raise LabExportError(f"{path}: cannot read the {LAB_FILE}: {exc.strerror or exc}") from None
+    with stream:
+        offset = 0
+        for raw in stream:
+            if offset == 0 and raw.startswith(codecs.BOM_UTF8):
+                raw, offset = raw[len(codecs.BOM_UTF8):], len(codecs.BOM_UTF8)
+            if b"\0" in raw:
+                raise LabExportError(f"{path}: not a text file (it holds NUL bytes): expected a {LAB_FILE}")
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                raise LabExportError(f"{path}: not UTF-8 text (byte {offset + exc.start}): expected a "
+                                     f"{LAB_FILE}") from None
+            offset += len(raw)
+            if "\r" in text.rstrip("\r\n"):  # lines ended by a lone carriage return
+                yield from text.splitlines(keepends=True)
+            else:
+                yield text
+
+
+class LabFile:
+    """A lab file split by the map's ``[csv]`` dialect, read :data:`CHUNK_ROWS` data rows at a
+    time: iterating gives :class:`LabTable` chunks (header line after ``skip_lines``, trailing
+    blank lines dropped); :attr:`data_rows`, once read, the number of data rows."""
+
+    def __init__(self, path: str | Path, lab_map: LabMap, chunk_rows: int | None = None):
+        self.path, self.dialect, self.chunk_rows = Path(path), lab_map.tables["csv"], chunk_rows or CHUNK_ROWS
+        self.data_rows = 0
+
+    def _header(self, row: list, line: int) -> tuple[str, ...]:
+        header = tuple(h.strip() for h in row)
+        delimiter = self.dialect["delimiter"]
+        others = [d for d in ",;\t" if d != delimiter and len(header) == 1 and d in header[0]]
+        if others:
+            raise LabExportError(f"{self.path}: line {line}: the fields seem separated by {others[0]!r}, not "
+                                 f"{delimiter!r} (key csv.delimiter)")
+        return header
+
+    def __iter__(self):
+        skip = self.dialect["skip_lines"]
+        lines = _text_lines(self.path)
+        for _ in range(skip):
+            next(lines, None)
+        reader = csv.reader(lines, delimiter=self.dialect["delimiter"])
+        first, header, rows, ends, blank = None, None, [], [], []
+        try:
+            for row in reader:
+                line = reader.line_num + skip
+                if first is None:
+                    first = (row, line)
+                elif not any(c.strip() for c in row):
+                    blank.append((row, line))  # data only if a row follows
+                else:
+                    header = header or self._header(*first)
+                    rows += [b[0] for b in blank] + [row]
+                    ends += [b[1] for b in blank] + [line]
+                    blank.clear()
+                    if len(rows) >= self.chunk_rows:
+                        yield self._chunk(header, first[1], rows, ends)
+                        rows, ends = [], []
+        except csv.Error as exc:
+            raise LabExportError(f"{self.path}: line {reader.line_num + skip}: not readable as CSV: {exc}") from None
+        if header is None:
+            empty = first is None or not any(c.strip() for c in first[0])
+            raise LabExportError(f"{self.path}: {'no header line' if empty else 'no data rows'} after the "
+                                 f"{skip} line(s) skipped (key csv.skip_lines)")
+        if rows:
+            yield self._chunk(header, first[1], rows, ends)
+
+    def _chunk(self, header: tuple, header_line: int, rows: list, ends: list) -> LabTable:
+        start = self.data_rows
+        self.data_rows += len(rows)
+        return LabTable(self.path, header, header_line, rows, ends, self.dialect["decimal"],
+                        range(start, start + len(rows)))
 
 
 def _kept_rows(table: LabTable, spec: dict) -> np.ndarray:
-    """0-based indices of the data rows ``[rows]`` keeps, each with a full set of fields."""
-    n = len(table.rows)
-    for key in ("first", "last"):
-        if spec.get(key, 1) > n:
-            raise LabExportError(f"{table.path}: key rows.{key} = {spec[key]}, but the file has {n} data rows")
-    beyond = [d for d in spec["drop"] if d > n]
-    if beyond:
-        raise LabExportError(f"{table.path}: key rows.drop names row {beyond[0]}, but the file has {n} data rows")
-    drop = set(spec["drop"])
-    rows = [i for i in range(spec.get("first", 1) - 1, spec.get("last", n)) if i + 1 not in drop]
+    """Indices of the rows of a chunk ``table`` that ``[rows]`` keeps, each with a full set of fields
+    (the rows the file lacks for ``first``, ``last``, ``drop``: :func:`_check_row_counts`)."""
+    first, last, drop = spec.get("first", 1) - 1, spec.get("last", math.inf), set(spec["drop"])
+    rows = [i for i, r in enumerate(table.numbers_of_rows) if first <= r < last and r + 1 not in drop]
     for i in rows:
         if not any(c.strip() for c in table.rows[i]):
             raise LabExportError(f"{table.where(i)}: blank line inside the data (drop it with rows.drop)")
         if len(table.rows[i]) != len(table.header):
             raise LabExportError(f"{table.where(i)}: expected {len(table.header)} fields (as the header), got "
                                  f"{len(table.rows[i])}")
-    if "keep_column" in spec:
+    if "keep_column" in spec and rows:
         name = spec["keep_column"]
         col = table.index(name, "rows.keep_column")
         words = [table.rows[i][col].strip().lower() for i in rows]
@@ -581,40 +657,67 @@ def _kept_rows(table: LabTable, spec: dict) -> np.ndarray:
             raise LabExportError(f"{table.where(rows[bad[0]])}, column {name!r}: {table.rows[rows[bad[0]]][col]!r} is "
                                  "not 1/true/yes (keep the row) or 0/false/no (drop it) (key rows.keep_column)")
         rows = [i for i, w in zip(rows, words) if KEEP_WORDS[w]]
-    if not rows:
-        raise LabExportError(f"{table.path}: no data row kept (keys rows.first, rows.last, rows.drop, "
-                             "rows.keep_column)")
     return np.array(rows, dtype=int)
 
 
-def _times(table: LabTable, kept: np.ndarray, spec: dict) -> tuple[np.ndarray, dict]:
-    """``(t_s, what the session declares of its time)``; time must not go backwards."""
+def _check_row_counts(path: Path, spec: dict, data_rows: int, kept: int) -> None:
+    """Refuse ``[rows]`` keys naming rows a file of ``data_rows`` data rows lacks, or keeping none."""
+    for key in ("first", "last"):
+        if spec.get(key, 1) > data_rows:
+            raise LabExportError(f"{path}: key rows.{key} = {spec[key]}, but the file has {data_rows} data rows")
+    beyond = [d for d in spec["drop"] if d > data_rows]
+    if beyond:
+        raise LabExportError(f"{path}: key rows.drop names row {beyond[0]}, but the file has {data_rows} data rows")
+    if not kept:
+        raise LabExportError(f"{path}: no data row kept (keys rows.first, rows.last, rows.drop, rows.keep_column)")
+
+
+@dataclass
+class SessionStream:
+    """What one file's conversion carries from chunk to chunk: rows kept so far, of them
+    validation rows, the time origin (ISO) and the last row's time."""
+
+    kept: int = 0
+    validation: int = 0
+    origin: datetime | None = None
+    last_t: float | None = None
+
+
+def _times(table: LabTable, kept: np.ndarray, spec: dict, state: SessionStream) -> np.ndarray:
+    """(len(kept),) ``t_s`` of a chunk's kept rows; time must not go backwards, in the chunk or
+    from the session's previous chunk (``state``)."""
     if spec["format"] == "none":
-        return np.arange(len(kept), dtype=float), {"time": "row order"}
+        return np.arange(state.kept, state.kept + len(kept), dtype=float)
     name = spec["column"]
-    info = {"time": "measured"}
     if spec["format"] == "seconds":
         t_s = (table.numbers(kept, (name,), "time.column")[:, 0] - spec["origin"]) / TIME_UNITS[spec["unit"]]
     else:
         col = table.index(name, "time.column")
         stamps = [_timestamp(table.rows[i][col], lambda what, i=i: LabExportError(
             f"{table.where(i)}, column {name!r}: {what}")) for i in kept]
-        origin = spec.get("origin", stamps[0])
+        origin = state.origin = state.origin or spec.get("origin", stamps[0])
         for i, s in zip(kept, stamps):
             if (s.tzinfo is None) != (origin.tzinfo is None):
                 raise LabExportError(f"{table.where(i)}, column {name!r}: {table.rows[i][col].strip()!r} has "
                                      f"{'no' if s.tzinfo is None else 'a'} time zone and the origin "
                                      f"({origin.isoformat()}) {'has' if s.tzinfo is None else 'has none'}")
         t_s = np.array([(s - origin).total_seconds() for s in stamps])
-        info["time_origin"] = origin.isoformat()
-    back = np.flatnonzero(np.diff(t_s) < 0)
+    before = np.concatenate([[state.last_t] if state.last_t is not None else [], t_s])
+    back = np.flatnonzero(np.diff(before) < 0)
     if back.size:
-        i = kept[back[0] + 1]
-        raise LabExportError(f"{table.where(i)}, column {name!r}: time goes backwards ({t_s[back[0] + 1]!r} s after "
-                             f"{t_s[back[0]]!r} s); rows must be in the order taken (or dropped: key rows.drop)")
-    return t_s, info
+        k = back[0] + 1 - (len(before) - len(t_s))  # the kept row that goes back
+        raise LabExportError(f"{table.where(kept[k])}, column {name!r}: time goes backwards ({before[back[0] + 1]!r} s "
+                             f"after {before[back[0]]!r} s); rows must be in the order taken (or dropped: key "
+                             "rows.drop)")
+    state.last_t = float(t_s[-1])
+    return t_s
 
 
+def _time_info(spec: dict, state: SessionStream) -> dict:
+    """What a session declares of its time (the sidecar's ``sessions.NAME``)."""
+    if spec["format"] == "none":
+        return {"time": "row order"}
+    return {"time": "measured", **({"time_origin": state.origin.isoformat()} if spec["format"] == "iso" else {})}
 def _orientation(table: LabTable, kept: np.ndarray, spec: dict) -> np.ndarray:
     """(N, 3) the angles ``[alpha, beta, gamma]`` of the orientation columns, rad (of the inverse
     rotation with ``rotation = "instrument_to_platform"``: the quaternion's conjugate, the
@@ -661,46 +764,125 @@ def session_joint_mapping(lab_map: LabMap, session: str | None = None) -> dict:
     return lab_map.tables["sessions"].get("joints", {}).get(session, lab_map.tables["joints"])
 
 
-def _convert_file(lab_map: LabMap, path: Path, joint_spec: dict, joint_key: str, whole_set: str | None) -> dict:
-    """One lab file's kept rows in the recording's units: ``t_s``, ``joints``, ``measured``,
-    ``sets``, ``extras``, ``time`` (what its session declares of its time), ``data_rows``;
-    ``joint_spec``: its joint mapping (``joint_key`` the map's table of it); ``whole_set``: every
-    row's set (``[sessions] set``), or None (``[set]``, or every row calibration)."""
+def _joint_key(lab_map: LabMap, session: str) -> str:
+    """The map's table of ``session``'s joint mapping, as messages name it."""
+    return f"sessions.{session}.joints" if session in lab_map.tables["sessions"].get("joints", {}) else "joints"
+
+
+def poses_and_joints(lab_map: LabMap, table: LabTable, kept: np.ndarray, session: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(measured (N, D), joints (N, C))`` of rows ``kept`` of session ``session``'s ``table`` in
+    the recording's units, as ``lab_map`` reads them."""
     robot, t = lab_map.robot, lab_map.tables
-    table = read_lab_table(path, lab_map)
-    kept = _kept_rows(table, t["rows"])
-    t_s, time_info = _times(table, kept, t["time"])
     poses = np.empty((len(kept), robot.pose_dim))
     angle = robot.angle_pose_mask
     poses[:, ~angle] = table.numbers(kept, t["position"]["columns"], "position.columns") \
         * LENGTH_UNITS[t["position"]["unit"]] + t["position"]["offset"]
     if angle.any():
         poses[:, angle] = _orientation(table, kept, t["orientation"])
-    j = joint_spec
+    j = session_joint_mapping(lab_map, session)
     factor = (LENGTH_UNITS if robot.joint_unit == "mm" else ANGLE_UNITS)[j["unit"]]
-    joints = (j["zero"] + j["scale"] * table.numbers(kept, j["columns"], f"{joint_key}.columns")) * factor
+    joints = (j["zero"] + j["scale"] * table.numbers(kept, j["columns"], f"{_joint_key(lab_map, session)}.columns")) \
+        * factor
+    return poses, joints
+
+
+def _sets(table: LabTable, kept: np.ndarray, spec: dict, whole_set: str | None) -> np.ndarray:
+    """(len(kept),) each kept row's set: ``whole_set``, or by ``[set]``'s column, or calibration."""
     sets = np.full(len(kept), whole_set or SETS[0], dtype=object)
-    if t["set"]:
-        col = table.index(t["set"]["column"], "set.column")
-        labels = {t["set"][s].strip(): s for s in SETS}
+    if spec:
+        col = table.index(spec["column"], "set.column")
+        labels = {spec[s].strip(): s for s in SETS}
         for k, i in enumerate(kept):
             cell = table.rows[i][col].strip()
             if cell not in labels:
-                raise LabExportError(f"{table.where(i)}, column {t['set']['column']!r}: {cell!r} is neither "
-                                     f"{t['set']['calibration']!r} (key set.calibration) nor "
-                                     f"{t['set']['validation']!r} (key set.validation)")
+                raise LabExportError(f"{table.where(i)}, column {spec['column']!r}: {cell!r} is neither "
+                                     f"{spec['calibration']!r} (key set.calibration) nor "
+                                     f"{spec['validation']!r} (key set.validation)")
             sets[k] = labels[cell]
-    extras = {name: table.numbers(kept, (column,), f"extra.{name}")[:, 0] for name, column in t["extra"].items()}
-    return {"t_s": t_s, "joints": joints, "measured": poses, "sets": sets.astype(str), "extras": extras,
-            "time": time_info, "data_rows": len(table.rows)}
+    return sets.astype(str)
 
 
-def _session_frames(lab_map: LabMap, names: list, frames: list, parts: list) -> None:
+class CheckSample:
+    """A seeded subsample of the rows kept, for the checks on evidence: each (session, set) group's
+    rows drawn uniformly without replacement (every row a random key, the smallest kept: the draw
+    does not depend on how the files are chunked); :data:`CHECK_ROWS` rows in all, at least
+    :data:`CHECK_ROWS_PER_GROUP` (or all) of each group; every row when there are no more than
+    :data:`CHECK_ROWS`."""
+
+    def __init__(self, seed: int = CHECK_SEED, size: int | None = None):
+        self.seed, self.size, self.rng = seed, size or CHECK_ROWS, np.random.default_rng(seed)
+        self.kept = max(self.size, CHECK_ROWS_PER_GROUP)  # the most rows a group may give
+        self.groups: dict = {}  # (session, set) -> [keys, [(row number, cells, line, time)], rows seen]
+        self.files: dict = {}  # session -> a table of its file (its path, header, decimal)
+
+    def add(self, session: str, table: LabTable, kept: np.ndarray, sets: np.ndarray, t_s: np.ndarray) -> None:
+        """Offer a chunk's kept rows ``kept`` of ``table`` (their sets and times)."""
+        keys = self.rng.random(len(kept))
+        self.files.setdefault(session, table.subset([]))
+        for name in SETS:
+            mine = np.flatnonzero(sets == name)
+            group = self.groups.setdefault((session, name), [np.empty(0), [], 0])
+            group[2] += mine.size
+            if len(group[0]) >= self.kept:  # only rows that can enter
+                mine = mine[keys[mine] < group[0].max()]
+            if not mine.size:
+                continue
+            group[0] = np.concatenate([group[0], keys[mine]])
+            group[1] += [(table.numbers_of_rows[kept[k]], table.rows[kept[k]], table.lines[kept[k]], float(t_s[k]))
+                         for k in mine]
+            if len(group[0]) > self.kept:
+                best = np.argpartition(group[0], self.kept)[:self.kept]
+                group[0], group[1] = group[0][best], [group[1][b] for b in best]
+
+    def rows(self) -> int:
+        """The rows offered."""
+        return sum(group[2] for group in self.groups.values())
+
+    def drawn(self, session: str) -> tuple[LabTable, np.ndarray, np.ndarray]:
+        """``(table, t_s, sets)`` of session ``session``'s rows drawn, in the file's order."""
+        total, picked = self.rows(), []
+        for name in SETS:
+            keys, items, seen = self.groups.get((session, name), (np.empty(0), [], 0))
+            take = seen if total <= self.size else min(seen, max(CHECK_ROWS_PER_GROUP, round(self.size * seen / total)))
+            picked += [(items[k], name) for k in np.argsort(keys)[:take]]
+        picked.sort(key=lambda p: p[0][0])
+        f = self.files[session]
+        table = LabTable(f.path, f.header, f.header_line, [p[0][1] for p in picked], [p[0][2] for p in picked],
+                         f.decimal, [p[0][0] for p in picked])
+        return table, np.array([p[0][3] for p in picked]), np.array([p[1] for p in picked], dtype=str)
+
+
+def _stream_file(lab_map: LabMap, path: Path, session: str, whole_set: str | None, writer,
+                 sample: CheckSample) -> dict:
+    """Convert one lab file chunk by chunk, each chunk's kept rows written as recording rows of
+    session ``session`` by ``writer`` and offered to ``sample``; ``whole_set``: every row's set
+    (``[sessions] set``), or None (``[set]``, or every row calibration). Returns what the
+    sidecar says of the file (``data_rows``, ``kept_rows``, ``validation_rows``, ``time``)."""
+    t = lab_map.tables
+    state, lab = SessionStream(), LabFile(path, lab_map)
+    for table in lab:
+        kept = _kept_rows(table, t["rows"])
+        if not kept.size:
+            continue
+        t_s = _times(table, kept, t["time"], state)
+        measured, joints = poses_and_joints(lab_map, table, kept, session)
+        sets = _sets(table, kept, t["set"], whole_set)
+        extras = [table.numbers(kept, (column,), f"extra.{name}")[:, 0] for name, column in t["extra"].items()]
+        write_recording_rows(writer, t_s, joints, measured, extras, sets, [session] * len(kept))
+        sample.add(session, table, kept, sets, t_s)
+        state.kept += len(kept)
+        state.validation += int(np.sum(sets == SETS[1]))
+    _check_row_counts(path, t["rows"], lab.data_rows, state.kept)
+    return {"data_rows": lab.data_rows, "kept_rows": state.kept, "validation_rows": state.validation,
+            "time": _time_info(t["time"], state)}
+
+
+def _session_frames(lab_map: LabMap, names: list, frames: list, calibrated: dict) -> None:
     """Refuse a frame naming a session that is not another with its own frame and calibration
-    rows, and a session without calibration rows whose frame is to be estimated."""
+    rows (``calibrated``: session -> whether it has any), and a session without calibration rows
+    whose frame is to be estimated."""
     path = lab_map.path
     own = {n: f for n, f in zip(names, frames)}
-    calibrated = {n: bool(np.any(p["sets"] == SETS[0])) for n, p in zip(names, parts)}
     for name, frame in own.items():
         if frame is None or frame in FRAME_MODES:
             if not calibrated[name] and len(names) > 1 and frame != "base":
@@ -720,16 +902,61 @@ def _session_frames(lab_map: LabMap, names: list, frames: list, parts: list) -> 
                                                 "calibration rows: its frame cannot be estimated")
 
 
-def convert_lab_files(lab_map: LabMap, files) -> Recording:
-    """The recording of a lab's files, one session per file (see the module's description).
+@dataclass(frozen=True, eq=False)
+class LabSample:
+    """The rows the checks on evidence judge the map on (:class:`CheckSample`'s draw).
 
-    The sidecar's ``meta.imported`` names the map and, per file, its session, its data rows and
-    the rows kept; ``meta.parameter_tolerance`` is the map's ``[robot] tolerance``.
-
-    Raises:
-        LabExportError: naming the file and the row and column, or the map's key, at fault.
+    Attributes:
+        recording: those rows as the map reads them (the recording's sessions, frames, meta).
+        tables: session -> its rows drawn, as the lab wrote them.
+        rows: the rows kept in all (``len(recording.t_s)`` of them drawn).
+        seed: the draw's seed.
     """
-    files = [Path(f) for f in files]
+
+    recording: Recording
+    tables: dict
+    rows: int
+    seed: int
+
+    @property
+    def all_rows(self) -> bool:
+        """Whether every row kept is in the sample."""
+        return len(self.recording.t_s) == self.rows
+
+    def read_as(self, lab_map: LabMap) -> tuple[np.ndarray, np.ndarray]:
+        """``(joints, measured)`` of the sample's rows as ``lab_map`` (the map with a key changed)
+        reads them.
+
+        Raises:
+            LabExportError: they cannot be read so.
+        """
+        parts = [poses_and_joints(lab_map, table, np.arange(len(table.rows)), name)
+                 for name, table in self.tables.items()]
+        return np.concatenate([p[1] for p in parts]), np.concatenate([p[0] for p in parts])
+
+
+@dataclass(frozen=True, eq=False)
+class LabImport:
+    """What :func:`import_lab_files` wrote and what the sidecar says of it.
+
+    Attributes:
+        header: the recording's CSV header.
+        meta: the sidecar's ``meta`` (``imported``: the map and, per file, its session, data rows and
+            rows kept; ``parameter_tolerance``; ``measurement``).
+        session_info: the sidecar's ``sessions`` (session -> its source, time and frame).
+        validation_rows: session -> its validation rows.
+        sample: the rows the checks on evidence judge the map on.
+    """
+
+    header: tuple[str, ...]
+    meta: dict
+    session_info: dict
+    validation_rows: dict
+    sample: LabSample
+
+
+def _sessions_of(lab_map: LabMap, files: list) -> tuple[list, list, list]:
+    """``(names, frames, sets)``: one each per file, by ``[sessions]`` (checked against the files)."""
     if not files:
         raise LabExportError("no lab file given")
     twice = sorted({str(f) for f in files if files.count(f) > 1})
@@ -745,23 +972,45 @@ def convert_lab_files(lab_map: LabMap, files) -> Recording:
     stray = [n for n in s.get("joints", {}) if n not in names]
     if stray:
         raise _fail(lab_map.path, f"sessions.{stray[0]}", f"names no session ({', '.join(map(repr, names))})")
-    parts = [_convert_file(lab_map, f, session_joint_mapping(lab_map, n),
-                           f"sessions.{n}.joints" if n in s.get("joints", {}) else "joints", w)
-             for f, n, w in zip(files, names, sets)]
-    _session_frames(lab_map, names, frames, parts)
+    return names, frames, sets
+
+
+def import_lab_files(lab_map: LabMap, files, csv_file, seed: int = CHECK_SEED) -> LabImport:
+    """Convert a lab's files, one session per file (see the module's description), writing the
+    recording's CSV rows to the open text file ``csv_file`` as they are converted,
+    :data:`CHUNK_ROWS` rows at a time (memory bounded by a chunk, not by the files); the rows the
+    checks on evidence judge the map on drawn on the way (``seed``).
+
+    Raises:
+        LabExportError: naming the file and the row and column, or the map's key, at fault.
+    """
+    files = [Path(f) for f in files]
+    names, frames, sets = _sessions_of(lab_map, files)
+    header = recording_header(lab_map.robot, {}, lab_map.tables["extra"], True)
+    writer = csv.writer(csv_file, lineterminator="\n")
+    writer.writerow(header)
+    sample = CheckSample(seed)
+    done = [_stream_file(lab_map, f, n, w, writer, sample) for f, n, w in zip(files, names, sets)]
+    _session_frames(lab_map, names, frames, {n: d["kept_rows"] > d["validation_rows"] for n, d in zip(names, done)})
     meta = {"imported": {"map": str(lab_map.path), "files": [
-        {"file": str(f), "session": n, "data_rows": p["data_rows"], "kept_rows": len(p["t_s"])}
-        for f, n, p in zip(files, names, parts)]}}
+        {"file": str(f), "session": n, "data_rows": d["data_rows"], "kept_rows": d["kept_rows"]}
+        for f, n, d in zip(files, names, done)]}}
     if "tolerance" in lab_map.tables["robot"]:
         meta["parameter_tolerance"] = dict(lab_map.tables["robot"]["tolerance"])
-    info = {n: {"source": str(f), **p["time"]} for f, n, p in zip(files, names, parts)}
+    info = {n: {"source": str(f), **d["time"]} for f, n, d in zip(files, names, done)}
     if len(files) == 1 and frames[0] is not None:
         meta["measurement"] = {"frame": frames[0]}
     for n, frame in zip(names, frames):
         if len(files) > 1 and frame is not None:
             info[n]["measurement"] = {"frame": frame}
-    cat = {k: np.concatenate([p[k] for p in parts]) for k in ("t_s", "joints", "measured", "sets")}
-    return Recording(robot=lab_map.robot, noise=lab_map.noise, meta=meta, **cat,
-                     sessions=np.concatenate([[n] * len(p["t_s"]) for n, p in zip(names, parts)]),
-                     session_info=info, extras={e: np.concatenate([p["extras"][e] for p in parts])
-                                                for e in lab_map.tables["extra"]})
+    drawn = {n: sample.drawn(n) for n in names}
+    read = {n: poses_and_joints(lab_map, table, np.arange(len(table.rows)), n) for n, (table, _, _) in drawn.items()}
+    rec = Recording(robot=lab_map.robot, noise=lab_map.noise, meta=meta, session_info=info,
+                    t_s=np.concatenate([d[1] for d in drawn.values()]),
+                    joints=np.concatenate([r[1] for r in read.values()]),
+                    measured=np.concatenate([r[0] for r in read.values()]),
+                    sets=np.concatenate([d[2] for d in drawn.values()]),
+                    sessions=np.concatenate([[n] * len(d[1]) for n, d in drawn.items()]))
+    return LabImport(header=header, meta=meta, session_info=info,
+                     validation_rows={n: d["validation_rows"] for n, d in zip(names, done)},
+                     sample=LabSample(rec, {n: d[0] for n, d in drawn.items()}, sample.rows(), seed))

@@ -45,8 +45,9 @@ class ResultSet:
     Every path is checked when the set is made (before any work): not a folder, not existing
     unless ``overwrite``, in a folder that exists (or is created, ``create_folders``) and can be
     written. Each file is written to a temporary file beside its destination (:meth:`temp`);
-    :meth:`publish` moves them all into place, and if one move fails, removes those already moved
-    (restoring what they replaced). Leaving the ``with`` block without publishing removes the
+    :meth:`publish` moves them all into place, each by one atomic rename (an earlier file it replaces
+    kept as a hard-linked backup until all are in place), and if one move fails, removes those
+    already moved (restoring what they replaced). Leaving the ``with`` block without publishing removes the
     temporary files: an interrupted run leaves only hidden ``.*.tmp`` files, nothing that looks
     complete.
 
@@ -103,10 +104,7 @@ class ResultSet:
                     os.replace(path, backup)
                     done.append((path, backup))
             for key, path in self.paths.items():
-                backup = None
-                if self.overwrite and path.exists():
-                    backup = temporary_file(path, ".bak")
-                    os.replace(path, backup)
+                backup = _backup(path) if self.overwrite and path.exists() else None
                 try:
                     publish(self._tmp[key], path, overwrite=self.overwrite)
                 except BaseException:
@@ -147,6 +145,20 @@ class ResultSet:
 
     def __exit__(self, *exc) -> None:
         self.discard()
+
+
+def _backup(path: Path) -> Path:
+    """A hidden backup of ``path`` beside it (``.bak``) that leaves ``path`` in place, a hard link:
+    the file is then replaced by one atomic rename, so that ``path`` names the earlier file or the
+    new one, complete, at every instant (a run killed then leaves the earlier one). Where the file
+    system has no hard links, the file is moved there."""
+    backup = temporary_file(path, ".bak")
+    backup.unlink()
+    try:
+        os.link(path, backup)
+    except OSError:
+        os.replace(path, backup)
+    return backup
 
 
 def check_outputs(paths: dict, *, overwrite: bool) -> None:

@@ -51,8 +51,9 @@ from calib.robots import ROBOTS, robot_from_description
 from .outputs import ResultSet
 
 __all__ = ["RecordingError", "Recording", "write_recording", "read_recording", "read_sidecar_geometry", "columns",
-           "recording_texts",
-           "sidecar_path", "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS", "READABLE_VERSIONS",
+           "recording_texts", "recording_header", "write_recording_rows", "sidecar_text", "sidecar_path",
+           "finite_number", "row_words", "row_message", "FORMAT", "FORMAT_VERSION", "SETS", "SIDECAR_FIELDS",
+           "READABLE_VERSIONS",
            "MIN_ROBOT_SIZE_MM", "DEFAULT_SESSION", "SESSION_KEYS", "SESSION_TIMES", "session_measurement",
            "check_session_name", "check_channel_name", "read_text_file", "frame_session", "shared_frame_error",
            "SESSION_NAME", "row_frame_groups"]
@@ -174,34 +175,56 @@ def _has_sessions(rec: Recording) -> bool:
     return bool(rec.session_info) or bool(np.any(rec.sessions != DEFAULT_SESSION))
 
 
-def recording_texts(rec: Recording) -> tuple[str, str]:
-    """The CSV text and the JSON sidecar text of ``rec``."""
-    joint_cols, pose_cols = columns(rec.robot, measurement_settings(rec.meta.get("measurement")).n_targets)
-    sessions = _has_sessions(rec)
-    extras = tuple(rec.extras)
-    header = ("t_s",) + joint_cols + pose_cols + extras + ("set",) + (("session",) if sessions else ())
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for k in range(len(rec.t_s)):
-        w.writerow([repr(float(rec.t_s[k]))] + [repr(float(v)) for v in rec.joints[k]]
-                   + [repr(float(v)) for v in rec.measured[k]] + [repr(float(rec.extras[e][k])) for e in extras]
-                   + [rec.sets[k]] + ([rec.sessions[k]] if sessions else []))
-    table = rec.robot.table
+def recording_header(robot: Robot, meta: dict, extras, sessions: bool) -> tuple[str, ...]:
+    """The CSV header of a recording of ``robot`` (``meta``'s measurement says its pose columns),
+    its extra channels ``extras`` and, with ``sessions``, a ``session`` column."""
+    joint_cols, pose_cols = columns(robot, measurement_settings(meta.get("measurement")).n_targets)
+    return ("t_s",) + joint_cols + pose_cols + tuple(extras) + ("set",) + (("session",) if sessions else ())
+
+
+def write_recording_rows(writer, t_s, joints, measured, extras, sets, sessions=None) -> None:
+    """Write recording rows with ``writer`` (a :func:`csv.writer`): each number as Python's
+    shortest exact ``repr``; ``extras``: the channels' (N,) values in the header's order;
+    ``sessions``: each row's session, or None (no ``session`` column)."""
+    extras = list(extras)
+    for k in range(len(t_s)):
+        writer.writerow([repr(float(t_s[k]))] + [repr(float(v)) for v in joints[k]]
+                        + [repr(float(v)) for v in measured[k]] + [repr(float(e[k])) for e in extras]
+                        + [sets[k]] + ([sessions[k]] if sessions is not None else []))
+
+
+def sidecar_text(robot: Robot, noise: SensorNoise, meta: dict, header, sessions: dict | None) -> str:
+    """The JSON sidecar of a recording with CSV ``header`` (:func:`recording_header`); ``sessions``:
+    the ``sessions`` field (name -> what is declared of it, in the order of their first row), or
+    None (one default session)."""
+    table = robot.table
     sidecar = {
         "format": FORMAT,
         "version": FORMAT_VERSION,
-        "robot": rec.robot.name,
+        "robot": robot.name,
         "units": UNITS,
         "columns": list(header),
-        **({"sessions": {name: rec.session_info.get(name, {}) for name in rec.session_names}} if sessions else {}),
-        "nominal_geometry": rec.robot.description(),
+        **({"sessions": sessions} if sessions is not None else {}),
+        "nominal_geometry": robot.description(),
         "parameter_table": [{"name": p.name, "unit": p.unit, "nominal": p.nominal, "chain": p.chain + 1}
                             for p in table],
-        "declared_noise": rec.noise.to_dict(),
-        "meta": rec.meta,
+        "declared_noise": noise.to_dict(),
+        "meta": meta,
     }
-    return buf.getvalue(), json.dumps(sidecar, indent=1)
+    return json.dumps(sidecar, indent=1)
+
+
+def recording_texts(rec: Recording) -> tuple[str, str]:
+    """The CSV text and the JSON sidecar text of ``rec``."""
+    sessions = _has_sessions(rec)
+    header = recording_header(rec.robot, rec.meta, rec.extras, sessions)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    write_recording_rows(w, rec.t_s, rec.joints, rec.measured, rec.extras.values(), rec.sets,
+                         rec.sessions if sessions else None)
+    declared = {name: rec.session_info.get(name, {}) for name in rec.session_names} if sessions else None
+    return buf.getvalue(), sidecar_text(rec.robot, rec.noise, rec.meta, header, declared)
 
 
 def check_session_name(name, error: type[Exception] = ValueError, where: str = "session") -> str:

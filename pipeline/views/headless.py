@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from pipeline.formats import writing
+
 __all__ = ["snapshot", "renderer_available", "viewer_executable", "SnapshotError", "DEFAULT_SIZE"]
 
 #: Logical window size of the headless viewer (points; one pixel a point).
@@ -173,9 +175,9 @@ def _shoot(proc, port, paths, out, *, timeout_s, settle_s, max_size) -> Path:
     if not png:
         raise SnapshotError("the viewer returned no picture")
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_bytes(png)
-    _shrink(out)
+    with writing(out, overwrite=True) as tmp:  # atomic: an interrupted run leaves the earlier picture
+        tmp.write_bytes(png)
+        _shrink(tmp)
     return out
 
 
@@ -187,5 +189,5 @@ def _shrink(path: Path) -> None:
         return
     with Image.open(path) as im:
         small = im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
-    small.save(path, optimize=True)
+    small.save(path, format="PNG", optimize=True)
 

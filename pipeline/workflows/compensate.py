@@ -28,8 +28,8 @@ from calib.measurement import compose, invert_frame
 from calib.robot import KinematicsError
 
 from pipeline.formats import (TIME_COLUMN, ResultSet, Targets, TargetsError, check_outputs, check_plausible_parameters,
-                              columns, command_columns, command_csv, joint_readings, read_map, read_targets,
-                              row_message, session_joint_mapping, sidecar_path)
+                              columns, command_columns, joint_readings, read_map, read_targets, row_message,
+                              session_joint_mapping, sidecar_path, write_command_rows)
 
 __all__ = ["TARGET_FRAMES", "CompensateSettings", "CompensationReport", "run_compensation", "domain_warnings",
            "controller_readings", "proof_in_the_testbed", "reachable_targets", "check_target_units", "TARGET_UNITS"]
@@ -279,8 +279,9 @@ def run_compensation(settings: CompensateSettings) -> CompensationReport:
                **({"controller_readings": readings_about} if readings_about else {})}
     paths = {"commands": out, "sidecar": sidecar_path(out)}
     with ResultSet(paths, overwrite=settings.overwrite, flags={"commands": "--out", "sidecar": "--out"}) as files:
-        files.temp("commands").write_text(command_csv(cal.robot, poses, comp.commands, tg.t_s,
-                                                      readings(comp.commands) if readings else None))
+        with open(files.temp("commands"), "w", newline="") as commands:  # streamed: a large file grows
+            write_command_rows(commands, cal.robot, poses, comp.commands, tg.t_s,
+                               readings(comp.commands) if readings else None)
         files.temp("sidecar").write_text(json.dumps({"robot": cal.robot.name, "produced_by": "pipeline.compensate",
                                                      **summary}, indent=1) + "\n")
         files.publish()

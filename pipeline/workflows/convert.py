@@ -15,8 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.formats import (Recording, ResultSet, convert_lab_files, lab_checks, read_map, read_recording,
-                              sidecar_path, write_recording)
+from pipeline.formats import (Recording, ResultSet, import_lab_files, read_map, read_recording, sidecar_path,
+                              sidecar_text)
+from pipeline.formats.lab_checks import lab_checks  # the function: the package's name is also the module's
 
 __all__ = ["ConvertSettings", "ConvertResult", "run_convert", "output_paths"]
 
@@ -44,17 +45,32 @@ class ConvertResult:
 
     Attributes:
         csv_path, json_path: the files written.
-        recording: the recording, as read back from them.
-        sessions: per session (in order) ``{"session", "file", "data_rows", "kept_rows"}``.
+        robot: the robot's name.
+        rows: the rows written.
+        extras: the extra channels kept.
+        sessions: per session (in order) ``{"session", "file", "data_rows", "kept_rows",
+            "validation_rows", "frame"}`` (``frame``: its instrument frame as declared).
+        checked_rows: the rows the checks on evidence judged the map on (all ``rows``, or a seeded
+            subsample of them).
+        check_seed: that subsample's seed.
         warnings: what the checks on evidence suspect of the map (:func:`pipeline.formats.lab_checks`),
             one line each.
     """
 
     csv_path: Path
     json_path: Path
-    recording: Recording
+    robot: str
+    rows: int
+    extras: tuple[str, ...]
     sessions: tuple[dict, ...]
+    checked_rows: int
+    check_seed: int
     warnings: tuple[str, ...] = ()
+
+    @property
+    def recording(self) -> Recording:
+        """The recording, read back from the files (all of it in memory: for small ones)."""
+        return read_recording(self.csv_path)
 
 
 def output_paths(out: str | Path) -> tuple[Path, Path]:
@@ -65,7 +81,10 @@ def output_paths(out: str | Path) -> tuple[Path, Path]:
 
 
 def run_convert(settings: ConvertSettings) -> ConvertResult:
-    """Convert ``settings.files`` through ``settings.map`` into the recording ``settings.out``.
+    """Convert ``settings.files`` through ``settings.map`` into the recording ``settings.out``,
+    streaming: the CSV is written to a temporary file beside it as the lab's rows are converted,
+    chunk by chunk; the sidecar when they all are; both moved into place once the map has passed
+    the checks on evidence (nothing left on a refusal or an interruption).
 
     Raises:
         LabExportError: a bad map or lab file (one line naming the file and the key, or the row
@@ -77,12 +96,20 @@ def run_convert(settings: ConvertSettings) -> ConvertResult:
         if Path(f).resolve() in (csv_path.resolve(), json_path.resolve()):
             raise ValueError(f"--out {settings.out}: would write over the lab file {f}")
     with ResultSet({"csv": csv_path, "json": json_path}, overwrite=settings.overwrite,
-                   flags={"csv": "--out", "json": "--out"}, create_folders=True):
-        pass
-    lab_map = read_map(settings.map)
-    rec = convert_lab_files(lab_map, settings.files)
-    warnings = lab_checks(lab_map, settings.files, rec)  # refuses a map key the data prove wrong
-    write_recording(csv_path, rec, overwrite=settings.overwrite)
-    back = read_recording(csv_path)
-    return ConvertResult(csv_path=csv_path, json_path=json_path, recording=back,
-                         sessions=tuple(back.meta["imported"]["files"]), warnings=tuple(warnings))
+                   flags={"csv": "--out", "json": "--out"}, create_folders=True) as out:
+        lab_map = read_map(settings.map)
+        with open(out.temp("csv"), "w", newline="") as csv_file:
+            imported = import_lab_files(lab_map, settings.files, csv_file)
+        warnings = lab_checks(lab_map, imported.sample)  # refuses a map key the data prove wrong
+        out.temp("json").write_text(sidecar_text(lab_map.robot, lab_map.noise, imported.meta, imported.header,
+                                                 imported.session_info))
+        out.publish()
+    measurement = imported.meta.get("measurement", {})
+    sessions = tuple(dict(f, validation_rows=imported.validation_rows[f["session"]],
+                          frame=imported.session_info[f["session"]].get("measurement", measurement).get("frame",
+                                                                                                          "auto"))
+                     for f in imported.meta["imported"]["files"])
+    return ConvertResult(csv_path=csv_path, json_path=json_path, robot=lab_map.robot.name,
+                         rows=sum(f["kept_rows"] for f in sessions), extras=tuple(lab_map.tables["extra"]),
+                         sessions=sessions, checked_rows=len(imported.sample.recording.t_s),
+                         check_seed=imported.sample.seed, warnings=tuple(warnings))
