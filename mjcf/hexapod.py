@@ -206,7 +206,6 @@ def save_default_xml(path: Path = DEFAULT_XML, *, overwrite: bool = False) -> Pa
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is False.
     """
-
     from calib.paper import TABLE3_ERRORS
     from calib.robots.hexapod import paper_hexapod
 
