@@ -1,0 +1,148 @@
+"""Make the example inputs the README and docs/ run their commands on (seeded: the same files every time).
+
+    python examples/make_examples.py          # from the repository root; rewrites examples/*
+
+Writes, beside this script:
+
+- ``capture.csv``, ``stewart.toml``, ``targets.csv``: the README's loop. The lab's file is simulated:
+  a MuJoCo hexapod with the paper's geometric errors and a 5 um dead band in every leg
+  (``python -m pipeline.run --poses 60 --heldout 20 --friction 1.0 --seed 3 --name machine``), its
+  recording rewritten as a motion-capture export (metres, quaternions scalar last, motor
+  revolutions, a ``Phase`` column marking the 20 check poses); ``stewart.toml`` is its map and
+  ``targets.csv`` five base-frame poses to command.
+- ``two_days/grid.csv``, ``two_days/feb12.csv``, ``two_days/map.toml``: docs/importer.md's two days
+  in one capture frame (a hexapod with geometry errors up to 1.5 mm; the second day's
+  revolutions-to-mm constants changed, its poses validation only), the generator of
+  ``tests/test_convert.py``'s ``two_days``.
+
+Every number comes from the product's own code (``pipeline.run`` simulates, ``calib`` draws the poses).
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from calib.measurement import instrument_measurements
+from calib.noise import SensorNoise
+from calib.robots import default_robot
+from calib.workspace import reachable_poses
+from pipeline.formats import read_recording
+from pipeline.run import main as run_main
+
+#: The folder the examples are written to: this script's.
+EXAMPLES = Path(__file__).resolve().parent
+MM_PER_M = 1000.0
+#: The simulated lab machine of the README's loop (``pipeline.run``'s arguments).
+LAB_RUN = ["--poses", "60", "--heldout", "20", "--friction", "1.0", "--seed", "3", "--name", "machine"]
+#: The lab's motor mapping: leg length (mm) = zero + scale * revolutions, per leg.
+MOTOR_SCALE_MM = [1.998, 2.003, 2.0, 1.997, 2.001, 2.002]
+MOTOR_ZERO_MM = [183.2, 183.3, 183.1, 183.25, 183.2, 183.15]
+#: The ``Phase`` column's words for the calibration and the check (validation) rows.
+PHASES = {"calibration": "cal", "validation": "check"}
+CAPTURE_HEADER = (["Frame", "Time", "Pos X", "Pos Y", "Pos Z", "Rot X", "Rot Y", "Rot Z", "Rot W"]
+                  + [f"motor{i + 1}" for i in range(6)] + ["Phase"])
+#: Seed and number of the poses ``targets.csv`` holds.
+TARGETS_SEED, TARGETS = 11, 5
+
+#: docs/importer.md's two days: the capture's frame (mm, rad), its position offset (mm), each day's
+#: revolutions-to-mm mapping (mm per revolution, length at zero revolutions) and the capture noise.
+CAPTURE_FRAME = np.array([30.0, -20.0, 15.0, 0.01, -0.02, 0.3])
+CAPTURE_OFFSET = np.array([1.5, -2.0, 574.3])
+DAY_MAPPINGS = {"grid": (2.0 + 0.01 * np.arange(6), 180.0 + np.arange(6)),
+                "feb12": (1.01 * (2.0 + 0.01 * np.arange(6)), 181.5 + np.arange(6))}
+DAYS = (("grid", 40, 1), ("feb12", 15, 2))
+LAB_NOISE = SensorNoise(0.01, 1e-4, "normal", 0.0)
+
+
+def toml_list(values) -> str:
+    return "[" + ", ".join(repr(float(v)) if not isinstance(v, str) else f'"{v}"' for v in values) + "]"
+
+
+def csv_text(header, rows) -> str:
+    return "\n".join([",".join(header)] + [",".join(c if isinstance(c, str) else repr(float(c)) for c in row)
+                                           for row in rows]) + "\n"
+
+
+def stewart_map(noise: dict) -> str:
+    """The README's map: metres, quaternions scalar last, motor revolutions, the ``Phase`` column."""
+    return ("# The README's lab: motion capture in metres, quaternions scalar last, legs as motor revolutions.\n"
+            '[robot]\nname = "hexapod"\n\n'
+            f'[noise]\nposition_mm = {noise["position_mm"]}\norientation_rad = {noise["orientation_rad"]}\n'
+            f'distribution = "{noise["distribution"]}"\n\n'
+            '[time]\nformat = "seconds"\ncolumn = "Time"\n\n'
+            '[position]\ncolumns = ["Pos X", "Pos Y", "Pos Z"]\nunit = "m"\n\n'
+            '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["Rot X", "Rot Y", "Rot Z", "Rot W"]\n\n'
+            f'[joints]\ncolumns = {toml_list(CAPTURE_HEADER[9:15])}\nreading = "revolutions"\nunit = "mm"\n'
+            f'scale = {toml_list(MOTOR_SCALE_MM)}\nzero = {toml_list(MOTOR_ZERO_MM)}\n\n'
+            f'[set]\ncolumn = "Phase"\ncalibration = "{PHASES["calibration"]}"\n'
+            f'validation = "{PHASES["validation"]}"\n')
+
+
+def write_readme_loop(folder: Path) -> None:
+    """``capture.csv``, ``stewart.toml`` and ``targets.csv`` of the README's loop."""
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        if run_main(LAB_RUN + ["--out", tmp]) != 0:
+            sys.exit("the simulated lab run failed")
+        rec = read_recording(Path(tmp) / "machine.csv")
+    quaternions = Rotation.from_euler("xyz", rec.measured[:, 3:]).as_quat()  # x, y, z, w
+    revolutions = (rec.joints - np.array(MOTOR_ZERO_MM)) / np.array(MOTOR_SCALE_MM)
+    rows = [[str(k + 1), rec.t_s[k], *(rec.measured[k, :3] / MM_PER_M), *quaternions[k], *revolutions[k],
+             PHASES[rec.sets[k]]] for k in range(len(rec.t_s))]
+    (folder / "capture.csv").write_text(csv_text(CAPTURE_HEADER, rows))
+    noise = rec.noise
+    (folder / "stewart.toml").write_text(stewart_map({"position_mm": noise.position_mm,
+                                                      "orientation_rad": noise.orientation_rad,
+                                                      "distribution": noise.distribution}))
+    targets = reachable_poses(default_robot("hexapod"), TARGETS, TARGETS_SEED)
+    (folder / "targets.csv").write_text(csv_text(["x_mm", "y_mm", "z_mm", "alpha_rad", "beta_rad", "gamma_rad"],
+                                                 targets))
+
+
+def two_days_map() -> str:
+    """docs/importer.md's map of the two days (printed there as it is here)."""
+    grid, feb12 = DAY_MAPPINGS["grid"], DAY_MAPPINGS["feb12"]
+    return ('[robot]\nname = "hexapod"\ntolerance = {mm = 2.0, rad = 0.02}\n'
+            f'[noise]\nposition_mm = {LAB_NOISE.position_mm}\norientation_rad = {LAB_NOISE.orientation_rad}\n'
+            'distribution = "normal"\n[time]\nformat = "none"\n'
+            f'[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\noffset = {toml_list(CAPTURE_OFFSET)}\n'
+            '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
+            f'[joints]\ncolumns = {toml_list([f"rev{i + 1}" for i in range(6)])}\nreading = "revolutions"\n'
+            f'unit = "mm"\nscale = {toml_list(grid[0])}\nzero = {toml_list(grid[1])}\n'
+            '[sessions]\nnames = ["grid", "feb12"]\nframe = ["estimate", "grid"]\nset = ["calibration", "validation"]\n'
+            f'[sessions.feb12.joints]\nscale = {toml_list(feb12[0])}\nzero = {toml_list(feb12[1])}\n')
+
+
+def write_two_days(folder: Path) -> None:
+    """``grid.csv`` (calibration), ``feb12.csv`` (validation only) and ``map.toml``."""
+    folder.mkdir(exist_ok=True)
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(37)
+    actual = robot.table.nominal + rng.uniform(-1.5, 1.5, robot.n_parameters)  # mm errors, by hand
+    header = ["X", "Y", "Z", "QX", "QY", "QZ", "QW"] + [f"rev{i + 1}" for i in range(6)]
+    for name, n, seed in DAYS:
+        poses = reachable_poses(robot, n, seed)
+        joints = robot.inverse_kinematics(actual, poses)  # the legs the machine really had
+        seen = instrument_measurements(robot, poses, CAPTURE_FRAME)
+        seen[:, :3] += rng.normal(0.0, LAB_NOISE.position_mm, (n, 3))
+        seen[:, 3:] += rng.normal(0.0, LAB_NOISE.orientation_rad, (n, 3))
+        scale, zero = DAY_MAPPINGS[name]
+        rows = [[*((seen[k, :3] - CAPTURE_OFFSET) / MM_PER_M), *Rotation.from_euler("xyz", seen[k, 3:]).as_quat(),
+                 *((joints[k] - zero) / scale)] for k in range(n)]
+        (folder / f"{name}.csv").write_text(csv_text(header, rows))
+    (folder / "map.toml").write_text(two_days_map())
+
+
+def main() -> int:
+    write_readme_loop(EXAMPLES)
+    write_two_days(EXAMPLES / "two_days")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
