@@ -54,8 +54,8 @@ TARGETS_SEED, TARGETS = 11, 5
 #: revolutions-to-mm mapping (mm per revolution, length at zero revolutions) and the capture noise.
 CAPTURE_FRAME = np.array([30.0, -20.0, 15.0, 0.01, -0.02, 0.3])
 CAPTURE_OFFSET = np.array([1.5, -2.0, 574.3])
-DAY_MAPPINGS = {"grid": (2.0 + 0.01 * np.arange(6), 180.0 + np.arange(6)),
-                "feb12": (1.01 * (2.0 + 0.01 * np.arange(6)), 181.5 + np.arange(6))}
+DAY_MAPPINGS = {"grid": ([2.0, 2.01, 2.02, 2.03, 2.04, 2.05], [180.0, 181.0, 182.0, 183.0, 184.0, 185.0]),
+                "feb12": ([2.02, 2.0301, 2.0402, 2.0503, 2.0604, 2.0705], [181.5, 182.5, 183.5, 184.5, 185.5, 186.5])}
 DAYS = (("grid", 40, 1), ("feb12", 15, 2))
 LAB_NOISE = SensorNoise(0.01, 1e-4, "normal", 0.0)
 
@@ -133,7 +133,7 @@ def write_two_days(folder: Path) -> None:
         seen[:, 3:] += rng.normal(0.0, LAB_NOISE.orientation_rad, (n, 3))
         scale, zero = DAY_MAPPINGS[name]
         rows = [[*((seen[k, :3] - CAPTURE_OFFSET) / MM_PER_M), *Rotation.from_euler("xyz", seen[k, 3:]).as_quat(),
-                 *((joints[k] - zero) / scale)] for k in range(n)]
+                 *((joints[k] - np.array(zero)) / np.array(scale))] for k in range(n)]
         (folder / f"{name}.csv").write_text(csv_text(header, rows))
     (folder / "map.toml").write_text(two_days_map())
 
