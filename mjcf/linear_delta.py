@@ -22,10 +22,10 @@ The machine (see docs/linear_delta.md):
   effector as well; the axles are held parallel here, as in the kinematic model.)
 * The effector on a free joint (it may tilt), its pairs' joints ``effector_radius_mm`` from its
   centre at the towers' nominal angles, the ``platform`` site (the tool point, ``platform_pos``
-  sensor) at the tool offset ``tool`` from its centre. With equal rods the effector's centre is
-  the reduced model's ``c = X - t``: each carriage's joint midpoint is the reduced carriage point
-  plus the effector's joint offset, so the closures are exactly those of
-  :mod:`calib.robots.linear_delta`.
+  sensor) at the tool offset ``t`` from its centre. Each carriage's joint midpoint is the reduced
+  carriage point (taken relative to the tool point) less ``t`` plus the effector's joint offset:
+  with equal rods the effector's centre sits at ``X - t`` and the closures are exactly those of
+  :mod:`calib.robots.linear_delta`, whatever ``t``; with unequal rods ``t`` is the tilt's lever.
 * Contacts off; the keyframe ``home``: every slide and hinge at 0, the effector where the
   machine's forward kinematics puts it at the home joints.
 """
@@ -123,7 +123,7 @@ def _geometry(robot: LinearDelta, theta: np.ndarray) -> _Geometry:
     nominal_angle = robot.split(robot.table.nominal)["angle"]
     e_r, e_t, _ = tower_directions(nominal_angle, np.zeros(3), np.zeros(3))
     offsets = robot.effector_radius_mm * e_r
-    return _Geometry(home_q=home_q, carriages=mm_to_m(reduced[0] + offsets), down=-p["u"], axles=e_t,
+    return _Geometry(home_q=home_q, carriages=mm_to_m(reduced[0] - p["tool"] + offsets), down=-p["u"], axles=e_t,
                      centre=mm_to_m(tool_point - p["tool"]), joints=mm_to_m(offsets), tool=mm_to_m(p["tool"]),
                      rods=mm_to_m(rod_lengths(robot, theta)), scale=p["scale"])
 

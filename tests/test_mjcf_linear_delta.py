@@ -86,7 +86,8 @@ def _six_rods(robot, theta, joints):
     e_r, e_t, _ = tower_directions(robot.split(robot.table.nominal)["angle"], np.zeros(3), np.zeros(3))
     half = robot.rod_spacing_mm / 2
     offset = robot.effector_radius_mm * e_r
-    carriage = np.concatenate([reduced[0] + offset - half * e_t, reduced[0] + offset + half * e_t])
+    joint = reduced[0] - p["tool"] + offset  # the carriages' joint midpoints
+    carriage = np.concatenate([joint - half * e_t, joint + half * e_t])
     effector = np.concatenate([offset - half * e_t, offset + half * e_t])
     lengths = rod_lengths(robot, theta).T.ravel()
 

@@ -6,9 +6,10 @@ Frames and conventions (mm, rad):
 * Base frame: origin at the bed's centre, ``z`` up, the bed the plane ``z = 0``; the pose is the
   tool point (the nozzle) ``(x, y, z)``.
 * The *reduced* model, Klipper's: each rod pair is one rod of the pair's mean length from a point
-  that rides the tower (the carriage's joint midpoint minus the effector's joint offset) to the
-  effector's centre ``c``, so that the towers' radius is Klipper's ``delta_radius`` (tower minus
-  effector offset) and the effector's own size is gone. The tool point is ``X = c + t``.
+  that rides the tower to the tool point ``X`` (the carriage's joint midpoint minus the
+  effector's joint offset and minus the tool offset ``t``, the vector from the effector's
+  centre to the tool), so that the towers' radius is Klipper's ``delta_radius`` and the
+  effector's own size is gone.
 * Tower i (1, 2, 3: Klipper's stepper_a, _b, _c) stands at ``F_i = radius_i (cos a_i, sin a_i,
   0)`` on the bed plane, ``a_i = angle_i`` (Klipper's ``angle``, defaults 210, 330, 90 degrees),
   and rises along the unit vector ``u_i = sin(lr) cos(lt) e_r + sin(lt) e_t + cos(lr) cos(lt) e_z``
@@ -24,19 +25,22 @@ Frames and conventions (mm, rad):
   counted travel (the real step distance is the nominal one times ``1 + step_error_i / 100``).
   Klipper's carriage height ``abs_endstop - position`` is ``s_i`` with ``H_i - endstop_drop_i``
   its absolute endstop and ``q_i`` its position.
-* Closure of chain i (mm): ``F_i = |F_i + s_i u_i - (X - t)| - arm_i``.
+* Closure of chain i (mm): ``F_i = |F_i + s_i u_i - X| - arm_i``.
 
 Parameters (27): per tower ``radius angle lean_r lean_t arm arm_diff endstop_drop step_error``
 (:data:`CHAIN_PARAMETERS`), then the tool offset ``tool.x tool.y tool.z`` (from the effector's
 centre to the tool point, effector frame).
 
-What the closure cannot see, and why (held by default, :attr:`LinearDelta.gauge_fixed`):
+What the closure cannot see, and why (:attr:`LinearDelta.machine_only`, held by default):
 
-* ``tool.x tool.y tool.z``: with a translating effector, moving the tool point by ``d`` is moving
-  the three towers' points by ``d`` together, which the towers' radii, angles and endstops do
-  exactly. Pose data cannot tell the tool offset from the towers: it is held at its nominal value
-  (a gauge), and it belongs to no tower (the table files it under tower 1; its column moves
-  every closure).
+* ``tool.x tool.y tool.z`` (mm): the tool offset. With a translating effector the towers' points
+  are taken relative to the tool point (Klipper's), so the tool offset is in them: another tool
+  offset on the same physical printer moves the three reduced towers by its difference together,
+  which their radii, angles and endstops do exactly. The closure does not see it, and pose data
+  could not tell it from the towers. It places the effector behind the tool in the MuJoCo machine
+  (the effector's centre is ``X - t``), where it is the lever of the effector's tilt. It belongs
+  to no tower (the table files it under tower 3, after it, so that the table stays in tower
+  order; its column is zero).
 * ``arm_diff_i``: the second rod of pair i (counter-clockwise) minus the first, mm. Unequal rods
   make no parallelogram: the effector tilts, about ``arm_diff / rod spacing`` (1 mm over 50 mm:
   20 mrad), by an amount that varies with the rods' directions over the volume, and the tilt
@@ -46,6 +50,8 @@ What the closure cannot see, and why (held by default, :attr:`LinearDelta.gauge_
   (:mod:`mjcf.linear_delta`) carries it (:attr:`LinearDelta.machine_only`). The part of a tilt
   that is the same everywhere moves the tool point by a constant the towers absorb; its variation
   is a model error of this robot, which these docs say rather than hide.
+
+Both are named with their tolerances so that an identification says they are left to them.
 
 Identifiable from tool positions: each tower's seven others (the line the carriage rides, its
 origin and scale along it, and the arm), 21 in all. Physical sizes for the MuJoCo machine and
@@ -78,10 +84,11 @@ STEP_ERROR_REFERENCE_MM = 100.0
 KLIPPER_ANGLES_DEG = (210.0, 330.0, 90.0)
 #: The default printer, a large Kossel-type machine (mm): Klipper's ``delta_radius`` 140 and
 #: ``arm_length`` 250, a print volume of radius 100 from the bed to 250 above it, the endstops
-#: 560 mm along the towers (Klipper's ``position_endstop`` about 303 with the tool 50 mm under
-#: the effector's joints), 480 mm of travel below them; effector joints 30 mm from its centre,
-#: each pair's rods 50 mm apart.
-DEFAULT_GEOMETRY = {"delta_radius_mm": 140.0, "arm_mm": 250.0, "endstop_height_mm": 560.0, "travel_mm": 480.0,
+#: 510 mm along the towers (Klipper's ``position_endstop`` 510 - sqrt(250^2 - 140^2) = 303.9: the
+#: tool 263 mm above the bed at the volume's edge nearest a tower, the carriage opposite 440 mm
+#: below its endstop with the tool on the bed at the far edge), 480 mm of travel below them; the
+#: tool 50 mm under the effector's centre, its joints 30 mm from it, each pair's rods 50 mm apart.
+DEFAULT_GEOMETRY = {"delta_radius_mm": 140.0, "arm_mm": 250.0, "endstop_height_mm": 510.0, "travel_mm": 480.0,
                     "tool_z_mm": -50.0, "print_radius_mm": 100.0, "print_height_mm": 250.0,
                     "effector_radius_mm": 30.0, "rod_spacing_mm": 50.0, "home_z_mm": 100.0}
 
@@ -137,8 +144,8 @@ class LinearDelta(Robot):
     #: Parameters of the machine that the closure cannot see (their columns are zero): the MuJoCo
     #: machine builds them, the kinematics does not (module docstring); seeded errors leave them
     #: at nominal.
-    machine_only = ("arm_diff1", "arm_diff2", "arm_diff3")
-    gauge_fixed = machine_only + TOOL_PARAMETERS
+    machine_only = ("arm_diff1", "arm_diff2", "arm_diff3") + TOOL_PARAMETERS
+    gauge_fixed = machine_only
     #: Tolerance of the parameters, the default prior's standard deviation, with its reasons:
     #: ``radius`` 0.5 mm (frame extrusions cut and printed vertices assembled: a few tenths, and
     #: Klipper's fits move ``delta_radius`` by up to a millimetre); ``angle`` 5 mrad (0.3 degree:
@@ -179,7 +186,7 @@ class LinearDelta(Robot):
         self.table = ParameterTable(
             [Parameter(t.format(i=c + 1), CHAIN_UNITS[k], float(self.towers[c, k]), c)
              for c in range(3) for k, t in enumerate(CHAIN_PARAMETERS)]
-            + [Parameter(n, "mm", float(v), 0) for n, v in zip(TOOL_PARAMETERS, self.tool)])
+            + [Parameter(n, "mm", float(v), 2) for n, v in zip(TOOL_PARAMETERS, self.tool)])
 
     @classmethod
     def default(cls) -> "LinearDelta":
@@ -256,10 +263,10 @@ class LinearDelta(Robot):
 
     # -- kinematics -----------------------------------------------------------------------
     def _rods(self, theta, joints, poses):
-        """``(w, norm, parts)``: (N, 3, 3) each reduced rod from the effector's centre to its
-        carriage point, (N, 3) their lengths, and :meth:`carriage_points`' parts."""
+        """``(w, norm, parts)``: (N, 3, 3) each reduced rod from the tool point to its carriage
+        point, (N, 3) their lengths, and :meth:`carriage_points`' parts."""
         P, p = self.carriage_points(theta, joints)
-        w = P - (np.asarray(poses, dtype=float) - p["tool"])[:, None, :]
+        w = P - np.asarray(poses, dtype=float)[:, None, :]
         return w, np.sqrt(np.einsum("nij,nij->ni", w, w)), p
 
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -281,7 +288,8 @@ class LinearDelta(Robot):
         """The closure and its derivatives; with ``n`` the unit rod (effector to carriage): pose
         ``-n``; joint and ``endstop_drop`` ``-(1 + step_error/100) n.u``; ``step_error``
         ``-(q + endstop_drop) / 100 n.u``; ``radius`` ``n.e_r``; ``angle`` ``n.(radius e_t + s
-        du/da)``; the leans ``s n.du/dlean``; ``arm`` -1; ``arm_diff`` 0; the tool ``n``."""
+        du/da)``; the leans ``s n.du/dlean``; ``arm`` -1; ``arm_diff`` and the tool 0. Each
+        tower's closure moves with its own parameters alone: the (N, P) own entries."""
         w, norm, p = self._rods(theta, joints, poses)
         n = w / norm[:, :, None]
         rows = n.shape[0]
@@ -295,28 +303,25 @@ class LinearDelta(Robot):
         du_dlr = (cr * ct)[:, None] * e_r - (sr * ct)[:, None] * e_z
         du_dlt = -(sr * st)[:, None] * e_r + ct[:, None] * e_t - (cr * st)[:, None] * e_z
         dq = -p["scale"] * nu
-        own = np.empty((rows, 3, len(CHAIN_PARAMETERS)))
-        own[:, :, 0] = np.einsum("nij,ij->ni", n, e_r)
-        own[:, :, 1] = np.einsum("nij,ij->ni", n, p["radius"][:, None] * e_t) + s * np.einsum("nij,ij->ni", n, du_da)
-        own[:, :, 2] = s * np.einsum("nij,ij->ni", n, du_dlr)
-        own[:, :, 3] = s * np.einsum("nij,ij->ni", n, du_dlt)
-        own[:, :, 4] = -1.0
-        own[:, :, 5] = 0.0
-        own[:, :, 6] = dq
-        own[:, :, 7] = -p["travel"] / STEP_ERROR_REFERENCE_MM * nu
-        dense = np.zeros((rows, 3, self.n_parameters))
-        for c in range(3):
-            dense[:, c, c * len(CHAIN_PARAMETERS):(c + 1) * len(CHAIN_PARAMETERS)] = own[:, c]
-        dense[:, :, 24:27] = n
+        towers = np.empty((rows, 3, len(CHAIN_PARAMETERS)))
+        towers[:, :, 0] = np.einsum("nij,ij->ni", n, e_r)
+        towers[:, :, 1] = np.einsum("nij,ij->ni", n, p["radius"][:, None] * e_t) + s * np.einsum("nij,ij->ni", n, du_da)
+        towers[:, :, 2] = s * np.einsum("nij,ij->ni", n, du_dlr)
+        towers[:, :, 3] = s * np.einsum("nij,ij->ni", n, du_dlt)
+        towers[:, :, 4] = -1.0
+        towers[:, :, 5] = 0.0
+        towers[:, :, 6] = dq
+        towers[:, :, 7] = -p["travel"] / STEP_ERROR_REFERENCE_MM * nu
+        own = np.concatenate([towers.reshape(rows, -1), np.zeros((rows, len(TOOL_PARAMETERS)))], axis=1)
         jq = np.zeros((rows, 3, 3))
         jq[:, np.arange(3), np.arange(3)] = dq
-        return norm - p["arm"], ClosureJacobians(pose=-n, joints=jq, parameters=dense)
+        return norm - p["arm"], ClosureJacobians(pose=-n, joints=jq, own=own, chains=self.table.chains)
 
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, 3) carriage travels below the endstops, mm: per tower, the carriage point at
-        distance ``s`` along the tower from ``F`` with ``|F + s u - c| = arm`` (``c = X - t``),
-        the upper root ``s = u.d + sqrt((u.d)^2 - |d|^2 + arm^2)``, ``d = c - F`` (the carriage
-        above the effector), then ``q = (H - s) / (1 + step_error/100) - endstop_drop``.
+        distance ``s`` along the tower from ``F`` with ``|F + s u - X| = arm``, the upper root
+        ``s = u.d + sqrt((u.d)^2 - |d|^2 + arm^2)``, ``d = X - F`` (the carriage above the
+        effector), then ``q = (H - s) / (1 + step_error/100) - endstop_drop``.
 
         Raises:
             KinematicsError: the arm cannot reach the tower, or is square to it (a serial
@@ -324,8 +329,7 @@ class LinearDelta(Robot):
         """
         p = self.split(theta)
         e_r, _, u = tower_directions(p["angle"], p["lean_r"], p["lean_t"])
-        c = np.asarray(poses, dtype=float) - p["tool"]
-        d = c[:, None, :] - p["radius"][:, None] * e_r
+        d = np.asarray(poses, dtype=float)[:, None, :] - p["radius"][:, None] * e_r
         b = np.einsum("nij,ij->ni", d, u)
         disc = b * b - np.einsum("nij,nij->ni", d, d) + p["arm"] ** 2
         bad = ~(disc > (1e-6 * p["arm"]) ** 2)
@@ -340,8 +344,7 @@ class LinearDelta(Robot):
 
     def forward_kinematics(self, theta: np.ndarray, joints: np.ndarray, *, initial=None) -> np.ndarray:
         """(N, 3) tool points: the trilateration of the three spheres (carriage points, arms), the
-        lower of the two intersections (the effector under the carriages), plus the tool
-        offset, then polished by Newton on the closure (:func:`newton_forward_kinematics`, which
+        lower of the two intersections (the effector under the carriages), then polished by Newton on the closure (:func:`newton_forward_kinematics`, which
         also refuses a singular configuration).
 
         Raises:
@@ -371,14 +374,17 @@ class LinearDelta(Robot):
                                   f"{np.array2string(joints[row], precision=4)})", row)
         base = p1 + x[:, None] * ex + y[:, None] * ey
         h = np.sqrt(z2)[:, None] * ez
-        centre = np.where(((base + h)[:, 2] < (base - h)[:, 2])[:, None], base + h, base - h)
-        return newton_forward_kinematics(self, theta, joints, initial=centre + p["tool"])
+        lower = np.where(((base + h)[:, 2] < (base - h)[:, 2])[:, None], base + h, base - h)
+        return newton_forward_kinematics(self, theta, joints, initial=lower)
 
     def chain_points(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, 3, 3, 3) mm: each tower's foot on the bed, its carriage's joint midpoint and the
-        effector's joint midpoint (the reduced model shifted by the effector's joint offset)."""
+        effector's joint midpoint: the reduced model shifted by the effector's joint offset
+        ``E_i`` (at the tower's angle) less the tool offset ``t`` (the physical tower is the
+        reduced one's line through ``F_i - t + E_i``)."""
         P, p = self.carriage_points(theta, joints)
-        offset = self.effector_radius_mm * p["e_r"]
-        foot = p["radius"][:, None] * p["e_r"] + offset
-        effector = (np.asarray(poses, dtype=float) - p["tool"])[:, None, :] + offset
-        return np.stack([np.broadcast_to(foot, P.shape), P + offset, effector], axis=2)
+        shift = self.effector_radius_mm * p["e_r"] - p["tool"]
+        u = p["u"]
+        foot = p["radius"][:, None] * p["e_r"] + shift - (shift[:, 2] / u[:, 2])[:, None] * u  # at z = 0
+        effector = np.asarray(poses, dtype=float)[:, None, :] + shift
+        return np.stack([np.broadcast_to(foot, P.shape), P + shift, effector], axis=2)
