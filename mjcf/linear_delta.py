@@ -39,6 +39,7 @@ import numpy as np
 
 from calib.robots.linear_delta import STEP_ERROR_REFERENCE_MM, LinearDelta, tower_directions
 
+from .hexapod import CLOSURE_SOLIMP  # the closures' impedance, as the other machines'
 from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values, new_spec
 from .units import M_PER_MM, mm_to_m
 
@@ -60,8 +61,6 @@ CHAIN_POINT_MASSES_KG = (CARRIAGE_MASS_KG + ROD_MASS_KG, ROD_MASS_KG)
 #: Viscous damping of the rods' hinges (N m s/rad) and of the effector's free joint (N s/m and
 #: N m s/rad).
 ROD_DAMPING, EFFECTOR_DAMPING = 0.05, 1.0
-#: Soft-constraint impedance of the closures (MuJoCo ``solimp``), as the other machines'.
-CLOSURE_SOLIMP = (0.99, 0.999, 0.0001, 0.5, 2.0)
 
 
 def _stiffness(options: MachineOptions) -> np.ndarray:
