@@ -1234,22 +1234,35 @@ class _Remainder:
             # GRAM_BASIS_RTOL of the largest singular value, as the Gram matrix resolves them.
             Gx = X.T @ X
             scale = np.sqrt(np.diag(Gx))
-            Gs = Gx / np.outer(scale, scale)
-            lam = np.linalg.eigvalsh(Gs)
-            k = int(np.sum(lam > GRAM_BASIS_RTOL ** 2 * lam.max()))
+            lam, V = np.linalg.eigh(Gx / np.outer(scale, scale))
+            resolved = lam > GRAM_BASIS_RTOL ** 2 * lam.max()
+            k = int(np.sum(resolved))
             if k == 0 or fit.dof - k <= 0:
                 return 1.0, None, None, keep
-            beta = np.linalg.pinv(Gs, hermitian=True) @ ((X.T @ self.w) / scale) / scale
+            # The estimate and its covariance on the same k resolved directions: with pinv's own
+            # cut-off for the one and not the other, nearly collinear columns (what the linear
+            # Delta's geometry and a shared drift leave of its towers' stroke columns) gave a
+            # coefficient of 7e8 on a direction the covariance had dropped, and t of 1.5e10.
+            inverse = (V[:, resolved] / lam[resolved]) @ V[:, resolved].T / np.outer(scale, scale)
+            beta = inverse @ (X.T @ self.w)
             d2 = float(beta @ Gx @ beta)
             s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
-            return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(Gx, hermitian=True) * s2, keep
-        k = int(np.linalg.matrix_rank(X)) if X.size else 0
+            return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, inverse * s2, keep
+        if not X.size:
+            return 1.0, None, None, keep
+        # The estimate and its covariance from one SVD of the scaled columns, on the directions
+        # its rank keeps (numpy's matrix_rank tolerance), as the Gram path above does.
+        scale = np.linalg.norm(X, axis=0)
+        U, sv, Vt = np.linalg.svd(X / scale, full_matrices=False)
+        resolved = sv > sv.max() * max(X.shape) * np.finfo(float).eps
+        k = int(np.sum(resolved))
         if k == 0 or fit.dof - k <= 0:
             return 1.0, None, None, keep
-        beta = _solve(X, self.w)
+        V = Vt[resolved].T / scale[:, None]
+        beta = (V / sv[resolved]) @ (U[:, resolved].T @ self.w)
         d2 = float(np.sum((X @ beta) ** 2))
         s2 = max(fit.chi2 - d2, 1e-300) / (fit.dof - k)
-        return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, np.linalg.pinv(X.T @ X, hermitian=True) * s2, keep
+        return float(f_dist.sf((d2 / k) / s2, k, fit.dof - k)), beta, (V / sv[resolved] ** 2) @ V.T * s2, keep
 
     def joint_test(self, Xq: np.ndarray, k: int):
         """:meth:`f_test` of joint displacements ``Xq`` (N, C, k), mapped to the closure."""
