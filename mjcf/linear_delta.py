@@ -40,7 +40,8 @@ import numpy as np
 from calib.robots.linear_delta import STEP_ERROR_REFERENCE_MM, LinearDelta, tower_directions
 
 from .hexapod import CLOSURE_SOLIMP  # the closures' impedance, as the other machines'
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values, new_spec
+from .machine import (HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values,
+                      checked_machine_inputs, new_spec)
 from .units import M_PER_MM, mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "servo_damping", "CARRIAGE_JOINTS",
@@ -195,12 +196,7 @@ def build_spec(robot: LinearDelta, theta: np.ndarray, options: MachineOptions = 
         options: physical options.
         name: model name.
     """
-    theta = np.asarray(theta, dtype=float)
-    if theta.shape != (robot.n_parameters,):
-        raise ValueError(f"theta must have shape ({robot.n_parameters},), got {theta.shape}")
-    scale = np.zeros(3) if options.transmission_scale is None else np.asarray(options.transmission_scale, dtype=float)
-    if scale.shape != (3,):
-        raise ValueError(f"transmission_scale must have 3 values (one per chain), got {scale.size}")
+    theta, scale = checked_machine_inputs(robot, theta, options)
     geo = _geometry(robot, theta)
     step = integration_step(options)
     spacing_m = float(mm_to_m(robot.rod_spacing_mm))
