@@ -1,18 +1,11 @@
 """Discovery of left-out physics, written once over :class:`calib.robot.Robot`.
 
-In joint space the measured pose gives, for chain i at measurement j, the closure residual of
-the geometric model ``r_ij(theta) = F_i(theta, q_ij, QM_j)`` (mm; for a hexapod
-``|R_j P_i + OP_j - B_i| - dl_i - l_ij``). An effect moves each joint by a known physical
-regressor times unknown coefficients, ``dq = Xq . phi`` (:mod:`calib.effects.base`), and the
-joint fit makes ``F(theta, q + Xq phi, QM)`` vanish to the noise: exactly, not only to first
-order (to first order the effect adds ``X phi``, ``X = -dF/dq Xq``, to the residual; for a
-hexapod, whose closure is linear in the leg length, the two are the same). Several effects fit
-together simply concatenate their regressors.
-The noise of ``r_j`` (C chains) comes from the pose sensor and the joint readings through the
-closure Jacobians, ``S_j = dF/dpose Sigma_pose dF/dpose^T + dF/dq Sigma_q dF/dq^T``; every fit
-is whitened by it (mm and rad never mixed by a raw norm), so that the sum of squares is
-chi-square distributed when the model is right. The geometry fitted with the effects is the
-robot's free parameters (``robot.free_default``).
+The joint fit of the geometry and the effects in joint space, whitened by the declared noise
+(:mod:`calib.effects.joint_fit`, :mod:`calib.effects.whitening`), linearised for the search of
+the searched parameters and the selection (:mod:`calib.effects.search`,
+:mod:`calib.effects.selection`), the remainder's tests (:mod:`calib.effects.remainder`) and the
+outlier scan (:mod:`calib.effects.gross_rows`) are rooms of their own; this module is the
+discovery itself, and re-exports their public names.
 
 :func:`discover_effects` then
 
@@ -187,26 +180,12 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         check_applies(m, robot)
     if data.n < MIN_ROWS:
         raise ValueError(f"effect discovery needs at least {MIN_ROWS} measurements, got {data.n}")
-    kept = np.arange(data.n)
-    flagged: list[int] = []
-    for _ in range(max_rounds):
-        sub = data.subset(kept)
-        sub, geo, fit, sel = choose_effects(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
-                                search_subsample_rows)
-        scan = outlier_scan(sub, fit, alpha=outlier_alpha)
-        new = scan["flagged"]
-        if scan["model_wrong"] or not new or kept.size - len(new) < MIN_ROWS \
-                or len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
-            if not scan["model_wrong"] and new and len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
-                scan = dict(scan, model_wrong=True, flagged=[])
-            break
-        flagged += [int(kept[j]) for j in new]
-        kept = np.delete(kept, new)
-    else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
-        sub = data.subset(kept)
-        sub, geo, fit, sel = choose_effects(sub, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
-                                search_subsample_rows)
-        scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
+
+    def choose(rows: EffectData):
+        return choose_effects(rows, models, max_effects, min_delta_bic, folds, seed, search_rows_max,
+                              search_subsample_rows)
+
+    sub, geo, fit, sel, scan, kept, flagged = _outlier_rounds(data, choose, outlier_alpha, max_rounds)
     tests = remainder_tests(sub, fit, alpha=alpha)
     release_span_bases(fit)  # the outlier scan and the tests are done with its bases
     explained = tests["explained"]
@@ -220,21 +199,50 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
         remaining = dict(remaining, bad_rows=len(scan["bad"]),
                          summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
                          f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
-    law = None
-    if laws and not explained:
-        try:
-            law = propose_law(sub, fit, channels=None if channels is None else
-                              {k: np.asarray(v)[kept] for k, v in channels.items()}, folds=folds, seed=seed)
-        except np.linalg.LinAlgError:
-            if fit.basis is None:
-                raise
-            # With combinations held at the prior a law's terms can resemble them; its exact fit
-            # then runs away along them: no law proposed (the pose set cannot tell it from the geometry).
-            law = None
+    law = _law_left(sub, fit, channels, kept, folds, seed) if laws and not explained else None
     return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
                      partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
                      tests=tests, aliases=aliases, outliers=scan, flagged=tuple(sorted(flagged)), kept=kept,
                      located=locate_mismatch(sub, geo), proposed_law=law, separation=separated, search=sel["search"])
+
+
+def _outlier_rounds(data: EffectData, choose, outlier_alpha: float, max_rounds: int) -> tuple:
+    """The rounds of :func:`discover_effects`: the choice on the rows kept (``choose(rows)``,
+    :func:`calib.effects.selection.choose_effects`) and its outlier scan, the isolated gross rows
+    left out and the choice made again, ``max_rounds`` times at most. Returns ``(rows kept as
+    data, geometry fit, chosen fit, selection, scan, kept, flagged)``."""
+    kept = np.arange(data.n)
+    flagged: list[int] = []
+    for _ in range(max_rounds):
+        sub, geo, fit, sel = choose(data.subset(kept))
+        scan = outlier_scan(sub, fit, alpha=outlier_alpha)
+        new = scan["flagged"]
+        if scan["model_wrong"] or not new or kept.size - len(new) < MIN_ROWS \
+                or len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
+            if not scan["model_wrong"] and new and len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
+                scan = dict(scan, model_wrong=True, flagged=[])
+            break
+        flagged += [int(kept[j]) for j in new]
+        kept = np.delete(kept, new)
+    else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
+        sub, geo, fit, sel = choose(data.subset(kept))
+        scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
+    return sub, geo, fit, sel, scan, kept, flagged
+
+
+def _law_left(sub: EffectData, fit: EffectFit, channels: dict | None, kept: np.ndarray, folds: int,
+              seed: int) -> ProposedLaw | None:
+    """The law over joint-space terms that explains what the library leaves (:func:`propose_law`
+    on the rows kept), or None."""
+    try:
+        return propose_law(sub, fit, channels=None if channels is None else
+                           {k: np.asarray(v)[kept] for k, v in channels.items()}, folds=folds, seed=seed)
+    except np.linalg.LinAlgError:
+        if fit.basis is None:
+            raise
+        # With combinations held at the prior a law's terms can resemble them; its exact fit
+        # then runs away along them: no law proposed (the pose set cannot tell it from the geometry).
+        return None
 
 
 def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict) -> dict:

@@ -5,7 +5,7 @@ decided again on the exact fits, insignificant effects dropped (a room of
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -128,6 +128,105 @@ def _trial(lin: LinearisedFit, eff: Effect, blocks: list, chi2_ref: float, p_ref
             "delta_bic": (chi2_ref - chi2_new) / s2 - k * log_n}
 
 
+@dataclass
+class _Model:
+    """The selection's current model: ``chosen`` the effects in it (key -> ``{"extra", "X",
+    "k"}``), ``excluded`` those a later effect made redundant (never tried again), its
+    chi-square, parameters and cross-validated whitened RMS."""
+
+    chosen: dict
+    excluded: set
+    chi2: float
+    p: int
+    cv: float
+
+    def blocks(self) -> list:
+        return [c["X"] for c in self.chosen.values()]
+
+
+def _tried(lin: LinearisedFit, models: dict, cur: _Model, family: dict, unseparated: dict, log_n: float) -> dict:
+    """Every candidate that may join ``cur`` fitted with it (:func:`_trial`): not in it, not
+    excluded, no member of its family in it, and separable from the geometry's held combinations
+    (those that are not go to ``unseparated``, updated here)."""
+    blocks = cur.blocks()
+    trials = {}
+    for name, eff in models.items():
+        if name in cur.chosen or name in cur.excluded or (family[name] - {name}) & set(cur.chosen):
+            continue
+        if eff.searched is None and unseparated.get(name):
+            continue
+        t = _trial(lin, eff, blocks, cur.chi2, cur.p, log_n)
+        if eff.searched is not None or name not in unseparated:
+            unseparated[name] = lin.unseparated(eff, t["extra"])
+        if unseparated[name]:
+            unseparated[name] = {"extra": t["extra"], "combinations": unseparated[name]}
+            continue
+        trials[name] = t
+    return trials
+
+
+def _entering(lin: LinearisedFit, trials: dict, order: list, cur: _Model, min_delta_bic: float, folds: int,
+              seed: int) -> tuple:
+    """``(name, its cross-validated RMS)`` of the first of ``order`` that lowers the BIC by
+    ``min_delta_bic`` and the cross-validated residual, or ``(None, None)``."""
+    blocks = cur.blocks()
+    for name in order:
+        t = trials[name]
+        if t["delta_bic"] < min_delta_bic:
+            break
+        cv_try = lin.cv_rms(blocks + [t["X"]], folds, seed)
+        if cv_try < cur.cv:
+            return name, cv_try
+    return None, None
+
+
+def _rivals(added: str, trials: dict, order: list, min_delta_bic: float) -> list:
+    """The candidates of the step whose evidence is within :data:`ALIAS_DELTA_BIC` of the one
+    ``added``: ``(added, rival, gap, canonical correlation, False)``."""
+    t = trials[added]
+    return [(added, other, t["delta_bic"] - trials[other]["delta_bic"],
+             _canonical_correlation(t["X"], trials[other]["X"]), False)
+            for other in order if other != added and trials[other]["delta_bic"] >= min_delta_bic
+            and t["delta_bic"] - trials[other]["delta_bic"] < ALIAS_DELTA_BIC]
+
+
+def _review_nested(lin: LinearisedFit, models: dict, cur: _Model, added: str, family: dict, nested: dict,
+                   unseparated: dict, step: dict, log_n: float, folds: int, seed: int) -> None:
+    """Nested review: with the others fitted, each family's simplest member that the evidence
+    allows takes the place of the one in ``cur`` (said in ``step["replaced"]``)."""
+    for name in [n for n in cur.chosen if n != added and len(family[n]) > 1]:
+        rest = {n: c for n, c in cur.chosen.items() if n != name}
+        blocks_rest = [c["X"] for c in rest.values()]
+        chi2_rest, p_rest = lin.chi2(blocks_rest), cur.p - cur.chosen[name]["k"]
+        review = {f: _trial(lin, models[f], blocks_rest, chi2_rest, p_rest, log_n)
+                  for f in family[name] if f not in cur.excluded and not unseparated.get(f)}
+        better = _simplest(review, review, nested)
+        if better != name:
+            r = review[better]
+            cur.chosen = {(better if n == name else n): ({"extra": r["extra"], "X": r["X"], "k": r["k"]} if n == name
+                                                         else c) for n, c in cur.chosen.items()}
+            cur.chi2, cur.p = r["chi2"], p_rest + r["k"]
+            cur.cv = lin.cv_rms(cur.blocks(), folds, seed)
+            step.setdefault("replaced", []).append((name, better))
+
+
+def _drop_redundant(lin: LinearisedFit, cur: _Model, added: str, step: dict, min_delta_bic: float, log_n: float,
+                    folds: int, seed: int) -> None:
+    """Backward: an earlier effect the later ones make redundant leaves ``cur`` (and is
+    excluded; said in ``step["dropped"]``)."""
+    for name in [n for n in cur.chosen if n != added]:
+        rest = [c["X"] for n, c in cur.chosen.items() if n != name]
+        chi2_wo = lin.chi2(rest)
+        s2 = max(1.0, cur.chi2 / max(lin.dof0 - cur.p, 1))
+        if (chi2_wo - cur.chi2) / s2 - cur.chosen[name]["k"] * log_n < min_delta_bic:
+            cur.p -= cur.chosen[name]["k"]
+            del cur.chosen[name]
+            cur.excluded.add(name)
+            cur.chi2 = chi2_wo
+            cur.cv = lin.cv_rms(rest, folds, seed)
+            step["dropped"].append(name)
+
+
 def _select(lin: LinearisedFit, models: dict, max_effects: int, min_delta_bic: float, folds: int, seed: int) -> dict:
     """Stepwise selection (forward, with a backward check after each addition).
 
@@ -140,26 +239,10 @@ def _select(lin: LinearisedFit, models: dict, max_effects: int, min_delta_bic: f
     log_n = np.log(lin.n)
     unseparated: dict = {}
     family, nested = _relations(models)
-    chosen: dict = {}  # name -> {"extra", "X", "k"}
-    excluded: set = set()
-    chi2_cur, p_cur = lin.chi2([]), 0
-    cv_cur = lin.cv_rms([], folds, seed)
+    cur = _Model({}, set(), lin.chi2([]), 0, lin.cv_rms([], folds, seed))
     steps, rivals, first = [], [], None
-    while len(chosen) < max_effects:
-        blocks = [c["X"] for c in chosen.values()]
-        trials = {}
-        for name, eff in models.items():
-            if name in chosen or name in excluded or (family[name] - {name}) & set(chosen):
-                continue
-            if eff.searched is None and unseparated.get(name):
-                continue
-            t = _trial(lin, eff, blocks, chi2_cur, p_cur, log_n)
-            if eff.searched is not None or name not in unseparated:
-                unseparated[name] = lin.unseparated(eff, t["extra"])
-            if unseparated[name]:
-                unseparated[name] = {"extra": t["extra"], "combinations": unseparated[name]}
-                continue
-            trials[name] = t
+    while len(cur.chosen) < max_effects:
+        trials = _tried(lin, models, cur, family, unseparated, log_n)
         if first is None:
             first = {n: {"chi2": t["chi2"], "delta_bic_vs_none": t["delta_bic"], "n_params": t["k"],
                          "extra": t["extra"],
@@ -167,57 +250,20 @@ def _select(lin: LinearisedFit, models: dict, max_effects: int, min_delta_bic: f
         # One member per family competes: the simplest that the evidence allows.
         winners = {n: _simplest(trials, family[n], nested) for n in trials}
         order = sorted((n for n in trials if winners[n] == n), key=lambda c: -trials[c]["delta_bic"])
-        added, cv_new = None, None
-        for name in order:
-            t = trials[name]
-            if t["delta_bic"] < min_delta_bic:
-                break
-            cv_try = lin.cv_rms(blocks + [t["X"]], folds, seed)
-            if cv_try < cv_cur:
-                added, cv_new = name, cv_try
-                break
+        added, cv_new = _entering(lin, trials, order, cur, min_delta_bic, folds, seed)
         step = {"trials": {n: {"delta_bic": t["delta_bic"], "chi2": t["chi2"]} for n, t in trials.items()},
                 "added": added, "dropped": []}
         steps.append(step)
         if added is None:
             break
+        rivals += _rivals(added, trials, order, min_delta_bic)
         t = trials[added]
-        for other in order:
-            if other != added and trials[other]["delta_bic"] >= min_delta_bic \
-                    and t["delta_bic"] - trials[other]["delta_bic"] < ALIAS_DELTA_BIC:
-                rivals.append((added, other, t["delta_bic"] - trials[other]["delta_bic"],
-                               _canonical_correlation(t["X"], trials[other]["X"]), False))
-        chosen[added] = {"extra": t["extra"], "X": t["X"], "k": t["k"]}
-        chi2_cur, p_cur, cv_cur = t["chi2"], p_cur + t["k"], cv_new
-        # Nested review: with the others fitted, the family's simplest member that the evidence allows.
-        for name in [n for n in chosen if n != added and len(family[n]) > 1]:
-            rest = {n: c for n, c in chosen.items() if n != name}
-            blocks_rest = [c["X"] for c in rest.values()]
-            chi2_rest, p_rest = lin.chi2(blocks_rest), p_cur - chosen[name]["k"]
-            review = {f: _trial(lin, models[f], blocks_rest, chi2_rest, p_rest, log_n)
-                      for f in family[name] if f not in excluded and not unseparated.get(f)}
-            better = _simplest(review, review, nested)
-            if better != name:
-                r = review[better]
-                chosen = {(better if n == name else n): ({"extra": r["extra"], "X": r["X"], "k": r["k"]} if n == name
-                                                         else c) for n, c in chosen.items()}
-                chi2_cur, p_cur = r["chi2"], p_rest + r["k"]
-                cv_cur = lin.cv_rms([c["X"] for c in chosen.values()], folds, seed)
-                step.setdefault("replaced", []).append((name, better))
-        # Backward: an earlier effect the later ones make redundant leaves the model.
-        for name in [n for n in chosen if n != added]:
-            rest = [c["X"] for n, c in chosen.items() if n != name]
-            chi2_wo = lin.chi2(rest)
-            s2 = max(1.0, chi2_cur / max(lin.dof0 - p_cur, 1))
-            if (chi2_wo - chi2_cur) / s2 - chosen[name]["k"] * log_n < min_delta_bic:
-                p_cur -= chosen[name]["k"]
-                del chosen[name]
-                excluded.add(name)
-                chi2_cur = chi2_wo
-                cv_cur = lin.cv_rms(rest, folds, seed)
-                step["dropped"].append(name)
-    return {"chosen": {n: c["extra"] for n, c in chosen.items()}, "steps": steps, "rivals": rivals,
-            "single": first or {}, "cv_geometry": lin.cv_rms([], folds, seed), "cv_chosen": cv_cur,
+        cur.chosen[added] = {"extra": t["extra"], "X": t["X"], "k": t["k"]}
+        cur.chi2, cur.p, cur.cv = t["chi2"], cur.p + t["k"], cv_new
+        _review_nested(lin, models, cur, added, family, nested, unseparated, step, log_n, folds, seed)
+        _drop_redundant(lin, cur, added, step, min_delta_bic, log_n, folds, seed)
+    return {"chosen": {n: c["extra"] for n, c in cur.chosen.items()}, "steps": steps, "rivals": rivals,
+            "single": first or {}, "cv_geometry": lin.cv_rms([], folds, seed), "cv_chosen": cur.cv,
             "unseparated": {n: u for n, u in unseparated.items() if u}}
 
 
