@@ -27,7 +27,8 @@ from .granularity import shared_form
 from .registry import EFFECTS, effect as registered
 from .search import LinearisedFit
 from .separability import GRAM_MIN_RESIDUALS, GeometryBasis
-from .whitening import free_indices, geometry_basis_of, noise_covariance, scaled_least_squares, whiten, whitening_matrices
+from .whitening import (free_indices, geometry_basis_of, noise_covariance, scaled_least_squares, whiten,
+                        whitening_matrices)
 
 __all__ = ["GN_ITERATIONS", "GN_TOLERANCE", "EffectFit", "fit_effects", "fit_effect", "as_models", "check_applies",
            "model_poses", "span_bases", "release_span_bases"]
@@ -363,7 +364,7 @@ def span_bases(fit: "EffectFit") -> tuple[np.ndarray, np.ndarray | None]:
     geometric combinations' columns too) and of ``fit.design`` (None without held combinations),
     computed once per fit (the outlier scan and the remainder's tests share them). Above
     :data:`GRAM_MIN_RESIDUALS` residuals ``Q`` is ``[Q_det, the held columns' remainder]``, so
-    that one product with ``Q`` gives both projections (:meth:`_Remainder.f_test`)."""
+    that one product with ``Q`` gives both projections (:meth:`calib.effects.remainder._Remainder.f_test`)."""
     if fit not in _SPANS:
         if fit.held_design is None:
             _SPANS[fit] = (orthonormal_columns(fit.design), None)

@@ -114,7 +114,7 @@ class _Remainder:
         Xp = X - Q @ QX
         gram = X.shape[0] > GRAM_MIN_RESIDUALS
         if self.Q_det is not None:
-            if gram:  # Q = [Q_det, Q_rest] (:func:`span_bases`): X less Q_det's part is Xp + Q_rest Q_rest^T X
+            if gram:  # Q = [Q_det, Q_rest] (joint_fit.span_bases): X less Q_det's part is Xp + Q_rest Q_rest^T X
                 I_free = Xp.T @ Xp
                 QXr = QX[self.Q_det.shape[1]:]
                 unseparated = unseparated_information(I_free + QXr.T @ QXr, I_free)
