@@ -211,6 +211,12 @@ class Robot(ABC):
     #: that parameter of chain ``i`` moved by ``d``). A re-homing, an encoder re-zeroed or a spool
     #: re-wound moves these and nothing else (:mod:`calib.session_shift`).
     joint_zero_names: ClassVar[tuple[str, ...]] = ()
+    #: Parameters of the physical machine that the closure does not see (their columns are zero),
+    #: e.g. the linear Delta's rod-pair differences, which tilt its effector where its kinematics
+    #: only translates it: the MuJoCo machine builds them, the kinematics cannot identify them
+    #: (they are among :attr:`gauge_fixed`), and seeded errors leave them at nominal so that a
+    #: machine and its kinematics agree unless a case sets them on purpose.
+    machine_only: ClassVar[tuple[str, ...]] = ()
 
     # -- description ----------------------------------------------------------------------
     @property

@@ -54,6 +54,7 @@ MACHINES: Mapping = _Builders({
     "hexapod": "hexapod",
     "delta": "delta",
     "rus": "rus",
+    "linear_delta": "linear_delta",
 })
 
 

@@ -33,7 +33,8 @@ import numpy as np
 
 from calib.robots.delta import Delta
 
-from .machine import HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values, new_spec
+from .machine import (HOME_KEY, PLATFORM_SITE, SENSOR_POS, Machine, MachineOptions, add_end_stop, chain_values,
+                      checked_machine_inputs, new_spec)
 from .units import mm_to_m
 
 __all__ = ["build_machine", "build_spec", "integration_step", "ARM_JOINTS", "DEFAULT_STIFFNESS_NM_PER_RAD",
@@ -201,12 +202,7 @@ def build_spec(robot: Delta, theta: np.ndarray, options: MachineOptions = Machin
         options: physical options.
         name: model name.
     """
-    theta = np.asarray(theta, dtype=float)
-    if theta.shape != (robot.n_parameters,):
-        raise ValueError(f"theta must have shape ({robot.n_parameters},), got {theta.shape}")
-    scale = np.zeros(3) if options.transmission_scale is None else np.asarray(options.transmission_scale, dtype=float)
-    if scale.shape != (3,):
-        raise ValueError(f"transmission_scale must have 3 values (one per chain), got {scale.size}")
+    theta, scale = checked_machine_inputs(robot, theta, options)
     geo = _geometry(robot, theta)
     step = integration_step(options, float(np.linalg.norm(geo.arms, axis=1).max()))
     spec = new_spec(name, step, options.gravity)

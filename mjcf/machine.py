@@ -30,7 +30,7 @@ from calib.rotation import euler_from_quaternion
 
 from .units import m_to_mm
 
-__all__ = ["MachineOptions", "MachineEffects", "Machine", "new_spec", "chain_values", "add_end_stop", "END_STOP_SOLIMP", "END_STOP_DAMPING_RATIO", "spec_xml", "xml_digits", "XML_DIGITS", "MUJOCO_XML_DIGITS", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
+__all__ = ["MachineOptions", "MachineEffects", "Machine", "new_spec", "chain_values", "checked_machine_inputs", "add_end_stop", "END_STOP_SOLIMP", "END_STOP_DAMPING_RATIO", "spec_xml", "xml_digits", "XML_DIGITS", "MUJOCO_XML_DIGITS", "PLATFORM_SITE", "SENSOR_POS", "SENSOR_QUAT", "HOME_KEY", "GRAVITY_M_S2"]
 
 #: Name of the platform site whose frame is the pose.
 PLATFORM_SITE = "platform"
@@ -77,6 +77,23 @@ def chain_values(value, n_chains: int, name: str = "value") -> np.ndarray:
     if v.shape != (n_chains,):
         raise ValueError(f"{name} must be one number or {n_chains} values (one per chain), got {v.size}")
     return v.copy()
+
+
+def checked_machine_inputs(robot, theta, options: "MachineOptions") -> tuple[np.ndarray, np.ndarray]:
+    """``(theta (P,), transmission scale (C,))`` of a three-chain machine's builder, checked: the
+    parameter vector's shape and one transmission scale a chain (zeros where none is given).
+
+    Raises:
+        ValueError: naming the argument of the wrong shape.
+    """
+    theta = np.asarray(theta, dtype=float)
+    if theta.shape != (robot.n_parameters,):
+        raise ValueError(f"theta must have shape ({robot.n_parameters},), got {theta.shape}")
+    c = robot.n_chains
+    scale = np.zeros(c) if options.transmission_scale is None else np.asarray(options.transmission_scale, dtype=float)
+    if scale.shape != (c,):
+        raise ValueError(f"transmission_scale must have {c} values (one per chain), got {scale.size}")
+    return theta, scale
 
 
 def add_end_stop(joint, low: float, high: float, timestep_s: float) -> None:

@@ -243,3 +243,32 @@ def test_a_runnable_module_has_a_command_line_whose_help_writes_nothing(module, 
                           text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.startswith(f"usage: python -m {module}"), done.stderr
     assert list(tmp_path.iterdir()) == [] and files() == before
+
+
+def test_no_module_imports_another_modules_private_name():
+    """No ``from X import _name`` in calib, mjcf or pipeline (a name shared by two modules is a
+    public one, in its module's ``__all__``); the check sees a planted one."""
+    def private_imports(source: str) -> list[str]:
+        return [f"{node.module}.{a.name}" for node in ast.walk(ast.parse(source))
+                if isinstance(node, ast.ImportFrom) and node.module != "__future__"
+                for a in node.names if a.name.startswith("_")]
+
+    assert private_imports("from .joint_fit import _design, EffectFit") == ["joint_fit._design"]
+    found = {name: private_imports(path.read_text()) for name, path in project_modules().items()}
+    assert not {k: v for k, v in found.items() if v}
+
+
+#: The rooms of the effects' discovery (docs/architecture.md), and their limits (issue 47): a
+#: module of about 600 lines at most, no function over 80.
+DISCOVERY_ROOMS = ("whitening", "search", "joint_fit", "selection", "remainder", "gross_rows", "discovery")
+ROOM_LINES, FUNCTION_LINES = 600, 80
+
+
+@pytest.mark.parametrize("room", DISCOVERY_ROOMS)
+def test_a_room_of_the_discovery_is_small_and_its_functions_short(room):
+    path = ROOT / "calib" / "effects" / f"{room}.py"
+    source = path.read_text()
+    lengths = [(node.name, node.end_lineno - node.lineno + 1) for node in ast.walk(ast.parse(source))
+               if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    long = [(name, n) for name, n in lengths if n > FUNCTION_LINES]
+    assert source.count("\n") <= ROOM_LINES and not long, (source.count("\n"), long)

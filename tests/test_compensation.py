@@ -333,8 +333,24 @@ TARGET_MISTAKES = {  # case: (change of the right targets, the robots, the colum
 }
 
 
+def _reaches_near_its_origin(name: str) -> bool:
+    """Whether the robot reaches the pose 0.1 mm above its base frame's origin (a printer's bed
+    centre): targets written in metres then lie where it reaches, and nothing refuses them."""
+    from calib.robot import KinematicsError, check_joint_limits
+
+    robot = default_robot(name)
+    near = np.zeros((1, robot.pose_dim))
+    near[0, 2] = 0.1
+    try:
+        check_joint_limits(robot, robot.inverse_kinematics(robot.table.nominal, near), "pose")
+    except KinematicsError:
+        return False
+    return True
+
+
 @pytest.mark.parametrize("case,name", [(c, n) for c in TARGET_MISTAKES for n in sorted(ROBOTS)
-                                       if TARGET_MISTAKES[c][1] == "all" or default_robot(n).angle_pose_mask.any()])
+                                       if (TARGET_MISTAKES[c][1] == "all" or default_robot(n).angle_pose_mask.any())
+                                       and not (c == "positions in metres" and _reaches_near_its_origin(n))])
 def test_targets_in_the_wrong_unit_are_named_by_column_with_the_conversion(case, name, robot_runs, tmp_path, capsys):
     folder, poses = robot_runs[name]
     change, _, unit, seems, fix = TARGET_MISTAKES[case]
@@ -352,6 +368,20 @@ def test_targets_in_the_wrong_unit_are_named_by_column_with_the_conversion(case,
                    f"as {seems} ({fix}) every target is reachable", "unreachable as written"):
         assert needle in err, (needle, err)
     assert not (tmp_path / "c.csv").exists()
+
+
+@pytest.mark.parametrize("name", [n for n in sorted(ROBOTS) if _reaches_near_its_origin(n)])
+def test_targets_in_metres_the_machine_reaches_are_compensated_with_the_box_warning(name, robot_runs, tmp_path, capsys):
+    """A printer's targets in metres lie just above its bed's centre, which it reaches: nothing
+    refuses them on evidence, and the warning names every row outside the calibration's box."""
+    folder, poses = robot_runs[name]
+    wrong = np.hstack([poses[:, :3] / 1000.0, poses[:, 3:]])
+    targets = _targets_file(tmp_path / "t.csv", default_robot(name), wrong)
+    assert compensate_main(["--calibration", str(folder / "r.calibration.json"), "--targets", str(targets),
+                            "--out", str(tmp_path / "c.csv")]) == 0
+    err = capsys.readouterr().err
+    rows = ", ".join(str(k) for k in range(1, len(wrong) + 1))
+    assert f"row(s) {rows}: outside the box of the calibration poses" in err, err
 
 
 @pytest.mark.parametrize("name,other", [(n, o) for n in sorted(ROBOTS) for o in sorted(ROBOTS) if o != n])

@@ -91,13 +91,15 @@ def mistaken(name: str, mistake: str):
     return robot, q, m
 
 
-#: Each robot's mistake classes (the report's): the Delta has no angle columns, its joints are rad.
+#: Each robot's mistake classes (the report's): the Deltas have no angle columns, the rotary one's joints are
+#: rad, the linear one's mm.
 MISTAKES = {
     "delta": ("positions in metres", "joints in degrees", "x and y swapped", "z sign flipped", "joint 2 reversed"),
     "hexapod": ("positions in metres", "angles in degrees", "x and y swapped", "z sign flipped", "gamma sign flipped",
                 "joint 2 reversed"),
     "rus": ("positions in metres", "angles in degrees", "joints in degrees", "x and y swapped", "z sign flipped",
             "gamma sign flipped", "joint 2 reversed"),
+    "linear_delta": ("positions in metres", "x and y swapped", "z sign flipped", "joint 2 reversed"),
 }
 CASES = [(n, m) for n in NAMES for m in MISTAKES[n]]
 

@@ -1,4 +1,4 @@
-"""The searched parameters' subsampled search (calib.effects.discovery.SEARCH_ROWS_MAX): above the
+"""The searched parameters' subsampled search (calib.effects.search.SEARCH_ROWS_MAX): above the
 threshold a searched parameter's grid is scanned on a seeded subsample stratified in time and
 confirmed and refined on every row. Here the threshold is lowered through ``discover_effects``'s
 ``search_rows_max`` (and the subsample through ``search_subsample_rows``) on a few hundred rows:
@@ -117,17 +117,29 @@ def test_the_blocked_crossvalidation_above_the_threshold_is_the_closed_form_one(
     assert sub.evidence["cv_whitened_rms_chosen"] == pytest.approx(full.evidence["cv_whitened_rms_chosen"], rel=1e-9)
 
 
+#: The discovery's rooms that read calib.effects.separability.GRAM_MIN_RESIDUALS (each holds the
+#: name: monkeypatch.setattr refuses one that does not).
+GRAM_ROOMS = ("whitening", "joint_fit", "remainder")
+
+
+def lower_the_gram_threshold(monkeypatch):
+    """GRAM_MIN_RESIDUALS lowered to 0 in every room of the discovery that reads it."""
+    import importlib
+
+    for room in GRAM_ROOMS:
+        monkeypatch.setattr(importlib.import_module(f"calib.effects.{room}"), "GRAM_MIN_RESIDUALS", 0)
+
+
 def test_the_normal_equations_of_a_tall_fit_give_the_svd_fit(monkeypatch):
-    """calib.effects.discovery.GRAM_MIN_RESIDUALS lowered to 0 (every fit through the Gram
+    """The discovery's GRAM_MIN_RESIDUALS lowered to 0 (every fit through the Gram
     matrix): the joint fit of the geometry and a screw error is the SVD's to 1e-8 relative
     (the Gram matrix squares the scaled columns' condition number, 1e3 to 1e4 here; Gauss-Newton
     corrects each step's error on the next)."""
-    import calib.effects.discovery
     from calib.effects import fit_effects
 
     data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
     svd = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
-    monkeypatch.setattr(calib.effects.discovery, "GRAM_MIN_RESIDUALS", 0)
+    lower_the_gram_threshold(monkeypatch)
     gram = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
     assert gram.chi2 == pytest.approx(svd.chi2, rel=1e-8)
     np.testing.assert_allclose(gram.coefficients, svd.coefficients, rtol=1e-6, atol=1e-8 * np.abs(svd.coefficients).max())
@@ -185,18 +197,17 @@ def test_the_gram_form_of_an_orthonormal_basis_spans_what_the_svds_spans(monkeyp
 
 def test_the_remainder_tests_in_the_gram_form_are_the_svds(monkeypatch):
     """The remainder's F tests through the normal equations (GRAM_MIN_RESIDUALS lowered to 0 in
-    calib.effects.discovery and calib.effects.base: span bases as [design, held remainder], one
+    the discovery's rooms and calib.effects.base: span bases as [design, held remainder], one
     product with them per test) give the SVD form's p-values and t statistics: relative 1e-6, the
     Gram matrices' squared conditioning (1e3 to 1e4 scaled, the docstring of GRAM_MIN_RESIDUALS)
     times eps, far below any decision (alpha 0.01 Bonferroni-corrected)."""
     import calib.effects.base as base
-    import calib.effects.discovery as disc_mod
     from calib.effects import fit_effects, remainder_tests
 
     data = recording("periodic_screw_error", [0.003, -0.002], 7.3)
     fit = fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3})
     svd = remainder_tests(data, fit)
-    monkeypatch.setattr(disc_mod, "GRAM_MIN_RESIDUALS", 0)
+    lower_the_gram_threshold(monkeypatch)
     monkeypatch.setattr(base, "GRAM_MIN_RESIDUALS", 0)
     gram = remainder_tests(data, fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3}))
     assert gram["explained"] == svd["explained"]
@@ -212,14 +223,14 @@ def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square(monkeyp
     window finds with a full pass at every point (``SEARCH_UPDATE_ROWS`` below one row): the same
     step, and the same fit at it to the bit (the update's rounding, relative 1e-12 on sums of
     products, is far below the gap between two step times' chi-squares)."""
-    import calib.effects.discovery as disc_mod
+    import calib.effects.search as search_mod
 
     t = recording("none", [], None).t_s
     truth = JointStep(2, float((t[300] + t[301]) / 2))
     data = recording("lost_count", [0.004], truth)
     kw = dict(candidates=["lost_count"], laws=False, search_rows_max=THRESHOLD, search_subsample_rows=SUBSAMPLE)
     updated = discover_effects(data, **kw)
-    monkeypatch.setattr(disc_mod, "SEARCH_UPDATE_ROWS", -1)
+    monkeypatch.setattr(search_mod, "SEARCH_UPDATE_ROWS", -1)
     full = discover_effects(data, **kw)
     assert updated.search["form"] == full.search["form"] == "subsample"
     assert updated.chosen.extras == full.chosen.extras

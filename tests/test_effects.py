@@ -610,15 +610,15 @@ def test_the_testbed_steps_one_joint_and_warms_the_legs_up():
 
 
 def test_large_folds_of_the_closed_form_crossvalidation_take_the_woodbury_form(monkeypatch):
-    """With calib.effects.discovery.DENSE_FOLD_MAX lowered to 0 every fold of the closed-form
+    """With calib.effects.search.DENSE_FOLD_MAX lowered to 0 every fold of the closed-form
     cross-validation is solved through the Woodbury identity (a P x P system) instead of the
     dense fold-sized one: the same effects are chosen and the same cross-validated figures to
     rounding (the two forms are the same algebra; 1e-9 is far above the rounding of a fold's
     systems and far below any difference between candidates)."""
-    import calib.effects.discovery
+    import calib.effects.search
 
     exact = discover_effects(two_effects())
-    monkeypatch.setattr(calib.effects.discovery, "DENSE_FOLD_MAX", 0)
+    monkeypatch.setattr(calib.effects.search, "DENSE_FOLD_MAX", 0)
     woodbury = discover_effects(two_effects())
     assert woodbury.effects == exact.effects
     for key in ("cv_whitened_rms_chosen",):
@@ -630,9 +630,9 @@ def test_large_folds_of_the_closed_form_crossvalidation_take_the_woodbury_form(m
 @pytest.mark.parametrize("robot_name", list(ROBOTS))
 def test_a_long_step_time_grid_is_searched_coarse_to_fine_to_the_same_step(robot_name, monkeypatch):
     """The lost count's step-time grid (one point per row and chain: 6 x 79 for the hexapod) is
-    longer than calib.effects.discovery.SEARCH_GRID_MAX lowered to 12: the coarse-to-fine search
+    longer than calib.effects.search.SEARCH_GRID_MAX lowered to 12: the coarse-to-fine search
     finds the same joint and time as every point tried (the independent truth: the step made)."""
-    import calib.effects.discovery
+    import calib.effects.search
     from calib.effects.lost_count import JointStep
 
     robot = default_robot(robot_name)
@@ -641,7 +641,7 @@ def test_a_long_step_time_grid_is_searched_coarse_to_fine_to_the_same_step(robot
     step = [0.004 if robot.joint_unit == "mm" else 4e-5]
     data = synthetic(robot_name, "lost_count", step, seed=11, extra=truth, noise=NOISE)
     assert len(EFFECTS["lost_count"].search_grid(data)) > 12
-    monkeypatch.setattr(calib.effects.discovery, "SEARCH_GRID_MAX", 12)
+    monkeypatch.setattr(calib.effects.search, "SEARCH_GRID_MAX", 12)
     d = discover_effects(data)
     assert list(d.effects) == ["lost_count"] and d.explained, d.verdict
     assert d.chosen.extra == truth

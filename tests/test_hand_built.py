@@ -21,50 +21,17 @@ import numpy as np
 import pytest
 
 from calib.measurement import compose
-from calib.noise import SensorNoise
-from calib.robots.hexapod import Hexapod
 from pipeline.formats.recording import Recording, write_recording
 from pipeline.run import run
 from pipeline.simulation.testbed import Testbed
+from tests.rehomed_twin import CAPTURE_FRAME, CAPTURE_NOISE, hand_built_hexapod, level_grid, off_plane_runs
 
-#: The capture's noise: 0.3 mm on positions, 1.5 mrad on angles, one standard deviation.
-CAPTURE_NOISE = SensorNoise(0.3, 1.5e-3, "normal")
-#: Each leg's stroke as built, from fully retracted; home is this far above retracted.
-STROKE_MM, HOME_ABOVE_RETRACTED_MM = 280.0, 100.0
-#: The capture's frame relative to the base: 574.3 mm below, turned 2 degrees about x.
-CAPTURE_FRAME = np.array([3.0, -2.0, -574.3, np.deg2rad(2.0), 0.0, 0.01])
 #: The acceptance of issue 37, point 7: within 1.5 times the fit told the true tolerance.
 TOLD_RATIO = 1.5
 
 
-def hand_built_hexapod() -> Hexapod:
-    """The nominal hand-built hexapod, its legs' ranges one-sided about home."""
-    a = np.deg2rad([-10, 10, 110, 130, 230, 250])
-    base = np.stack([300 * np.cos(a), 300 * np.sin(a), np.zeros(6)], axis=1)
-    b = np.deg2rad([-50, 50, 70, 170, 190, 290])
-    platform = np.stack([150 * np.cos(b), 150 * np.sin(b), np.zeros(6)], axis=1)
-    home = np.array([0.0, 0.0, 700.0, 0.0, 0.0, 0.0])
-    legs = np.linalg.norm(platform + home[:3] - base, axis=1)
-    low = legs - HOME_ABOVE_RETRACTED_MM
-    return Hexapod(base, platform, legs, home_pose=home, joint_ranges=np.stack([low, low + STROKE_MM], axis=1))
-
-
-def level_grid() -> np.ndarray:
-    """(100, 6) a 10 x 10 grid, 240 mm square, at the home height, level."""
-    xs = np.linspace(-120.0, 120.0, 10)
-    X, Y = np.meshgrid(xs, xs)
-    poses = np.zeros((100, 6))
-    poses[:, 0], poses[:, 1], poses[:, 2] = X.ravel(), Y.ravel(), 700.0
-    return poses
-
-
-def off_plane_runs(rng: np.random.Generator, n: int = 40) -> np.ndarray:
-    """(n, 6) poses off the grid: other heights and tilts."""
-    poses = np.zeros((n, 6))
-    poses[:, :2] = rng.uniform(-100.0, 100.0, (n, 2))
-    poses[:, 2] = rng.uniform(650.0, 750.0, n)
-    poses[:, 3:] = rng.uniform(-0.08, 0.08, (n, 3))
-    return poses
+#: The runs off the grid (validation rows).
+OFF_PLANE_ROWS = 40
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +41,7 @@ def twin(tmp_path_factory):
     rng = np.random.default_rng(37)
     errors = rng.uniform(1.0, 3.0, robot.n_parameters) * rng.choice([-1.0, 1.0], robot.n_parameters)
     theta = robot.table.nominal + errors
-    poses = np.vstack([level_grid(), off_plane_runs(rng)])
+    poses = np.vstack([level_grid(), off_plane_runs(rng, OFF_PLANE_ROWS)])
     commands = robot.inverse_kinematics(robot.table.nominal, poses)
     limits = robot.joint_limits()
     assert np.all((commands > limits[:, 0]) & (commands < limits[:, 1])), "the runs stay inside the legs' ranges"

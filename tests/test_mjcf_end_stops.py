@@ -45,7 +45,7 @@ def settle(machine, values):
     return tail[-1], np.ptp(tail, axis=0)
 
 
-@pytest.mark.parametrize("name", ["hexapod", "delta", "rus"])
+@pytest.mark.parametrize("name", ["hexapod", "delta", "rus", "linear_delta"])
 def test_the_declared_ranges_are_the_joints_limits_in_the_machines_units(name):
     robot, _ = robot_with_ranges(name)
     machine = build_machine(robot, robot.table.nominal)
@@ -59,7 +59,7 @@ def test_the_declared_ranges_are_the_joints_limits_in_the_machines_units(name):
     assert not np.any(plain.model.jnt_limited[[plain.model.joint(j).id for j in plain.actuated_joints]])
 
 
-@pytest.mark.parametrize("name", ["hexapod", "delta", "rus"])
+@pytest.mark.parametrize("name", ["hexapod", "delta", "rus", "linear_delta"])
 def test_a_servo_commanded_past_its_stop_stops_there(name):
     robot, home = robot_with_ranges(name)
     machine = build_machine(robot, robot.table.nominal)

@@ -19,7 +19,7 @@ FRICTION = (0.4, 0.6, 0.8, 1.0, 0.5, 0.7)  # N
 STIFFNESS = (1e5, 2e5, 1.5e5, 2.5e5, 1.2e5, 3e5)  # N/m
 
 
-@pytest.mark.parametrize("name", ["hexapod", "delta", "rus"])
+@pytest.mark.parametrize("name", ["hexapod", "delta", "rus", "linear_delta"])
 def test_every_builder_writes_each_joints_friction_and_stiffness_into_the_spec(name):
     robot = default_robot(name)
     c = robot.n_chains

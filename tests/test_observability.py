@@ -91,12 +91,14 @@ def test_joint_noise_whitening_is_the_pose_covariance(name):
     F = fisher_information(robot, theta, poses, noise, joints=q)
     J = identification_jacobian(robot, theta, poses, SensorNoise(1.0, 1.0, "normal"), joints=q) \
         .reshape(4, robot.pose_dim, -1)
-    h = 1e-6
+    # central differences, h = 1e-6 rad or 1e-4 mm: rounding eps |pose| / h ~ 1e-8 absolute (atol;
+    # a step of 1e-6 mm on poses of 250 mm, the linear Delta's, rounded to 9e-8, and F's cancelling
+    # entries to 8e-4 relative), truncation ~h^2 plus the forward kinematics' Newton residual over
+    # h, below 1e-5 relative
+    h = 1e-4 if robot.joint_unit == "mm" else 1e-6
     jq = np.stack([(robot.forward_kinematics(theta, q + h * np.eye(robot.n_chains)[c], initial=poses)
                     - robot.forward_kinematics(theta, q - h * np.eye(robot.n_chains)[c], initial=poses)) / (2 * h)
                    for c in range(robot.n_chains)], axis=-1)
-    # central differences, h = 1e-6: rounding eps |pose| / h ~ 1e-8 absolute (atol), truncation
-    # ~h^2 plus the forward kinematics' Newton residual over h, below 1e-5 relative
     np.testing.assert_allclose(jq, pose_jacobian_of_joints(robot, theta, q, poses), rtol=1e-5, atol=1e-8)
     S = np.diag(NOISE.pose_std(robot.pose_units) ** 2) + noise.joint_std ** 2 * jq @ np.swapaxes(jq, 1, 2)
     expected = sum(J[j].T @ np.linalg.solve(S[j], J[j]) for j in range(4))

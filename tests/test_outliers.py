@@ -96,8 +96,8 @@ def test_above_the_size_the_jacobian_kept_as_its_chain_factors_gives_the_same_st
     numbers in another order (the kept rows' Gram product as every row's less the left-out rows'),
     so every statistic agrees to rounding carried through the normal equations: relative to
     ``1 + t``, below ``100 kappa eps`` with ``kappa`` the column-scaled condition number of the
-    whitened Gram product (measured here from the dense Jacobian of the flagged-free fit,
-    independent of the factored form)."""
+    whitened Gram product of the free parameters (measured here from the dense Jacobian of the
+    flagged-free fit, independent of the factored form)."""
     robot, theta, poses, joints, measured = spoiled(name)
     for constant in ("ONE_AT_A_TIME_MAX_ROWS", "REUSED_JACOBIAN_MIN_ROWS"):
         monkeypatch.setattr(calib.outliers, constant, 40)
@@ -113,7 +113,9 @@ def test_above_the_size_the_jacobian_kept_as_its_chain_factors_gives_the_same_st
         return
     assert not np.array_equal(factored.statistic, dense.statistic)  # the other form ran
     std = NOISE.pose_std(robot.pose_units)
-    J = pose_jacobian_of_parameters(robot, theta, joints, poses).reshape(-1, robot.n_parameters) / np.tile(std, 60)[:, None]
+    free = robot.table.indices(robot.free_default)  # the fitted columns (a held one may be zero)
+    J = pose_jacobian_of_parameters(robot, theta, joints, poses)[:, :, free].reshape(-1, free.size) \
+        / np.tile(std, 60)[:, None]
     scale = np.linalg.norm(J, axis=0)
     kappa = np.linalg.cond(J / scale) ** 2
     bound = 100 * kappa * np.finfo(float).eps

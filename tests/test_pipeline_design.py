@@ -310,17 +310,17 @@ def test_observability_markdown_names_the_delta_null_directions():
 
 def _recording_sidecar(name, folder):
     """The sidecar of a recording of ``name`` whose nominal geometry is another machine's (the
-    base joints' x and y 1.02 times the default's), and that machine."""
+    base joints' x and y, or the towers' radii, 1.02 times the default's), and that machine."""
     from pipeline.formats import Recording, read_sidecar_geometry, write_recording
 
     robot = default_robot(name)
     desc = robot.description()
     if "base_joints_mm" in desc:
         desc["base_joints_mm"] = [[1.02 * b[0], 1.02 * b[1], b[2]] for b in desc["base_joints_mm"]]
-    else:
-        prefix = {"delta": "D", "rus": "M"}[name]
-        desc["parameters"] = {k: v * (1.02 if k.startswith(prefix) and k[-2:] in (".x", ".y") else 1.0)
-                              for k, v in desc["parameters"].items()}
+    else:  # the shoulders' or motors' x and y; the linear Delta's towers' radii
+        prefix = {"delta": "D", "rus": "M", "linear_delta": "radius"}[name]
+        desc["parameters"] = {k: v * (1.02 if k.startswith(prefix) and (k[-2:] in (".x", ".y") or prefix == "radius")
+                                      else 1.0) for k, v in desc["parameters"].items()}
     other = robot_from_description(name, desc)
     poses = reference_poses(other)
     poses = np.repeat(other.home_pose[None], 2, axis=0) if poses is None else poses[:2]

@@ -29,7 +29,7 @@ from calib.workspace import reachable_poses
 from pipeline.formats.recording import Recording, write_recording
 from pipeline.run import main, run
 from pipeline.simulation.testbed import Testbed
-from tests.test_hand_built import CAPTURE_FRAME, CAPTURE_NOISE, hand_built_hexapod, level_grid, off_plane_runs
+from tests.rehomed_twin import CAPTURE_FRAME, CAPTURE_NOISE, DAY2_ROWS, hand_built_hexapod, level_grid, off_plane_runs
 
 #: Issue 46 point 5 (b): the other rows predicted within this many noise floors (RMS).
 FLOOR_RATIO = 1.2
@@ -39,7 +39,7 @@ SIGMAS = 3.0
 #: within the prior of calib.session_shift.FRAME_SHIFT_STD (10 mm, 0.02 rad).
 CAPTURE_MOTION = np.array([6.0, -4.0, 3.0, 0.012, -0.008, 0.01])
 #: Day 2's rows: the first few are the calibration rows.
-DAY2_ROWS, DAY2_CALIBRATION = 60, 8
+DAY2_CALIBRATION = 8
 
 
 def _re_homed(rng, n, scale=1.0):
@@ -208,7 +208,7 @@ def test_the_linuxcnc_export_carries_the_new_zeros_in_the_comp_tables(twin, tmp_
     from tests.test_export_linuxcnc import linuxcnc_motor_commands
 
     result, _ = _from(twin, "level_rehomed")
-    today, held = Calibration.read(result.paths["calibration"]), Calibration.read(twin["cal"])
+    today = Calibration.read(result.paths["calibration"])
     targets = level_grid()[11:89:9]
     motors, stated = {}, {}
     for name, path in (("today", result.paths["calibration"]), ("held", twin["cal"])):

@@ -228,3 +228,20 @@ def test_real_model_misfit_is_reported_in_words_and_no_row_is_left_out(tmp_path)
     assert s["model_misfit"] and s["outliers"]["model_misfit"] and s["flagged_poses"] == []
     assert "model misfit" in s["outliers"]["verdict"] and s["calibration_poses_used"] == 60
     assert "does not fit to the declared noise" in s["message"]
+
+
+def test_a_run_returns_its_objects_and_its_summary_keeps_no_private_key(tmp_path):
+    """``RunResult`` carries the calibration as written, the simulated recording and the suggested
+    poses as objects (issue 47, point 1); the summary has no private (underscore) key."""
+    from calib.calibration import Calibration
+    from pipeline.workflows.calibration import RunSettings, run_calibration
+
+    result = run_calibration(RunSettings(out=tmp_path, name="objects"))
+    assert not [k for k in result.summary if k.startswith("_")]
+    written = Calibration.read(tmp_path / "objects.calibration.json")
+    assert np.array_equal(result.calibration.theta, written.theta)
+    assert result.calibration.recording == written.recording and written.recording["name"] == "objects.csv"
+    assert result.simulated is not None and result.simulated.robot.name == "hexapod"
+    from pipeline.formats import read_recording
+
+    assert np.array_equal(result.simulated.joints, read_recording(tmp_path / "objects.csv").joints)

@@ -137,6 +137,8 @@ def test_validation():
     ("delta", MachineOptions(gravity=True, payload_kg=2.0)),
     ("rus", MachineOptions()),
     ("rus", MachineOptions(gravity=True)),
+    ("linear_delta", MachineOptions()),
+    ("linear_delta", MachineOptions(gravity=True, payload_kg=0.5)),
 ])
 def test_rollout_settles_where_the_sequential_settle_does(robot_name, options):
     robot = default_robot(robot_name)

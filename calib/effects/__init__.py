@@ -23,11 +23,14 @@ __all__ = ["EFFECT_MODULES", "EFFECTS", "effect", "effects_for", "effect_family"
            "closure_noise_std", "candidate_forms", "PerChainForm", "per_chain_form", "SHARED", "PER_CHAIN",
            "propose_law", "ProposedLaw", "Law", "law_effect", "search_law", "LAW_WORDS", "law_to_dict", "law_from_dict"]
 
-# Discovery's names are imported from it when first read: it loads scipy.stats (half a second), which
-# a command that only reads or writes found effects (the calibration file) does not need.
-_discovery_names, __getattr__, __dir__ = lazy_exports(__name__, {"discovery": (
-    "MAX_EFFECTS", "MIN_DELTA_BIC", "Discovery", "EffectFit", "candidate_forms", "closure_noise_std", "discover_effect",
-    "discover_effects", "fit_effect", "fit_effects", "locate_mismatch", "outlier_scan", "propose_law",
-    "regressor_correlation", "remainder_tests")})
+# Discovery's names are imported from their rooms when first read: they load scipy.stats (half a
+# second), which a command that only reads or writes found effects (the calibration file) does not need.
+_discovery_names, __getattr__, __dir__ = lazy_exports(__name__, {
+    "discovery": ("MAX_EFFECTS", "Discovery", "discover_effect", "discover_effects", "propose_law"),
+    "joint_fit": ("EffectFit", "fit_effect", "fit_effects"),
+    "whitening": ("closure_noise_std",),
+    "selection": ("MIN_DELTA_BIC", "candidate_forms", "regressor_correlation"),
+    "remainder": ("locate_mismatch", "remainder_tests"),
+    "gross_rows": ("outlier_scan",)})
 from .laws import LAW_WORDS, Law, ProposedLaw, law_effect, law_from_dict, law_to_dict, search_law  # noqa: E402
 from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form  # noqa: E402

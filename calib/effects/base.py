@@ -35,7 +35,7 @@ __all__ = ["FOLLOWED_QUANTITIES", "PAYLOAD_CHANNEL", "SPREAD_RANGE", "orthonorma
            "Coefficient", "SearchedParameter", "PhysicalParameter", "MachineContext", "EffectScenario",
            "EffectData", "Effect", "motion_history", "closure_regressors", "scale_to_magnitude", "unabsorbed"]
 
-#: The quantities a remainder is tested against (:func:`calib.effects.discovery.remainder_tests`):
+#: The quantities a remainder is tested against (:func:`calib.effects.remainder.remainder_tests`):
 #: time, the direction and size of each joint's last move, each joint's stroke from the centre
 #: of travel, the load each chain carries (statics of the platform's weight), and the position in
 #: the workspace (``"position <coordinate>"``).

@@ -29,7 +29,7 @@ import numpy as np
 
 from .base import Coefficient, Effect, EffectScenario
 
-__all__ = ["SHARED", "PER_CHAIN", "GRANULARITIES", "PerChainForm", "per_chain_form", "form_key",
+__all__ = ["SHARED", "PER_CHAIN", "GRANULARITIES", "PerChainForm", "per_chain_form", "shared_form", "form_key",
            "merge_chain_settings", "chain_coefficient_name"]
 
 #: The two granularities.
@@ -59,6 +59,11 @@ def per_chain_form(eff: Effect) -> "PerChainForm | None":
     if key not in _FORMS:
         _FORMS[key] = (eff, PerChainForm(eff))
     return _FORMS[key][1]
+
+
+def shared_form(eff: Effect) -> Effect:
+    """The registered effect a per-chain form is made of; any other effect itself."""
+    return eff.base if isinstance(eff, PerChainForm) else eff
 
 
 def merge_chain_settings(per_chain: list[dict], n_chains: int) -> dict:

@@ -27,7 +27,8 @@ from ..session_shift import shift_of_residuals
 from ..measurement import compose
 from .base import EffectData
 from .granularity import form_key
-from .discovery import EffectFit, closure_noise_covariance, fit_effects
+from .joint_fit import EffectFit, fit_effects
+from .whitening import closure_noise_covariance
 
 __all__ = ["HeldoutFold", "HeldoutFigures", "HeldoutJudgement", "RejectedEffect", "heldout_folds", "session_shifts",
            "judge_effects", "MIN_SESSION_ROWS", "TIME_BLOCKS", "WORSE_STANDARD_ERRORS", "FRAME_STEP"]

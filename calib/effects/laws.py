@@ -60,7 +60,7 @@ LAW_CV_MARGIN = 0.01
 LAW_TAU_POINTS = 12
 #: Evidence a saturating term ``(1 - exp(-t/T)) * x`` needs over its long-time-constant limit
 #: ``x * t`` (nested: the limit is named unless the saturation gains this much BIC; the library's
-#: :data:`calib.effects.discovery.MIN_NESTED_DELTA_BIC` for a warm-up over a drift).
+#: :data:`calib.effects.selection.MIN_NESTED_DELTA_BIC` for a warm-up over a drift).
 LAW_NESTED_DELTA_BIC = 10.0
 #: Golden-section iterations refining a parametrised term between its grid neighbours.
 REFINE_ITERATIONS = 25

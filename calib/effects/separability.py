@@ -56,7 +56,7 @@ HELD_INFORMATION = 1.0 / DATA_SOURCE_RATIO ** 2 - 1.0
 #: The hexapod's whitened geometry columns, scaled, have condition numbers of 1e3 to 1e4: the
 #: Gram matrix squares it, which leaves 8 digits of a step that Gauss-Newton then iterates on
 #: (the next step corrects the last). 20,000 hexapod rows
-#: (:data:`calib.effects.discovery.SEARCH_ROWS_MAX`); below it the SVD, as always: nothing changes.
+#: (:data:`calib.effects.search.SEARCH_ROWS_MAX`); below it the SVD, as always: nothing changes.
 GRAM_MIN_RESIDUALS = 120_000
 #: A direction of one chain's parameters counts as lying in the held space (and is named as that
 #: chain's combination) when its cosine with that space is at least this.
@@ -205,7 +205,7 @@ def unseparated_combinations(X_held: np.ndarray, X_free: np.ndarray, rtol: float
 def unseparated_information(I_held: np.ndarray, I_free: np.ndarray, rtol: float = 1e-9) -> list[tuple[np.ndarray, float]]:
     """:func:`unseparated_combinations` from the informations ``I_held`` and ``I_free`` (p, p) of
     the effect's coefficients (``X_held^T X_held``, ``X_free^T X_free``): where the tall columns'
-    products are formed otherwise (:meth:`calib.effects.discovery._Remainder.f_test`)."""
+    products are formed otherwise (:meth:`calib.effects.remainder._Remainder.f_test`)."""
     lam, V = np.linalg.eigh(0.5 * (I_held + I_held.T))
     keep = lam > rtol * max(float(lam.max(initial=0.0)), 1e-300)
     if not keep.any():

@@ -15,15 +15,20 @@ from .. import paper
 from ..robot import Robot
 from .delta import Delta
 from .hexapod import Hexapod, paper_hexapod
+from .linear_delta import LinearDelta
 from .rus import RotaryHexapod, default_rotary_hexapod
 
 __all__ = ["ROBOTS", "RobotEntry", "robot_class", "default_robot", "robot_from_description",
-           "reference_errors", "reference_poses", "uniform_errors", "Hexapod", "Delta", "RotaryHexapod"]
+           "reference_errors", "reference_poses", "uniform_errors", "Hexapod", "Delta", "RotaryHexapod",
+           "LinearDelta"]
 
 
 def uniform_errors(robot: Robot, seed, error_mm: float, error_rad: float) -> np.ndarray:
-    """(P,) seeded errors uniform within +-``error_mm`` on lengths and +-``error_rad`` on angles."""
+    """(P,) seeded errors uniform within +-``error_mm`` on lengths and +-``error_rad`` on angles;
+    zero on the robot's :attr:`~calib.robot.Robot.machine_only` parameters (its kinematics cannot
+    see them)."""
     half = np.where(robot.table.angle_mask(), error_rad, error_mm)
+    half[robot.table.indices(robot.machine_only)] = 0.0
     return np.random.default_rng(seed).uniform(-1.0, 1.0, robot.n_parameters) * half
 
 
@@ -45,13 +50,17 @@ class RobotEntry:
 
 
 #: name -> entry. The hexapod's reference experiment is its paper's (Table 2 machine, Table 3
-#: errors, Table 4 poses); the Delta's its paper's primary study (errors within 1 mm / 1 deg).
+#: errors, Table 4 poses); the Delta's its paper's primary study (errors within 1 mm / 1 deg); the
+#: linear Delta's errors within 0.3 mm / 0.3 deg (tenths of a millimetre and degree, step
+#: distances within 0.3 percent) on what its kinematics sees, its rods equal.
 ROBOTS: dict[str, RobotEntry] = {
     Hexapod.name: RobotEntry(Hexapod, paper_hexapod, lambda r, s: paper.TABLE3_ERRORS.ravel().copy(),
                              paper.TABLE4_NOMINAL_POSES),
     Delta.name: RobotEntry(Delta, Delta, lambda r, s: uniform_errors(r, s, 1.0, np.deg2rad(1.0))),
     RotaryHexapod.name: RobotEntry(RotaryHexapod, default_rotary_hexapod,
                                    lambda r, s: uniform_errors(r, s, 0.5, np.deg2rad(0.5))),
+    LinearDelta.name: RobotEntry(LinearDelta, LinearDelta.default,
+                                 lambda r, s: uniform_errors(r, s, 0.3, np.deg2rad(0.3))),
 }
 
 

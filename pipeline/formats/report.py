@@ -431,7 +431,7 @@ class Search:
     """How a discovery searched its nonlinear parameters (a screw's pitch, a warm-up's time
     constant, a lost count's step time) above ``threshold`` measurements: each grid scanned on a
     seeded subsample of ``subsample_rows`` of the ``rows`` rows, stratified in time, then confirmed
-    and refined on every row (:meth:`calib.effects.discovery._Linear.search`); ``effects`` those
+    and refined on every row (:meth:`calib.effects.search.LinearisedFit.search`); ``effects`` those
     searched so."""
 
     rows: int

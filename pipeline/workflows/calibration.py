@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from calib import paper
+from calib.calibration import Calibration
 from calib.design import augment_poses
 from calib.engine import IdentificationResult, gauge_representative, integrated_error
 from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification, SessionSearch, UnreachableRows,
@@ -107,6 +108,23 @@ class RunResult:
     #: The recording read from ``RunSettings.real`` (None for a simulated run).
     recording: Recording | None = None
     #: The recording as the run read it (None for a simulated run): what discovery analyses.
+    as_read: AsRead | None = None
+    #: The calibration the run made, as its file holds it (its recording named and hashed).
+    calibration: Calibration | None = None
+    #: The recording a simulated run made (None for a recording read).
+    simulated: Recording | None = None
+    #: The poses suggested to measure next, ``(csv text, json text)``, or None.
+    suggested_poses: tuple | None = None
+
+
+@dataclass(frozen=True)
+class RunObjects:
+    """What a run's analysis made besides its summary: the calibration (before its provenance is
+    set), the simulated recording, the suggested poses' file texts, the recording as read."""
+
+    calibration: Calibration
+    simulated: Recording | None = None
+    suggested_poses: tuple | None = None
     as_read: AsRead | None = None
 
 
@@ -327,9 +345,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf",
                                                       "report": "--report"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
-            summary, result = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
-                                   None if checks is None else {"excitation": checks.excitation})
-            suggestion = summary.pop("_suggested_poses", None)
+            summary, result, made = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
+                                         None if checks is None else {"excitation": checks.excitation})
+            suggestion = made.suggested_poses
             if suggestion is None:
                 for key in ("suggested_poses", "suggested_poses_json"):
                     outputs.drop(key)
@@ -343,23 +361,22 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                 summary["suggested_poses_path"] = paths["suggested_poses"]
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
-            as_read = summary.pop("_as_read", None)
-            write_data_files(outputs, summary, settings, targets_out)
+            calibration = write_data_files(outputs, summary, settings, targets_out, made)
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=as_read)
+    return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=made.as_read,
+                     calibration=calibration, simulated=made.simulated, suggested_poses=made.suggested_poses)
 
 
-def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict) -> None:
+def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict, made: RunObjects) -> Calibration:
     """Write the summary JSON (when asked), the simulated recording (when simulating), the
     calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
-    the summary's private keys (``_recording``, ``_calibration``) are taken out of it first."""
+    returns the calibration as written."""
     from pipeline.formats import calibration_text, recording_source, recording_texts, summary_document
 
-    recording = summary.pop("_recording", None)
-    calibration = summary.pop("_calibration")
+    recording, calibration = made.simulated, made.calibration
     if "summary_json" in targets_out:
         outputs.temp("summary_json").write_text(json.dumps(summary_document(summary), indent=1))
     if "report" in targets_out:
@@ -378,6 +395,7 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
         from pipeline.simulation.mjcf_export import mjcf_text
 
         outputs.temp("mjcf").write_text(mjcf_text(calibration))
+    return calibration
 
 
 #: What the summary says of the prior with --no-prior.
@@ -1088,25 +1106,24 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     shifts = validation_session_shifts(inp, outcome)
     if shifts:
         summary["session_shifts"] = shifts
-    if inp.sim is not None:
-        summary["_recording"] = simulated_recording(inp, settings)
-    summary["_calibration"] = outcome.calibration
+    simulated = simulated_recording(inp, settings) if inp.sim is not None else None
     t_s = time.perf_counter()
+    suggestion = read = None
     if summary["left_to_prior"]:
         try:
-            summary["_suggested_poses"] = suggested_poses(inp, outcome, settings, summary)
+            suggestion = suggested_poses(inp, outcome, settings, summary)
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
             summary["suggested_poses"] = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
     if inp.rec is not None:
         try:
-            summary["_as_read"] = as_read(inp, outcome)
+            read = as_read(inp, outcome)
         except ValueError:  # position-only targets: nothing for a pose analysis to read
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
     log_step(inp, ident, outcome.heldout, summary, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
-    return summary, ident.result
+    return summary, ident.result, RunObjects(outcome.calibration, simulated, suggestion, read)
 
 
 def sha256_text(text: str) -> str:

@@ -350,7 +350,8 @@ def true_machine_poses(robot: Robot, errors, kind: str, settings: StudySettings,
     """(N, D) the poses the true machine (nominal + ``errors``) reaches at the ``commanded`` joints.
 
     Random errors this large may make no machine (a Delta's arm of negative length) or one that
-    cannot reach the study's poses (calibration or held-out, commanded by the nominal model):
+    cannot reach the study's poses (calibration or held-out, commanded by the nominal model, and
+    the held-out targets themselves, where the prediction takes the true machine):
     refused naming ``--error-mm`` and ``--error-rad``, with the largest errors of the same draw
     that fit (the draw scaled down, by bisection to 2**-:data:`FITTING_SCALE_STEPS`).
 
@@ -364,6 +365,8 @@ def true_machine_poses(robot: Robot, errors, kind: str, settings: StudySettings,
         theta = nominal + scale * errors
         for q in check[1:]:
             robot.forward_kinematics(theta, q)
+        if heldout is not None:  # the held-out prediction takes the true machine there
+            robot.inverse_kinematics(theta, heldout)
         return robot.forward_kinematics(theta, check[0], initial=targets)
 
     try:
