@@ -15,6 +15,14 @@ Writes, beside this script:
   revolutions-to-mm constants changed, its poses validation only), the generator of
   ``tests/test_convert.py``'s ``two_days``.
 
+- ``stewart/``: docs/importer.md's Example 1, a hobby Stewart platform captured in two sessions
+  (``capture_march.csv``, ``capture_june.csv``: metres, quaternions scalar last, motor
+  revolutions; the capture frame moved 45 mm and 0.6 degrees in between) and its map.
+- ``delta_tracker/``: its Example 2, a Delta read by encoder counts and a laser tracker in inches
+  (``delta_tracker.csv``: ``;`` and decimal commas after two preamble lines, ISO timestamps, a row
+  where the tracker lost the reflector, three validation rows, the motor temperature), its map
+  ``delta.toml`` and the broken copies the page's refusals read (``bad.toml``, ``bad2.toml``, ``bad.csv``).
+
 Every number comes from the product's own code (``pipeline.run`` simulates, ``calib`` draws the poses).
 """
 from __future__ import annotations
@@ -86,7 +94,8 @@ def stewart_map(noise: dict) -> str:
 
 def write_readme_loop(folder: Path) -> None:
     """``capture.csv``, ``stewart.toml`` and ``targets.csv`` of the README's loop."""
-    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()), \
+            contextlib.redirect_stderr(io.StringIO()):
         if run_main(LAB_RUN + ["--out", tmp]) != 0:
             sys.exit("the simulated lab run failed")
         rec = read_recording(Path(tmp) / "machine.csv")
@@ -138,9 +147,155 @@ def write_two_days(folder: Path) -> None:
     (folder / "map.toml").write_text(two_days_map())
 
 
+#: Example 1's map, as docs/importer.md prints it.
+STEWART_TWO_SESSIONS_MAP = """# A hobby Stewart platform: motor revolutions per leg, poses from motion capture.
+[robot]
+name = "hexapod"                     # the registered hexapod's nominal geometry
+# description = "my_platform.json"   # or its own: a Robot.description() JSON
+
+[noise]
+position_mm = 0.1                    # the capture system's noise (standard deviation)
+orientation_rad = 0.001
+distribution = "normal"
+
+[time]
+format = "seconds"
+column = "Time"
+
+[position]
+columns = ["Pos X", "Pos Y", "Pos Z"]
+unit = "m"
+
+[orientation]
+kind = "quaternion"
+scalar = "last"                      # Rot X, Rot Y, Rot Z, Rot W
+columns = ["Rot X", "Rot Y", "Rot Z", "Rot W"]
+
+[joints]
+columns = ["motor1", "motor2", "motor3", "motor4", "motor5", "motor6"]
+reading = "revolutions"
+unit = "mm"                          # scale in mm per revolution, zero in mm
+scale = [1.998, 2.003, 2.0, 1.997, 2.001, 2.002]
+zero = [183.2, 183.3, 183.1, 183.25, 183.2, 183.15]   # leg length at 0 revolutions
+
+[sessions]                           # one per file, in the order given
+names = ["march", "june"]
+frame = "estimate"                   # the capture frame moved between them: one frame each
+"""
+#: Example 1: the capture frame of March (mm, rad) and how it moved by June (45 mm, 0.6 degrees).
+MARCH_FRAME = np.array([2.0, -1.5, 0.5, 0.002, -0.001, 0.003])
+JUNE_MOVE = np.array([45.0, 0.0, 0.0, 0.0, 0.0, np.deg2rad(0.6)])
+STEWART_NOISE = SensorNoise(0.1, 0.001, "normal", 0.0)
+STEWART_SCALE = [1.998, 2.003, 2.0, 1.997, 2.001, 2.002]
+STEWART_ZERO = [183.2, 183.3, 183.1, 183.25, 183.2, 183.15]
+STEWART_HEADER = (["Frame", "Time", "Pos X", "Pos Y", "Pos Z", "Rot X", "Rot Y", "Rot Z", "Rot W"]
+                  + [f"motor{i + 1}" for i in range(6)])
+
+
+def write_stewart(folder: Path) -> None:
+    """Example 1: ``capture_march.csv``, ``capture_june.csv`` (20 poses each, 1.5 s apart) and ``stewart.toml``."""
+    folder.mkdir(exist_ok=True)
+    robot = default_robot("hexapod")
+    rng = np.random.default_rng(41)
+    for name, frame, seed in (("march", MARCH_FRAME, 1), ("june", MARCH_FRAME + JUNE_MOVE, 2)):
+        poses = reachable_poses(robot, 20, seed)
+        legs = robot.inverse_kinematics(robot.table.nominal, poses)
+        seen = instrument_measurements(robot, poses, frame) + STEWART_NOISE.sample(20, rng, robot.pose_units)
+        quaternions = Rotation.from_euler("xyz", seen[:, 3:]).as_quat()
+        revolutions = (legs - np.array(STEWART_ZERO)) / np.array(STEWART_SCALE)
+        rows = [[str(k + 1), f"{1.5 * k:.3f}", *(f"{v:.7f}" for v in seen[k, :3] / MM_PER_M),
+                 *(f"{v:.7f}" for v in quaternions[k]), *(f"{v:.5f}" for v in revolutions[k])] for k in range(20)]
+        (folder / f"capture_{name}.csv").write_text(csv_text(STEWART_HEADER, rows))
+    (folder / "stewart.toml").write_text(STEWART_TWO_SESSIONS_MAP)
+
+
+#: Example 2's map, as docs/importer.md prints it.
+DELTA_MAP = """# A Delta robot: encoder counts, a laser tracker in inches, ISO timestamps, a motor temperature.
+[robot]
+name = "delta"
+
+[noise]
+position_mm = 0.02
+distribution = "normal"
+
+[csv]
+delimiter = ";"
+decimal = ","                        # 21,4 is 21.4
+skip_lines = 2                       # the tracker's two preamble lines
+
+[time]
+format = "iso"
+column = "timestamp"                 # t_s from the first kept row (or give origin = "...")
+
+[position]
+columns = ["X [in]", "Y [in]", "Z [in]"]
+unit = "in"
+
+[joints]
+columns = ["enc_A", "enc_B", "enc_C"]
+reading = "counts"
+unit = "deg"                         # scale in degrees per count, zero in degrees
+scale = 0.00274658203125             # 360 / 131072
+zero = -90.0
+
+[rows]
+keep_column = "tracker_ok"           # 0: the tracker lost the reflector; the row is left out
+
+[set]
+column = "phase"
+calibration = "cal"
+validation = "val"
+
+[extra]
+temperature_C = "T_motor [C]"
+
+[sessions]
+frame = "base"                       # the tracker was registered to the robot's base
+"""
+DELTA_NOISE = SensorNoise(0.02, 0.0, "normal", 0.0)
+DEG_PER_COUNT = 360.0 / 131072
+DELTA_HEADER = ["timestamp", "tracker_ok", "phase", "X [in]", "Y [in]", "Z [in]", "enc_A", "enc_B", "enc_C", "T_motor [C]"]
+#: Example 2's rows: seconds after 08:00:00, the phase, the tracker flag (the last row lost).
+DELTA_SECONDS = [0, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30, 32, 34]
+DELTA_PHASES = ["cal"] * 13 + ["val"] * 3 + ["cal"]
+
+
+def decimal_comma(value: float, digits: int) -> str:
+    return f"{value:.{digits}f}".replace(".", ",")
+
+
+def write_delta_tracker(folder: Path) -> None:
+    """Example 2: ``delta_tracker.csv``, ``delta.toml`` and the refusals' ``bad.toml``, ``bad2.toml``, ``bad.csv``."""
+    folder.mkdir(exist_ok=True)
+    robot = default_robot("delta")
+    rng = np.random.default_rng(43)
+    n = len(DELTA_SECONDS)
+    poses = reachable_poses(robot, n, 3)
+    joints_deg = np.rad2deg(robot.inverse_kinematics(robot.table.nominal, poses))
+    seen = poses + DELTA_NOISE.sample(n, rng, robot.pose_units)
+    counts = np.rint((joints_deg + 90.0) / DEG_PER_COUNT).astype(int)
+    lines = ["Tracker export v2.1", "units: inch, counts", ";".join(DELTA_HEADER)]
+    for k in range(n):
+        lost = k == n - 1
+        cells = ([""] * 3 + ["0"] * 3) if lost else ([decimal_comma(v / 25.4, 6) for v in seen[k]]
+                                                     + [str(c) for c in counts[k]])
+        lines.append(";".join([f"2024-05-14T08:00:{DELTA_SECONDS[k]:02d}.000", "0" if lost else "1",
+                               DELTA_PHASES[k], *cells, decimal_comma(21.0 + 0.2 * k, 1)]))
+    tracker = "\n".join(lines) + "\n"
+    (folder / "delta_tracker.csv").write_text(tracker)
+    (folder / "delta.toml").write_text(DELTA_MAP)
+    (folder / "bad.toml").write_text(DELTA_MAP.replace('unit = "in"', 'unit = "inch"'))
+    (folder / "bad2.toml").write_text(DELTA_MAP.replace('"enc_C"]', '"enc_c"]'))
+    row3 = lines[5].split(";")
+    row3[3] = row3[3][:-2] + "x" + row3[3][-1]  # a typing slip in row 3's X cell
+    (folder / "bad.csv").write_text(tracker.replace(lines[5], ";".join(row3)))
+
+
 def main() -> int:
     write_readme_loop(EXAMPLES)
     write_two_days(EXAMPLES / "two_days")
+    write_stewart(EXAMPLES / "stewart")
+    write_delta_tracker(EXAMPLES / "delta_tracker")
     return 0
 
 
