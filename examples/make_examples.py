@@ -10,6 +10,8 @@ Writes, beside this script:
   recording rewritten as a motion-capture export (metres, quaternions scalar last, motor
   revolutions, a ``Phase`` column marking the 20 check poses); ``stewart.toml`` is its map and
   ``targets.csv`` five base-frame poses to command.
+- ``table4.csv`` (+ ``.json``): the hexapod paper's Table 4 as a recording, with 50 noise-free
+  validation rows from the Table 3 machine (docs/real_data.md; ``tests/test_run.py``'s recipe).
 - ``two_days/grid.csv``, ``two_days/feb12.csv``, ``two_days/map.toml``: docs/importer.md's two days
   in one capture frame (a hexapod with geometry errors up to 1.5 mm; the second day's
   revolutions-to-mm constants changed, its poses validation only), the generator of
@@ -36,11 +38,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from calib import paper
 from calib.measurement import instrument_measurements
 from calib.noise import SensorNoise
-from calib.robots import default_robot
+from calib.robots import default_robot, paper_hexapod
 from calib.workspace import reachable_poses
-from pipeline.formats import read_recording
+from pipeline.formats import Recording, read_recording, write_recording
 from pipeline.run import main as run_main
 
 #: The folder the examples are written to: this script's.
@@ -291,7 +294,28 @@ def write_delta_tracker(folder: Path) -> None:
     (folder / "bad.csv").write_text(tracker.replace(lines[5], ";".join(row3)))
 
 
+def write_table4(folder: Path, heldout: int = 50, seed: int = 1) -> None:
+    """``table4.csv``: the hexapod paper's Table 4 as a recording (docs/real_data.md): the printed
+    measured poses at the paper's commanded leg lengths (the nominal inverse kinematics of its target
+    poses) and, since the paper gives no validation poses, ``heldout`` validation rows simulated
+    noise-free from the Table 3 machine; declared noise the paper's 1 um on positions and 1e-5 rad
+    on angles (the print resolution of Table 4's angles)."""
+    robot = paper_hexapod()
+    nominal = robot.table.nominal
+    targets = reachable_poses(robot, heldout, np.random.default_rng(seed))
+    val_joints = robot.inverse_kinematics(nominal, targets)
+    val_meas = robot.forward_kinematics(nominal + paper.TABLE3_ERRORS.ravel(), val_joints, initial=targets)
+    n = 10 + heldout
+    rec = Recording(robot=robot, noise=SensorNoise(paper.PAPER_NOISE_MM, 1e-5), t_s=np.arange(n, dtype=float),
+                    joints=np.vstack([robot.inverse_kinematics(nominal, paper.TABLE4_NOMINAL_POSES), val_joints]),
+                    measured=np.vstack([paper.TABLE4_MEASURED_POSES, val_meas]),
+                    sets=np.array(["calibration"] * 10 + ["validation"] * heldout),
+                    meta={"scenario": "the hexapod paper's Table 4 (printed poses) + noise-free validation rows"})
+    write_recording(folder / "table4.csv", rec, overwrite=True)
+
+
 def main() -> int:
+    write_table4(EXAMPLES)
     write_readme_loop(EXAMPLES)
     write_two_days(EXAMPLES / "two_days")
     write_stewart(EXAMPLES / "stewart")
