@@ -172,6 +172,8 @@ class ProbeFit:
         bed: the bed mode.
         iterations: Gauss-Newton iterations.
         directions_determined: the effective number of free directions the data determine.
+        covariance: (P + 3, P + 3) the posterior covariance, parameter units; zero rows and
+            columns for the held ones.
     """
 
     robot: LinearDelta
@@ -186,6 +188,7 @@ class ProbeFit:
     bed: str
     iterations: int
     directions_determined: float
+    covariance: np.ndarray
 
     @property
     def theta(self) -> np.ndarray:
@@ -290,6 +293,8 @@ def fit_result(robot, data, noise, names, x, tol, idx, r, J, kinds, iterations) 
     cov_w = np.linalg.inv(info + np.eye(idx.size))
     std = tol.copy()
     std[idx] = np.sqrt(np.diag(cov_w)) * tol[idx]
+    covariance = np.zeros((tol.size, tol.size))
+    covariance[np.ix_(idx, idx)] = cov_w * np.outer(tol[idx], tol[idx])
     sources = dict.fromkeys(names, "held")
     src = parameter_sources(std[idx], tol[idx], x[idx] - np.concatenate([robot.table.nominal, np.zeros(3)])[idx])
     sources.update({names[i]: str(s) for i, s in zip(idx, src)})
@@ -299,7 +304,7 @@ def fit_result(robot, data, noise, names, x, tol, idx, r, J, kinds, iterations) 
     left = left_combinations(cov_w, info, candidates, [names[i] for i in idx])
     return ProbeFit(robot=robot, names=names, values=x, std=std, prior_std=tol, sources=sources, left=left,
                     residual_rms_mm=rms, counts=data.counts, bed=data.bed, iterations=iterations,
-                    directions_determined=float(np.sum(1.0 - np.diag(cov_w))))
+                    directions_determined=float(np.sum(1.0 - np.diag(cov_w))), covariance=covariance)
 
 
 def left_combinations(cov_w, info, candidates: dict, names: list) -> tuple[dict, ...]:
