@@ -26,7 +26,8 @@ from calib.calibration import Calibration, validity_domain
 from calib.files import atomic_write
 from calib.klipper import STEP_MISMATCH_MM, joints_from_stable, linear_delta_from_klipper, step_distance_factor
 from calib.probe import ProbeData, ProbeFit, ProbeNoise, fit_probe
-from pipeline.formats.klipper import CALIBRATE_SECTION, KlipperError, read_klipper_printer
+from pipeline.formats.klipper import (CALIBRATE_SECTION, STEPPERS, KlipperError, klipper_printer,
+                                      read_klipper_config)
 from pipeline.formats.outputs import check_outputs, output_folder
 from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, write_probe_file
 
@@ -63,7 +64,8 @@ def convert_klipper(config, out: str, *, overwrite: bool = False) -> KlipperConv
     """The probe-data file of the printer.cfg ``config`` (module docstring)."""
     path = probe_output_path(out)
     check_outputs({"--out": path}, overwrite=overwrite)
-    printer = read_klipper_printer(config)
+    cfg = read_klipper_config(config)
+    printer = klipper_printer(cfg)
     if printer.kinematics != "delta":
         raise KlipperError(f"{printer.path}: [printer] kinematics: {printer.kinematics}: probe data are converted for "
                            "the linear Delta (kinematics: delta) only")
@@ -81,7 +83,8 @@ def convert_klipper(config, out: str, *, overwrite: bool = False) -> KlipperConv
     check_step_distance(printer.path, robot, data)
     raw = Path(config).read_bytes()
     source = {"name": Path(config).name, "sha256": hashlib.sha256(raw).hexdigest(),
-              "what": f"Klipper printer.cfg, [{CALIBRATE_SECTION}]: stable positions x the steppers' step distances"}
+              "what": f"Klipper printer.cfg, [{CALIBRATE_SECTION}]: stable positions x the steppers' step distances",
+              "rotation_distances_mm": [cfg.number(s, "rotation_distance") for s in STEPPERS]}
     write_probe_file(path, robot, data, ProbeNoise(), sd, source, overwrite=overwrite)
     return KlipperConvertResult(path=path, counts=data.counts, step_distances_mm=tuple(float(v) for v in sd))
 
