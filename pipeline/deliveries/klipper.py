@@ -19,6 +19,7 @@ import numpy as np
 from calib.calibration import Calibration
 from calib.klipper import KLIPPER_PARAMETERS, VOLUME_STEP_MM, fit_klipper, mesh_points, volume_grid
 from pipeline.formats import check_export_folder, write_export_folder
+from pipeline.formats.klipper import SAVE_CONFIG_HEADER, SAVE_CONFIG_NOTICE, SAVE_CONFIG_PREFIX, STEPPERS
 
 from .protocol import Delivery, ExportReport, ExportSettings
 
@@ -29,9 +30,6 @@ SAVE_CONFIG_NAME, KLIPPER_NOTES_NAME = "save_config.cfg", "NOTES.md"
 MESH_COUNT, MESH_PROFILE = 7, "workbench"
 #: Klipper's bed_mesh profile version, its interpolation and the points it interpolates between nodes.
 MESH_VERSION, MESH_ALGO, MESH_TENSION, MESH_PPS = 1, "bicubic", 0.2, 2
-TOWERS = "abc"
-SAVE_CONFIG_HEADER_LINES = ("#*# <---------------------- SAVE_CONFIG ---------------------->",
-                            "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.", "#*#")
 
 
 def bed_of(cal: Calibration) -> np.ndarray:
@@ -58,8 +56,9 @@ def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray,
     """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh."""
     k = dict(zip(KLIPPER_PARAMETERS, kappa))
     lines = ["[printer]", f"delta_radius = {k['delta_radius']:.6f}", ""]
-    for i, t in enumerate(TOWERS):
-        lines += [f"[stepper_{t}]", f"angle = {np.degrees(k[f'angle_{t}']):.6f}",
+    for i, stepper in enumerate(STEPPERS):
+        t = stepper[-1]
+        lines += [f"[{stepper}]", f"angle = {np.degrees(k[f'angle_{t}']):.6f}",
                   f"arm_length = {k[f'arm_length_{t}']:.6f}", f"position_endstop = {k[f'position_endstop_{t}']:.6f}"]
         if rotation is not None:
             lines.append(f"rotation_distance = {rotation[i] * k[f'step_factor_{t}']:.6f}")
@@ -69,7 +68,8 @@ def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray,
     lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
               f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
               f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}", f"max_y = {axis[-1]:.6f}"]
-    return "\n".join(SAVE_CONFIG_HEADER_LINES + tuple(f"#*# {line}".rstrip() for line in lines)) + "\n"
+    block = [f"{SAVE_CONFIG_NOTICE}. The contents are auto-generated.", ""] + lines
+    return "\n".join([SAVE_CONFIG_HEADER] + [f"{SAVE_CONFIG_PREFIX}{line}".rstrip() for line in block]) + "\n"
 
 
 def residuals(errors: np.ndarray, grid: np.ndarray) -> dict:
