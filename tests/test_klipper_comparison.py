@@ -15,6 +15,17 @@ import klipper_comparison as kc
 
 #: The issue's bound for (b): the export's held-out RMS at most this fraction of Klipper's.
 GAUGED_RATIO = 0.7
+#: The held-out bed's flatness under the export and its mesh "stays at the probe's noise": its RMS
+#: within twice the touches' (the fit's own uncertainty and the mesh's interpolation add to it).
+FLATNESS_NOISE_FACTOR = 2.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("gauges", [False, True])
+def test_held_out_bed_flatness_stays_at_the_probe_noise(seed, gauges):
+    flat = kc.compare(seed, gauges)["bed_flatness"]
+    assert flat["rms_mm"] <= FLATNESS_NOISE_FACTOR * kc.NOISE.touch_mm, flat
 
 
 @pytest.mark.slow
