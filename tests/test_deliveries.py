@@ -55,7 +55,7 @@ def offered(capsys) -> str:
 
 def test_a_delivery_registered_once_is_offered_by_the_command_and_used_by_both(plain, tmp_path, capsys):
     cal = calibration_file(ACCEPTED, tmp_path)
-    assert offered(capsys) == f"linuxcnc,mjcf,report,{PLAIN}"
+    assert offered(capsys) == f"linuxcnc,klipper,mjcf,report,{PLAIN}"
     assert export_main(["--calibration", str(cal.source), "--to", PLAIN, "--out", str(tmp_path / "cli.txt")]) == 0
     assert capsys.readouterr().out == f"wrote 1 files of the hexapod's {PLAIN} export: {tmp_path / 'cli.txt'}\n"
     report = cal.deliver(PLAIN, tmp_path / "api.txt")
@@ -89,7 +89,7 @@ def test_a_robot_the_delivery_does_not_accept_is_refused_in_one_line_by_both(pla
 
 def test_the_projects_targets_are_the_modules_of_the_package():
     """Each target module holds its DELIVERY, registered under its name, in the order offered."""
-    assert [m.DELIVERY.name for m in TARGET_MODULES] == ["linuxcnc", "mjcf", "report"]
+    assert [m.DELIVERY.name for m in TARGET_MODULES] == ["linuxcnc", "klipper", "mjcf", "report"]
     assert all(DELIVERIES[m.DELIVERY.name] is m.DELIVERY for m in TARGET_MODULES)
     assert DELIVERIES["linuxcnc"].robots == ("hexapod", "delta")
     assert set(DELIVERIES["mjcf"].robots) == set(DELIVERIES["report"].robots) == set(ROBOTS)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import linuxcnc, mjcf, report
+from . import klipper, linuxcnc, mjcf, report
 from .protocol import Delivery, ExportReport, ExportSettings
 
 __all__ = ["Delivery", "ExportSettings", "ExportReport", "DELIVERIES", "TARGET_MODULES", "register", "delivery",
@@ -29,7 +29,7 @@ __all__ = ["Delivery", "ExportSettings", "ExportReport", "DELIVERIES", "TARGET_M
 #: The deliveries by name, in the order ``pipeline.export --help`` offers them.
 DELIVERIES: dict[str, Delivery] = {}
 #: The project's target modules, each holding its ``DELIVERY``: registered when this package is imported.
-TARGET_MODULES = (linuxcnc, mjcf, report)
+TARGET_MODULES = (linuxcnc, klipper, mjcf, report)
 
 
 def register(target: Delivery) -> Delivery:

@@ -1,0 +1,149 @@
+"""Klipper's printer.cfg for a linear Delta (``python -m pipeline.export --calibration C.json --to
+klipper --out DIR``; docs/klipper.md).
+
+Klipper holds a linear Delta as ``delta_radius``, each tower's ``angle``, ``arm_length`` and
+``position_endstop`` and each stepper's ``rotation_distance``: vertical towers, equal rods, no
+thermal term. :func:`calib.klipper.fit_klipper` fits those to the identified machine over the
+print volume (least squares of the tool-point error on :func:`calib.klipper.volume_grid`, in the
+bed's frame where the calibration estimated the bed); what remains in z at the bed goes into a
+``[bed_mesh]`` profile. Written into ``DIR``, all or nothing: ``save_config.cfg`` (the SAVE_CONFIG
+block, values ``%.6f``, to append to printer.cfg in place of the old block) and ``NOTES.md`` (the
+projection's residual over the volume with and without the mesh, what Klipper cannot hold, the
+accuracy given up).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib.calibration import Calibration
+from calib.klipper import KLIPPER_PARAMETERS, VOLUME_STEP_MM, fit_klipper, mesh_points, volume_grid
+from pipeline.formats import check_export_folder, write_export_folder
+from pipeline.formats.klipper import SAVE_CONFIG_HEADER, SAVE_CONFIG_NOTICE, SAVE_CONFIG_PREFIX, STEPPERS
+
+from .protocol import Delivery, ExportReport, ExportSettings
+
+__all__ = ["DELIVERY", "write_klipper", "SAVE_CONFIG_NAME", "KLIPPER_NOTES_NAME", "MESH_COUNT", "MESH_PROFILE"]
+
+SAVE_CONFIG_NAME, KLIPPER_NOTES_NAME = "save_config.cfg", "NOTES.md"
+#: The mesh's nodes per axis (Klipper's bicubic interpolation; lagrange stops at 6) and its profile's name.
+MESH_COUNT, MESH_PROFILE = 7, "workbench"
+#: Klipper's bed_mesh profile version, its interpolation and the points it interpolates between nodes.
+MESH_VERSION, MESH_ALGO, MESH_TENSION, MESH_PPS = 1, "bicubic", 0.2, 2
+
+
+def bed_of(cal: Calibration) -> np.ndarray:
+    """(3,) the bed plane a probe calibration estimated (zero for any other)."""
+    bed = cal.recording.get("bed") or {}
+    return np.array([bed.get("z_mm", 0.0), bed.get("tilt_x_rad", 0.0), bed.get("tilt_y_rad", 0.0)], dtype=float)
+
+
+def calibrated_radius(cal: Calibration) -> float:
+    """The radius the calibration saw (mm): the largest |x| or |y| of its validity box, within the
+    robot's print radius."""
+    v = cal.validity
+    seen = max(abs(v["pose_min"][0]), abs(v["pose_max"][0]), abs(v["pose_min"][1]), abs(v["pose_max"][1]))
+    return float(min(seen, cal.robot.full_workspace_bounds()[0, 1]))
+
+
+def rotation_distances(cal: Calibration) -> list | None:
+    """The config's ``rotation_distance`` per stepper the joints were counted with, or None."""
+    source = cal.recording.get("source")
+    return source.get("rotation_distances_mm") if isinstance(source, dict) else None
+
+
+def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray, points: np.ndarray) -> str:
+    """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh."""
+    k = dict(zip(KLIPPER_PARAMETERS, kappa))
+    lines = ["[printer]", f"delta_radius = {k['delta_radius']:.6f}", ""]
+    for i, stepper in enumerate(STEPPERS):
+        t = stepper[-1]
+        lines += [f"[{stepper}]", f"angle = {np.degrees(k[f'angle_{t}']):.6f}",
+                  f"arm_length = {k[f'arm_length_{t}']:.6f}", f"position_endstop = {k[f'position_endstop_{t}']:.6f}"]
+        if rotation is not None:
+            lines.append(f"rotation_distance = {rotation[i] * k[f'step_factor_{t}']:.6f}")
+        lines.append("")
+    lines += [f"[bed_mesh {MESH_PROFILE}]", f"version = {MESH_VERSION}", "points ="]
+    lines += ["\t" + ", ".join(f"{v:.6f}" for v in row) for row in points]
+    lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
+              f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
+              f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}", f"max_y = {axis[-1]:.6f}"]
+    block = [f"{SAVE_CONFIG_NOTICE}. The contents are auto-generated.", ""] + lines
+    return "\n".join([SAVE_CONFIG_HEADER] + [f"{SAVE_CONFIG_PREFIX}{line}".rstrip() for line in block]) + "\n"
+
+
+def residuals(errors: np.ndarray, grid: np.ndarray) -> dict:
+    """RMS and max (mm) of the tool-point error over the grid, without and with the mesh (the
+    mesh taken at its exact values: the z error at the bed under each point removed)."""
+    at_bed = {tuple(p[:2]): e[2] for p, e in zip(grid, errors) if p[2] == 0.0}
+    meshed = errors.copy()
+    meshed[:, 2] -= [at_bed[tuple(p[:2])] for p in grid]
+    out = {}
+    for label, e in (("without mesh", errors), ("with mesh", meshed)):
+        n = np.linalg.norm(e, axis=1)
+        out[label] = {"rms_mm": float(np.sqrt(np.mean(n ** 2))), "max_mm": float(n.max()),
+                      "z_rms_mm": float(np.sqrt(np.mean(e[:, 2] ** 2))), "z_max_mm": float(np.abs(e[:, 2]).max())}
+    return out
+
+
+def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: int, radius: float, rotation) -> str:
+    """NOTES.md: the projection's residual, what Klipper cannot hold, the accuracy given up."""
+    by = cal.robot.table.to_dict(cal.theta)
+    std = cal.robot.table.to_dict(cal.std)
+    leans = ", ".join(f"{n} {1e3 * by[n]:+.2f} +- {1e3 * std[n]:.2f} mrad" for n in by if n.startswith("lean"))
+    rows = "\n".join(f"| {k} | {v['rms_mm']:.4f} | {v['max_mm']:.4f} | {v['z_rms_mm']:.4f} | {v['z_max_mm']:.4f} |"
+                     for k, v in res.items())
+    steps = ("rotation_distance written per stepper (the config's times the fitted step factor)" if rotation
+             else "no rotation_distance written: the calibration does not name the config's; the step factors are "
+                  "in the record below")
+    return f"""# Klipper export of {settings.calibration or 'a calibration made in memory'}
+
+Klipper's linear Delta holds `delta_radius`, per tower `angle`, `arm_length`, `position_endstop`,
+and per stepper `rotation_distance` ({steps}). They were fitted to the identified machine by
+least squares of the tool-point error over {n_points} points of the print volume (every
+{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it), in the bed's frame.
+
+## The projection's residual over the volume (mm)
+
+| | RMS | max | z RMS | z max |
+|---|---|---|---|---|
+{rows}
+
+"with mesh": the `[bed_mesh {MESH_PROFILE}]` profile removes the z error at the bed under each point
+(taken at its exact values; Klipper interpolates between its {MESH_COUNT} x {MESH_COUNT} nodes). Load it
+with `BED_MESH_PROFILE LOAD={MESH_PROFILE}`. Nodes outside the print radius (the square's corners)
+take the value at the nearest point of its circle.
+
+## What Klipper cannot hold (the accuracy given up is the residual above)
+
+- Tower lean: {leans}.
+- Unequal rods within a pair (`arm_diff`, the effector's tilt): not seen by the kinematics, left
+  at its tolerance; Klipper's equal-rod model has no term for it.
+- Per-tower radius: Klipper has one `delta_radius`; the identified radii differ by
+  {np.ptp([by[f'radius{i}'] for i in (1, 2, 3)]):.3f} mm.
+- Thermal growth: none identified in this calibration; Klipper has no temperature term
+  (re-calibrate at the printing temperature).
+"""
+
+
+def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
+    """Write ``save_config.cfg`` and ``NOTES.md`` into ``settings.out`` (module docstring)."""
+    check_export_folder(settings.out, [SAVE_CONFIG_NAME, KLIPPER_NOTES_NAME], overwrite=settings.overwrite)
+    robot, bed = cal.robot, bed_of(cal)
+    radius = calibrated_radius(cal)
+    grid = volume_grid(radius)
+    kappa, errors = fit_klipper(robot, cal.theta, bed, grid)
+    axis, points = mesh_points(robot, cal.theta, bed, kappa, radius, MESH_COUNT)
+    res = residuals(errors, grid)
+    rotation = rotation_distances(cal)
+    texts = {SAVE_CONFIG_NAME: save_config_text(kappa, rotation, axis, points),
+             KLIPPER_NOTES_NAME: notes_text(cal, settings, res, len(grid), radius, rotation)}
+    paths = write_export_folder(settings.out, texts, overwrite=settings.overwrite)
+    lines = [f"projection onto Klipper's parameters over {len(grid)} points: {k} RMS {v['rms_mm']:.4f} mm, max "
+             f"{v['max_mm']:.4f} mm" for k, v in res.items()]
+    return ExportReport(format="klipper", robot=robot.name, paths={k: str(v) for k, v in paths.items()}, messages=lines,
+                        summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res})
+
+
+DELIVERY = Delivery(name="klipper", robots=("linear_delta",), write=write_klipper,
+                    refusal="Klipper has no kinematics for the {robot} ({source}); it has for the {robots}")

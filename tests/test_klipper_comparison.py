@@ -1,0 +1,38 @@
+"""Issue 49 point 4 on the MuJoCo linear Delta (tests/klipper_comparison.py): from Klipper's own
+data (61 touches, the calibration object's 12 distances) the workbench's Klipper export should be
+never worse over the print volume than Klipper's DELTA_CALIBRATE fit; with gauge heights at 50
+and 100 mm it should leave at most 0.7 times Klipper's error.
+
+Seed 3 does not meet it yet (measured: (a) workbench 0.337 mm RMS against Klipper's 0.301; (b)
+0.168 against 0.7 x 0.239): the 1 mm rod pair tilts the effector, which neither kinematics holds,
+and the distances (0.036 mm RMS residual against 0.02 declared) then pull the step errors. It is
+marked a strict expected failure, so that it is seen, and fails the suite once it passes.
+"""
+
+import pytest
+
+import klipper_comparison as kc
+
+#: The issue's bound for (b): the export's held-out RMS at most this fraction of Klipper's.
+GAUGED_RATIO = 0.7
+#: The held-out bed's flatness under the export and its mesh "stays at the probe's noise": its RMS
+#: within twice the touches' (the fit's own uncertainty and the mesh's interpolation add to it).
+FLATNESS_NOISE_FACTOR = 2.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("gauges", [False, True])
+def test_held_out_bed_flatness_stays_at_the_probe_noise(seed, gauges):
+    flat = kc.compare(seed, gauges)["bed_flatness"]
+    assert flat["rms_mm"] <= FLATNESS_NOISE_FACTOR * kc.NOISE.touch_mm, flat
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, pytest.param(3, marks=pytest.mark.xfail(
+    strict=True, reason="the tilting effector's model error: see the module docstring"))])
+def test_never_worse_than_klipper_and_better_with_gauge_heights(seed):
+    a = kc.compare(seed, gauges=False)
+    assert a["workbench"]["rms_mm"] <= a["klipper"]["rms_mm"], a
+    b = kc.compare(seed, gauges=True)
+    assert b["workbench"]["rms_mm"] <= GAUGED_RATIO * min(a["klipper"]["rms_mm"], b["klipper"]["rms_mm"]), (a, b)

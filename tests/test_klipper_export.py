@@ -1,0 +1,82 @@
+"""pipeline.deliveries.klipper (python -m pipeline.export --to klipper): Klipper's parameters fitted
+to a probe calibration, read back by pipeline.formats.klipper and moved by the independent Klipper
+implementation (tests/klipper_reference.py) onto the identified machine: the residual NOTES.md
+states, at least %.6f, a bed_mesh profile in Klipper's format."""
+
+import re
+
+import numpy as np
+import pytest
+
+import klipper_reference as kr
+from calib.calibration import Calibration
+from calib.klipper import bed_to_base, volume_grid
+from pipeline.convert import main as convert_main
+from pipeline.export import main as export_main
+from pipeline.formats.klipper import parse_klipper_text
+from pipeline.probe import main as probe_main
+from test_klipper_probe import STEP_MM, config_text
+
+#: Agreement of two implementations of the same double-precision formulas, mm (%.6f rounding of
+#: the written parameters moves the tool by ~1e-6 mm x the lever arms' ratio ~10).
+READ_BACK_MM = 1e-4
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    d = tmp_path_factory.mktemp("klipper")
+    cfg = d / "printer.cfg"
+    cfg.write_text(config_text())
+    assert convert_main([str(cfg), "--klipper", "--out", str(d / "p")]) == 0
+    assert probe_main([str(d / "p.probe.json"), "--out", str(d / "cal")]) == 0
+    assert export_main(["--calibration", str(d / "cal" / "p.calibration.json"), "--to", "klipper",
+                        "--out", str(d / "out")]) == 0
+    return d
+
+
+def read_back(d):
+    """The printer.cfg with the export's SAVE_CONFIG block in place of the old one, as Klipper reads it."""
+    head = (d / "printer.cfg").read_text().split("#*# <")[0]
+    return parse_klipper_text(head + (d / "out" / "save_config.cfg").read_text(), d / "printer.cfg")
+
+
+def test_klipper_reference_reproduces_the_stated_residual(exported):
+    cfg = read_back(exported)
+    from pipeline.formats.klipper import klipper_printer
+
+    m = klipper_printer(cfg).machine
+    params = kr.DeltaParams(m.radius_mm, tuple(np.degrees(m.angles_rad)), tuple(m.arm_lengths_mm),
+                            tuple(m.endstops_mm), tuple(m.step_distances_mm))
+    cal = Calibration.read(exported / "cal" / "p.calibration.json")
+    bed = [cal.recording["bed"][k] for k in ("z_mm", "tilt_x_rad", "tilt_y_rad")]
+    v = cal.validity
+    grid = volume_grid(max(abs(v["pose_min"][0]), abs(v["pose_max"][0]), abs(v["pose_min"][1]),
+                           abs(v["pose_max"][1])))
+    steps = kr.stable_from_position(params, grid)  # Klipper's steps at its new step distances
+    reached = cal.robot.forward_kinematics(cal.theta, steps * STEP_MM)  # counted at the old ones
+    err = np.linalg.norm(reached - bed_to_base(grid, bed), axis=1)
+    notes = (exported / "out" / "NOTES.md").read_text()
+    rms, mx = (float(x) for x in re.search(r"\| without mesh \| ([0-9.]+) \| ([0-9.]+) \|", notes).groups())
+    assert abs(np.sqrt(np.mean(err ** 2)) - rms) < READ_BACK_MM + 5e-5  # the table's 4 decimals
+    assert abs(err.max() - mx) < READ_BACK_MM + 5e-5
+    nominal = kr.DeltaParams(140.0, (210.0, 330.0, 90.0), (250.0,) * 3, (303.9,) * 3, (STEP_MM,) * 3)
+    before = cal.robot.forward_kinematics(cal.theta, kr.stable_from_position(nominal, grid) * STEP_MM)
+    assert np.sqrt(np.mean(np.sum((before - bed_to_base(grid, bed)) ** 2, 1))) > 5 * rms
+
+
+def test_save_config_precision_and_mesh_format(exported):
+    text = (exported / "out" / "save_config.cfg").read_text()
+    assert all(line.startswith("#*#") for line in text.splitlines())
+    for key in ("delta_radius", "angle", "arm_length", "position_endstop", "rotation_distance"):
+        values = re.findall(rf"^#\*# {key} = (-?[0-9]+\.[0-9]+)$", text, flags=re.M)
+        assert values and all(len(v.split(".")[1]) >= 6 for v in values), key
+    cfg = read_back(exported)
+    mesh = cfg.sections["bed_mesh workbench"]
+    rows = [r for r in mesh["points"].value.split("\n") if r.strip()]
+    n = int(mesh["x_count"].value)
+    assert len(rows) == int(mesh["y_count"].value) == n
+    assert all(len(r.split(",")) == n for r in rows)
+    assert float(mesh["min_x"].value) == -float(mesh["max_x"].value) > -140.0
+    notes = (exported / "out" / "NOTES.md").read_text()
+    for words in ("Tower lean", "Unequal rods", "Thermal growth", "with mesh"):
+        assert words in notes
