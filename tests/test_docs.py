@@ -5,13 +5,12 @@ would from a fresh clone), and its output compared with the page, as doctests ke
 The rules (docs/README.md, "Transcripts"): a line ``$ CMD`` is a command, the lines after it its
 expected output (stdout and stderr together) until the next ``$ ``; ``[...]`` alone on a line
 matches any run of lines (none included); a number matches when the output's rounds to it at the
-digits printed; a figure printed with a leading ``~`` (a timing, or a figure another BLAS kernel
-prints otherwise, such as a singular matrix's condition number) matches any number, the spaces
-before it any run of spaces; the rest of a line
-matches exactly. A page's blocks run in order in one folder (the copy's root, the
-repository's place; ``$ cd DIR`` moves), with the repository's python, ``HOME`` a temporary folder.
-A block not meant to run carries ``<!-- not run: why -->`` on the line before its fence, and is
-listed in :data:`NOT_RUN`.
+digits printed (at most :data:`SIGNIFICANT_DIGITS`); a figure printed with a leading ``~`` (a
+timing, or a figure another BLAS kernel prints otherwise, such as a singular matrix's condition
+number) matches any number, the spaces before it any run of spaces; the rest of a line matches
+exactly. A page's blocks run in order in one folder (a clone's root; ``$ cd DIR`` moves), with the
+repository's python and ``HOME`` a temporary folder. A block not meant to run carries
+``<!-- not run: why -->`` on the line before its fence, and is listed in :data:`NOT_RUN`.
 """
 from __future__ import annotations
 
@@ -40,7 +39,7 @@ NOT_RUN: dict[str, int] = {}
 #: behind them have condition numbers ~1e3 (the runs print them), so with eps 2.2e-16 they agree to
 #: about 1e-13 relative, and 12 digits hold on any BLAS.
 SIGNIFICANT_DIGITS = 12
-#: A figure on the page or in the output; ``~`` before it on the page: a timing, any number.
+#: A figure on the page or in the output; ``~`` before it on the page: any number.
 NUMBER = re.compile(r"~?-?\d+(?:\.\d+)?(?:e[+-]?\d+)?")
 #: What the pages' commands write in ``examples/`` (its .gitignore): left out of the copy, as from a clone.
 EXAMPLE_OUTPUTS = [line.strip().rstrip("/").rpartition("/")[2]
@@ -50,7 +49,7 @@ EXAMPLE_OUTPUTS = [line.strip().rstrip("/").rpartition("/")[2]
 CLONE_LINKS = ("README.md", "pyproject.toml", "calib", "mjcf", "pipeline", "tests", "benchmarks", "docs")
 #: A here-document in a command: its lines, to the word, are the command's, not its output.
 HEREDOC = re.compile(r"<<-?\s*'?(\w+)'?")
-#: Each transcript's commands together may run this long (s) before the test fails.
+#: A command may run this long (s) before the test fails.
 COMMAND_TIMEOUT_S = 120
 
 
@@ -215,7 +214,7 @@ def test_the_blocks_not_run_are_marked_and_listed():
     assert marked == NOT_RUN
 
 
-def test_the_readme_loop_and_the_importer_are_run():
+def test_the_pages_with_transcripts_are_run():
     assert {"README.md", "docs/importer.md", "docs/commands.md", "docs/discovery.md", "docs/poor_pose_sets.md",
             "docs/compensation.md", "docs/real_data.md"} <= set(RUN_PAGES)
 
