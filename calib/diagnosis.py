@@ -57,7 +57,7 @@ from .rotation import euler_from_matrix, rotation_matrix
 
 __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
-           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
+           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "motionless_rows",
            "SAME_POSE_STDS", "SAME_POSE_FRACTION", "TURN_RESOLUTION",
            "description_pattern", "PATTERN_FIT", "Comparison", "compare_readings"]
 
@@ -125,15 +125,14 @@ def same_pose_rows(robot: Robot, joints, joint_std: float = 0.0) -> np.ndarray:
     return np.flatnonzero(inverse.ravel() == int(np.argmax(counts)))
 
 
-def no_motion_words(robot: Robot, joints, joint_std: float = 0.0) -> str | None:
-    """``"the calibration rows do not move the machine: 40 of 40 rows are the same pose ..."``
-    where every row of ``joints`` (N, C), N >= 2, is at one pose (:func:`same_pose_rows`); None
-    otherwise."""
+def motionless_rows(robot: Robot, joints, joint_std: float = 0.0) -> int | None:
+    """The number of rows of ``joints`` (N, C), N >= 2, where every row is at one pose
+    (:func:`same_pose_rows`): rows that do not move the machine; None otherwise (worded by
+    :func:`pipeline.formats.verdict_words.no_motion_words`)."""
     n = len(joints)
     if n < 2 or len(same_pose_rows(robot, joints, joint_std)) < n:
         return None
-    return (f"the calibration rows do not move the machine: {n} of {n} rows are the same pose (the same joint "
-            f"readings), so they say nothing of the {robot.name}'s geometry; measure poses spread over the workspace")
+    return n
 
 
 # --------------------------------------------------------------------------- the description
