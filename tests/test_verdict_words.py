@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures
+from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures, ScalePattern
 from calib.prior import MOVED_BY_DATA, parameter_sources
 from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearch, Misprediction, NoConvergence,
                                   NoInformation, NoMotion, Verdict, VerdictEvidence, likely_cause)
@@ -63,7 +63,8 @@ def test_every_cause_calib_returns_has_its_words_and_no_other():
 
 EVIDENCE = VerdictEvidence(converged=True, fit_ratio=0.9, fit_limit_ratio=1.2, fit_at_noise=True,
                            predictions={"what": "validation rows", "agrees": True, "ratio": 1.1, "rows": 5})
-PATTERN = {"words": "the fitted errors of B1.x ... B6.z are +3% of their nominal values"}
+PATTERN = ScalePattern(group="B", names=("B1.x", "B1.y", "B6.z"), scale=-0.0297, residual=0.2, largest_error=5.69,
+                       largest=56.9)
 
 
 @pytest.mark.parametrize("cause, detail, said", [
@@ -76,7 +77,11 @@ PATTERN = {"words": "the fitted errors of B1.x ... B6.z are +3% of their nominal
      "tolerances, and all together they determine 0.44 of the 12 directions (noise standard deviation 1.73 mm "
      "against a tolerance of 0.1 mm, 0.002 rad; 3 of 8 rows are the same pose)"),
     ("description", DescriptionPattern(patterns=(PATTERN, PATTERN), geometry_source="m.json"),
-     f"not physics: {PATTERN['words']}; {PATTERN['words']}: the nominal geometry in m.json seems to be another"),
+     "not physics: the fitted errors of B1.x ... B6.z (3 parameters, up to 5.69 mm) are -2.97% of their nominal "
+     "values, to 0.2 mm RMS: the description's B coordinates are 1.03 times this machine's (a scale of the "
+     "description); the fitted errors of B1.x ... B6.z (3 parameters, up to 5.69 mm) are -2.97% of their nominal "
+     "values, to 0.2 mm RMS: the description's B coordinates are 1.03 times this machine's (a scale of the "
+     "description): the nominal geometry in m.json seems to be another machine's"),
     ("no_convergence", NoConvergence("no stopping rule met in 20 iterations"),
      "the fit did not converge (no stopping rule met in 20 iterations)"),
     ("unpredictable_rows", Misprediction("validation rows", None, "rec.csv"),

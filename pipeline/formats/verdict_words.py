@@ -68,7 +68,7 @@ def verdict_fields(verdict) -> dict:
         fields["same"] = (f"; {detail.same_pose_rows} of {detail.rows} rows are the same pose"
                           if detail.same_pose_rows > 1 else "")
     if verdict.cause == "description":
-        fields["pattern"] = "; ".join(p["words"] for p in verdict.detail.patterns)
+        fields["pattern"] = "; ".join(p.words() for p in verdict.detail.patterns)
         source = verdict.detail.geometry_source
         fields["described_in"] = f" in {source}" if source else ""
     if verdict.diagnosis is not None:
