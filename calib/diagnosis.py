@@ -57,9 +57,9 @@ from .rotation import euler_from_matrix, rotation_matrix
 
 __all__ = ["Conversion", "conversion_registry", "FitFigures", "Diagnosis", "diagnose", "CAUSES", "FIT_ALPHA",
            "MIN_IMPROVEMENT", "PLAUSIBLE_TOLERANCES", "SCREEN_KEEP", "SCREEN_ROWS_FACTOR", "SCREEN_ITERATIONS",
-           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "no_motion_words",
+           "FULL_ITERATIONS", "CONSTANT_COLUMN_STDS", "chi2_limit", "same_pose_rows", "motionless_rows",
            "SAME_POSE_STDS", "SAME_POSE_FRACTION", "TURN_RESOLUTION",
-           "description_pattern", "PATTERN_FIT", "Comparison", "compare_readings"]
+           "description_pattern", "ScalePattern", "PATTERN_FIT", "Comparison", "compare_readings"]
 
 #: False-alarm probability of the fit test: data fit when chi-square <= the chi-square(dof)
 #: ``1 - FIT_ALPHA`` quantile.
@@ -125,15 +125,14 @@ def same_pose_rows(robot: Robot, joints, joint_std: float = 0.0) -> np.ndarray:
     return np.flatnonzero(inverse.ravel() == int(np.argmax(counts)))
 
 
-def no_motion_words(robot: Robot, joints, joint_std: float = 0.0) -> str | None:
-    """``"the calibration rows do not move the machine: 40 of 40 rows are the same pose ..."``
-    where every row of ``joints`` (N, C), N >= 2, is at one pose (:func:`same_pose_rows`); None
-    otherwise."""
+def motionless_rows(robot: Robot, joints, joint_std: float = 0.0) -> int | None:
+    """The number of rows of ``joints`` (N, C), N >= 2, where every row is at one pose
+    (:func:`same_pose_rows`): rows that do not move the machine; None otherwise (worded by
+    :func:`pipeline.formats.verdict_words.no_motion_words`)."""
     n = len(joints)
     if n < 2 or len(same_pose_rows(robot, joints, joint_std)) < n:
         return None
-    return (f"the calibration rows do not move the machine: {n} of {n} rows are the same pose (the same joint "
-            f"readings), so they say nothing of the {robot.name}'s geometry; measure poses spread over the workspace")
+    return n
 
 
 # --------------------------------------------------------------------------- the description
@@ -149,7 +148,42 @@ def _group(name: str) -> str:
     return head.group(0) if head else name
 
 
-def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dict]:
+@dataclass(frozen=True)
+class ScalePattern:
+    """A group of length parameters whose fitted errors are a scale of their nominal values
+    (:func:`description_pattern`).
+
+    Attributes:
+        group: the letters the group's parameters share (``B``).
+        names: its parameters.
+        scale: the least-squares factor ``s`` of the errors on the nominal values.
+        residual: the RMS of what the scale leaves of the errors, mm.
+        largest_error: the largest error's magnitude, mm.
+        largest: the largest error in tolerances.
+    """
+
+    group: str
+    names: tuple
+    scale: float
+    residual: float
+    largest_error: float
+    largest: float
+    unit: str = "mm"
+
+    @property
+    def factor(self) -> float:
+        """The description over the fitted value: ``1 / (1 + scale)``."""
+        return 1.0 / (1.0 + self.scale)
+
+    def words(self) -> str:
+        """The pattern in words (the diagnosis' message and the verdict's say it)."""
+        return (f"the fitted errors of {self.names[0]} ... {self.names[-1]} ({len(self.names)} parameters, up to "
+                f"{self.largest_error:.3g} mm) are {100 * self.scale:+.3g}% of their nominal values, to "
+                f"{self.residual:.2g} mm RMS: the description's {self.group} coordinates are "
+                f"{self.factor:.3g} times this machine's (a scale of the description)")
+
+
+def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[ScalePattern]:
     """Groups of length parameters whose fitted errors are a scale of their nominal values: the
     nominal geometry described is another machine's (or this one's scaled), not physics.
 
@@ -164,9 +198,7 @@ def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dic
         tolerance: (P,) each parameter's tolerance (one standard deviation).
 
     Returns:
-        ``{"group", "names", "scale", "factor", "residual", "unit", "words"}`` each, where ``scale``
-        is ``s`` and ``factor`` the description over the fitted value (``1 / (1 + s)``); largest
-        movement first.
+        a :class:`ScalePattern` per group named, largest movement first.
     """
     errors, tolerance = np.asarray(errors, dtype=float), np.asarray(tolerance, dtype=float)
     table = robot.table
@@ -186,16 +218,10 @@ def description_pattern(robot: Robot, errors, tolerance, names=None) -> list[dic
         rest = e - scale * n
         if np.linalg.norm(rest) > PATTERN_FIT * np.linalg.norm(e) or scale <= -1.0:
             continue
-        factor = 1.0 / (1.0 + scale)
-        members = [table.names[k] for k in idx]
-        words = (f"the fitted errors of {members[0]} ... {members[-1]} ({len(members)} parameters, up to "
-                 f"{np.max(np.abs(e)):.3g} mm) are {100 * scale:+.3g}% of their nominal values, to "
-                 f"{np.sqrt(np.mean(rest ** 2)):.2g} mm RMS: the description's {group} coordinates are "
-                 f"{factor:.3g} times this machine's (a scale of the description)")
-        out.append({"group": group, "names": members, "scale": scale, "factor": factor,
-                    "residual": float(np.sqrt(np.mean(rest ** 2))), "unit": "mm", "words": words,
-                    "largest": float(np.max(np.abs(e) / tolerance[idx]))})
-    return sorted(out, key=lambda d: -d["largest"])
+        out.append(ScalePattern(group=group, names=tuple(table.names[k] for k in idx), scale=scale,
+                                residual=float(np.sqrt(np.mean(rest ** 2))), largest_error=float(np.max(np.abs(e))),
+                                largest=float(np.max(np.abs(e) / tolerance[idx]))))
+    return sorted(out, key=lambda d: -d.largest)
 
 
 # --------------------------------------------------------------------------- conversions
@@ -682,7 +708,7 @@ def _fit_words(robot: Robot, written: FitFigures, tolerance: np.ndarray) -> str:
     pattern = [] if written.fit is None else description_pattern(robot, written.fit.result.errors, tolerance)
     if pattern:
         return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()}, and "
-                f"the fitted errors are a pattern of the description, not physics: {pattern[0]['words']}: the "
+                f"the fitted errors are a pattern of the description, not physics: {pattern[0].words()}: the "
                 "nominal geometry described seems to be another machine's")
     return (f"the data fit the {robot.name} at the declared noise, but only with {written.moved_words()} "
             f"(chi-square {written.chi2_dof:.3g} per degree of freedom) and no conversion "

@@ -59,11 +59,18 @@ from .robust import GrossRowResult, find_gross_rows
 from .validation import as_array
 
 __all__ = ["calibrate", "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
-           "Verdict", "SessionSearch", "UnreachableRows", "BASE_FRAME", "INSTRUMENT_FOLDS", "SOLVERS", "PRODUCED_BY",
+           "Verdict", "VerdictEvidence", "NoMotion", "NoInformation", "DescriptionPattern", "NoConvergence",
+           "GrossSearch", "Misprediction", "SessionSearch", "UnreachableRows", "BASE_FRAME", "INSTRUMENT_FOLDS",
+           "SOLVERS", "PRODUCED_BY", "VERDICT_CAUSES", "DIAGNOSED_CAUSES",
            "identify_rows", "gross_row_search", "first_fit", "learn_tolerance", "validation_errors", "instrument_heldout",
            "crossvalidation_of", "crossvalidation_settings", "prediction_check", "verdict_of", "information_verdict",
            "description_verdict", "likely_cause", "calibration_of", "instrument_frames"]
 
+#: The recording diagnosis' causes a failed :class:`Verdict` adopts (the diagnosis says them).
+DIAGNOSED_CAUSES = ("conversion", "unmeasured column")
+#: Every cause of a failed :class:`Verdict`: its own, then the diagnosis' it adopts.
+VERDICT_CAUSES = ("no_motion", "no_information", "description", "no_convergence", "gross_search_failed",
+                  "model_misfit", "unpredictable_rows", "left_out_physics") + DIAGNOSED_CAUSES
 #: A validation row's frame group when it is predicted in the base frame (a session without
 #: calibration rows declared in the base frame).
 BASE_FRAME = -1
@@ -211,27 +218,133 @@ class Identification:
 
 
 @dataclass(frozen=True)
+class VerdictEvidence:
+    """The figures every verdict rests on (the summary's ``verdict.evidence``: :meth:`to_dict`).
+
+    Attributes:
+        converged: the fit converged.
+        fit_ratio: the fit's RMS whitened residual (the rows' misfit over the declared noise).
+        fit_limit_ratio: its limit (chi-square at :data:`calib.diagnosis.FIT_ALPHA`).
+        fit_at_noise: the fit is within that limit.
+        predictions: :func:`prediction_check` of rows the fit did not use, or None.
+    """
+
+    converged: bool
+    fit_ratio: float
+    fit_limit_ratio: float
+    fit_at_noise: bool
+    predictions: dict | None
+
+    def to_dict(self) -> dict:
+        """The figures under the names the summary JSON gives them."""
+        return {"converged": self.converged, "fit_ratio": self.fit_ratio, "fit_limit_ratio": self.fit_limit_ratio,
+                "fit_at_noise": self.fit_at_noise, "predictions": self.predictions}
+
+
+@dataclass(frozen=True)
+class NoMotion:
+    """Cause ``"no_motion"``: every calibration row used is at one pose (:func:`calib.diagnosis.motionless_rows`).
+    ``rows``: how many; ``robot``: the robot's name."""
+
+    rows: int
+    robot: str
+
+
+@dataclass(frozen=True)
+class NoInformation:
+    """Cause ``"no_information"``: the rows determine nothing beyond the tolerance.
+
+    Attributes:
+        free: the parameters not held.
+        determined: the directions the rows determine, singly or in combinations.
+        same_pose_rows: rows at one pose (:func:`calib.diagnosis.same_pose_rows`), of ``rows``.
+        noise: the declared pose noise's first standard deviation, in ``noise_unit``.
+        tolerances: ``(median tolerance, unit)`` of the free parameters, one per unit.
+    """
+
+    free: int
+    determined: float
+    same_pose_rows: int
+    rows: int
+    noise: float
+    noise_unit: str
+    tolerances: tuple
+
+
+@dataclass(frozen=True)
+class DescriptionPattern:
+    """Cause ``"description"``: the fitted errors are a scale of the nominal geometry described.
+    ``patterns``: :func:`calib.diagnosis.description_pattern`'s groups; ``geometry_source``: the
+    description's file, or None."""
+
+    patterns: tuple
+    geometry_source: str | None
+
+
+@dataclass(frozen=True)
+class NoConvergence:
+    """Cause ``"no_convergence"``: the solver's own ``message``."""
+
+    message: str
+
+
+@dataclass(frozen=True)
+class GrossSearch:
+    """Causes ``"gross_search_failed"`` and ``"model_misfit"``: the gross-row search could not judge.
+
+    Attributes:
+        message: the search's own reason.
+        beyond: rows beyond the declared noise after the trimmed fits, of ``rows`` searched.
+        where: the recording (``CalibrationData.where``).
+    """
+
+    message: str
+    beyond: int
+    rows: int
+    where: str
+
+
+@dataclass(frozen=True)
+class Misprediction:
+    """Causes ``"unpredictable_rows"`` and ``"left_out_physics"``: rows off the model.
+
+    Attributes:
+        what: the rows off (``"calibration rows"``, or the prediction check's ``what``).
+        ratio: their RMS whitened residual (None: the model cannot predict them at all).
+        where: the recording (``CalibrationData.where``).
+    """
+
+    what: str
+    ratio: float | None
+    where: str
+
+
+@dataclass(frozen=True)
 class Verdict:
-    """Whether the calibration is a success, and if not its likely cause.
+    """Whether the calibration is a success, and if not its likely cause: a code and typed
+    evidence, no sentence (the words, one table per cause, are pipeline's:
+    :mod:`pipeline.formats.verdict_words`).
 
     Attributes:
         success: the fit converged, its rows fit within the declared noise and the predictions of
             rows it did not use agree with what it says they can be (and the rows determine
             something, and the errors are not a description's pattern).
-        cause: None on success, else ``"no_motion"``, ``"no_information"``, ``"description"``,
-            ``"no_convergence"``, ``"gross_search_failed"``, ``"model_misfit"``,
-            ``"unpredictable_rows"``, ``"left_out_physics"``, or the diagnosis' cause
-            (``"conversion"``, ``"unmeasured column"``).
-        words: the verdict in words.
-        evidence: ``converged``, ``fit_ratio`` and ``fit_limit_ratio`` (the fit's RMS whitened
-            residual and its limit), ``fit_at_noise``, ``predictions`` (:func:`prediction_check`).
+        cause: None on success, else one of :data:`VERDICT_CAUSES`: ``"no_motion"``,
+            ``"no_information"``, ``"description"``, ``"no_convergence"``,
+            ``"gross_search_failed"``, ``"model_misfit"``, ``"unpredictable_rows"``,
+            ``"left_out_physics"``, or the diagnosis' cause (``"conversion"``, ``"unmeasured column"``).
+        evidence: the :class:`VerdictEvidence` every verdict rests on.
+        detail: the cause's own evidence: :class:`NoMotion`, :class:`NoInformation`,
+            :class:`DescriptionPattern`, :class:`NoConvergence`, :class:`GrossSearch` (both its
+            causes), :class:`Misprediction` (both its causes); None on success and for the
+            diagnosis' causes (the diagnosis says them).
         diagnosis: the recording's diagnosis given to :func:`calibrate`, or None.
     """
 
     success: bool
     cause: str | None
-    words: str
-    evidence: dict
+    evidence: VerdictEvidence
+    detail: object | None = None
     diagnosis: object | None = None
 
 
@@ -926,64 +1039,57 @@ def verdict_of(data: CalibrationData, ident: Identification, held, cv, diagnosis
     fit_ok = bool(np.isfinite(result.chi2) and result.chi2 <= chi2_limit(dof))
     check = prediction_check(data, ident, held, cv)
     success = bool(result.success and fit_ok and (check is None or check["agrees"]))
-    evidence = {"converged": bool(result.success), "fit_ratio": float(np.sqrt(result.chi2 / dof)),
-                "fit_limit_ratio": float(np.sqrt(chi2_limit(dof) / dof)), "fit_at_noise": fit_ok,
-                "predictions": check}
+    evidence = VerdictEvidence(converged=bool(result.success), fit_ratio=float(np.sqrt(result.chi2 / dof)),
+                               fit_limit_ratio=float(np.sqrt(chi2_limit(dof) / dof)), fit_at_noise=fit_ok,
+                               predictions=check)
     uninformed = information_verdict(data, ident) or description_verdict(data, ident)
     if uninformed is not None:
-        cause, words = uninformed
-        return Verdict(False, cause, words, evidence, diagnosis)
+        cause, detail = uninformed
+        return Verdict(False, cause, evidence, detail, diagnosis)
     if success:
-        words = "calibrated: the rows fit to the declared noise" + (
-            f" and the {check['what']} are predicted to it" if check else "")
-        return Verdict(True, None, words, evidence, diagnosis)
-    if diagnosis is not None and diagnosis.cause in ("conversion", "unmeasured column"):
-        cause, words = diagnosis.cause, f"not calibrated: {diagnosis.message}"
-    else:
-        cause, words = likely_cause(data, ident, evidence)
-    return Verdict(False, cause, words, evidence, diagnosis)
+        return Verdict(True, None, evidence, None, diagnosis)
+    if diagnosis is not None and diagnosis.cause in DIAGNOSED_CAUSES:
+        return Verdict(False, diagnosis.cause, evidence, None, diagnosis)
+    cause, detail = likely_cause(data, ident, evidence)
+    return Verdict(False, cause, evidence, detail, diagnosis)
 
 
-def information_verdict(data: CalibrationData, ident: Identification) -> tuple[str, str] | None:
-    """``(cause, words)`` of a fit that learnt nothing from its rows, else None: rows that do not
-    move the machine (every calibration row used at one pose, :func:`calib.diagnosis.no_motion_words`:
-    ``"no_motion"``), or, with the tolerances as a prior, no parameter determined by the data
-    (:meth:`calib.engine.IdentificationResult.parameter_sources`: none whose posterior standard
-    deviation fell below half the prior's, none moved beyond 3 prior standard deviations:
-    ``"no_information"``), and fewer than one direction determined singly or in combinations
-    (:meth:`calib.engine.IdentificationResult.directions_determined`: a plane of poses determines
-    combinations, not single parameters). Such a fit is never a success, however well the rows fit."""
-    from .diagnosis import no_motion_words, same_pose_rows
+def information_verdict(data: CalibrationData, ident: Identification) -> tuple[str, object] | None:
+    """``(cause, detail)`` of a fit that learnt nothing from its rows, else None: rows that do not
+    move the machine (every calibration row used at one pose, :func:`calib.diagnosis.motionless_rows`:
+    ``"no_motion"``, :class:`NoMotion`), or, with the tolerances as a prior, no parameter determined
+    by the data (:meth:`calib.engine.IdentificationResult.parameter_sources`: none whose posterior
+    standard deviation fell below half the prior's, none moved beyond 3 prior standard deviations:
+    ``"no_information"``, :class:`NoInformation`), and fewer than one direction determined singly or
+    in combinations (:meth:`calib.engine.IdentificationResult.directions_determined`: a plane of
+    poses determines combinations, not single parameters). Such a fit is never a success, however
+    well the rows fit."""
+    from .diagnosis import motionless_rows, same_pose_rows
 
     robot, result = data.robot, ident.result
     joints = data.joints[ident.used]
-    still = no_motion_words(robot, joints, data.noise.joint_std)
+    still = motionless_rows(robot, joints, data.noise.joint_std)
     if still is not None:
-        return "no_motion", f"not calibrated: {still}"
+        return "no_motion", NoMotion(rows=still, robot=robot.name)
     sources = result.parameter_sources()
     seen = result.directions_determined()
     if seen is None or seen >= MIN_DETERMINED or any(v == "data" for v in sources.values()):
         return None
     free = [n for n, v in sources.items() if v != "held"]
-    same = len(same_pose_rows(robot, joints, data.noise.joint_std))
-    rows = f"; {same} of {len(joints)} rows are the same pose" if same > 1 else ""
     noise = data.noise.pose_std(robot.pose_units)
     idx = robot.table.indices(free)
     units = np.array(robot.table.units)[idx]
-    tolerance = ", ".join(f"{np.median(result.prior.std[idx][units == u]):.3g} {u}" for u in dict.fromkeys(units))
-    return "no_information", (
-        f"not calibrated: the rows determine nothing beyond the tolerance: of the {len(free)} parameters none has "
-        f"its standard deviation below half its tolerance, none moved beyond 3 tolerances, and all together they "
-        f"determine {seen:.2g} of the {len(free)} directions (noise standard deviation "
-        f"{noise[0]:.3g} {robot.pose_units[0]} against a tolerance of {tolerance}{rows}): the geometry reported "
-        "is the prior's, not a measurement; measure more poses, spread over the workspace, or with less noise")
+    tolerances = tuple((float(np.median(result.prior.std[idx][units == u])), str(u)) for u in dict.fromkeys(units))
+    return "no_information", NoInformation(
+        free=len(free), determined=float(seen), same_pose_rows=len(same_pose_rows(robot, joints, data.noise.joint_std)),
+        rows=len(joints), noise=float(noise[0]), noise_unit=robot.pose_units[0], tolerances=tolerances)
 
 
-def description_verdict(data: CalibrationData, ident: Identification) -> tuple[str, str] | None:
-    """``("description", words)`` where the fitted errors are a scale of the nominal geometry
-    described (:func:`calib.diagnosis.description_pattern`, against the declared tolerance or the
-    robot's default, not one learnt from these rows: the learnt one grows to hold the pattern):
-    the description is another machine's (``data.geometry_source`` named); else None."""
+def description_verdict(data: CalibrationData, ident: Identification) -> tuple[str, DescriptionPattern] | None:
+    """``("description", DescriptionPattern)`` where the fitted errors are a scale of the nominal
+    geometry described (:func:`calib.diagnosis.description_pattern`, against the declared tolerance
+    or the robot's default, not one learnt from these rows: the learnt one grows to hold the
+    pattern): the description is another machine's (``data.geometry_source`` named); else None."""
     from .diagnosis import description_pattern
 
     robot, result = data.robot, ident.result
@@ -991,39 +1097,30 @@ def description_verdict(data: CalibrationData, ident: Identification) -> tuple[s
     pattern = description_pattern(robot, result.errors, reference.std, result.free_names)
     if not pattern:
         return None
-    where = f" in {data.geometry_source}" if data.geometry_source else ""
-    return "description", (f"not calibrated: the fitted errors are a pattern of the description, not physics: "
-                           f"{'; '.join(p['words'] for p in pattern)}: the nominal geometry{where} seems to be another "
-                           "machine's; give this machine's nominal geometry")
+    return "description", DescriptionPattern(patterns=tuple(pattern), geometry_source=data.geometry_source or None)
 
 
-def likely_cause(data, ident, evidence: dict) -> tuple[str, str]:
-    """``(cause, words)`` of a calibration that is no success: no convergence, a gross-row search
-    that could not judge, a model that misfits most rows, rows it cannot predict, or physics the
-    geometric model leaves out. Reads ``data.where``, ``ident.result.message``, ``ident.gross``
-    (its ``success``, ``statistic``, ``cutoff``, ``message``) and the verdict's ``evidence``."""
+def likely_cause(data, ident, evidence: VerdictEvidence) -> tuple[str, object]:
+    """``(cause, detail)`` of a calibration that is no success: no convergence
+    (:class:`NoConvergence`), a gross-row search that could not judge or a model that misfits most
+    rows (:class:`GrossSearch`), rows it cannot predict or physics the geometric model leaves out
+    (:class:`Misprediction`). Reads ``data.where``, ``ident.result.message``, ``ident.gross`` (its
+    ``success``, ``statistic``, ``cutoff``, ``message``) and the verdict's ``evidence``."""
     where = data.where
-    if not evidence["converged"]:
-        return "no_convergence", f"not calibrated: the fit did not converge ({ident.result.message})"
+    if not evidence.converged:
+        return "no_convergence", NoConvergence(message=ident.result.message)
     search = ident.gross
     if search is not None and not search.success:
         beyond = int(np.sum(search.statistic > search.cutoff))
-        if 2 * beyond <= search.statistic.size:  # the search failed for another reason: say which
-            return "gross_search_failed", (f"not calibrated: the gross-row search could not judge the rows "
-                                           f"({search.message}), and the fit on every row is "
-                                           f"{evidence['fit_ratio']:.3g} times the declared noise off the model")
-        return "model_misfit", (f"not calibrated: the model misfits most rows ({beyond} of {search.statistic.size} "
-                                f"beyond the declared noise even after the trimmed fits), so no row can be called "
-                                f"gross: physics the geometric model leaves out (run python -m pipeline.discover "
-                                f"--real {where}) or a mistake in the file")
-    if evidence["fit_at_noise"] and evidence["predictions"]["ratio"] is None:
-        return "unpredictable_rows", (f"not calibrated: the model cannot predict the {evidence['predictions']['what']} "
-                                      "(it cannot reach their joints): a geometry far from the nominal one")
-    ratio = evidence["fit_ratio"] if not evidence["fit_at_noise"] else evidence["predictions"]["ratio"]
-    what = "the calibration rows" if not evidence["fit_at_noise"] else f"the {evidence['predictions']['what']}"
-    return "left_out_physics", (f"not calibrated: {what} are {ratio:.3g} times the declared noise off the model: "
-                                f"physics the geometric model leaves out (run python -m pipeline.discover --real "
-                                f"{where}), or noise declared too small")
+        found = GrossSearch(message=search.message, beyond=beyond, rows=int(search.statistic.size), where=where)
+        # most rows beyond the noise: the model misfits them; else the search failed for another reason
+        return ("gross_search_failed" if 2 * beyond <= search.statistic.size else "model_misfit"), found
+    predictions = evidence.predictions
+    if evidence.fit_at_noise and predictions["ratio"] is None:
+        return "unpredictable_rows", Misprediction(what=predictions["what"], ratio=None, where=where)
+    if evidence.fit_at_noise:
+        return "left_out_physics", Misprediction(what=predictions["what"], ratio=predictions["ratio"], where=where)
+    return "left_out_physics", Misprediction(what="calibration rows", ratio=evidence.fit_ratio, where=where)
 
 
 # --------------------------------------------------------------------------- calibration

@@ -201,10 +201,41 @@ def test_the_report_and_its_words_import_no_rerun_and_no_numpy():
                 names.add((node.module or "").split(".")[0])
         return names
 
-    for module in ("report", "report_text"):
+    for module in ("report", "report_text", "verdict_words"):
         imported = third_party(ROOT / "pipeline" / "formats" / f"{module}.py")
         assert not imported & {"rerun", "numpy"}, (module, sorted(imported))
     assert "rerun" in third_party(ROOT / "pipeline" / "views" / "run_view.py")  # the check sees an import
+
+
+def command_lines_worded(source: str) -> list[int]:
+    """Lines of ``source`` whose string literals (f-strings' text included), docstrings left out,
+    name a command line (``python -m``): words a person reads, composed where they are run."""
+    tree = ast.parse(source)
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    return [node.lineno for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+            and "python -m" in node.value]
+
+
+def test_calib_words_no_command_line():
+    """calib returns causes and typed evidence; the words, command-line advice included, are
+    pipeline's (the verdict's: :mod:`pipeline.formats.verdict_words`). Docstrings and comments may
+    name the commands that use a function."""
+    found = {str(path.relative_to(ROOT)): lines for path in (ROOT / "calib").rglob("*.py")
+             if (lines := command_lines_worded(path.read_text()))}
+    assert not found, found
+
+
+def test_the_check_sees_a_command_line_in_words_not_in_a_docstring():
+    planted = '''"""run python -m pipeline.run"""
+def f(where):
+    """python -m pipeline.discover"""
+    # python -m pipeline.discover
+    return f"run python -m pipeline.discover --real {where}"
+'''
+    assert command_lines_worded(planted) == [5]
 
 
 def runnable_modules() -> list[str]:

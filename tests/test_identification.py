@@ -9,7 +9,8 @@ import pytest
 
 from calib.calibration import Calibration
 from calib.engine import gauge_representative
-from calib.identification import BASE_FRAME, CalibrationOutcome, UnreachableRows, calibrate
+from calib.identification import (BASE_FRAME, CalibrationOutcome, GrossSearch, Misprediction, UnreachableRows,
+                                  calibrate)
 from calib.measurement import MeasurementSettings, instrument_measurements
 from calib.noise import SensorNoise
 from calib.robots import default_robot, reference_errors
@@ -76,8 +77,8 @@ def test_the_injected_errors_are_recovered_within_the_fits_uncertainty(spoiled):
 def test_the_verdict_is_a_success_and_the_validation_rows_are_predicted_to_the_noise(spoiled):
     robot, _, outcome = spoiled
     verdict = outcome.verdict
-    assert verdict.success and verdict.cause is None, verdict.words
-    assert verdict.evidence["predictions"]["what"] == "validation rows" and verdict.evidence["predictions"]["agrees"]
+    assert verdict.success and verdict.cause is None, verdict
+    assert verdict.evidence.predictions["what"] == "validation rows" and verdict.evidence.predictions["agrees"]
     before, after = outcome.heldout
     assert before.shape == after.shape == (VALIDATION, robot.pose_dim)
     position = ~robot.angle_pose_mask
@@ -109,12 +110,16 @@ def test_noise_declared_ten_times_too_small_is_a_failed_verdict_returned(name):
     robot, _, q, m, qv, mv = machine(name, seed=2)
     declared = SensorNoise(1e-4, 1e-7, "normal")
     searched = calibrate(robot, q, m, declared, validation_joints=qv, validation_measured=mv)
-    assert not searched.verdict.success and searched.verdict.cause == "model_misfit", searched.verdict.words
+    assert not searched.verdict.success and searched.verdict.cause == "model_misfit", searched.verdict
+    found = searched.verdict.detail  # typed: the rows beyond the noise of those searched
+    assert isinstance(found, GrossSearch) and found.rows == ROWS and 2 * found.beyond > ROWS, found
     assert searched.identification.gross_idx == [] and searched.identification.used.size == ROWS
     plain = calibrate(robot, q, m, declared, validation_joints=qv, validation_measured=mv, search_gross_rows=False)
     verdict = plain.verdict
-    assert not verdict.success and verdict.cause == "left_out_physics", verdict.words
-    assert 7.0 <= verdict.evidence["fit_ratio"] <= 13.0, verdict.evidence
+    assert not verdict.success and verdict.cause == "left_out_physics", verdict
+    assert 7.0 <= verdict.evidence.fit_ratio <= 13.0, verdict.evidence
+    assert verdict.detail == Misprediction(what="calibration rows", ratio=verdict.evidence.fit_ratio,
+                                           where=plain.data.where), verdict.detail
     assert plain.calibration is not None and searched.calibration is not None
 
 
@@ -123,8 +128,8 @@ def test_without_validation_rows_the_rows_are_crossvalidated():
     outcome = calibrate(robot, q, m, NOISE, method="forward")
     cv = outcome.crossvalidation
     assert cv is not None and outcome.heldout is None
-    assert outcome.verdict.success, outcome.verdict.words
-    assert outcome.verdict.evidence["predictions"]["what"] == f"cross-validation ({cv.scheme})"
+    assert outcome.verdict.success, outcome.verdict
+    assert outcome.verdict.evidence.predictions["what"] == f"cross-validation ({cv.scheme})"
     # the model exact, a row's prediction error is its noise (sqrt(3) um) and the fold model's (a few %)
     ratio = cv.summary()["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * 1e-3)
     assert 0.8 <= ratio <= 1.3, ratio
@@ -141,7 +146,7 @@ def test_an_instrument_frame_is_recovered_within_its_uncertainty():
     fit = outcome.identification.instrument
     assert fit is not None and fit.frame_estimated
     assert np.all(np.abs(fit.frame - FRAME) <= SIGMAS * fit.frame_std + 1e-12), (fit.frame - FRAME) / fit.frame_std
-    assert outcome.verdict.success, outcome.verdict.words
+    assert outcome.verdict.success, outcome.verdict
     assert set(outcome.calibration.frames) == {"lab"}
     np.testing.assert_array_equal(outcome.calibration.frames["lab"], fit.frame)
 
@@ -159,7 +164,7 @@ def test_heldout_errors_measured_by_the_caller_are_taken_as_given():
     outcome = calibrate(robot, q, m, NOISE, heldout=heldout, search_gross_rows=False, cross_validate=False)
     assert len(seen) == 1 and np.array_equal(seen[0], outcome.result.theta)
     assert outcome.heldout[0].shape == (3, robot.pose_dim) and outcome.crossvalidation is None
-    assert outcome.verdict.evidence["predictions"] is None and outcome.identification.gross is None
+    assert outcome.verdict.evidence.predictions is None and outcome.identification.gross is None
 
 
 def test_assess_false_stops_after_the_identification():
@@ -227,10 +232,10 @@ def test_above_the_size_the_prediction_check_takes_the_jacobians_chain_factors(m
 
     robot, _, q, m, qv, mv = machine("hexapod", seed=4)
     outcome = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv)
-    dense = outcome.verdict.evidence["predictions"]
+    dense = outcome.verdict.evidence.predictions
     assert "form" not in dense
     monkeypatch.setattr(calib.outliers, "STRUCTURED_JACOBIAN_MIN_ROWS", 10)
-    fast = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv).verdict.evidence["predictions"]
+    fast = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv).verdict.evidence.predictions
     assert fast["form"] == "J Sigma J^T through the Jacobian's chain factors (20 rows > STRUCTURED_JACOBIAN_MIN_ROWS = 10)"
     assert fast["agrees"] == dense["agrees"] and fast["rows"] == dense["rows"] == VALIDATION
     result = outcome.result

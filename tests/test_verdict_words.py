@@ -14,10 +14,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures
+from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures, ScalePattern
 from calib.prior import MOVED_BY_DATA, parameter_sources
-from calib.identification import likely_cause
+from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearch, Misprediction, NoConvergence,
+                                  NoInformation, NoMotion, Verdict, VerdictEvidence, likely_cause)
 from pipeline.formats.report_text import IMPLAUSIBLE_LINES
+from pipeline.formats.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
 from pipeline.run import print_summary
 
 
@@ -43,13 +45,67 @@ def test_misfits_most_rows_only_when_most_rows_misfit(beyond, cause):
     stat = np.r_[np.full(beyond, 100.0), np.full(n - beyond, 1.0)]
     ident = SimpleNamespace(gross=_search(stat), result=SimpleNamespace(message=""))
     inp = SimpleNamespace(where="rec.csv")
-    evidence = {"converged": True, "fit_at_noise": False, "fit_ratio": 7.5, "predictions": None}
-    got, words = likely_cause(inp, ident, evidence)
-    assert got == cause
+    evidence = VerdictEvidence(converged=True, fit_ratio=7.5, fit_limit_ratio=1.2, fit_at_noise=False, predictions=None)
+    got, detail = likely_cause(inp, ident, evidence)
+    assert got == cause and detail == GrossSearch("the search's own reason", beyond, n, "rec.csv")
+    words = verdict_sentence(Verdict(False, got, evidence, detail))
     if cause == "model_misfit":
         assert f"({beyond} of {n} beyond" in words and "misfits most rows" in words
     else:
         assert "misfits most rows" not in words and "the search's own reason" in words and "7.5 times" in words
+
+
+def test_every_cause_calib_returns_has_its_words_and_no_other():
+    """One table of words per cause: a cause code calib can return without words (or words for a
+    code it never returns) would be a KeyError in a run or a dead row."""
+    assert set(CAUSE_WORDS) == {None, *VERDICT_CAUSES}
+
+
+EVIDENCE = VerdictEvidence(converged=True, fit_ratio=0.9, fit_limit_ratio=1.2, fit_at_noise=True,
+                           predictions={"what": "validation rows", "agrees": True, "ratio": 1.1, "rows": 5})
+PATTERN = ScalePattern(group="B", names=("B1.x", "B1.y", "B6.z"), scale=-0.0297, residual=0.2, largest_error=5.69,
+                       largest=56.9)
+
+
+@pytest.mark.parametrize("cause, detail, said", [
+    ("no_motion", NoMotion(rows=7, robot="delta"),
+     "the calibration rows do not move the machine: 7 of 7 rows are the same pose (the same joint readings), so "
+     "they say nothing of the delta's geometry"),
+    ("no_information", NoInformation(free=12, determined=0.4444, same_pose_rows=3, rows=8, noise=1.7321,
+                                     noise_unit="mm", tolerances=((0.1, "mm"), (0.002, "rad"))),
+     "of the 12 parameters none has its standard deviation below half its tolerance, none moved beyond 3 "
+     "tolerances, and all together they determine 0.44 of the 12 directions (noise standard deviation 1.73 mm "
+     "against a tolerance of 0.1 mm, 0.002 rad; 3 of 8 rows are the same pose)"),
+    ("description", DescriptionPattern(patterns=(PATTERN, PATTERN), geometry_source="m.json"),
+     "not physics: the fitted errors of B1.x ... B6.z (3 parameters, up to 5.69 mm) are -2.97% of their nominal "
+     "values, to 0.2 mm RMS: the description's B coordinates are 1.03 times this machine's (a scale of the "
+     "description); the fitted errors of B1.x ... B6.z (3 parameters, up to 5.69 mm) are -2.97% of their nominal "
+     "values, to 0.2 mm RMS: the description's B coordinates are 1.03 times this machine's (a scale of the "
+     "description): the nominal geometry in m.json seems to be another machine's"),
+    ("no_convergence", NoConvergence("no stopping rule met in 20 iterations"),
+     "the fit did not converge (no stopping rule met in 20 iterations)"),
+    ("unpredictable_rows", Misprediction("validation rows", None, "rec.csv"),
+     "the model cannot predict the validation rows (it cannot reach their joints)"),
+    ("left_out_physics", Misprediction("validation rows", 12.345, "rec.csv"),
+     "the validation rows are 12.3 times the declared noise off the model: physics the geometric model leaves out "
+     "(run python -m pipeline.discover --real rec.csv), or noise declared too small"),
+])
+def test_each_cause_is_worded_from_its_typed_evidence(cause, detail, said):
+    words = verdict_sentence(Verdict(False, cause, EVIDENCE, detail))
+    assert words.startswith(NOT_CALIBRATED) and said in words, words
+
+
+def test_a_success_says_which_rows_it_predicted():
+    assert verdict_sentence(Verdict(True, None, EVIDENCE)) == ("calibrated: the rows fit to the declared noise and "
+                                                              "the validation rows are predicted to it")
+    alone = VerdictEvidence(converged=True, fit_ratio=0.9, fit_limit_ratio=1.2, fit_at_noise=True, predictions=None)
+    assert verdict_sentence(Verdict(True, None, alone)) == "calibrated: the rows fit to the declared noise"
+
+
+def test_a_diagnosed_cause_is_said_by_the_diagnosis():
+    diagnosis = SimpleNamespace(cause="conversion", message="the rows fit in inches, not mm")
+    words = verdict_sentence(Verdict(False, "conversion", EVIDENCE, None, diagnosis))
+    assert words == "not calibrated: the rows fit in inches, not mm"
 
 
 def test_the_diagnosis_says_a_movement_in_its_unit():

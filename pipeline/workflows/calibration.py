@@ -33,6 +33,7 @@ from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, build_report, command_columns, command_csv,
                               output_folder, frame_session, render_html, row_message, session_measurement)
+from pipeline.formats.verdict_words import verdict_sentence
 
 from .options import check_noise_flags
 
@@ -831,11 +832,13 @@ def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray)
 def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
     """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
     recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
-    ``verdict`` (``words``, ``cause``, ``evidence``)."""
+    ``verdict`` (``words``: :func:`pipeline.formats.verdict_words.verdict_sentence`, ``cause``,
+    ``evidence``)."""
     verdict = outcome.verdict
     return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
             "success": verdict.success,
-            "verdict": {"words": verdict.words, "cause": verdict.cause, "evidence": verdict.evidence}}
+            "verdict": {"words": verdict_sentence(verdict), "cause": verdict.cause,
+                        "evidence": verdict.evidence.to_dict()}}
 
 
 def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:

@@ -30,7 +30,7 @@ from calib.effects.session_zeros import SessionZeros, session_codes, session_zer
 from calib.effects.heldout import HeldoutJudgement, RejectedEffect, TIME_BLOCKS, heldout_folds, judge_effects
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
-from calib.diagnosis import no_motion_words
+from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from calib.effects.records import EffectRecord, fitted_effects
 from calib.measurement import frame_from_dict
@@ -40,6 +40,7 @@ from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.formats.report_text import shift_words, verdict_words
+from pipeline.formats.verdict_words import no_motion_words
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 
@@ -361,9 +362,9 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
         candidates = list(candidates) + [kept_law_effect(kept_law, rec)]
     names = [registered_effect(c).name for c in candidates]
     cal, val, analysed_all = analysed_rows(rec, exclude)
-    still = no_motion_words(robot, rec.joints[cal], rec.noise.joint_std)
+    still = motionless_rows(robot, rec.joints[cal], rec.noise.joint_std)
     if still is not None:
-        raise ValueError(f"{still}: nothing to discover")
+        raise ValueError(f"{no_motion_words(still, robot.name)}: nothing to discover")
     tolerance, tolerance_source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
     codes, session_names = session_codes(rec.sessions)
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
@@ -712,9 +713,9 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
         rec = read_recording(settings.real)
         stem = Path(settings.real).stem
         warnings = recording_checks(rec, settings.real).warnings  # the checks every command reading a recording makes
-        still = no_motion_words(rec.robot, rec.joints, rec.noise.joint_std)
+        still = motionless_rows(rec.robot, rec.joints, rec.noise.joint_std)
         if still is not None:  # no geometry, so no physics, to tell from one pose
-            raise ValueError(f"{settings.real}: {still.replace('calibration rows', 'rows')}: nothing to discover")
+            raise ValueError(f"{settings.real}: {no_motion_words(still, rec.robot.name, 'rows')}: nothing to discover")
     else:
         robot_name = settings.robot or DEFAULT_SCENARIO_ROBOT
         stem = f"{robot_name}_{'+'.join(settings.scenario)}_{settings.scenario_seed}"
