@@ -3,6 +3,10 @@ against the workbench's probe fit and Klipper export, from the same probe data, 
 point's error over the print volume (held-out points from the bed to 150 mm above it, after
 removing a turn about z and a shift in x, y, which no measurement here fixes).
 
+And the last check of point 4 (:func:`compare_with_compensate`): through the files (printer.cfg,
+``pipeline.convert --klipper``, ``pipeline.probe``, ``pipeline.export --to klipper``), the export read
+back by the reference implementation against the calibration's own commands (``pipeline.compensate``).
+
 ``python tests/klipper_comparison.py`` prints the figures for several seeds and draws
 docs/img/klipper_comparison.png; tests/test_klipper_comparison.py asserts them.
 """
@@ -10,6 +14,7 @@ docs/img/klipper_comparison.png; tests/test_klipper_comparison.py asserts them.
 from __future__ import annotations
 
 import sys
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -253,6 +258,11 @@ def main(seeds=(1, 2, 3)) -> None:
                   f"Klipper RMS {r['klipper']['rms_mm']:.3f} max {r['klipper']['max_mm']:.3f}; workbench RMS "
                   f"{r['workbench']['rms_mm']:.3f} max {r['workbench']['max_mm']:.3f} mm; bed flatness with the mesh "
                   f"RMS {r['bed_flatness']['rms_mm']:.4f} max {r['bed_flatness']['max_mm']:.4f} mm")
+            with tempfile.TemporaryDirectory() as folder:
+                c = compare_with_compensate(seed, gauges, Path(folder))
+            print(f"  through the files: the export read back RMS {c['klipper_export']['rms_mm']:.3f} max "
+                  f"{c['klipper_export']['max_mm']:.3f}; pipeline.compensate RMS {c['compensate']['rms_mm']:.3f} "
+                  f"max {c['compensate']['max_mm']:.3f} mm")
     fig, ax = plt.subplots(figsize=(7, 3.5))
     x = np.arange(len(rows))
     ax.bar(x - 0.2, [r["klipper"]["rms_mm"] for *_, r in rows], 0.4, label="Klipper's DELTA_CALIBRATE fit")
