@@ -24,6 +24,8 @@ Writes, beside this script:
   (``delta_tracker.csv``: ``;`` and decimal commas after two preamble lines, ISO timestamps, a row
   where the tracker lost the reflector, three validation rows, the motor temperature), its map
   ``delta.toml`` and the broken copies the page's refusals read (``bad.toml``, ``bad2.toml``, ``bad.csv``).
+- ``klipper/printer.cfg``: docs/klipper.md's worked example, a linear Delta printer's Klipper config
+  after DELTA_CALIBRATE on the MuJoCo printer (``make_klipper_example.py``, which writes it alone too).
 
 Every number comes from the product's own code (``pipeline.run`` simulates, ``calib`` draws the poses).
 """
@@ -45,6 +47,9 @@ from calib.robots import default_robot, paper_hexapod
 from calib.workspace import reachable_poses
 from pipeline.formats import Recording, read_recording, write_recording
 from pipeline.run import main as run_main
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from make_klipper_example import write_klipper_example  # noqa: E402
 
 #: The folder the examples are written to: this script's.
 EXAMPLES = Path(__file__).resolve().parent
@@ -320,6 +325,7 @@ def main() -> int:
     write_two_days(EXAMPLES / "two_days")
     write_stewart(EXAMPLES / "stewart")
     write_delta_tracker(EXAMPLES / "delta_tracker")
+    write_klipper_example(EXAMPLES / "klipper")
     return 0
 
 

@@ -3,6 +3,10 @@ against the workbench's probe fit and Klipper export, from the same probe data, 
 point's error over the print volume (held-out points from the bed to 150 mm above it, after
 removing a turn about z and a shift in x, y, which no measurement here fixes).
 
+And the last check of point 4 (:func:`compare_with_compensate`): through the files (printer.cfg,
+``pipeline.convert --klipper``, ``pipeline.probe``, ``pipeline.export --to klipper``), the export read
+back by the reference implementation against the calibration's own commands (``pipeline.compensate``).
+
 ``python tests/klipper_comparison.py`` prints the figures for several seeds and draws
 docs/img/klipper_comparison.png; tests/test_klipper_comparison.py asserts them.
 """
@@ -10,6 +14,7 @@ docs/img/klipper_comparison.png; tests/test_klipper_comparison.py asserts them.
 from __future__ import annotations
 
 import sys
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -21,8 +26,13 @@ import klipper_reference as kr  # noqa: E402
 
 from calib.klipper import (bed_to_base, fit_klipper, klipper_joints, klipper_vector,  # noqa: E402
                            linear_delta_from_klipper, mesh_points, volume_grid)
+from calib.calibration import Calibration  # noqa: E402
 from calib.probe import ProbeData, ProbeNoise, fit_probe  # noqa: E402
+from pipeline.deliveries.protocol import ExportSettings  # noqa: E402
+from pipeline.formats.klipper import klipper_printer, read_klipper_config  # noqa: E402
 from pipeline.simulation import Testbed  # noqa: E402
+from pipeline.workflows.export import run_export  # noqa: E402
+from pipeline.workflows.klipper import convert_klipper, fit_probe_file  # noqa: E402
 
 #: The printer as its owner configured it (Klipper's parameters before calibration) and its step
 #: distance (rotation_distance 40 / (200 x 16)).
@@ -103,8 +113,14 @@ def probe_data(testbed: Testbed, rng, gauges: bool) -> Dataset:
 
 def volume_error(testbed: Testbed, kappa: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """(N,) the tool's distance from ``targets`` (above the true bed) when Klipper with ``kappa``
-    is commanded there, after the best turn about z and shift in x, y (removed: no measurement fixes them)."""
-    tool = testbed.measure(klipper_joints(kappa, targets)).true_poses
+    is commanded there (:func:`tool_error`)."""
+    return tool_error(testbed, klipper_joints(kappa, targets), targets)
+
+
+def tool_error(testbed: Testbed, joints: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(N,) the tool's distance from ``targets`` (above the true bed) when ``joints`` are commanded,
+    after the best turn about z and shift in x, y (removed: no measurement fixes them)."""
+    tool = testbed.measure(joints).true_poses
     want = bed_to_base(targets, BED)
     a, b = tool[:, :2] - tool[:, :2].mean(0), want[:, :2] - want[:, :2].mean(0)
     turn = np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a * b))
@@ -133,14 +149,21 @@ def bed_flatness(testbed: Testbed, fit, kappa, rng) -> dict:
     return {"rms_mm": float(np.sqrt(np.mean(dz ** 2))), "max_mm": float(np.abs(dz).max())}
 
 
-@lru_cache(maxsize=None)
-def compare(seed: int, gauges: bool) -> dict:
-    """RMS and max of the held-out volume error (mm) of Klipper's fit and of the workbench's export,
-    and the held-out bed's flatness under the workbench's export with its mesh (:func:`bed_flatness`)."""
+def klipper_case(seed: int, gauges: bool) -> tuple:
+    """``(testbed, rng, data, found)``: the machine of ``seed``, the generator the held-out points
+    are drawn from next, its probe data (:func:`probe_data`) and Klipper's DELTA_CALIBRATE fit of them."""
     testbed = Testbed(ROBOT, true_machine(seed), settle="sequential")  # rollouts from home blow up with the 1 mm pair
     rng = np.random.default_rng(seed + 1000)
     data = probe_data(testbed, rng, gauges)
     found, _ = kr.delta_calibrate(CONFIGURED, data.klipper)
+    return testbed, rng, data, found
+
+
+@lru_cache(maxsize=None)
+def compare(seed: int, gauges: bool) -> dict:
+    """RMS and max of the held-out volume error (mm) of Klipper's fit and of the workbench's export,
+    and the held-out bed's flatness under the workbench's export with its mesh (:func:`bed_flatness`)."""
+    testbed, rng, data, found = klipper_case(seed, gauges)
     fit = fit_probe(ROBOT, data.touches, noise=NOISE)
     kappa, _ = fit_klipper(ROBOT, fit.theta, fit.bed_plane, volume_grid(PROBE_RADIUS))
     held = volume_grid(HELD_OUT_RADIUS)
@@ -150,6 +173,73 @@ def compare(seed: int, gauges: bool) -> dict:
         e = volume_error(testbed, k, held)
         out[label] = {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
     out["bed_flatness"] = bed_flatness(testbed, fit, kappa, rng)
+    return out
+
+
+#: The printer.cfg's sections above the SAVE_CONFIG block: the configured printer (:data:`CONFIGURED`).
+CONFIG_HEAD = f"""# A linear Delta printer's Klipper config (the parts the calibration reads).
+[printer]
+kinematics: delta
+max_velocity: 300
+max_accel: 3000
+delta_radius: {CONFIGURED.radius:g}
+print_radius: {PROBE_RADIUS:g}
+""" + "".join(f"""
+[stepper_{t}]
+step_pin: PF{2 * i}
+dir_pin: PF{2 * i + 1}
+microsteps: 16
+rotation_distance: 40
+endstop_pin: ^PE{i}
+angle: {CONFIGURED.angles[i]:g}
+""" + (f"arm_length: {CONFIGURED.arms[0]:g}\nposition_endstop: {CONFIGURED.endstops[0]:g}\n" if t == "a" else "")
+              for i, t in enumerate(kr.TOWERS)) + f"""
+[delta_calibrate]
+radius: {PROBE_RADIUS:g}
+
+"""
+
+
+def printer_cfg_text(seed: int, gauges: bool) -> str:
+    """The printer.cfg after DELTA_CALIBRATE (and DELTA_ANALYZE) on the machine of ``seed``: the
+    configured sections and the SAVE_CONFIG block Klipper writes (its fit and the probe data)."""
+    _, _, data, found = klipper_case(seed, gauges)
+    return CONFIG_HEAD + kr.save_config_text(found, data.klipper)
+
+
+def read_back_params(config: Path, save_config: Path) -> kr.DeltaParams:
+    """Klipper's parameters from ``config`` with the export's SAVE_CONFIG block in place of its own."""
+    head = config.read_text().split("#*# <")[0]
+    merged = config.with_name("printer.exported.cfg")
+    merged.write_text(head + save_config.read_text())
+    m = klipper_printer(read_klipper_config(merged)).machine
+    return kr.DeltaParams(m.radius_mm, tuple(np.degrees(m.angles_rad)), tuple(m.arm_lengths_mm),
+                          tuple(m.endstops_mm), tuple(m.step_distances_mm))
+
+
+def compare_with_compensate(seed: int, gauges: bool, folder: Path) -> dict:
+    """RMS and max (mm) of the held-out volume error (:func:`tool_error`) on the machine of
+    ``seed`` when commanded by Klipper with the export read back (the reference's inverse
+    kinematics) and by the calibration's own commands (``pipeline.compensate``'s,
+    :meth:`Calibration.commands`), both through the command lines' workflows from a printer.cfg
+    written in ``folder``."""
+    config = folder / "printer.cfg"
+    config.write_text(printer_cfg_text(seed, gauges))
+    convert_klipper(config, str(folder / "printer"))
+    fitted = fit_probe_file(folder / "printer.probe.json", folder / "cal")
+    run_export(ExportSettings(calibration=fitted.calibration_path, to="klipper", out=folder / "klipper"))
+    params = read_back_params(config, folder / "klipper" / "save_config.cfg")
+    testbed, rng, _, _ = klipper_case(seed, gauges)
+    held = volume_grid(HELD_OUT_RADIUS)
+    held = held[rng.choice(len(held), 300, replace=False)]
+    cal = Calibration.read(fitted.calibration_path)
+    bed = [cal.recording["bed"][k] for k in ("z_mm", "tilt_x_rad", "tilt_y_rad")]
+    joints = {"klipper_export": kr.stable_from_position(params, held) * STEP_MM,  # counted at the old step
+              "compensate": cal.commands(bed_to_base(held, bed))}
+    out = {}
+    for label, q in joints.items():
+        e = tool_error(testbed, q, held)
+        out[label] = {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
     return out
 
 
@@ -168,6 +258,11 @@ def main(seeds=(1, 2, 3)) -> None:
                   f"Klipper RMS {r['klipper']['rms_mm']:.3f} max {r['klipper']['max_mm']:.3f}; workbench RMS "
                   f"{r['workbench']['rms_mm']:.3f} max {r['workbench']['max_mm']:.3f} mm; bed flatness with the mesh "
                   f"RMS {r['bed_flatness']['rms_mm']:.4f} max {r['bed_flatness']['max_mm']:.4f} mm")
+            with tempfile.TemporaryDirectory() as folder:
+                c = compare_with_compensate(seed, gauges, Path(folder))
+            print(f"  through the files: the export read back RMS {c['klipper_export']['rms_mm']:.3f} max "
+                  f"{c['klipper_export']['max_mm']:.3f}; pipeline.compensate RMS {c['compensate']['rms_mm']:.3f} "
+                  f"max {c['compensate']['max_mm']:.3f} mm")
     fig, ax = plt.subplots(figsize=(7, 3.5))
     x = np.arange(len(rows))
     ax.bar(x - 0.2, [r["klipper"]["rms_mm"] for *_, r in rows], 0.4, label="Klipper's DELTA_CALIBRATE fit")

@@ -216,7 +216,7 @@ def test_the_blocks_not_run_are_marked_and_listed():
 
 def test_the_pages_with_transcripts_are_run():
     assert {"README.md", "docs/importer.md", "docs/commands.md", "docs/discovery.md", "docs/poor_pose_sets.md",
-            "docs/compensation.md", "docs/real_data.md"} <= set(RUN_PAGES)
+            "docs/compensation.md", "docs/real_data.md", "docs/klipper.md"} <= set(RUN_PAGES)
 
 
 @pytest.mark.parametrize("page, out, expected", [

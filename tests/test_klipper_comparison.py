@@ -7,6 +7,10 @@ Seed 3 does not meet it yet (measured: (a) workbench 0.337 mm RMS against Klippe
 0.168 against 0.7 x 0.239): the 1 mm rod pair tilts the effector, which neither kinematics holds,
 and the distances (0.036 mm RMS residual against 0.02 declared) then pull the step errors. It is
 marked a strict expected failure, so that it is seen, and fails the suite once it passes.
+
+The export read back by the reference implementation moves the MuJoCo machine's tool where
+pipeline.compensate's commands do, within 1.5x (RMS over 300 held-out points of the volume), through
+the files from a printer.cfg (measured ratios 0.88-0.99 over seeds 1-3, with and without gauges).
 """
 
 import pytest
@@ -36,3 +40,16 @@ def test_never_worse_than_klipper_and_better_with_gauge_heights(seed):
     assert a["workbench"]["rms_mm"] <= a["klipper"]["rms_mm"], a
     b = kc.compare(seed, gauges=True)
     assert b["workbench"]["rms_mm"] <= GAUGED_RATIO * min(a["klipper"]["rms_mm"], b["klipper"]["rms_mm"]), (a, b)
+
+
+#: The issue's bound: the export read back by the reference implementation moves the tool no
+#: further from the targets (RMS over the held-out volume) than this times pipeline.compensate's commands.
+COMPENSATE_RATIO = 1.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("gauges", [False, True])
+def test_the_export_read_back_moves_the_tool_where_compensate_does(seed, gauges, tmp_path):
+    r = kc.compare_with_compensate(seed, gauges, tmp_path)
+    assert r["klipper_export"]["rms_mm"] <= COMPENSATE_RATIO * r["compensate"]["rms_mm"], r
