@@ -729,8 +729,7 @@ def _discovery_heldout(s: dict) -> Heldout:
     return Heldout(basis=s.get("heldout_basis") or "", poses=len(per["rows"]) if per else 0, figures=tuple(rows),
                    per_pose=per_pose, noise_floor_mm=s.get("noise_floor_mm"), crossvalidation=info,
                    session_shifts=shifts,
-                   as_predicted_mm=None if not raw or (raw["before"], raw["after"]) == (before, after)
-                   else (raw["before"], raw["after"]))
+                   as_predicted_mm=None if not raw else (raw["before"], raw["after"]))
 
 
 def _frames(s: dict) -> Frames | None:

@@ -75,7 +75,9 @@ def heldout_block(judgement: HeldoutJudgement) -> dict:
                "what": "closure residual RMS over the joints of each held-out row (1-based data rows), each shifted "
                        "session's shift taken out"}
     return {"heldout_rms_before_mm": g.unshifted_rms_mm, "heldout_rms_after_mm": m.unshifted_rms_mm,
-            "heldout_rms_as_predicted_mm": {"before": g.rms_mm, "after": m.rms_mm},
+            # as predicted, a shifted session's shift left in: said only where a session shifted
+            "heldout_rms_as_predicted_mm": {"before": g.rms_mm, "after": m.rms_mm}
+            if any(s.shifted for s in judgement.shifts.values()) else None,
             "noise_floor_mm": judgement.floor_mm, "after_over_floor": m.unshifted_rms_mm / judgement.floor_mm,
             "heldout_rows": [int(i) for i in held], "per_row": per_row,
             "heldout_folds": [{"kind": k, "rows": n, "geometry_rms_mm": gb, "model_rms_mm": mb}
