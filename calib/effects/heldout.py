@@ -25,6 +25,7 @@ import numpy as np
 
 from ..session_shift import shift_of_residuals
 from ..measurement import compose
+from ..robot import KinematicsError
 from .base import EffectData
 from .granularity import form_key
 from .joint_fit import EffectFit, fit_effects
@@ -122,14 +123,19 @@ def session_shifts(data: EffectData, theta: np.ndarray, residuals: np.ndarray, s
                    candidates: dict) -> dict:
     """``{session: SessionShift}`` of each session in ``candidates`` (``{session: rows}``, indices
     into ``data``, ``residuals`` (len(data), C) the model's closure residuals there), with at
-    least :data:`MIN_SESSION_ROWS` rows: the shift the rows show against the model ``theta``."""
+    least :data:`MIN_SESSION_ROWS` rows: the shift the rows show against the model ``theta`` (a
+    session with a row the model cannot assemble at is left out: its figures say it)."""
     out = {}
     for s, rows in candidates.items():
         if rows.size < MIN_SESSION_ROWS:
             continue
         sub = data.subset(rows)
+        try:
+            mean_error = _mean_position_error(sub, theta)
+        except KinematicsError:  # a row the model cannot assemble at: the session is not tested for a shift
+            continue
         Jz, Jf, W = _shift_jacobians(sub, theta)
-        out[s] = shift_of_residuals(data.robot, residuals[rows], Jz, Jf, W, _mean_position_error(sub, theta))
+        out[s] = shift_of_residuals(data.robot, residuals[rows], Jz, Jf, W, mean_error)
     return out
 
 
