@@ -649,8 +649,9 @@ def _discovery_markdown(r: Report) -> list[str]:
     x, fl, h = r.effects, r.flagged, r.heldout
     rem = x.remaining
     closure = h.figures[0]
-    lines = [f"# {'Explained' if r.verdict.success else 'NOT explained'}", "", r.verdict.words, "",
-             "| what remains | |", "|---|---|",
+    lines = [f"# {'Explained' if r.verdict.success else 'NOT explained'}", "", r.verdict.words, ""]
+    lines += [f"**Shift between sessions**: {w}." for w in h.session_shifts] + [""] * bool(h.session_shifts)
+    lines += ["| what remains | |", "|---|---|",
              f"| model | {model_words([e.name for e in x.effects])} |",
              f"| residual RMS | {_f(rem.rms_mm, '.2f', 1e3)} um (noise floor {_f(rem.noise_floor_mm, '.2f', 1e3)} um) |",
              f"| whitened | {_f(rem.noise_ratio, '.2f')} x the declared noise |",
@@ -693,7 +694,6 @@ def _discovery_markdown(r: Report) -> list[str]:
         within = "contains it; the simpler one named" if a.nested else f"within {a.delta_bic:.1f} BIC"
         lines += ["", f"Cannot tell apart: {a.named} and {a.rival} ({within})."]
     lines += [f"\nNot named: {w}." for w in x.not_named]
-    lines += [f"\nShift between sessions: {w}." for w in (r.heldout.session_shifts if r.heldout else ())]
     if x.resimulation is not None:
         lines += ["", f"MuJoCo re-simulation, position RMS: {x.resimulation.before_um:.2f} -> "
                       f"{x.resimulation.after_um:.2f} um."]
