@@ -98,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "per unit ('mm=2,rad=0.02') and/or by parameter name ('B3.z=0.5'); overrides the sidecar's "
                         "meta.parameter_tolerance. Default: the sidecar's, else learnt from the rows (empirical "
                         "Bayes, calib.evidence)")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing: no progress and no summary (the summary in --summary-json; errors still on stderr)")
     return p
 
 
