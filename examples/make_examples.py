@@ -135,14 +135,17 @@ def two_days_map() -> str:
             f'[sessions.feb12.joints]\nscale = {toml_list(feb12[0])}\nzero = {toml_list(feb12[1])}\n')
 
 
-def write_two_days(folder: Path) -> None:
-    """``grid.csv`` (calibration), ``feb12.csv`` (validation only) and ``map.toml``."""
+def write_two_days(folder: Path, *, n_cal: int = DAYS[0][1], n_val: int = DAYS[1][1],
+                   map_edit=lambda m: m) -> tuple[Path, np.ndarray]:
+    """``grid.csv`` (calibration, ``n_cal`` rows), ``feb12.csv`` (validation only, ``n_val``) and
+    ``map.toml`` (edited by ``map_edit``: tests/test_convert.py's mistakes); returns the map's path
+    and the machine's true geometry (a hexapod with errors up to 1.5 mm, by hand)."""
     folder.mkdir(exist_ok=True)
     robot = default_robot("hexapod")
     rng = np.random.default_rng(37)
     actual = robot.table.nominal + rng.uniform(-1.5, 1.5, robot.n_parameters)  # mm errors, by hand
     header = ["X", "Y", "Z", "QX", "QY", "QZ", "QW"] + [f"rev{i + 1}" for i in range(6)]
-    for name, n, seed in DAYS:
+    for (name, _, seed), n in zip(DAYS, (n_cal, n_val)):
         poses = reachable_poses(robot, n, seed)
         joints = robot.inverse_kinematics(actual, poses)  # the legs the machine really had
         seen = instrument_measurements(robot, poses, CAPTURE_FRAME)
@@ -152,7 +155,8 @@ def write_two_days(folder: Path) -> None:
         rows = [[*((seen[k, :3] - CAPTURE_OFFSET) / MM_PER_M), *Rotation.from_euler("xyz", seen[k, 3:]).as_quat(),
                  *((joints[k] - np.array(zero)) / np.array(scale))] for k in range(n)]
         (folder / f"{name}.csv").write_text(csv_text(header, rows))
-    (folder / "map.toml").write_text(two_days_map())
+    (folder / "map.toml").write_text(map_edit(two_days_map()))
+    return folder / "map.toml", actual
 
 
 #: Example 1's map, as docs/importer.md prints it.

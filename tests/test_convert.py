@@ -585,49 +585,19 @@ def test_bad_sessions_and_channels_name_file_row_and_column(edit, match, tmp_pat
 
 from pipeline.run import run as run_main  # noqa: E402
 
-#: The capture's frame (mm, rad): where the lab's motion capture sits relative to the base.
-CAPTURE_FRAME = np.array([30.0, -20.0, 15.0, 0.01, -0.02, 0.3])
-#: The lab's position offset (mm): its capture reports positions this far from what it sees.
-CAPTURE_OFFSET = np.array([1.5, -2.0, 574.3])
-#: Each day's revolutions-to-mm mapping: (mm per revolution, length at zero revolutions) per leg.
-DAY_MAPPINGS = {"grid": (2.0 + 0.01 * np.arange(6), 180.0 + np.arange(6)),
-                "feb12": (1.01 * (2.0 + 0.01 * np.arange(6)), 181.5 + np.arange(6))}
-LAB_NOISE = SensorNoise(0.01, 1e-4, "normal", 0.0)
+# docs/importer.md's two days: the capture's frame and offset, each day's mapping, the noise, as
+# examples/make_examples.py makes them (one recipe for the page and the tests).
+from examples.make_examples import (CAPTURE_FRAME, DAY_MAPPINGS, LAB_NOISE,  # noqa: E402
+                                    write_two_days)
 
 
 def two_days(tmp_path, *, map_edit=lambda m: m, n_cal: int = 40, n_val: int = 15):
-    """A hexapod with geometry errors up to 1.5 mm, measured on two days in one capture frame:
-    ``grid.csv`` (calibration) and ``feb12.csv`` (validation only), each with its own
-    revolutions-to-mm mapping, positions in metres less :data:`CAPTURE_OFFSET`; the map declares
-    the per-day mappings, the offset, the shared frame, the sets and a tolerance. Returns the
-    map's path and the true geometry."""
-    robot = default_robot("hexapod")
-    rng = np.random.default_rng(37)
-    actual = robot.table.nominal + rng.uniform(-1.5, 1.5, robot.n_parameters)  # built by hand: mm errors
-    files = {}
-    for name, n, seed in (("grid", n_cal, 1), ("feb12", n_val, 2)):
-        poses = reachable_poses(robot, n, seed)
-        joints = robot.inverse_kinematics(actual, poses)  # the legs the machine really had
-        seen = instrument_measurements(robot, poses, CAPTURE_FRAME)
-        seen[:, :3] += rng.normal(0.0, LAB_NOISE.position_mm, (n, 3))
-        seen[:, 3:] += rng.normal(0.0, LAB_NOISE.orientation_rad, (n, 3))
-        scale, zero = DAY_MAPPINGS[name]
-        rows = [[*((seen[k, :3] - CAPTURE_OFFSET) / MM_PER_M), *Rotation.from_euler("xyz", seen[k, 3:]).as_quat(),
-                 *((joints[k] - zero) / scale)] for k in range(n)]
-        files[name] = lab_csv(["X", "Y", "Z", "QX", "QY", "QZ", "QW"] + [f"rev{i + 1}" for i in range(6)], rows)
-        (tmp_path / f"{name}.csv").write_text(files[name])
-    mapping = (f'[robot]\nname = "hexapod"\ntolerance = {{mm = 2.0, rad = 0.02}}\n'
-               f'[noise]\nposition_mm = {LAB_NOISE.position_mm}\norientation_rad = {LAB_NOISE.orientation_rad}\n'
-               'distribution = "normal"\n[time]\nformat = "none"\n'
-               f'[position]\ncolumns = ["X", "Y", "Z"]\nunit = "m"\noffset = {toml_list(CAPTURE_OFFSET)}\n'
-               '[orientation]\nkind = "quaternion"\nscalar = "last"\ncolumns = ["QX", "QY", "QZ", "QW"]\n'
-               f'[joints]\ncolumns = {toml_list([f"rev{i + 1}" for i in range(6)])}\nreading = "revolutions"\n'
-               f'unit = "mm"\nscale = {toml_list(DAY_MAPPINGS["grid"][0])}\nzero = {toml_list(DAY_MAPPINGS["grid"][1])}\n'
-               '[sessions]\nnames = ["grid", "feb12"]\nframe = ["estimate", "grid"]\nset = ["calibration", "validation"]\n'
-               f'[sessions.feb12.joints]\nscale = {toml_list(DAY_MAPPINGS["feb12"][0])}\n'
-               f'zero = {toml_list(DAY_MAPPINGS["feb12"][1])}\n')
-    (tmp_path / "map.toml").write_text(map_edit(mapping))
-    return tmp_path / "map.toml", actual
+    """docs/importer.md's two days (examples/make_examples.py's recipe): a hexapod with geometry
+    errors up to 1.5 mm, measured on two days in one capture frame: ``grid.csv`` (calibration) and
+    ``feb12.csv`` (validation only), each with its own revolutions-to-mm mapping, positions in
+    metres less the capture's offset; the map declares the per-day mappings, the offset, the
+    shared frame, the sets and a tolerance. Returns the map's path and the true geometry."""
+    return write_two_days(tmp_path, n_cal=n_cal, n_val=n_val, map_edit=map_edit)
 
 
 def convert_two_days(tmp_path, out="days"):
