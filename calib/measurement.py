@@ -48,7 +48,7 @@ from .prior import ParameterPrior
 from .robot import KinematicsError, Robot, pose_jacobian_of_joints, pose_jacobian_of_parameters
 from .rotation import euler_from_matrix, rotation_matrix, rotation_matrix_derivatives
 
-__all__ = ["FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETECTION_RAD", "GAUGE_RTOL",
+__all__ = ["compose_frames", "FRAME_MODES", "FRAME_NAMES", "FRAME_DETECTION_FRACTION", "FRAME_DETECTION_RAD", "GAUGE_RTOL",
            "MeasurementSettings", "measurement_settings", "frame_from_dict", "frame_to_dict", "compose",
            "instrument_measurements", "measurement_jacobians", "measurement_units", "measurement_names",
            "target_names", "measurement_residuals", "rigid_registration", "Registration", "register_frame",
@@ -859,7 +859,7 @@ class MeasuredFit:
         so its uncertainty is the data's whatever holds the gauge; ``std`` from the joint covariance
         of the two frames (linearised, central differences)."""
         pair = np.r_[self.frames[session], self.frames[reference]]
-        motion = lambda v: _compose_frames(v[:6], invert_frame(v[6:]))  # noqa: E731
+        motion = lambda v: compose_frames(v[:6], invert_frame(v[6:]))  # noqa: E731
         J = np.zeros((6, 12))
         for j in range(12):
             step = np.zeros(12)
@@ -904,7 +904,7 @@ def _read_only(value, dtype) -> np.ndarray:
     return a
 
 
-def _compose_frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def compose_frames(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(6,) the frame ``a o b`` (``b`` applied first)."""
     Ra = rotation_matrix(a[3:])
     return np.concatenate([Ra @ b[:3] + a[:3], euler_from_matrix(Ra @ rotation_matrix(b[3:]))])

@@ -26,12 +26,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .calibration import Calibration
-from .measurement import compose, measurement_jacobians
+from .measurement import compose, compose_frames, measurement_jacobians
 from .metrics import pose_error_norms
 from .noise import SensorNoise
 from .robot import Robot, pose_jacobian_of_parameters
 from .workspace import reachable_poses
-from .session_shift import SHIFT_MODELS, SessionShift, compose_frames, fit_session_shift, rereferenced_theta
+from .session_shift import SHIFT_MODELS, SessionShift, fit_session_shift, rereferenced_theta
 
 __all__ = ["Rereference", "ErrorFigures", "rereference", "check_same_machine", "held_machine",
            "held_prediction_covariance", "frame_response", "seen_poses", "SEEN_POSES", "held_frame", "frame_words", "noise_floor", "error_figures_of", "rereferenced_calibration",

@@ -28,13 +28,13 @@ from typing import Callable
 
 import numpy as np
 
-from .measurement import compose
+from .measurement import compose, compose_frames, measurement_residuals
 from .noise import SensorNoise
 from .robot import Robot
 
 __all__ = ["SHIFT_MODELS", "JOINT_ZERO_SHIFT_STD", "FRAME_SHIFT_STD", "FRAME_SHIFT_NAMES", "SessionShift",
            "ShiftModel", "fit_session_shift", "shift_of_residuals", "shift_unknown_names", "frame_shift_std",
-           "joint_zero_shift_std", "compose_frames", "rereferenced_theta", "UNDETERMINED_FRACTION"]
+           "joint_zero_shift_std", "rereferenced_theta", "UNDETERMINED_FRACTION"]
 
 #: The models a session's shift is chosen among, simplest first.
 SHIFT_MODELS = ("none", "joint zeros", "instrument frame", "joint zeros and instrument frame")
@@ -69,15 +69,6 @@ def frame_shift_std() -> np.ndarray:
 def shift_unknown_names(robot: Robot) -> tuple[str, ...]:
     """The joint zeros' names (``d_l1`` ...) then :data:`FRAME_SHIFT_NAMES`."""
     return tuple(f"zero.{j}" for j in robot.joint_names) + FRAME_SHIFT_NAMES
-
-
-def compose_frames(a, b) -> np.ndarray:
-    """(6,) the frame ``a o b`` (``b`` applied first), mm and rad."""
-    from .rotation import euler_from_matrix, rotation_matrix
-
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    Ra = rotation_matrix(a[3:])
-    return np.concatenate([Ra @ b[:3] + a[:3], euler_from_matrix(Ra @ rotation_matrix(b[3:]))])
 
 
 def rereferenced_theta(robot: Robot, theta: np.ndarray, zeros: np.ndarray) -> np.ndarray:
@@ -308,13 +299,6 @@ def _prediction_jacobian(robot: Robot, machine: Callable, joints: np.ndarray, fr
     return np.stack(cols, axis=2)
 
 
-def _angle_wrapped(robot: Robot, d: np.ndarray) -> np.ndarray:
-    angle = robot.angle_pose_mask
-    d = d.copy()
-    d[:, angle] = (d[:, angle] + np.pi) % (2 * np.pi) - np.pi
-    return d
-
-
 def fit_session_shift(robot: Robot, machine: Callable, joints, measured, noise: SensorNoise, *, frame=None,
                       prediction_covariance=None, models=SHIFT_MODELS) -> SessionShift:
     """Estimate a session's shift from its rows, the machine held (the module docstring's models,
@@ -339,7 +323,7 @@ def fit_session_shift(robot: Robot, machine: Callable, joints, measured, noise: 
     W = _whitening(robot, noise, prediction_covariance, n)
     prior_std = np.r_[joint_zero_shift_std(robot), frame_shift_std()]
     zero = np.zeros(robot.n_chains + 6)
-    d0 = _angle_wrapped(robot, measured - _predicted(robot, machine, joints, frame, zero))
+    d0 = measurement_residuals(robot, measured, _predicted(robot, machine, joints, frame, zero))
     r0 = np.einsum("nij,nj->ni", W, d0).ravel()
     # Every model linearised about no shift (a shift of millimetres on a machine of hundreds moves
     # the Jacobian by a part in a thousand), the chosen one then iterated to its own maximum.
@@ -347,7 +331,7 @@ def fit_session_shift(robot: Robot, machine: Callable, joints, measured, noise: 
     fitted, chosen = _choose(robot, r0, A0, prior_std, models)
     cols, u = fitted[chosen].columns, fitted[chosen].estimate
     for _ in range(SHIFT_ITERATIONS if cols.size else 0):
-        d = _angle_wrapped(robot, measured - _predicted(robot, machine, joints, frame, u))
+        d = measurement_residuals(robot, measured, _predicted(robot, machine, joints, frame, u))
         A = np.einsum("nij,njk->nik", W, _prediction_jacobian(robot, machine, joints, frame, u)).reshape(r0.size, -1)
         # the residual about the current estimate, expressed about no shift: r + A u
         m = _linear_model(chosen, cols, np.einsum("nij,nj->ni", W, d).ravel() + A @ u, A, prior_std)

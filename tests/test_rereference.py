@@ -24,7 +24,7 @@ from calib.measurement import compose
 from calib.noise import SensorNoise
 from calib.rereference import check_same_machine, held_frame, noise_floor, rereference
 from calib.robots import ROBOTS
-from calib.session_shift import compose_frames
+from calib.measurement import compose_frames
 from calib.workspace import reachable_poses
 from pipeline.formats.recording import Recording, write_recording
 from pipeline.run import main, run

@@ -10,11 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.measurement import compose
+from calib.measurement import compose, compose_frames
 from calib.noise import SensorNoise, chi2_quantile
 from calib.robots import ROBOTS
-from calib.session_shift import (SHIFT_MODELS, compose_frames, fit_session_shift, rereferenced_theta,
-                                 shift_unknown_names)
+from calib.session_shift import SHIFT_MODELS, fit_session_shift, rereferenced_theta, shift_unknown_names
 from calib.workspace import random_poses
 
 #: The instrument's frame as the held machine knows it.

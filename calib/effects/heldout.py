@@ -27,6 +27,7 @@ from ..session_shift import shift_of_residuals
 from ..measurement import compose
 from ..robot import KinematicsError
 from .base import EffectData
+from .session_zeros import session_codes
 from .granularity import form_key
 from .joint_fit import EffectFit, fit_effects
 from .whitening import closure_noise_covariance
@@ -76,7 +77,7 @@ def heldout_folds(t_s: np.ndarray, sessions: np.ndarray, rows: np.ndarray, valid
     n_held = max(1, int(round(random_fraction * rows.size)))
     folds = [HeldoutFold("random", np.sort(rows[order[:n_held]]), np.sort(rows[order[n_held:]]))]
     # contiguous blocks in time, session by session in their order (a session's rows are together)
-    timeline = rows[np.lexsort((t_s[rows], _first_row_order(sessions)[rows]))]
+    timeline = rows[np.lexsort((t_s[rows], session_codes(sessions)[0][rows]))]
     for block in np.array_split(timeline, TIME_BLOCKS):
         if block.size:
             folds.append(HeldoutFold("time block", np.sort(block), np.setdiff1d(rows, block)))
@@ -86,13 +87,6 @@ def heldout_folds(t_s: np.ndarray, sessions: np.ndarray, rows: np.ndarray, valid
             held = rows[sessions[rows] == s]
             folds.append(HeldoutFold("session", held, np.setdiff1d(rows, held)))
     return folds
-
-
-def _first_row_order(sessions: np.ndarray) -> np.ndarray:
-    """(N,) each row's session numbered in the order of the sessions' first rows."""
-    names, first = np.unique(sessions, return_index=True)
-    rank = {n: k for k, n in enumerate(names[np.argsort(first)])}
-    return np.array([rank[s] for s in sessions])
 
 
 def _shift_jacobians(data: EffectData, theta: np.ndarray):
@@ -119,12 +113,22 @@ def _mean_position_error(data: EffectData, theta: np.ndarray) -> np.ndarray:
     return (data.measured - pred)[:, position].mean(axis=0)
 
 
-def session_shifts(data: EffectData, theta: np.ndarray, residuals: np.ndarray, sessions: np.ndarray,
-                   candidates: dict) -> dict:
+def _session_jacobians(data: EffectData, theta: np.ndarray, session, rows: np.ndarray, cache: dict) -> tuple:
+    """:func:`_shift_jacobians` of ``session``'s ``rows`` at ``theta``, made once (``cache``)."""
+    key = (session, theta.tobytes())
+    if key not in cache:
+        cache[key] = _shift_jacobians(data.subset(rows), theta)
+    return cache[key]
+
+
+def session_shifts(data: EffectData, theta: np.ndarray, residuals: np.ndarray, candidates: dict,
+                   cache: dict | None = None) -> dict:
     """``{session: SessionShift}`` of each session in ``candidates`` (``{session: rows}``, indices
     into ``data``, ``residuals`` (len(data), C) the model's closure residuals there), with at
     least :data:`MIN_SESSION_ROWS` rows: the shift the rows show against the model ``theta`` (a
-    session with a row the model cannot assemble at is left out: its figures say it)."""
+    session with a row the model cannot assemble at is left out: its figures say it); ``cache``
+    keeps each session's shift Jacobians for :func:`_unshifted` at the same model."""
+    cache = {} if cache is None else cache
     out = {}
     for s, rows in candidates.items():
         if rows.size < MIN_SESSION_ROWS:
@@ -134,12 +138,13 @@ def session_shifts(data: EffectData, theta: np.ndarray, residuals: np.ndarray, s
             mean_error = _mean_position_error(sub, theta)
         except KinematicsError:  # a row the model cannot assemble at: the session is not tested for a shift
             continue
-        Jz, Jf, W = _shift_jacobians(sub, theta)
+        Jz, Jf, W = _session_jacobians(data, theta, s, rows, cache)
         out[s] = shift_of_residuals(data.robot, residuals[rows], Jz, Jf, W, mean_error)
     return out
 
 
-def _unshifted(data: EffectData, theta: np.ndarray, residuals: np.ndarray, shifts: dict, session_rows: dict) -> np.ndarray:
+def _unshifted(data: EffectData, theta: np.ndarray, residuals: np.ndarray, shifts: dict, session_rows: dict,
+               cache: dict) -> np.ndarray:
     """``residuals`` with each shifted session's shift (of its chosen model, fitted again to these
     residuals) taken out."""
     out = residuals.copy()
@@ -147,8 +152,7 @@ def _unshifted(data: EffectData, theta: np.ndarray, residuals: np.ndarray, shift
         if not shift.shifted:
             continue
         rows = session_rows[s]
-        sub = data.subset(rows)
-        Jz, Jf, W = _shift_jacobians(sub, theta)
+        Jz, Jf, W = _session_jacobians(data, theta, s, rows, cache)
         again = shift_of_residuals(data.robot, residuals[rows], Jz, Jf, W, np.zeros(3), models=(shift.chosen,))
         u = again.best.estimate
         out[rows] = residuals[rows] - np.concatenate([Jz, Jf], axis=2) @ u
@@ -214,8 +218,8 @@ class HeldoutJudgement:
     fit: EffectFit
 
 
-def _figures(data, theta, residuals, shifts, session_rows) -> HeldoutFigures:
-    unshifted = _unshifted(data, theta, residuals, shifts, session_rows)
+def _figures(data, theta, residuals, shifts, session_rows, cache: dict) -> HeldoutFigures:
+    unshifted = _unshifted(data, theta, residuals, shifts, session_rows, cache)
     return HeldoutFigures(float(np.sqrt(np.mean(residuals ** 2))), float(np.sqrt(np.mean(unshifted ** 2))),
                           np.sqrt(np.mean(unshifted ** 2, axis=1)))
 
@@ -236,11 +240,12 @@ class _Fold:
         held_sessions = sessions[fold.held]
         self.session_rows = {s: np.flatnonzero(held_sessions == s) for s in dict.fromkeys(held_sessions.tolist())
                              if s not in trained}
-        self.shifts = session_shifts(self.test, self.geo.theta, r0, held_sessions, self.session_rows) \
+        self.jacobians: dict = {}  # each shifted session's at each model tried
+        self.shifts = session_shifts(self.test, self.geo.theta, r0, self.session_rows, self.jacobians) \
             if shift_sessions else {}
         self.floor = float(np.sqrt(np.mean(np.diagonal(closure_noise_covariance(
             data.robot, data.theta, self.test), axis1=1, axis2=2))))
-        self.geometry = _figures(self.test, self.geo.theta, r0, self.shifts, self.session_rows)
+        self.geometry = _figures(self.test, self.geo.theta, r0, self.shifts, self.session_rows, self.jacobians)
         self.tried: dict = {}
 
     def figures(self, models: tuple, extras: dict) -> tuple[HeldoutFigures, EffectFit] | None:
@@ -257,7 +262,8 @@ class _Fold:
                     ok = bool(np.all(np.isfinite(r)))
                 except (np.linalg.LinAlgError, ValueError):
                     ok = False
-                self.tried[key] = (_figures(self.test, fit.theta, r, self.shifts, self.session_rows), fit) if ok else None
+                got = _figures(self.test, fit.theta, r, self.shifts, self.session_rows, self.jacobians) if ok else None
+                self.tried[key] = None if got is None else (got, fit)
         return self.tried[key]
 
     def worse(self, models: tuple, extras: dict) -> bool | None:
