@@ -128,7 +128,7 @@ def same_pose_rows(robot: Robot, joints, joint_std: float = 0.0) -> np.ndarray:
 def motionless_rows(robot: Robot, joints, joint_std: float = 0.0) -> int | None:
     """The number of rows of ``joints`` (N, C), N >= 2, where every row is at one pose
     (:func:`same_pose_rows`): rows that do not move the machine; None otherwise (worded by
-    :func:`pipeline.formats.verdict_words.no_motion_words`)."""
+    :func:`pipeline.report.verdict_words.no_motion_words`)."""
     n = len(joints)
     if n < 2 or len(same_pose_rows(robot, joints, joint_std)) < n:
         return None

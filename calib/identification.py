@@ -323,7 +323,7 @@ class Misprediction:
 class Verdict:
     """Whether the calibration is a success, and if not its likely cause: a code and typed
     evidence, no sentence (the words, one table per cause, are pipeline's:
-    :mod:`pipeline.formats.verdict_words`).
+    :mod:`pipeline.report.verdict_words`).
 
     Attributes:
         success: the fit converged, its rows fit within the declared noise and the predictions of

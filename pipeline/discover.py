@@ -1,7 +1,7 @@
 """``python -m pipeline.discover --real FILE``: find the physics the geometric model left out.
 
 A thin front end of :func:`pipeline.workflows.discovery.run_discovery` (which says what it does):
-parse the flags, call it, print its report (:func:`pipeline.formats.report_text.terminal_lines`).
+parse the flags, call it, print its report (:func:`pipeline.report.text.terminal_lines`).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 from calib.effects import EFFECTS
 from calib.robots import ROBOTS
 from pipeline.cli import ArgumentParser, cli_main, nonnegative_int
-from pipeline.formats.report import build_report
-from pipeline.formats.report_text import terminal_lines
+from pipeline.report import build_report
+from pipeline.report.text import terminal_lines
 from pipeline.workflows.discovery import DiscoveryReport, DiscoverySettings, run_discovery
 
 __all__ = ["build_parser", "settings_from_args", "run", "main"]

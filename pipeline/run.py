@@ -1,7 +1,7 @@
 """``python -m pipeline.run``: calibrate any registered robot, simulated or from a recording.
 
 Thin: parses the flags, calls :func:`pipeline.workflows.calibration.run_calibration`, prints the
-summary's report (:mod:`pipeline.formats.report_text`).
+summary's report (:mod:`pipeline.report.text`).
 The calibration (and with it MuJoCo and Rerun) is imported when a run starts, not for ``--help``.
 """
 
@@ -19,8 +19,8 @@ from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
 from .cli import ArgumentParser, cli_main, keep_freed_memory
-from .formats.report import build_report
-from .formats.report_text import terminal_lines
+from .report.from_summary import build_report
+from .report.text import terminal_lines
 
 if TYPE_CHECKING:
     from pipeline.workflows.calibration import RunResult, RunSettings
@@ -170,7 +170,7 @@ def _progress(enabled: bool):
 
 def print_summary(s: dict) -> None:
     """The summary (``s``: a run's summary dict) in plain words, for the terminal
-    (:func:`pipeline.formats.report_text.terminal_lines` of its report)."""
+    (:func:`pipeline.report.text.terminal_lines` of its report)."""
     for line in terminal_lines(build_report(s)):
         print(line)
 

@@ -18,7 +18,7 @@ LAYERS = (
     ("commands",),
     ("pipeline.workflows",),
     ("pipeline.deliveries",),
-    ("pipeline.views", "pipeline.simulation"),
+    ("pipeline.views", "pipeline.simulation", "pipeline.report"),
     ("pipeline.formats", "pipeline.execution"),
     ("mjcf",),
     ("calib",),
@@ -118,7 +118,8 @@ def test_the_checks_see_a_planted_upward_import_and_circle(tmp_path):
 
 
 @pytest.mark.parametrize("package", ["pipeline.formats", "pipeline.views", "pipeline.simulation",
-                                     "pipeline.execution", "pipeline.workflows", "pipeline.deliveries"])
+                                     "pipeline.execution", "pipeline.workflows", "pipeline.deliveries",
+                                     "pipeline.report"])
 def test_every_room_exports_what_it_names(package):
     import importlib
 
@@ -182,7 +183,7 @@ def test_the_words_of_a_verdict_load_no_rerun():
     import subprocess
     import sys
 
-    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.formats.report_text; "
+    code = ("import sys, pipeline.workflows.discovery, pipeline.workflows.fleet, pipeline.report.text; "
             "print('rerun' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "False"
@@ -201,8 +202,8 @@ def test_the_report_and_its_words_import_no_rerun_and_no_numpy():
                 names.add((node.module or "").split(".")[0])
         return names
 
-    for module in ("report", "report_text", "verdict_words"):
-        imported = third_party(ROOT / "pipeline" / "formats" / f"{module}.py")
+    for module in ("model", "text", "verdict_words"):
+        imported = third_party(ROOT / "pipeline" / "report" / f"{module}.py")
         assert not imported & {"rerun", "numpy"}, (module, sorted(imported))
     assert "rerun" in third_party(ROOT / "pipeline" / "views" / "run_view.py")  # the check sees an import
 
@@ -221,7 +222,7 @@ def command_lines_worded(source: str) -> list[int]:
 
 def test_calib_words_no_command_line():
     """calib returns causes and typed evidence; the words, command-line advice included, are
-    pipeline's (the verdict's: :mod:`pipeline.formats.verdict_words`). Docstrings and comments may
+    pipeline's (the verdict's: :mod:`pipeline.report.verdict_words`). Docstrings and comments may
     name the commands that use a function."""
     found = {str(path.relative_to(ROOT)): lines for path in (ROOT / "calib").rglob("*.py")
              if (lines := command_lines_worded(path.read_text()))}

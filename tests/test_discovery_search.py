@@ -165,8 +165,8 @@ def test_the_geometry_basis_of_a_tall_jacobian_from_its_information_is_the_svds(
 
 
 def test_the_report_says_when_the_search_ran_on_a_subsample():
-    from pipeline.formats.report import Search
-    from pipeline.formats.report_text import search_words
+    from pipeline.report.model import Search
+    from pipeline.report.text import search_words
 
     assert search_words(None) is None  # every row searched: nothing said
     words = search_words(Search(rows=99893, subsample_rows=10000, threshold=20000,

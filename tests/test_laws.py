@@ -134,7 +134,7 @@ def test_a_term_is_each_joints_own_variable():
 
 def test_the_summary_and_the_report_say_the_proposed_law():
     from pipeline.simulation.scenarios import make_recording
-    from pipeline.formats import build_report, terminal_lines
+    from pipeline.report import build_report, terminal_lines
     from pipeline.workflows.discovery import discover
 
     terms, draw, law = LAWS["scale quadratic in stroke"]
@@ -226,7 +226,7 @@ def test_the_law_is_searched_again_without_the_library_effects_it_makes_redundan
     spread (searched beside it, the law came out with one constant for every joint); searched
     again without the dead band, it has its constant per joint and the dead band is dropped."""
     from pipeline.simulation import law_recording
-    from pipeline.formats import build_report, terminal_lines
+    from pipeline.report import build_report, terminal_lines
     from pipeline.workflows.discovery import discover
 
     s = discover(law_recording("friction proportional to load", 705, robot="delta"), resim=False).summary

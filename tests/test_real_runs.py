@@ -197,7 +197,7 @@ def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
     from types import SimpleNamespace
 
     from calib.identification import Misprediction, Verdict, VerdictEvidence, likely_cause
-    from pipeline.formats.verdict_words import verdict_sentence
+    from pipeline.report.verdict_words import verdict_sentence
 
     inp = SimpleNamespace(where="rec.csv")
     ident = SimpleNamespace(gross=None, result=SimpleNamespace(message="converged"))

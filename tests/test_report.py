@@ -1,4 +1,4 @@
-"""The report a lab keeps (pipeline.formats.report, report_html; --report on pipeline.run and
+"""The report a lab keeps (pipeline.report: model, html; --report on pipeline.run and
 pipeline.discover): the figures in the HTML are the summary's, ISO 9283 figures are those of the
 recording's repeated poses, nothing is fetched from the network, and headless Chromium renders it
 without a console error."""
@@ -213,7 +213,7 @@ def test_an_existing_report_is_not_overwritten(real_run, capsys):
 
 
 def test_every_string_is_escaped(real_run):
-    from pipeline.formats import build_report, render_html
+    from pipeline.report import build_report, render_html
 
     _, _, s = real_run
     hostile = dict(s, warnings=['<script>alert("x")</script>'], scenario="<img src=x onerror=alert(1)>")

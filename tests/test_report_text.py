@@ -1,5 +1,5 @@
 """The terminal summary and the Rerun markdown are two renderings of one report
-(pipeline.formats.report, report_text): every figure a summary holds (the verdict's words, the
+(pipeline.report.model, report_text): every figure a summary holds (the verdict's words, the
 held-out RMS, mean and max before and after, the implausible parameters, the flagged rows, the
 effects' coefficients) appears in both, as the summary dict has it (read from the dict here, not
 from the model); the summary JSON carries the same model.
@@ -14,8 +14,9 @@ from dataclasses import replace
 
 import pytest
 
-from pipeline.formats import build_report, read_recording, report_markdown, terminal_lines, write_recording
-from pipeline.formats.report_text import DISCOVERY_IMPLAUSIBLE_LINES, IMPLAUSIBLE_LINES
+from pipeline.formats import read_recording, write_recording
+from pipeline.report import build_report, report_markdown, terminal_lines
+from pipeline.report.text import DISCOVERY_IMPLAUSIBLE_LINES, IMPLAUSIBLE_LINES
 from pipeline.run import run
 
 #: Declared tolerance the simulated machine's errors (tens of um) exceed many times over.

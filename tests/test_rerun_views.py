@@ -84,7 +84,7 @@ def test_parameter_bars_are_named_identified_beside_injected(robot_run):
 def test_summary_is_markdown_tables_with_short_lines(robot_run):
     from rerun.chunk import RrdReader
 
-    from pipeline.formats import build_report, report_markdown
+    from pipeline.report import build_report, report_markdown
 
     _, rrd, res = robot_run
     chunk = next(c for c in RrdReader(str(rrd)).stream().to_chunks() if str(c.entity_path) == "/summary")

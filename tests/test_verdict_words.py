@@ -18,8 +18,8 @@ from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures, ScalePattern
 from calib.prior import MOVED_BY_DATA, parameter_sources
 from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearch, Misprediction, NoConvergence,
                                   NoInformation, NoMotion, Verdict, VerdictEvidence, likely_cause)
-from pipeline.formats.report_text import IMPLAUSIBLE_LINES
-from pipeline.formats.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
+from pipeline.report.text import IMPLAUSIBLE_LINES
+from pipeline.report.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
 from pipeline.run import print_summary
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 from calib.calibration import Calibration
 from calib.measurement import frame_to_dict
 from calib.robots import ROBOTS
-from pipeline.formats import read_json_file, write_report
+from pipeline.formats import read_json_file
+from pipeline.report import write_report
 
 from .protocol import Delivery, ExportReport, ExportSettings
 

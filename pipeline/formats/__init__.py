@@ -1,7 +1,7 @@
 """File formats: the recording (CSV + JSON sidecar), the checks a recording passes before
-anything is fitted to it, lab exports turned into recordings, command files, the report (its
-model, its words, its HTML), the LinuxCNC files, Klipper's printer.cfg, and safe writing of every output (atomic files,
-sets published together, locks on names).
+anything is fitted to it, lab exports turned into recordings, command files, the LinuxCNC files,
+Klipper's printer.cfg, and safe writing of every output (atomic files, sets published together,
+locks on names). The report is :mod:`pipeline.report`.
 
 The names below are imported from their modules when first used: a command loads the formats
 it reads or writes, not every one (the lab exports' TOML reader, the checks of a measured
@@ -30,9 +30,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
                 "remove_dead_writers_temporaries", "remove_stale_temporaries", "take_back_created_folders",
                 "temporary_file", "writing"),
     "targets": ("Targets", "TargetsError", "read_targets"),
-    "report": ("Report", "build_report", "summary_document", "REPORT_KEY"),
-    "report_text": ("terminal_lines", "report_markdown", "verdict_words", "model_words"),
-    "report_html": ("render_html", "write_report"),
     "recording": ("DEFAULT_SESSION", "FORMAT", "FORMAT_VERSION", "MIN_ROBOT_SIZE_MM", "READABLE_VERSIONS",
                   "SESSION_KEYS", "SESSION_TIMES", "SETS", "SIDECAR_FIELDS", "Recording", "RecordingError",
                   "columns", "frame_session", "read_json_file", "read_recording", "read_sidecar_geometry",

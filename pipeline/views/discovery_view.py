@@ -1,6 +1,6 @@
 """The discovery's Rerun view (rerun-sdk 0.41 API): residuals against time, stroke, the direction
 of the last move and the verdict's quantity, candidate evidence bars named by effect, and the
-report's markdown (:func:`pipeline.formats.report_text.report_markdown`) as its summary panel."""
+report's markdown (:func:`pipeline.report.text.report_markdown`) as its summary panel."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from calib.effects import EFFECTS, EffectData
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.robot import Robot
 from pipeline.formats import Recording
-from pipeline.formats.report import build_report
-from pipeline.formats.report_text import model_words, report_markdown
+from pipeline.report import build_report
+from pipeline.report.text import model_words, report_markdown
 
 from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, chart_view, log_named_bars,
                      log_residual_scatter, save_recording)

@@ -23,7 +23,7 @@ and its own default blueprint, so that files of different tools or robots opened
   values as ``convergence/log10`` on timeline ``iteration``).
 * ``parameters/chart``: named bars, identified (+-2 sigma) beside injected, one scale.
 * ``observability``: see :mod:`pipeline.views.observability`; ``summary``: the run's report as
-  markdown (:func:`pipeline.formats.report_text.report_markdown`, given to :func:`log_calibration_run`).
+  markdown (:func:`pipeline.report.text.report_markdown`, given to :func:`log_calibration_run`).
 
 The charts are drawn with :mod:`pipeline.views.charts`.
 """
@@ -290,7 +290,7 @@ def log_calibration_run(
         history: max dQint (or cost) per iteration.
         heldout_before, heldout_after: (M, D) held-out pose errors (reached - target), or None.
         summary_markdown: text of the summary panel (the run's report as markdown,
-            :func:`pipeline.formats.report_text.report_markdown`).
+            :func:`pipeline.report.text.report_markdown`).
         observability: a :class:`calib.observability.ObservabilityAnalysis` to log, or None.
         flagged: 0-based indices of the calibration poses flagged as outliers.
         history_label: what ``history`` holds.

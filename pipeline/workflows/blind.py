@@ -77,8 +77,8 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.formats.report import build_report
-    from pipeline.formats.report_text import terminal_lines
+    from pipeline.report import build_report
+    from pipeline.report.text import terminal_lines
     from pipeline.workflows.discovery import discover
 
     rep = discover(rec, seed=seed, resim=False, candidates=candidates)

@@ -31,9 +31,10 @@ from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
-from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, build_report, command_columns, command_csv,
-                              output_folder, frame_session, render_html, row_message, session_measurement)
-from pipeline.formats.verdict_words import verdict_sentence
+from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
+                              frame_session, row_message, session_measurement)
+from pipeline.report import build_report, render_html
+from pipeline.report.verdict_words import verdict_sentence
 
 from .options import check_noise_flags
 
@@ -375,7 +376,8 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
     calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
     returns the calibration as written."""
-    from pipeline.formats import calibration_text, recording_source, recording_texts, summary_document
+    from pipeline.formats import calibration_text, recording_source, recording_texts
+    from pipeline.report import summary_document
 
     recording, calibration = made.simulated, made.calibration
     if "summary_json" in targets_out:
@@ -693,7 +695,7 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
         return {}
     from calib.effects.heldout import MIN_SESSION_ROWS  # a recording's run only: the default run loads no discovery
     from calib.session_shift import fit_session_shift
-    from pipeline.formats.report_text import shift_words
+    from pipeline.report.text import shift_words
     robot = rec.robot
     val_rows = rec.rows("validation")
     trained = set(rec.sessions[rec.rows("calibration")].tolist())
@@ -832,7 +834,7 @@ def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray)
 def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
     """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
     recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
-    ``verdict`` (``words``: :func:`pipeline.formats.verdict_words.verdict_sentence`, ``cause``,
+    ``verdict`` (``words``: :func:`pipeline.report.verdict_words.verdict_sentence`, ``cause``,
     ``evidence``)."""
     verdict = outcome.verdict
     return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
@@ -1050,7 +1052,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
              rrd_path: Path) -> None:
     """Write the run's ``.rrd`` (its default layout, the robot's application id)."""
     from calib.observability import analyze_observability
-    from pipeline.formats import report_markdown
+    from pipeline.report import report_markdown
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
     from pipeline.views.run_view import MAX_MACHINE_POSES, drawn_poses
 

@@ -34,13 +34,12 @@ from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from calib.effects.records import EffectRecord, fitted_effects
 from calib.measurement import frame_from_dict
-from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder,
-                              read_json_file, read_recording, recording_checks, recording_source, summary_document,
-                              validity_domain, write_calibration, write_report)
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, validity_domain, write_calibration)
+from pipeline.report import summary_document, write_report
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
-from pipeline.formats.report_text import shift_words, verdict_words
-from pipeline.formats.verdict_words import no_motion_words
+from pipeline.report.text import shift_words, verdict_words
+from pipeline.report.verdict_words import no_motion_words
 
 from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 

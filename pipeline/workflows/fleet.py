@@ -198,7 +198,7 @@ def _discovered(read, summary_path: Path) -> dict:
     the base frame, its gross rows left out)."""
     from numpy.linalg import LinAlgError
 
-    from pipeline.formats.report_text import model_words
+    from pipeline.report.text import model_words
     from pipeline.workflows.discovery import discover
 
     if read is None:

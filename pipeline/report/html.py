@@ -1,6 +1,6 @@
-"""The report (:mod:`pipeline.formats.report`) as one self-contained HTML file: no script, no
+"""The report (:mod:`pipeline.report.model`) as one self-contained HTML file: no script, no
 network, the plots inline SVG drawn here, every string escaped. The sentences are
-:mod:`pipeline.formats.report_text`'s; this module lays them out.
+:mod:`pipeline.report.text`'s; this module lays them out.
 
 Figures are shown in um and urad (the model keeps mm and rad), four significant digits; each
 figure's cell names what it is in a ``data-figure`` attribute (``heldout/position error/after/rms``)
@@ -13,9 +13,10 @@ import html
 import math
 from pathlib import Path
 
-from .outputs import atomic_write
-from .report import Report, build_report
-from .report_text import (DISPLAY_SCALE, determined_by, effect_evidence, effect_notes, figure_label, flagged_words,
+from pipeline.formats.outputs import atomic_write
+from .from_summary import build_report
+from .model import Report
+from .text import (DISPLAY_SCALE, determined_by, effect_evidence, effect_notes, figure_label, flagged_words,
                           heldout_basis, implausible_notes, law_words, machine_facts, no_effect_words, per_pose_label,
                           remaining_words, report_title, tolerance_verdict, verdict_text)
 
@@ -346,7 +347,7 @@ def render_html(report: Report) -> str:
 
 def write_report(source: dict | Report, path: str | Path, *, overwrite: bool = False) -> Path:
     """Write the report of ``source`` (a ``pipeline.run`` / ``pipeline.discover`` summary dict, or a
-    :class:`~pipeline.formats.report.Report`) to ``path`` as HTML, atomically.
+    :class:`~pipeline.report.model.Report`) to ``path`` as HTML, atomically.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is off.

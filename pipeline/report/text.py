@@ -1,10 +1,10 @@
-"""The words of a report (:mod:`pipeline.formats.report`): every sentence a person reads of a
+"""The words of a report (:mod:`pipeline.report.model`): every sentence a person reads of a
 calibration or a discovery is composed here, from the typed model.
 
 - :func:`terminal_lines`: the summary ``python -m pipeline.run`` and ``python -m pipeline.discover``
   print;
 - :func:`report_markdown`: the summary panel of their Rerun files (the views only log it);
-- the phrases the HTML report (:mod:`pipeline.formats.report_html`) lays out: :func:`report_title`,
+- the phrases the HTML report (:mod:`pipeline.report.html`) lays out: :func:`report_title`,
   :func:`verdict_text`, :func:`machine_facts`, :func:`figure_label`, :func:`tolerance_verdict`,
   :func:`determined_by`, :func:`heldout_basis`, :func:`implausible_notes`, :func:`effect_evidence`,
   :func:`effect_notes`, :func:`law_words`, :func:`no_effect_words`, :func:`remaining_words`,
@@ -21,7 +21,7 @@ import math
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .report import Effects, EffectRow, FigureRow, Flagged, Heldout, Law, Noise, ParameterRow, Report, Search
+    from .model import Effects, EffectRow, FigureRow, Flagged, Heldout, Law, Noise, ParameterRow, Report, Search
 
 __all__ = ["terminal_lines", "report_markdown", "verdict_words", "model_words", "report_title", "verdict_text",
            "machine_facts", "noise_words", "figure_label", "per_pose_label", "heldout_basis", "implausible_notes",

@@ -1,0 +1,548 @@
+"""The report of a calibration or a discovery: one typed model of its outcome, built from the
+summary ``python -m pipeline.run`` or ``python -m pipeline.discover`` gives (the dict their
+``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
+the parameters and what determined them, the implausible ones, the held-out figures, the
+instrument frames, the effects found, the flagged rows, the compensation, the warnings, the timing
+and the files written.
+
+The model holds figures, names and the sentences the analysis itself wrote (a verdict, a held-out
+basis, a warning); it composes no words. :mod:`pipeline.report.text` words it (the
+terminal summary, the Rerun markdown, the phrases of the HTML report), :mod:`pipeline.report.html`
+lays it out as one HTML file, and :meth:`Report.to_dict` is its JSON form (the summary JSON's
+``report_model``). Every figure keeps the summary's unit (mm, rad; um where the name says so).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+__all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow", "Parameters", "Suggested",
+           "Determination", "Implausible", "Figures", "FigureRow", "PerPose", "IsoPose", "CrossValidation", "Heldout",
+           "FrameRow", "Frames", "Coefficient", "EffectRow", "Candidate", "Remaining", "GeometryTest", "Alias",
+           "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Search", "Effects",
+           "Flagged", "CompensationTable", "Timing", "Outputs", "REPORT_KEY", "OUTPUT_KEYS"]
+
+#: The key of the report model in a summary JSON (:func:`summary_document`).
+REPORT_KEY = "report_model"
+#: The summary keys of the files a run or a discovery writes, in the order they are listed.
+OUTPUT_KEYS = ("rrd", "csv", "json", "calibration", "mjcf", "summary_json", "report")
+
+
+@dataclass(frozen=True)
+class Noise:
+    """The declared noise: on each position coordinate (mm), each angle (rad), each joint reading
+    (the robot's joint unit); ``distribution`` ``uniform`` (the figures are half-widths) or ``normal``
+    (standard deviations)."""
+
+    position_mm: float
+    orientation_rad: float
+    joint: float
+    distribution: str
+
+
+@dataclass(frozen=True)
+class Source:
+    """The machine and the recording: the robot and what its chains are called, the recording (a
+    file, or the simulated scenario in words), its rows (a discovery's), the declared noise, the seed."""
+
+    robot: str
+    chain_word: str
+    recording: str
+    rows: int | None = None
+    noise: Noise | None = None
+    seed: int | None = None
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The outcome: ``success`` (calibrated / explained; None: not judged, a calibration file alone),
+    the analysis's own words (None: it stated no verdict), the likely cause (a calibration's)."""
+
+    success: bool | None
+    words: str | None
+    cause: str | None = None
+
+
+@dataclass(frozen=True)
+class Fit:
+    """How a calibration's identification ran: method and solver, iterations, whether it converged,
+    the solver's stop message, max dQint per iteration (mm), the condition numbers, the calibration
+    rows and those used, the held-out poses."""
+
+    method: str
+    solver: str | None
+    iterations: int | None
+    converged: bool | None
+    message: str
+    history: tuple[float, ...]
+    condition_numbers: tuple[float, ...]
+    rows: int | None
+    rows_used: int | None
+    heldout_poses: int
+
+
+@dataclass(frozen=True)
+class Truth:
+    """A simulated machine against its injected errors: RMS of identified - injected over the
+    lengths (mm) and the angles (rad), None where there are none; the calibration gain G, percent
+    (mean over the parameters, on the error norm), None when not computed."""
+
+    rms_mm: float | None
+    rms_rad: float | None
+    gain_mean_percent: float | None = None
+    gain_norm_percent: float | None = None
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    """One parameter: identified value and error from nominal (its unit), two standard
+    uncertainties (``two_sigma``, None when unknown), its tolerance (one standard deviation about
+    nominal, None when none is known), what determined it (``source``: ``data``, ``prior``,
+    ``held`` or None) and whether its error is implausible."""
+
+    name: str
+    unit: str
+    value: float | None
+    error: float
+    two_sigma: float | None
+    tolerance: float | None
+    source: str | None
+    implausible: bool
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The identified parameters, the prior they were fitted under (in words, the analysis's), and
+    the combinations the data left to it (each in words)."""
+
+    rows: tuple[ParameterRow, ...]
+    prior: str
+    left_to_prior: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Suggested:
+    """Poses suggested to determine what the data left to the prior: how many, where (words), the file."""
+
+    poses: int
+    what: str
+    path: str
+
+
+@dataclass(frozen=True)
+class Determination:
+    """What a calibration's rows determined: whether a prior was used and which (words), the
+    parameters the data determined and those left to the prior (names), how many free directions
+    the rows determine, the combinations left to the prior (words), suggested poses."""
+
+    prior_used: bool
+    prior: str
+    by_data: tuple[str, ...]
+    by_prior: tuple[str, ...]
+    directions: float | None
+    combinations: tuple[str, ...]
+    suggested: Suggested | None = None
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """Identified errors far beyond their tolerance, one sentence each: a calibration's (``words``);
+    a discovery's with the geometry alone that the effects bring back within tolerance (``words``)
+    and those still implausible with the effects (``with_effects``)."""
+
+    words: tuple[str, ...] = ()
+    with_effects: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Figures:
+    """RMS, mean and max of per-pose error norms (the unit of the row they belong to; None: not given)."""
+
+    rms: float | None
+    mean: float | None
+    max: float | None
+
+    @classmethod
+    def of(cls, block: dict | None) -> "Figures | None":
+        if not block:
+            return None
+        return cls(block.get("rms"), block.get("mean"), block.get("max"))
+
+
+@dataclass(frozen=True)
+class FigureRow:
+    """A quantity before and after (``unit`` the summary's: mm or rad): ``quantity`` ``position``,
+    ``orientation`` (a calibration's pose errors) or ``closure`` (a discovery's closure residual,
+    geometry alone -> with the effects); ``crossvalidated``: the cross-validated prediction error
+    (of the calibration; of the geometry alone for a discovery) rather than held-out poses'."""
+
+    quantity: str
+    unit: str
+    before: Figures | None
+    after: Figures | None
+    crossvalidated: bool = False
+
+
+@dataclass(frozen=True)
+class PerPose:
+    """Per held-out pose (or row) error norms before and after, for a plot (``unit`` mm or rad);
+    ``quantity`` as :class:`FigureRow`'s; ``rows``: their 1-based data rows, None for simulated poses."""
+
+    quantity: str
+    unit: str
+    before: tuple[float, ...]
+    after: tuple[float, ...]
+    rows: tuple[int, ...] | None = None
+
+
+@dataclass(frozen=True)
+class IsoPose:
+    """ISO 9283 figures of one repeated pose, mm: accuracy AP before and after, repeatability RP."""
+
+    rows: tuple[int, ...]
+    repeats: int
+    ap_before: float
+    ap_after: float
+    rp: float
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """A cross-validation: its scheme (``10-fold``, ``leave-one-out``), fits, the model it fitted
+    (a discovery's: words), what it did (the analysis's words)."""
+
+    scheme: str
+    fits: int | None
+    model: str | None
+    message: str
+
+
+@dataclass(frozen=True)
+class Heldout:
+    """Errors on poses the fit did not use: what they are (``basis``, the analysis's words), how
+    many, the figures, the per-pose errors, the ISO 9283 figures of repeated poses (and the
+    standard in words), the noise floor (mm) where known, the cross-validation behind
+    cross-validated figures."""
+
+    basis: str
+    poses: int
+    figures: tuple[FigureRow, ...]
+    per_pose: tuple[PerPose, ...] = ()
+    iso9283: tuple[IsoPose, ...] = ()
+    iso_standard: str = ""
+    noise_floor_mm: float | None = None
+    crossvalidation: CrossValidation | None = None
+    session_shifts: tuple[str, ...] = ()
+    as_predicted_mm: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class FrameRow:
+    """One instrument frame (its session): translation mm, rotation rad, with standard uncertainties."""
+
+    session: str
+    translation_mm: tuple[float, ...]
+    rotation_rad: tuple[float, ...]
+    translation_std_mm: tuple[float, ...] | None
+    rotation_std_rad: tuple[float, ...] | None
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The instrument frames the data were registered in (``sessions``: one per session, else the
+    recording's one frame), and the components the poses left to the geometry (words)."""
+
+    rows: tuple[FrameRow, ...]
+    held: tuple[str, ...] = ()
+    sessions: bool = False
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One fitted coefficient of an effect: value, standard deviation (None: not known), unit."""
+
+    name: str
+    value: float
+    std: float | None
+    unit: str
+
+
+@dataclass(frozen=True)
+class EffectRow:
+    """One effect found: its granularity (``shared``, ``per_chain``), its coefficients, its evidence:
+    the BIC drop when it entered, its Wald test (chi-square, degrees of freedom, p-value), the
+    cross-validated whitened RMS with it alone, whether structure remains (``partial``)."""
+
+    name: str
+    granularity: str
+    coefficients: tuple[Coefficient, ...]
+    delta_bic_when_added: float | None = None
+    wald_chi2: float | None = None
+    dof: int | None = None
+    p_value: float | None = None
+    cv_whitened_rms: float | None = None
+    partial: bool = False
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect's evidence: the BIC drop alone against the geometry, the cross-validated
+    whitened RMS with it alone, whether it was named."""
+
+    name: str
+    delta_bic_vs_none: float | None
+    cv_whitened_rms: float | None
+    named: bool
+
+
+@dataclass(frozen=True)
+class Remaining:
+    """What the model leaves: whether beyond the noise (``present``), the analysis's summary in
+    words, the residual RMS and noise floor (mm), the whitened RMS (x the declared noise), the
+    quantities it follows, the chains it is on (1-based)."""
+
+    present: bool
+    summary: str
+    rms_mm: float | None
+    noise_floor_mm: float | None
+    noise_ratio: float | None
+    follows: tuple[str, ...]
+    chains: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class GeometryTest:
+    """The omnibus chi-square test of the geometry alone against the declared noise."""
+
+    chi2: float
+    dof: int
+    p_value: float
+    alpha: float
+
+
+@dataclass(frozen=True)
+class Alias:
+    """Two candidates the recording cannot tell apart (``named`` fitted): the BIC between them,
+    the correlation of their regressors; ``nested``: ``rival`` contains ``named`` and its extra
+    parameters gain less than ``nested_min_delta_bic``."""
+
+    named: str
+    rival: str
+    delta_bic: float
+    correlation: float | None
+    nested: bool
+    nested_min_delta_bic: float | None = None
+
+
+@dataclass(frozen=True)
+class Unseparated:
+    """An effect the poses cannot separate from the geometry: its form, the first effect combination
+    and the geometric one it acts as (words), how many more combinations, the pose families that
+    would separate it."""
+
+    effect: str
+    form: str
+    combination: str
+    geometry: str
+    more: int
+    separated_by: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class PoseFamily:
+    """A family of poses tried: how many reachable of those tried, how many of the combinations left
+    to the prior it would determine, the effects it separates."""
+
+    family: str
+    reachable: int
+    tried: int
+    determines: int
+    separates: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Separation:
+    """What the poses cannot separate: of the geometry's ``free`` combinations the rows determine
+    ``determined``; those left to the prior (words; the prior's source in words), the effects not
+    separated, the pose families that would separate them."""
+
+    determined: int
+    free: int
+    prior_source: str
+    left_to_prior: tuple[str, ...]
+    unseparated: tuple[Unseparated, ...]
+    families: tuple[PoseFamily, ...]
+
+
+@dataclass(frozen=True)
+class LawConstant:
+    """A proposed law's constant: one value per joint (equal when ``granularity`` is ``shared``),
+    their standard deviations (None: not known), its unit."""
+
+    name: str
+    values: tuple[float, ...]
+    std: tuple[float, ...] | None
+    unit: str
+    granularity: str
+
+
+@dataclass(frozen=True)
+class Law:
+    """A proposed law outside the library: the formula, its constants, the cross-validated residual
+    RMS before and after and the noise floor (mm), whether it explains the recording (else what
+    remains, in words), the library's effects in its model and those it made redundant."""
+
+    formula: str
+    constants: tuple[LawConstant, ...]
+    cv_before_mm: float | None
+    cv_after_mm: float | None
+    noise_floor_mm: float | None
+    explained: bool
+    remaining: str
+    library_effects: tuple[str, ...] = ()
+    library_effects_dropped: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SysId:
+    """The mujoco.sysid re-fit of one MuJoCo parameter: start, value, 95% half-interval, unit."""
+
+    parameter: str
+    start: float
+    value: float
+    interval_95: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class Resimulation:
+    """The MuJoCo machine re-simulated: position RMS before and after (um), the sysid re-fit."""
+
+    before_um: float
+    after_um: float
+    sysid: SysId | None = None
+
+
+@dataclass(frozen=True)
+class Search:
+    """How a discovery searched its nonlinear parameters (a screw's pitch, a warm-up's time
+    constant, a lost count's step time) above ``threshold`` measurements: each grid scanned on a
+    seeded subsample of ``subsample_rows`` of the ``rows`` rows, stratified in time, then confirmed
+    and refined on every row (:meth:`calib.effects.search.LinearisedFit.search`); ``effects`` those
+    searched so."""
+
+    rows: int
+    subsample_rows: int
+    threshold: int
+    effects: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Effects:
+    """What discovery found beyond the geometry: the geometry alone's test and where its mismatch
+    is (words), the effects named, every candidate's evidence, the cross-validated whitened RMS of
+    the geometry alone and of the model chosen, what remains, the aliases, what the poses cannot
+    separate, a proposed law, the MuJoCo re-simulation."""
+
+    effects: tuple[EffectRow, ...]
+    candidates: tuple[Candidate, ...]
+    remaining: Remaining
+    geometry_test: GeometryTest | None = None
+    located: tuple[str, ...] = ()
+    cv_whitened_rms_geometry: float | None = None
+    cv_whitened_rms_chosen: float | None = None
+    aliases: tuple[Alias, ...] = ()
+    separation: Separation | None = None
+    law: Law | None = None
+    resimulation: Resimulation | None = None
+    search: Search | None = None
+    not_named: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Flagged:
+    """Rows flagged (1-based data rows): every one (``rows``), those named gross before any fit
+    (``gross``); whether the outlier test's rows and the gross rows were left out of the fit; the
+    outlier test's verdict (words); the held-out position error after (mm) without and with the
+    flagged rows. A discovery's: the rows that look bad, whether they say the model is wrong, the
+    large residuals kept because their neighbours share them (``(where, rows)``), the rows in all.
+    ``numbering``: how rows are numbered (words)."""
+
+    rows: tuple[int, ...]
+    gross: tuple[int, ...] = ()
+    left_out: bool = False
+    gross_left_out: bool = False
+    outlier_verdict: str | None = None
+    heldout_after_without_mm: float | None = None
+    heldout_after_with_mm: float | None = None
+    bad_rows: tuple[int, ...] = ()
+    model_wrong: bool = False
+    shared: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    total_rows: int | None = None
+    numbering: str | None = None
+
+
+@dataclass(frozen=True)
+class CompensationTable:
+    """Compensated commands for a sequence of targets: what was compensated and what not (why),
+    a table (``columns``, ``rows`` of numbers; the correction columns in the joints' units)."""
+
+    what: str
+    compensated: tuple[str, ...]
+    not_compensated: tuple[tuple[str, str], ...]
+    columns: tuple[str, ...]
+    rows: tuple[tuple[float, ...], ...]
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Wall time of the run (s) and of its stages ``(stage, s)``, in order."""
+
+    total_s: float
+    stages: tuple[tuple[str, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """The files written ``(summary key, path)`` (:data:`OUTPUT_KEYS`); a discovery's kept law:
+    whether ``--law`` asked for it, the file (None: no law proposed, nothing kept)."""
+
+    files: tuple[tuple[str, str], ...] = ()
+    law_asked: bool = False
+    law_kept: str | None = None
+
+
+@dataclass(frozen=True)
+class Report:
+    """One calibration's or discovery's report (``kind``: ``calibration`` or ``discovery``); a
+    section is None where the summary has none of it."""
+
+    kind: str
+    source: Source
+    verdict: Verdict
+    fit: Fit | None
+    truth: Truth | None
+    parameters: Parameters | None
+    determination: Determination | None
+    implausible: Implausible
+    heldout: Heldout | None
+    frames: Frames | None
+    effects: Effects | None
+    flagged: Flagged
+    compensation: CompensationTable | None = None
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+    timing: Timing | None = None
+    outputs: Outputs = field(default_factory=Outputs)
+
+    def to_dict(self) -> dict:
+        """The report as JSON-ready nested dicts and lists (field names as keys)."""
+        return _plain(dataclasses.asdict(self))
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
