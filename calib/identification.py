@@ -58,8 +58,8 @@ from .robot import KinematicsError, Robot, chain_jacobian_factors, pose_jacobian
 from .robust import GrossRowResult, find_gross_rows
 from .validation import as_array
 
-__all__ = ["calibrate", "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
-           "Verdict", "VerdictEvidence", "NoMotion", "NoInformation", "DescriptionPattern", "NoConvergence",
+__all__ = ["calibrate", "calibrate_checked", "checked_arguments", "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
+           "Verdict", "VerdictEvidence", "PredictionCheck", "NoMotion", "NoInformation", "DescriptionPattern", "NoConvergence",
            "GrossSearch", "Misprediction", "SessionSearch", "UnreachableRows", "BASE_FRAME", "INSTRUMENT_FOLDS",
            "SOLVERS", "PRODUCED_BY", "VERDICT_CAUSES", "DIAGNOSED_CAUSES",
            "identify_rows", "gross_row_search", "first_fit", "learn_tolerance", "validation_errors", "instrument_heldout",
@@ -218,6 +218,43 @@ class Identification:
 
 
 @dataclass(frozen=True)
+class PredictionCheck:
+    """Whether the predictions of rows the fit did not use agree with what the fit says they can be
+    (:func:`prediction_check`).
+
+    Attributes:
+        what: the rows predicted: ``"validation rows"`` or ``"cross-validation (<scheme>)"``.
+        agrees: their whitened chi-square is within its limit.
+        ratio: their RMS whitened residual, or None where no row could be predicted.
+        rows: the rows predicted.
+        limit_ratio: the ratio's limit (chi-square at :data:`calib.diagnosis.FIT_ALPHA`); None
+            where no row could be predicted.
+        factored_rows: the base-frame rows whose ``J Sigma J^T`` was taken through the Jacobian's
+            chain factors (above :data:`calib.outliers.STRUCTURED_JACOBIAN_MIN_ROWS`), or None
+            where it was formed densely.
+    """
+
+    what: str
+    agrees: bool
+    ratio: float | None
+    rows: int
+    limit_ratio: float | None = None
+    factored_rows: int | None = None
+
+    def to_dict(self) -> dict:
+        """The figures under the names the summary JSON gives them (``limit_ratio`` where there is
+        one; ``form`` where the factored form ran)."""
+        out = {"what": self.what, "agrees": self.agrees, "ratio": self.ratio}
+        if self.limit_ratio is not None:
+            out["limit_ratio"] = self.limit_ratio
+        out["rows"] = self.rows
+        if self.factored_rows is not None:
+            out["form"] = (f"J Sigma J^T through the Jacobian's chain factors ({self.factored_rows:,} rows > "
+                           f"STRUCTURED_JACOBIAN_MIN_ROWS = {outliers.STRUCTURED_JACOBIAN_MIN_ROWS})")
+        return out
+
+
+@dataclass(frozen=True)
 class VerdictEvidence:
     """The figures every verdict rests on (the summary's ``verdict.evidence``: :meth:`to_dict`).
 
@@ -233,12 +270,13 @@ class VerdictEvidence:
     fit_ratio: float
     fit_limit_ratio: float
     fit_at_noise: bool
-    predictions: dict | None
+    predictions: PredictionCheck | None
 
     def to_dict(self) -> dict:
         """The figures under the names the summary JSON gives them."""
         return {"converged": self.converged, "fit_ratio": self.fit_ratio, "fit_limit_ratio": self.fit_limit_ratio,
-                "fit_at_noise": self.fit_at_noise, "predictions": self.predictions}
+                "fit_at_noise": self.fit_at_noise,
+                "predictions": None if self.predictions is None else self.predictions.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -469,6 +507,14 @@ def calibrate(robot: Robot, joints, measured, noise: SensorNoise, *, measurement
         method=method, solver=solver, weighted=weighted, keep_outliers=keep_outliers,
         search_gross_rows=search_gross_rows, cross_validate=cross_validate, rows=rows, t_s=t_s, where=where,
         geometry_source=geometry_source, seed=seed)
+    return calibrate_checked(data, options, heldout=heldout, diagnosis=diagnosis, assess=assess)
+
+
+def calibrate_checked(data: CalibrationData, options: IdentificationOptions, *, heldout: Callable | None = None,
+                      diagnosis=None, assess: bool = True) -> CalibrationOutcome:
+    """:func:`calibrate`'s back end: trusts its input, ``data`` and ``options`` as
+    :func:`checked_arguments` returns them (``heldout``, ``diagnosis``, ``assess`` as
+    :func:`calibrate` takes them)."""
     warnings: list[str] = []
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -963,7 +1009,7 @@ def crossvalidation_settings(data: CalibrationData, instrument: MeasuredFit):
 # --------------------------------------------------------------------------- verdict
 
 
-def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> dict | None:
+def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> PredictionCheck | None:
     """Whether the predictions of rows the fit did not use agree with what the fit says they can be:
     each row's prediction residual (the validation rows' ``held``, or the cross-validation's)
     whitened by its covariance, the declared noise plus the identified parameters' uncertainty
@@ -972,11 +1018,7 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
 
     Above :data:`calib.outliers.STRUCTURED_JACOBIAN_MIN_ROWS` rows in the base frame ``J Sigma
     J^T`` is taken through the Jacobian's chain factors where the robot's closures give them
-    (:func:`calib.robot.chain_jacobian_factors`; equal to rounding), and ``"form"`` says so.
-
-    Returns:
-        ``{"what", "agrees", "ratio" (RMS whitened residual, or None where no row could be
-        predicted), "limit_ratio", "rows"}`` (and ``"form"`` where the factored form ran).
+    (:func:`calib.robot.chain_jacobian_factors`; equal to rounding), and ``factored_rows`` says so.
     """
     if ident.instrument is not None and ident.instrument.targets is not None:
         return None
@@ -990,7 +1032,7 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
         return None
     ok = np.all(np.isfinite(residuals), axis=1)
     if not ok.any():
-        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
+        return PredictionCheck(what, agrees=False, ratio=None, rows=0)
     joints, poses, residuals = joints[ok], poses[ok], residuals[ok]
     std = data.noise.pose_std(robot.pose_units)
     try:
@@ -1015,16 +1057,12 @@ def prediction_check(data: CalibrationData, ident: Identification, held, cv) -> 
                 joints[~base], sessions=groups[~base] if data.n_sessions > 1 else None)
         cov += np.diag(std ** 2)
     except KinematicsError:
-        return {"what": what, "agrees": False, "ratio": None, "rows": 0}
+        return PredictionCheck(what, agrees=False, ratio=None, rows=0)
     w = np.linalg.solve(np.linalg.cholesky(cov), residuals[:, :, None])[:, :, 0]
     chi2, dof = float(np.sum(w ** 2)), int(w.size)
     limit = chi2_limit(dof)
-    check = {"what": what, "agrees": bool(chi2 <= limit), "ratio": float(np.sqrt(chi2 / dof)),
-             "limit_ratio": float(np.sqrt(limit / dof)), "rows": int(ok.sum())}
-    if factors is not None:
-        check["form"] = (f"J Sigma J^T through the Jacobian's chain factors ({factors.n:,} rows > "
-                         f"STRUCTURED_JACOBIAN_MIN_ROWS = {outliers.STRUCTURED_JACOBIAN_MIN_ROWS})")
-    return check
+    return PredictionCheck(what, agrees=bool(chi2 <= limit), ratio=float(np.sqrt(chi2 / dof)), rows=int(ok.sum()),
+                           limit_ratio=float(np.sqrt(limit / dof)), factored_rows=None if factors is None else factors.n)
 
 
 def verdict_of(data: CalibrationData, ident: Identification, held, cv, diagnosis=None) -> Verdict:
@@ -1038,7 +1076,7 @@ def verdict_of(data: CalibrationData, ident: Identification, held, cv, diagnosis
     dof = max(int(result.dof), 1)
     fit_ok = bool(np.isfinite(result.chi2) and result.chi2 <= chi2_limit(dof))
     check = prediction_check(data, ident, held, cv)
-    success = bool(result.success and fit_ok and (check is None or check["agrees"]))
+    success = bool(result.success and fit_ok and (check is None or check.agrees))
     evidence = VerdictEvidence(converged=bool(result.success), fit_ratio=float(np.sqrt(result.chi2 / dof)),
                                fit_limit_ratio=float(np.sqrt(chi2_limit(dof) / dof)), fit_at_noise=fit_ok,
                                predictions=check)
@@ -1116,10 +1154,10 @@ def likely_cause(data, ident, evidence: VerdictEvidence) -> tuple[str, object]:
         # most rows beyond the noise: the model misfits them; else the search failed for another reason
         return ("gross_search_failed" if 2 * beyond <= search.statistic.size else "model_misfit"), found
     predictions = evidence.predictions
-    if evidence.fit_at_noise and predictions["ratio"] is None:
-        return "unpredictable_rows", Misprediction(what=predictions["what"], ratio=None, where=where)
+    if evidence.fit_at_noise and predictions.ratio is None:
+        return "unpredictable_rows", Misprediction(what=predictions.what, ratio=None, where=where)
     if evidence.fit_at_noise:
-        return "left_out_physics", Misprediction(what=predictions["what"], ratio=predictions["ratio"], where=where)
+        return "left_out_physics", Misprediction(what=predictions.what, ratio=predictions.ratio, where=where)
     return "left_out_physics", Misprediction(what="calibration rows", ratio=evidence.fit_ratio, where=where)
 
 

@@ -78,7 +78,7 @@ def test_the_verdict_is_a_success_and_the_validation_rows_are_predicted_to_the_n
     robot, _, outcome = spoiled
     verdict = outcome.verdict
     assert verdict.success and verdict.cause is None, verdict
-    assert verdict.evidence.predictions["what"] == "validation rows" and verdict.evidence.predictions["agrees"]
+    assert verdict.evidence.predictions.what == "validation rows" and verdict.evidence.predictions.agrees
     before, after = outcome.heldout
     assert before.shape == after.shape == (VALIDATION, robot.pose_dim)
     position = ~robot.angle_pose_mask
@@ -129,7 +129,7 @@ def test_without_validation_rows_the_rows_are_crossvalidated():
     cv = outcome.crossvalidation
     assert cv is not None and outcome.heldout is None
     assert outcome.verdict.success, outcome.verdict
-    assert outcome.verdict.evidence.predictions["what"] == f"cross-validation ({cv.scheme})"
+    assert outcome.verdict.evidence.predictions.what == f"cross-validation ({cv.scheme})"
     # the model exact, a row's prediction error is its noise (sqrt(3) um) and the fold model's (a few %)
     ratio = cv.summary()["crossvalidated_position_error_mm"]["rms"] / (np.sqrt(3) * 1e-3)
     assert 0.8 <= ratio <= 1.3, ratio
@@ -233,11 +233,12 @@ def test_above_the_size_the_prediction_check_takes_the_jacobians_chain_factors(m
     robot, _, q, m, qv, mv = machine("hexapod", seed=4)
     outcome = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv)
     dense = outcome.verdict.evidence.predictions
-    assert "form" not in dense
+    assert dense.factored_rows is None and "form" not in dense.to_dict()
     monkeypatch.setattr(calib.outliers, "STRUCTURED_JACOBIAN_MIN_ROWS", 10)
     fast = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv).verdict.evidence.predictions
-    assert fast["form"] == "J Sigma J^T through the Jacobian's chain factors (20 rows > STRUCTURED_JACOBIAN_MIN_ROWS = 10)"
-    assert fast["agrees"] == dense["agrees"] and fast["rows"] == dense["rows"] == VALIDATION
+    assert fast.to_dict()["form"] == ("J Sigma J^T through the Jacobian's chain factors (20 rows > "
+                                      "STRUCTURED_JACOBIAN_MIN_ROWS = 10)")
+    assert fast.factored_rows == 20 and fast.agrees == dense.agrees and fast.rows == dense.rows == VALIDATION
     result = outcome.result
     J = pose_jacobian_of_parameters(robot, result.theta, qv, mv)
     Jl, Sl = J.astype(np.longdouble), result.covariance.astype(np.longdouble)
@@ -247,4 +248,4 @@ def test_above_the_size_the_prediction_check_takes_the_jacobians_chain_factors(m
     truth = np.sqrt(chi2 / after.size)
     bound = 100 * J.shape[2] * np.finfo(float).eps
     for check in (dense, fast):
-        assert abs(check["ratio"] - truth) <= bound * truth, (check["ratio"], truth, bound)
+        assert abs(check.ratio - truth) <= bound * truth, (check.ratio, truth, bound)

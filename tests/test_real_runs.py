@@ -196,13 +196,13 @@ def test_a_verdict_on_rows_the_model_cannot_reach_names_that_cause():
     all (the identified model cannot reach their joints): said so, not a figure it does not have."""
     from types import SimpleNamespace
 
-    from calib.identification import Misprediction, Verdict, VerdictEvidence, likely_cause
+    from calib.identification import Misprediction, PredictionCheck, Verdict, VerdictEvidence, likely_cause
     from pipeline.report.verdict_words import verdict_sentence
 
     inp = SimpleNamespace(where="rec.csv")
     ident = SimpleNamespace(gross=None, result=SimpleNamespace(message="converged"))
     evidence = VerdictEvidence(converged=True, fit_ratio=0.9, fit_limit_ratio=1.2, fit_at_noise=True,
-                               predictions={"what": "validation rows", "agrees": False, "ratio": None, "rows": 0})
+                               predictions=PredictionCheck("validation rows", agrees=False, ratio=None, rows=0))
     cause, detail = likely_cause(inp, ident, evidence)
     assert cause == "unpredictable_rows" and detail == Misprediction("validation rows", None, "rec.csv")
     assert "cannot predict the validation rows" in verdict_sentence(Verdict(False, cause, evidence, detail))

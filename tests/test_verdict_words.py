@@ -17,7 +17,8 @@ import pytest
 from calib.diagnosis import PLAUSIBLE_TOLERANCES, FitFigures, ScalePattern
 from calib.prior import MOVED_BY_DATA, parameter_sources
 from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearch, Misprediction, NoConvergence,
-                                  NoInformation, NoMotion, Verdict, VerdictEvidence, likely_cause)
+                                  NoInformation, NoMotion, PredictionCheck, Verdict, VerdictEvidence,
+                                  likely_cause)
 from pipeline.report.text import IMPLAUSIBLE_LINES
 from pipeline.report.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
 from pipeline.run import print_summary
@@ -62,7 +63,7 @@ def test_every_cause_calib_returns_has_its_words_and_no_other():
 
 
 EVIDENCE = VerdictEvidence(converged=True, fit_ratio=0.9, fit_limit_ratio=1.2, fit_at_noise=True,
-                           predictions={"what": "validation rows", "agrees": True, "ratio": 1.1, "rows": 5})
+                           predictions=PredictionCheck("validation rows", agrees=True, ratio=1.1, rows=5))
 PATTERN = ScalePattern(group="B", names=("B1.x", "B1.y", "B6.z"), scale=-0.0297, residual=0.2, largest_error=5.69,
                        largest=56.9)
 
