@@ -304,3 +304,20 @@ def test_a_room_of_the_discovery_is_small_and_its_functions_short(room):
                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
     long = [(name, n) for name, n in lengths if n > FUNCTION_LINES]
     assert source.count("\n") <= ROOM_LINES and not long, (source.count("\n"), long)
+
+
+#: The longest function the team keeps, docstring included (lines).
+MAX_FUNCTION_LINES = 80
+
+
+def test_no_function_is_longer_than_the_team_keeps():
+    """A function over :data:`MAX_FUNCTION_LINES` lines (docstring included) in calib, mjcf or
+    pipeline is named with its length: split it along its own steps."""
+    long = []
+    for name, path in sorted(project_modules().items()):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{name}.{node.name}: {lines} lines")
+    assert not long, long
