@@ -21,9 +21,10 @@ from calib.klipper import KLIPPER_PARAMETERS, VOLUME_STEP_MM, fit_klipper, mesh_
 from pipeline.formats import check_export_folder, write_export_folder
 from pipeline.formats.klipper import SAVE_CONFIG_HEADER, SAVE_CONFIG_NOTICE, SAVE_CONFIG_PREFIX, STEPPERS
 
+from .klipper_rotary import rotary_export
 from .protocol import Delivery, ExportReport, ExportSettings
 
-__all__ = ["DELIVERY", "write_klipper", "SAVE_CONFIG_NAME", "KLIPPER_NOTES_NAME", "MESH_COUNT", "MESH_PROFILE"]
+__all__ = ["DELIVERY", "write_klipper", "write_klipper_rotary", "write_klipper_for", "SAVE_CONFIG_NAME", "KLIPPER_NOTES_NAME", "MESH_COUNT", "MESH_PROFILE"]
 
 SAVE_CONFIG_NAME, KLIPPER_NOTES_NAME = "save_config.cfg", "NOTES.md"
 #: The mesh's nodes per axis (Klipper's bicubic interpolation; lagrange stops at 6) and its profile's name.
@@ -145,5 +146,21 @@ def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
                         summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res})
 
 
-DELIVERY = Delivery(name="klipper", robots=("linear_delta",), write=write_klipper,
+def write_klipper_rotary(cal: Calibration, settings: ExportSettings) -> ExportReport:
+    """The rotary Delta's (``delta``) ``save_config.cfg`` and ``NOTES.md`` into ``settings.out``
+    (:mod:`pipeline.deliveries.klipper_rotary`: Klipper's rotary parameters, no bed mesh)."""
+    check_export_folder(settings.out, [SAVE_CONFIG_NAME, KLIPPER_NOTES_NAME], overwrite=settings.overwrite)
+    export = rotary_export(cal, settings)
+    paths = write_export_folder(settings.out, {SAVE_CONFIG_NAME: export.save_config, KLIPPER_NOTES_NAME: export.notes},
+                                overwrite=settings.overwrite)
+    return ExportReport(format="klipper", robot=cal.robot.name, paths={k: str(v) for k, v in paths.items()},
+                        messages=export.messages, summary=export.summary)
+
+
+def write_klipper_for(cal: Calibration, settings: ExportSettings) -> ExportReport:
+    """The export of Klipper's kinematics for ``cal``'s robot: rotary (``delta``) or linear."""
+    return (write_klipper_rotary if cal.robot.name == "delta" else write_klipper)(cal, settings)
+
+
+DELIVERY = Delivery(name="klipper", robots=("linear_delta", "delta"), write=write_klipper_for,
                     refusal="Klipper has no kinematics for the {robot} ({source}); it has for the {robots}")

@@ -29,7 +29,7 @@ from calib.files import read_text_file
 __all__ = ["KlipperError", "KlipperConfig", "KlipperDelta", "KlipperRotaryDelta", "ProbeData", "KlipperPrinter",
            "read_klipper_config", "parse_klipper_text", "read_klipper_printer", "klipper_printer",
            "SAVE_CONFIG_HEADER", "SAVE_CONFIG_PREFIX", "STEPPERS", "LINEAR_ANGLES_DEG", "ROTARY_ANGLES_DEG",
-           "KINEMATICS", "CALIBRATE_SECTION"]
+           "KINEMATICS", "CALIBRATE_SECTION", "save_config_block"]
 
 #: The line that opens Klipper's SAVE_CONFIG block (any number of dashes is accepted).
 SAVE_CONFIG_HEADER = "#*# <---------------------- SAVE_CONFIG ---------------------->"
@@ -53,6 +53,13 @@ FULL_STEPS_MULTIPLE = 4
 #: An index of a ``[delta_calibrate]`` series as Klipper writes it (``%d``: no leading zero).
 INDEX = r"(0|[1-9][0-9]*)"
 REQUIRED = object()
+
+
+def save_config_block(lines: list) -> str:
+    """The SAVE_CONFIG block of the config ``lines`` as Klipper writes it: the header, its notice
+    and every line prefixed (trailing blanks removed)."""
+    block = [f"{SAVE_CONFIG_NOTICE}. The contents are auto-generated.", ""] + list(lines)
+    return "\n".join([SAVE_CONFIG_HEADER] + [f"{SAVE_CONFIG_PREFIX}{line}".rstrip() for line in block]) + "\n"
 
 
 class KlipperError(ValueError):
