@@ -42,7 +42,7 @@ from .robot import KinematicsError
 from .robots.delta import Delta, DeltaParams, canonical_params, forward_kinematics
 from .validation import as_array
 
-__all__ = ["KLIPPER_ROTARY_PARAMETERS", "ROTARY_GRID_STEP_MM", "RotaryProjection", "arm_angles",
+__all__ = ["KLIPPER_ROTARY_PARAMETERS", "ROTARY_GRID_STEP_MM", "RotaryProjection", "arm_angles", "unchecked_arm_angles",
            "absolute_endstop_angles", "klipper_rotary_joints", "klipper_rotary_forward", "delta_params_of_klipper",
            "klipper_of_delta_params", "delta_from_klipper_rotary", "bed_depth", "rotary_volume_grid",
            "rotary_tool_errors", "project_onto_klipper_rotary", "unheld_geometry"]
@@ -62,14 +62,8 @@ def split(kappa) -> tuple:
     return k[0], k[1], k[2:5], k[5:8], k[8:11], k[11:14]
 
 
-def arm_angles(kappa, points) -> np.ndarray:
-    """(N, 3) Klipper's arm angles (rad, up from the horizontal) that put the tool at ``points``
-    (N, 3, Klipper frame, mm): each arm's elbow on the circle of its upper arm meets the sphere of
-    its lower arm about the point, the outer of the two elbows.
-
-    Raises:
-        KinematicsError: a point an arm cannot reach (naming its row and arm).
-    """
+def unchecked_arm_angles(kappa, points) -> np.ndarray:
+    """(N, 3) :func:`arm_angles`, NaN where an arm cannot reach."""
     radius, height, angles, upper, lower, _ = split(kappa)
     p = as_array(points, "points", (-1, 3))
     c, s = np.cos(angles), np.sin(angles)
@@ -80,19 +74,41 @@ def arm_angles(kappa, points) -> np.ndarray:
     distance = np.hypot(radial, up)
     with np.errstate(invalid="ignore", divide="ignore"):
         cosine = (distance ** 2 + upper ** 2 - reach2) / (2.0 * upper * distance)
-    bad = ~(np.abs(cosine) <= 1.0) | ~(reach2 > 0.0)
+        return np.where(reach2 > 0.0, np.arctan2(up, radial) + np.arccos(cosine), np.nan)
+
+
+def arm_angles(kappa, points) -> np.ndarray:
+    """(N, 3) Klipper's arm angles (rad, up from the horizontal) that put the tool at ``points``
+    (N, 3, Klipper frame, mm): each arm's elbow on the circle of its upper arm meets the sphere of
+    its lower arm about the point, the outer of the two elbows.
+
+    Raises:
+        KinematicsError: a point an arm cannot reach (naming its row and arm).
+    """
+    out = unchecked_arm_angles(kappa, points)
+    bad = np.isnan(out)
     if np.any(bad):
         row, arm = np.argwhere(bad)[0]
-        raise KinematicsError(f"point {row}: {p[row].tolist()} is out of reach of arm {'abc'[arm]} "
-                              "under Klipper's parameters", int(row))
-    return np.arctan2(up, radial) + np.arccos(cosine)
+        raise KinematicsError(f"point {row}: {np.asarray(points)[row].tolist()} is out of reach of arm "
+                              f"{'abc'[arm]} under Klipper's parameters", int(row))
+    return out
 
 
 def absolute_endstop_angles(kappa) -> np.ndarray:
     """(3,) each arm's angle at its endstop: the one that puts the tool at ``(0, 0,
-    position_endstop)``."""
+    position_endstop)``.
+
+    Raises:
+        KinematicsError: an endstop height its arm cannot reach at the centre (``index`` the arm).
+    """
     endstops = split(kappa)[5]
-    return np.array([arm_angles(kappa, [[0.0, 0.0, e]])[0, i] for i, e in enumerate(endstops)])
+    out = np.diagonal(unchecked_arm_angles(kappa, np.column_stack([np.zeros((3, 2)), endstops]))).copy()
+    bad = np.flatnonzero(np.isnan(out))
+    if bad.size:
+        i = int(bad[0])
+        raise KinematicsError(f"arm {'abc'[i]}: position_endstop {endstops[i]:g} is out of its reach at the centre "
+                              "under Klipper's parameters", i)
+    return out
 
 
 def klipper_rotary_joints(kappa, points) -> np.ndarray:

@@ -3,7 +3,8 @@ as a recording (``NAME.csv`` + ``NAME.json``), one session per input file.
 
 ``python -m pipeline.convert printer.cfg --klipper --out NAME``: a Klipper linear Delta's
 ``[delta_calibrate]`` probe data as a probe-data file ``NAME.probe.json``
-(:func:`pipeline.workflows.klipper.convert_klipper`; fitted by ``python -m pipeline.probe``).
+(:func:`pipeline.workflows.klipper.convert_klipper`; fitted by ``python -m pipeline.probe``); a
+rotary Delta's config as its Delta robot's description ``NAME.json``.
 
 A thin front end of :func:`pipeline.workflows.convert.run_convert`: the mapping file's keys are
 described in ``docs/importer.md`` (and :mod:`pipeline.formats.lab_export`). A bad map, lab file or
@@ -18,6 +19,7 @@ import sys
 from pipeline.cli import ArgumentParser, cli_main
 from pipeline.workflows.convert import ConvertResult, ConvertSettings, run_convert
 from pipeline.workflows.klipper import KlipperConvertResult, convert_klipper
+from pipeline.workflows.klipper_rotary import RotaryConvertResult
 
 __all__ = ["build_parser", "settings_from_args", "run", "main"]
 
@@ -64,11 +66,17 @@ def run(argv: list[str] | None = None) -> ConvertResult:
     return result
 
 
-def run_klipper(parser, args) -> KlipperConvertResult:
-    """``--klipper``: one printer.cfg to NAME.probe.json; print what was written."""
+def run_klipper(parser, args) -> KlipperConvertResult | RotaryConvertResult:
+    """``--klipper``: one printer.cfg to NAME.probe.json (a rotary Delta's: its robot, NAME.json);
+    print what was written."""
     if len(args.files) != 1 or args.map is not None:
         parser.error("--klipper converts one printer.cfg and takes no --map")
     result = convert_klipper(args.files[0], args.out, overwrite=args.overwrite)
+    if isinstance(result, RotaryConvertResult):
+        for w in result.warnings():
+            print(f"warning: {w}", file=sys.stderr)
+        print(result.line())
+        return result
     print(f"wrote {result.path}: " + ", ".join(f"{v} {k}" for k, v in result.counts.items())
           + " (joints: stable positions x step distances " + ", ".join(f"{v:.6g}" for v in result.step_distances_mm)
           + " mm)")

@@ -31,6 +31,8 @@ from pipeline.formats.klipper import (CALIBRATE_SECTION, STEPPERS, KlipperError,
 from pipeline.formats.outputs import check_outputs, output_folder
 from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, write_probe_file
 
+from .klipper_rotary import RotaryConvertResult, convert_rotary_klipper
+
 __all__ = ["KlipperConvertResult", "ProbeRunResult", "convert_klipper", "fit_probe_file", "probe_output_path"]
 
 OBSERVABILITY_SUFFIX = ".observability.txt"
@@ -60,15 +62,15 @@ def probe_output_path(out: str) -> Path:
     return Path(name if name.endswith(PROBE_SUFFIX) else name + PROBE_SUFFIX)
 
 
-def convert_klipper(config, out: str, *, overwrite: bool = False) -> KlipperConvertResult:
-    """The probe-data file of the printer.cfg ``config`` (module docstring)."""
-    path = probe_output_path(out)
-    check_outputs({"--out": path}, overwrite=overwrite)
+def convert_klipper(config, out: str, *, overwrite: bool = False) -> KlipperConvertResult | RotaryConvertResult:
+    """The probe-data file of the printer.cfg ``config`` (module docstring); of a rotary Delta's
+    config, its Delta robot (:func:`pipeline.workflows.klipper_rotary.convert_rotary_klipper`)."""
     cfg = read_klipper_config(config)
     printer = klipper_printer(cfg)
-    if printer.kinematics != "delta":
-        raise KlipperError(f"{printer.path}: [printer] kinematics: {printer.kinematics}: probe data are converted for "
-                           "the linear Delta (kinematics: delta) only")
+    if printer.kinematics == "rotary_delta":
+        return convert_rotary_klipper(printer, config, out, overwrite=overwrite)
+    path = probe_output_path(out)
+    check_outputs({"--out": path}, overwrite=overwrite)
     probe = printer.probe
     if probe is None or not len(probe.touch_z_mm):
         raise KlipperError(f"{printer.path}: [{CALIBRATE_SECTION}] has no height0/height0_pos: run DELTA_CALIBRATE "
