@@ -213,6 +213,8 @@ class RotaryProjection:
         errors: (N, 3) the tool-point errors left there, mm.
         bed_depth_mm: the Klipper frame's bed below the base frame's origin.
         unheld: :func:`unheld_geometry` of the identified parameters.
+        start_errors: (N, 3) the errors of :func:`klipper_of_delta_params` (the identified
+            parameters read one by one, no fit), mm.
     """
 
     kappa: np.ndarray
@@ -220,6 +222,7 @@ class RotaryProjection:
     errors: np.ndarray
     bed_depth_mm: float
     unheld: dict
+    start_errors: np.ndarray
 
     @property
     def rms_mm(self) -> float:
@@ -228,6 +231,11 @@ class RotaryProjection:
     @property
     def max_mm(self) -> float:
         return float(np.max(np.linalg.norm(self.errors, axis=1)))
+
+    def start_figures(self) -> tuple[float, float]:
+        """``(RMS, max)`` (mm) of :attr:`start_errors`."""
+        n = np.linalg.norm(self.start_errors, axis=1)
+        return float(np.sqrt(np.mean(n ** 2))), float(n.max())
 
     def parameters(self) -> dict:
         """``{name: value}`` of :data:`KLIPPER_ROTARY_PARAMETERS` (mm, rad)."""
@@ -252,4 +260,5 @@ def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=Non
     fit = least_squares(lambda k: rotary_tool_errors(robot, theta, k, depth, targets).ravel(), start,
                         x_scale=scale, diff_step=1e-8, xtol=1e-14, ftol=1e-14, gtol=1e-14)
     return RotaryProjection(kappa=fit.x, targets=targets, errors=rotary_tool_errors(robot, theta, fit.x, depth, targets),
-                            bed_depth_mm=depth, unheld=unheld_geometry(params))
+                            bed_depth_mm=depth, unheld=unheld_geometry(params),
+                            start_errors=rotary_tool_errors(robot, theta, start, depth, targets))

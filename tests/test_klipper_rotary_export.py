@@ -75,10 +75,12 @@ def test_the_block_read_back_by_klippers_formulas_leaves_the_residual_notes_stat
     reached = cal.robot.forward_kinematics(cal.theta, ref.turns_below_endstops(p, targets)) + [0.0, 0.0, depth]
     error = np.linalg.norm(reached - targets, axis=1)
     notes = (d / "out" / "NOTES.md").read_text()
-    rms, worst = map(float, re.search(r"\| ([\d.]+) \| ([\d.]+) \|\n", notes).groups())
+    rms, worst = map(float, re.search(r"\| fitted \(this block\) \| ([\d.]+) \| ([\d.]+) \|\n", notes).groups())
     assert abs(np.sqrt(np.mean(error ** 2)) - rms) < READ_BACK_MM + 5e-5  # NOTES prints 4 decimals
     assert abs(error.max() - worst) < READ_BACK_MM + 5e-5
     assert rms > 10 * READ_BACK_MM  # the shoulder across its plane is not held
+    unfitted = float(re.search(r"\| read off the identified ones one by one \(no fit\) \| ([\d.]+) \|", notes).group(1))
+    assert rms < unfitted  # the fit gives up less than Klipper's parameters read off one by one
 
 
 def test_the_notes_name_what_klipper_cannot_hold(exported):

@@ -10,6 +10,9 @@ bed's frame where the calibration estimated the bed); what remains in z at the b
 block, values ``%.6f``, to append to printer.cfg in place of the old block) and ``NOTES.md`` (the
 projection's residual over the volume with and without the mesh, what Klipper cannot hold, the
 accuracy given up).
+
+A rotary Delta (the ``delta`` robot) goes to :func:`write_klipper_rotary`: Klipper's rotary
+parameters (:mod:`pipeline.deliveries.klipper_rotary`), the same two files, no bed mesh.
 """
 
 from __future__ import annotations

@@ -73,6 +73,7 @@ def rotary_notes_text(cal: Calibration, settings: ExportSettings, projection: Ro
     lo, hi = projection.targets.min(axis=0), projection.targets.max(axis=0)
     box = " x ".join(f"{a:.1f}..{b:.1f}" for a, b in zip(lo, hi))
     unheld = "\n".join(unheld_lines(projection, cal.effects))
+    start = projection.start_figures()
     return f"""# Klipper export of {settings.calibration or 'a calibration made in memory'}
 
 Klipper's rotary Delta holds `shoulder_radius`, `shoulder_height` and per stepper `angle`,
@@ -89,9 +90,10 @@ Klipper's steps count the arms' turn from there.
 
 ## The projection's residual over the volume (mm)
 
-| RMS | max |
-|---|---|
-| {projection.rms_mm:.4f} | {projection.max_mm:.4f} |
+| Klipper's parameters | RMS | max |
+|---|---|---|
+| fitted (this block) | {projection.rms_mm:.4f} | {projection.max_mm:.4f} |
+| read off the identified ones one by one (no fit) | {start[0]:.4f} | {start[1]:.4f} |
 
 ## What Klipper cannot hold (the accuracy given up is the residual above)
 
@@ -106,6 +108,8 @@ def rotary_export(cal: Calibration, settings: ExportSettings) -> RotaryExport:
     message = (f"projection onto Klipper's parameters over {len(projection.targets)} points: RMS "
                f"{projection.rms_mm:.4f} mm, max {projection.max_mm:.4f} mm")
     summary = {"parameters": projection.parameters(), "bed_depth_mm": projection.bed_depth_mm,
-               "residual": {"rms_mm": projection.rms_mm, "max_mm": projection.max_mm}, "unheld": projection.unheld}
+               "residual": {"rms_mm": projection.rms_mm, "max_mm": projection.max_mm},
+               "residual_unfitted": dict(zip(("rms_mm", "max_mm"), projection.start_figures())),
+               "unheld": projection.unheld}
     return RotaryExport(save_config=rotary_save_config_text(projection),
                         notes=rotary_notes_text(cal, settings, projection), messages=[message], summary=summary)
