@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
                                             "one printer.cfg")
     p.add_argument("--map", help="mapping file (TOML, see docs/importer.md); required without --klipper")
     p.add_argument("--klipper", action="store_true", help="the file is a Klipper printer.cfg of a linear Delta: "
-                   "write its [delta_calibrate] probe data as NAME.probe.json (docs/klipper.md)")
+                   "write its [delta_calibrate] probe data as NAME.probe.json; of a rotary Delta: its Delta robot "
+                   "as NAME.json (docs/klipper.md)")
     p.add_argument("--out", required=True, help="recording to write: NAME (or NAME.csv) and its NAME.json")
     p.add_argument("--overwrite", action="store_true", help="allow replacing an existing recording")
     return p

@@ -4,6 +4,7 @@ independent implementation of Klipper's formulas (tests/klipper_rotary_reference
 touches it cannot fit said, a config it cannot hold refused in one line with nothing written."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from pipeline.formats.klipper import read_klipper_config
 from pipeline.workflows.design import load_robot
 from test_klipper_rotary import SAME_FORMULAS, grid_of
 
-FIXTURE = __import__("pathlib").Path(__file__).parent / "data" / "klipper" / "rotary_delta_printer.cfg"
+FIXTURE = Path(__file__).parent / "data" / "klipper" / "rotary_delta_printer.cfg"
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ at least %.6f, read back by pipeline.formats.klipper and moved by the independen
 
 import dataclasses
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from pipeline.export import main as export_main
 from pipeline.formats.klipper import parse_klipper_text, rotary_delta
 from test_klipper_rotary import CONFIGS, HELD_ERROR, grid_of, kappa_of, robot_of
 
-DATA = __import__("pathlib").Path(__file__).parent / "data" / "klipper"
+DATA = Path(__file__).parent / "data" / "klipper"
 #: %.6f rounding of the written parameters moves the tool by ~1e-6 x the arms' lever ratio (~10).
 READ_BACK_MM = 1e-4
 #: A shoulder moved across its arm's plane (mm): what Klipper cannot hold.
