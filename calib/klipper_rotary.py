@@ -42,7 +42,7 @@ from .robot import KinematicsError
 from .robots.delta import Delta, DeltaParams, canonical_params, forward_kinematics
 from .validation import as_array
 
-__all__ = ["KLIPPER_ROTARY_PARAMETERS", "ROTARY_GRID_STEP_MM", "RotaryProjection", "arm_angles", "unchecked_arm_angles",
+__all__ = ["KLIPPER_ROTARY_PARAMETERS", "ROTARY_GRID_STEP_MM", "WORKSPACE_SCALES", "RotaryProjection", "arm_angles", "unchecked_arm_angles",
            "absolute_endstop_angles", "klipper_rotary_joints", "klipper_rotary_forward", "delta_params_of_klipper",
            "klipper_of_delta_params", "delta_from_klipper_rotary", "bed_depth", "rotary_volume_grid",
            "rotary_tool_errors", "project_onto_klipper_rotary", "unheld_geometry"]
@@ -146,26 +146,41 @@ def klipper_of_delta_params(params: DeltaParams, bed_depth_mm: float) -> np.ndar
     return np.concatenate([[radius, height], p.theta, p.Lax, p.Lb, endstops])
 
 
+#: The workspace's scales tried, largest first, until every point of its grid is within the joints' ranges.
+WORKSPACE_SCALES = np.linspace(1.0, 0.1, 10)
+
+
 def delta_from_klipper_rotary(shoulder_radius_mm: float, shoulder_height_mm: float, angles_rad, upper_arms_mm,
                               lower_arms_mm, endstops_mm) -> Delta:
     """The workbench's :class:`Delta` whose nominal geometry is Klipper's rotary Delta (module
-    docstring): base frame at the shoulders, joints the arms' turns below their endstops. Its
-    workspace: the square inscribed in half of Klipper's reach radius (``min(shoulder_radius +
-    upper, lower - shoulder_radius)``), from the bed to half of Klipper's top (the lowest
-    endstop); its home at the centre, halfway up.
+    docstring): base frame at the shoulders, joints the arms' turns below their endstops, each
+    from 0 (the arm does not pass its endstop) to the arm hanging straight down. Its workspace: the
+    square inscribed in half of Klipper's reach radius (``min(shoulder_radius + upper, lower -
+    shoulder_radius)``), from the bed to half of Klipper's top (the lowest endstop), scaled down
+    (:data:`WORKSPACE_SCALES`) until its grid's joints are within their ranges; its home at the
+    centre, halfway up.
 
     Raises:
-        ValueError: an endstop no arm can reach at the centre.
+        KinematicsError: an endstop its arm cannot reach at the centre (``index`` the arm), or no
+            workspace within the joints' ranges.
     """
     kappa = np.concatenate([[shoulder_radius_mm, shoulder_height_mm],
                             as_array(angles_rad, "angles_rad", (3,)), as_array(upper_arms_mm, "upper_arms_mm", (3,)),
                             as_array(lower_arms_mm, "lower_arms_mm", (3,)), as_array(endstops_mm, "endstops_mm", (3,))])
     _, height, _, upper, lower, endstops = split(kappa)
     params = delta_params_of_klipper(kappa, height)
+    ranges = np.column_stack([np.zeros(3), np.pi / 2 - params.alpha])
     half = 0.5 * min(np.min(shoulder_radius_mm + upper), np.min(lower - shoulder_radius_mm)) / np.sqrt(2.0)
     top = 0.5 * float(np.min(endstops))
-    workspace = [[-half, half], [-half, half], [-height, top - height]]
-    return Delta(params, rn_mm=0.0, home_position_mm=[0.0, 0.0, 0.5 * top - height], workspace_mm=workspace)
+    for scale in WORKSPACE_SCALES:
+        box = np.array([[-half, half], [-half, half], [0.0, top]]) * scale
+        turns = -params.alpha - unchecked_arm_angles(kappa, rotary_volume_grid(box[:, 0], box[:, 1], 0.0))
+        if np.all((turns >= ranges[:, 0]) & (turns <= ranges[:, 1])):  # NaN (out of reach) fails too
+            workspace = box - [[0.0, 0.0], [0.0, 0.0], [height, height]]
+            return Delta(params, rn_mm=0.0, home_position_mm=[0.0, 0.0, 0.5 * box[2, 1] - height],
+                         workspace_mm=workspace, joint_ranges=ranges.tolist())
+    raise KinematicsError("no workspace above the bed keeps the arms between their endstops and hanging straight down "
+                          "under Klipper's parameters", 0)
 
 
 def bed_depth(robot: Delta) -> float:

@@ -71,6 +71,9 @@ def test_the_delta_of_a_config_moves_as_klipper_does(name):
                                atol=SAME_FORMULAS * 1e3)
     assert bed_depth(robot) == p.shoulder_height
     assert robot.workspace_bounds()[2, 1] < min(p.endstops) - p.shoulder_height
+    # the arms stay between their endstops and hanging straight down over the workspace
+    assert np.all((turns >= 0.0) & (turns <= robot.joint_ranges[:, 1]))
+    np.testing.assert_allclose(robot.joint_ranges[:, 1], ref.absolute_endstops(p) + np.pi / 2, rtol=0, atol=1e-12)
 
 
 def test_a_point_out_of_reach_is_named():
