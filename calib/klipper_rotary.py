@@ -74,7 +74,8 @@ def unchecked_arm_angles(kappa, points) -> np.ndarray:
     distance = np.hypot(radial, up)
     with np.errstate(invalid="ignore", divide="ignore"):
         cosine = (distance ** 2 + upper ** 2 - reach2) / (2.0 * upper * distance)
-        return np.where(reach2 > 0.0, np.arctan2(up, radial) + np.arccos(cosine), np.nan)
+        outer = np.where(up > 0.0, -1.0, 1.0)  # the elbow farther out: below the shoulder +, above it -
+        return np.where(reach2 > 0.0, np.arctan2(up, radial) + outer * np.arccos(cosine), np.nan)
 
 
 def arm_angles(kappa, points) -> np.ndarray:

@@ -76,6 +76,14 @@ def test_the_delta_of_a_config_moves_as_klipper_does(name):
     np.testing.assert_allclose(robot.joint_ranges[:, 1], ref.absolute_endstops(p) + np.pi / 2, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("name", CONFIGS)
+def test_above_the_shoulders_the_elbow_is_klippers_too(name):
+    p = CONFIGS[name]
+    above = p.shoulder_height + max(p.lower_arms) - min(p.upper_arms) + 20.0  # nearer, the lower arm cannot reach
+    points = np.array([[0.0, 0.0, above], [30.0, -20.0, above]])
+    np.testing.assert_allclose(arm_angles(kappa_of(p), points), ref.arm_angles(p, points), rtol=0, atol=SAME_FORMULAS)
+
+
 def test_a_point_out_of_reach_is_named():
     p = CONFIGS["example"]
     with pytest.raises(KinematicsError, match=r"point 1: .* out of reach of arm"):
