@@ -257,8 +257,8 @@ def judged_discovery(rec: Recording, data: EffectData, disc: Discovery, cal: np.
     for round_ in range(MAX_REDISCOVERIES + 1):
         folds = heldout_folds(rec.t_s, rec.sessions, disc.kept, val, random_fraction=heldout_fraction, seed=seed)
         start = disc.geometry.theta if folds[0].train.size * robot.n_chains > GRAM_MIN_RESIDUALS else None
-        unseparated = {u["form"] for u in disc.separation.get("unseparated", [])} if disc.separation else set()
-        delta_bic = {n: disc.evidence.get(n, {}).get("delta_bic_when_added") for n in disc.effects}
+        unseparated = {u.form for u in disc.separation.unseparated} if disc.separation is not None else set()
+        delta_bic = {n: disc.evidence.delta_bic_when_added(n) for n in disc.effects}
         judgement = judge_effects(data, disc.chosen, folds, rec.sessions, unseparated=unseparated,
                                   delta_bic=delta_bic, start=start)
         if not judgement.rejected:
@@ -294,7 +294,7 @@ def witnessed(rec: Recording, data: EffectData, disc: Discovery, cal: np.ndarray
     if not disc.effects or sim is None or sim["after"]["position_um"] <= sim["before"]["position_um"]:
         return disc, judgement, resimulated
     before, after = 1e-3 * sim["before"]["position_um"], 1e-3 * sim["after"]["position_um"]
-    rejected = tuple(RejectedEffect(n, disc.evidence.get(n, {}).get("delta_bic_when_added"), before, after,
+    rejected = tuple(RejectedEffect(n, disc.evidence.delta_bic_when_added(n), before, after,
                                     "MuJoCo re-simulation", "worse re-simulated") for n in disc.effects)
     geometry = rediscovered(data, disc, cal, [], seed, rec)
     folds = [judgement.fold]
@@ -409,14 +409,15 @@ def discovery_summary(rec: Recording, disc: Discovery, judgement: HeldoutJudgeme
     flagged = list(disc.flagged)
     h = heldout_block(judgement)
     scan = disc.outliers
+    remaining = disc.remaining.to_dict()
     summary = {
         "robot": robot.name,
         "explained": disc.explained,
-        "verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining),
-        "remaining": disc.remaining,
+        "verdict": verdict_words(disc.explained, list(disc.effects), remaining),
+        "remaining": remaining,
         "effects": list(disc.effects),
         "partial": list(disc.partial),
-        "aliases": disc.aliases,
+        "aliases": [a.to_dict() for a in disc.aliases],
         "candidates": [n for n in names if n != "none"],
         "effect_parameters": disc.chosen.parameters(),
         "heldout_rms_before_mm": h["heldout_rms_before_mm"],
@@ -431,26 +432,27 @@ def discovery_summary(rec: Recording, disc: Discovery, judgement: HeldoutJudgeme
                            for s, shift in judgement.shifts.items() if shift.shifted}
         | calibration_session_shifts(rec, disc.chosen),
         "flagged_poses": [i + 1 for i in flagged],
-        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
-                     "model_wrong": bool(scan["model_wrong"]),
-                     "shared": {str(int(disc.kept[int(j)]) + 1): v for j, v in scan["shared"].items()},
-                     "threshold": scan["threshold"], "scale": scan["scale"]},
-        "tests": {"noise": disc.tests["noise"], "structure": disc.tests["structure"]},
-        "evidence": disc.evidence,
+        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan.bad),
+                     "model_wrong": bool(scan.model_wrong),
+                     "shared": {str(int(disc.kept[r.row]) + 1): dict(r.by) for r in scan.shared},
+                     "threshold": scan.threshold, "scale": scan.scale},
+        "tests": disc.tests.to_dict(),
+        "evidence": disc.evidence.to_dict(),
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "identified_std": robot.table.to_dict(np.sqrt(np.clip(np.diag(disc.chosen.geometry_covariance()), 0.0, None))),
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
         "free_parameters": list(robot.free_default),
         "declared_noise": rec.noise.to_dict(),
-        "located": disc.located,
+        "located": disc.located.to_dict(),
         "rows": int(rec.joints.shape[0]),
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
-        "search": disc.search,
+        "search": disc.search.to_dict(),
     }
     summary["implausible_parameters"] = implausibility(rec, disc)
     summary["time"] = "row order" if row_order(rec) else "measured"
     summary["effect_parameters"] = placed_by_row(summary["effect_parameters"], rec, disc.kept, row_order(rec))
-    summary["separation"] = dict(disc.separation, prior_source=tolerance_source) if disc.separation else {}
+    summary["separation"] = {} if disc.separation is None else dict(disc.separation.to_dict(),
+                                                                      prior_source=tolerance_source)
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resimulated is not None:
