@@ -35,7 +35,7 @@ from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, write_calibration)
-from pipeline.report import summary_document, write_report
+from pipeline.report import REPORT_KEY, Report, build_report, write_report
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.report.text import shift_words, verdict_words
@@ -63,6 +63,8 @@ class DiscoveryReport:
         outcome: the discovery policy's outcome (:class:`calib.discovery.DiscoveryOutcome`).
         recording: the recording analysed (as read: poses in the base frame).
         calibration: what the discovery found, as a calibration file holds it.
+        report: the report of it (:class:`pipeline.report.Report`): of the summary so far, and
+            of every file written once :func:`run_discovery` has written them.
     """
 
     discovery: Discovery
@@ -70,6 +72,7 @@ class DiscoveryReport:
     outcome: DiscoveryOutcome | None = None
     recording: Recording | None = None
     calibration: Calibration | None = None
+    report: Report | None = None
 
 
 def heldout_block(judgement: HeldoutJudgement) -> dict:
@@ -322,7 +325,7 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = HELDOUT
     summary["wall_time_s"] = time.perf_counter() - t0
     calibration = outcome.calibration(frames=frames[0], frames_std=frames[1], recording=source or {})
     return DiscoveryReport(discovery=outcome.discovery, summary=summary, outcome=outcome, recording=rec,
-                           calibration=calibration)
+                           calibration=calibration, report=build_report(summary))
 
 
 def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_source: str,
@@ -670,11 +673,12 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if settings.report is not None:
         report.summary["report"] = str(settings.report)
         report.summary["compensation"] = compensation_table(rec, cal, report.summary)
+    report.report = build_report(report.summary)  # every file named: the report of the whole discovery
     if settings.summary_json is not None:
-        atomic_write(settings.summary_json, json.dumps(summary_document(report.summary), indent=1),
-                     overwrite=settings.overwrite)
+        atomic_write(settings.summary_json, json.dumps({**report.summary, REPORT_KEY: report.report.to_dict()},
+                                                       indent=1), overwrite=settings.overwrite)
     if settings.report is not None:
-        write_report(report.summary, settings.report, overwrite=settings.overwrite)
+        write_report(report.report, settings.report, overwrite=settings.overwrite)
     return report
 
 
