@@ -214,17 +214,18 @@ def discover_machine(rows: DiscoveryRows, *, tolerance: ParameterPrior, seed: in
     if np.unique(codes[cal]).size > 1:  # rows of several sessions analysed: each later one may have re-homed
         candidates = list(candidates) + [session_zeros_effect(session_names)]
     disc = rediscovered(data, rows, cal, candidates, seed)
-    outcome = DiscoveryOutcome(disc, None, "", rows, data, cal, val, analysed_all, tuple(candidates), names, seed)
-    return judged(outcome, heldout_fraction)
+    disc, judgement, started = judged(data, rows, disc, cal, val, tuple(candidates), seed, heldout_fraction)
+    basis = heldout_basis(rows, disc, val, analysed_all, heldout_fraction, seed, started)
+    return DiscoveryOutcome(disc, judgement, basis, rows, data, cal, val, analysed_all, tuple(candidates), names, seed)
 
 
-def judged(outcome: DiscoveryOutcome, heldout_fraction: float) -> DiscoveryOutcome:
-    """``outcome`` judged by held-out rows (:func:`calib.effects.heldout.judge_effects`: the
-    validation rows, or folds at random, in blocks of time and by session); where the held-out
-    rows reject an effect (or the separability screen set it aside), the discovery is run again
-    without it, and judged again; then the proposed law (:func:`judged_law`)."""
-    rec, data, disc, seed = outcome.rows, outcome.data, outcome.discovery, outcome.seed
-    val = outcome.validation
+def judged(data: EffectData, rec: DiscoveryRows, disc: Discovery, cal: np.ndarray, val: np.ndarray, candidates: tuple,
+           seed: int, heldout_fraction: float) -> tuple[Discovery, HeldoutJudgement, bool]:
+    """``(discovery, judgement, whether the training fits started from every row's geometry)``:
+    ``disc`` (on the rows ``cal``) judged by held-out rows (:func:`calib.effects.heldout.judge_effects`:
+    the validation rows ``val``, or folds at random, in blocks of time and by session); where the
+    held-out rows reject an effect (or the separability screen set it aside), the discovery is run
+    again without it (of ``candidates``), and judged again; then the proposed law (:func:`judged_law`)."""
     rejected: list = []
     for round_ in range(MAX_REDISCOVERIES + 1):
         folds = heldout_folds(rec.t_s, rec.sessions, disc.kept, val, random_fraction=heldout_fraction, seed=seed)
@@ -239,22 +240,23 @@ def judged(outcome: DiscoveryOutcome, heldout_fraction: float) -> DiscoveryOutco
         out = {r.name for r in rejected}
         # the last round: the geometry alone, which the held-out rows cannot reject
         narrowed = [] if round_ == MAX_REDISCOVERIES - 1 else \
-            [c for c in outcome.candidates if registered_effect(c).name not in out]
-        disc = outcome.rediscovered(narrowed)
+            [c for c in candidates if registered_effect(c).name not in out]
+        disc = rediscovered(data, rec, cal, narrowed, seed)
     judgement = replace(judgement, rejected=tuple(rejected))
     judgement, disc = judged_law(data, disc, judgement, folds, rec.sessions, start)
-    return replace(outcome, discovery=disc, judgement=judgement,
-                   basis=heldout_basis(outcome, disc, heldout_fraction, start is not None))
+    return disc, judgement, start is not None
 
 
-def heldout_basis(outcome: DiscoveryOutcome, disc: Discovery, heldout_fraction: float, started: bool) -> str:
-    """The held-out rows of ``outcome`` in words (the summary's ``heldout_basis``)."""
-    rec, seed = outcome.rows, outcome.seed
-    basis = "recorded validation rows" if outcome.validation.size else (
+def heldout_basis(rec: DiscoveryRows, disc: Discovery, val: np.ndarray, analysed_all: bool, heldout_fraction: float,
+                  seed: int, started: bool) -> str:
+    """The held-out rows in words (the summary's ``heldout_basis``): the validation rows ``val``, or
+    the folds (the share held out at random, the blocks of time, the sessions of ``disc``'s rows);
+    every row analysed; the training fits started from every row's geometry (``started``)."""
+    basis = "recorded validation rows" if val.size else (
         f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed}) for the figures; every "
         f"effect also judged on {TIME_BLOCKS} contiguous blocks in time"
         + (" and session by session" if len(set(rec.sessions[disc.kept].tolist())) > 1 else ""))
-    if outcome.analysed_all:
+    if analysed_all:
         basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
                   f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
     if started:
