@@ -49,7 +49,7 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             discover(rec, resim=False)
             t_all.append(time.perf_counter() - t0)
-        forms = ", ".join(f"{k}: {v}" for k, v in d.evidence["granularity"].items()) or "-"
+        forms = ", ".join(f"{k}: {v}" for k, v in d.evidence.granularity) or "-"
         print(f"| {robot} | {' + '.join(effects) or 'none'} | {' + '.join(d.effects) or 'none'} | {forms} | "
               f"{d.explained} | {np.min(t_core):.2f} | {np.min(t_shared):.2f} | "
               f"{np.min(t_core) / np.min(t_shared):.2f} | {np.min(t_all):.2f} |")

@@ -5,8 +5,8 @@
 On the 100-pose level grid of the re-homed twin (tests/rehomed_twin.py, day 1 alone: no validation
 rows, so every effect is judged on folds at random, in four blocks of time), best of ``--repeat``
 in process time: ``choice`` the calibration rows' choice (:func:`calib.effects.discovery.discover_effects`)
-and ``judged`` the same followed by the judgement
-(:func:`pipeline.workflows.discovery.judged_discovery`); printed with their ratio, measured in one
+and ``judged`` the same followed by the judgement (the discovery policy,
+:func:`calib.discovery.discover_machine`, on the same rows); printed with their ratio, measured in one
 run. Also the same on both days (day 2 as validation rows: one fold, the shift by session).
 """
 
@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from calib.effects import EffectData, discover_effects, effects_for  # noqa: E402
+from calib.discovery import DiscoveryRows, discover_machine  # noqa: E402
+from calib.effects import EffectData, discover_effects  # noqa: E402
 from pipeline.workflows.calibration import machine_tolerance  # noqa: E402
-from pipeline.workflows.discovery import judged_discovery  # noqa: E402
 from calib.measurement import compose, invert_frame  # noqa: E402
 from tests.rehomed_twin import CAPTURE_FRAME, GRID_ROWS, rehomed_twin  # noqa: E402
 
@@ -35,16 +35,19 @@ def timed(rec, rows, val, repeat: int) -> tuple[float, float]:
     robot = rec.robot
     tolerance, _ = machine_tolerance(robot, rec.meta, "sidecar")
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise, tolerance=tolerance.std)
+    sets = np.full(len(rec.sets), "calibration")
+    sets[val] = "validation"
+    rest = np.setdiff1d(np.arange(len(sets)), np.union1d(rows, val))  # neither analysed nor held out
+    taken = DiscoveryRows(robot, rec.joints, rec.measured, rec.t_s, rec.noise, sets, rec.sessions, rec.extras)
     choice, judged = [], []
     for _ in range(repeat):
         t0 = time.process_time()
-        disc = discover_effects(data.subset(rows), seed=0)
+        discover_effects(data.subset(rows), seed=0)
         t1 = time.process_time()
-        judged_discovery(rec, data, disc, rows, val, heldout_fraction=0.25, seed=0, analysed_all=False,
-                         candidates=effects_for(robot))
+        discover_machine(taken, tolerance=tolerance, seed=0, exclude=rest)
         t2 = time.process_time()
         choice.append(t1 - t0)
-        judged.append(t2 - t0)
+        judged.append(t2 - t1)
     return min(choice), min(judged)
 
 

@@ -12,7 +12,6 @@ from pathlib import Path
 from calib.effects import EFFECTS
 from calib.robots import ROBOTS
 from pipeline.cli import ArgumentParser, cli_main, nonnegative_int
-from pipeline.report import build_report
 from pipeline.report.text import terminal_lines
 from pipeline.workflows.discovery import DiscoveryReport, DiscoverySettings, run_discovery
 
@@ -84,7 +83,7 @@ def settings_from_args(args: argparse.Namespace) -> DiscoverySettings:
 def run(argv: list[str] | None = None) -> DiscoveryReport:
     """Parse ``argv``, run the discovery, print the report; raises on bad input (see :func:`main`)."""
     report = run_discovery(settings_from_args(build_parser().parse_args(argv)))
-    for line in terminal_lines(build_report(report.summary)):
+    for line in terminal_lines(report.report):
         print(line)
     return report
 

@@ -12,6 +12,7 @@ import pytest
 from calib.effects import EFFECTS, EffectData, discover_effects
 from calib.effects.discovery import SEARCH_ROWS_MAX, search_subsample
 from calib.effects.lost_count import JointStep
+from calib.effects.search import SearchForm
 from calib.noise import SensorNoise
 from calib.robots import default_robot
 
@@ -50,10 +51,9 @@ def both(data: EffectData, effect: str):
 def test_a_refined_searched_value_is_found_on_the_subsample_as_on_every_row(effect, coef, truth):
     data = recording(effect, coef, truth)
     full, sub = both(data, effect)
-    assert full.search == {"form": "every row"}
-    assert sub.search == {"form": "subsample", "rows": ROWS, "subsample_rows": SUBSAMPLE, "threshold": THRESHOLD,
-                          "effects": [effect]}
-    assert full.effects == sub.effects == (effect,) and sub.explained, sub.remaining["summary"]
+    assert full.search == SearchForm("every row")
+    assert sub.search == SearchForm("subsample", ROWS, SUBSAMPLE, THRESHOLD, (effect,))
+    assert full.effects == sub.effects == (effect,) and sub.explained, sub.remaining.summary
     eff = EFFECTS[effect]
     grid = eff.search_grid(data)
     step = float(np.diff(grid).mean())
@@ -70,7 +70,7 @@ def test_a_step_time_is_found_on_the_subsample_as_on_every_row():
     truth = JointStep(4, float((t[611] + t[612]) / 2))
     data = recording("lost_count", [0.004], truth)
     full, sub = both(data, "lost_count")
-    assert sub.search["form"] == "subsample" and sub.search["effects"] == ["lost_count"]
+    assert sub.search.form == "subsample" and sub.search.effects == ("lost_count",)
     # Not refined: the step lies between two measurements, and every row's window around the
     # subsample's best finds the very step every row's search finds, the one made.
     assert full.chosen.extra == sub.chosen.extra == truth
@@ -85,7 +85,7 @@ def test_below_the_threshold_the_search_is_that_on_every_row():
     at = discover_effects(data, candidates=["periodic_screw_error"], laws=False, search_rows_max=ROWS,
                           search_subsample_rows=SUBSAMPLE)
     assert ROWS < SEARCH_ROWS_MAX
-    assert default.search == at.search == {"form": "every row"}
+    assert default.search == at.search == SearchForm("every row")
     assert at.chosen.extras == default.chosen.extras
     assert at.chosen.chi2 == default.chosen.chi2
     np.testing.assert_array_equal(at.chosen.coefficients, default.chosen.coefficients)
@@ -112,9 +112,10 @@ def test_the_blocked_crossvalidation_above_the_threshold_is_the_closed_form_one(
     data = recording("lost_count", [0.004], JointStep(2, float((t[300] + t[301]) / 2)))
     full, sub = both(data, "lost_count")
     assert sub.chosen.extra == full.chosen.extra
-    for key in ("none", "lost_count"):
-        assert sub.evidence[key]["cv_whitened_rms"] == pytest.approx(full.evidence[key]["cv_whitened_rms"], rel=1e-9)
-    assert sub.evidence["cv_whitened_rms_chosen"] == pytest.approx(full.evidence["cv_whitened_rms_chosen"], rel=1e-9)
+    assert sub.evidence.geometry.cv_whitened_rms == pytest.approx(full.evidence.geometry.cv_whitened_rms, rel=1e-9)
+    assert sub.evidence.of("lost_count").cv_whitened_rms == pytest.approx(full.evidence.of("lost_count").cv_whitened_rms,
+                                                                          rel=1e-9)
+    assert sub.evidence.cv_whitened_rms_chosen == pytest.approx(full.evidence.cv_whitened_rms_chosen, rel=1e-9)
 
 
 #: The discovery's rooms that read calib.effects.separability.GRAM_MIN_RESIDUALS (each holds the
@@ -210,11 +211,12 @@ def test_the_remainder_tests_in_the_gram_form_are_the_svds(monkeypatch):
     lower_the_gram_threshold(monkeypatch)
     monkeypatch.setattr(base, "GRAM_MIN_RESIDUALS", 0)
     gram = remainder_tests(data, fit_effects(data, ["periodic_screw_error"], extras={"periodic_screw_error": 7.3}))
-    assert gram["explained"] == svd["explained"]
-    for q, v in svd["structure"].items():
+    assert gram.explained == svd.explained
+    for v in svd.structure:
+        g = gram.quantity(v.quantity)
         for key in ("p_value_proportional", "p_value_common_smooth", "p_value"):
-            assert gram["structure"][q][key] == pytest.approx(v[key], rel=1e-6, abs=1e-12), (q, key)
-        np.testing.assert_allclose(gram["structure"][q]["t_per_chain"], v["t_per_chain"], rtol=1e-6, atol=1e-9)
+            assert getattr(g, key) == pytest.approx(getattr(v, key), rel=1e-6, abs=1e-12), (v.quantity, key)
+        np.testing.assert_allclose(g.t_per_chain, v.t_per_chain, rtol=1e-6, atol=1e-9)
 
 
 def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square(monkeypatch):
@@ -232,7 +234,7 @@ def test_a_step_times_window_updated_row_by_row_is_every_rows_chi_square(monkeyp
     updated = discover_effects(data, **kw)
     monkeypatch.setattr(search_mod, "SEARCH_UPDATE_ROWS", -1)
     full = discover_effects(data, **kw)
-    assert updated.search["form"] == full.search["form"] == "subsample"
+    assert updated.search.form == full.search.form == "subsample"
     assert updated.chosen.extras == full.chosen.extras
     assert updated.chosen.extra == truth
     assert updated.chosen.chi2 == full.chosen.chi2

@@ -282,9 +282,9 @@ def test_discovery_names_the_synthetic_effect(robot_name, effect, coef):
     d = discover_effect(synthetic(robot_name, effect, coef, seed=4, noise=NOISE))
     assert d.effect == effect
     assert d.effects == (() if effect == "none" else (effect,))
-    assert d.explained and not d.remaining["present"]
+    assert d.explained and not d.remaining.present
     assert d.flagged == ()
-    assert set(effects_for(default_robot(robot_name))) <= set(d.evidence)
+    assert set(effects_for(default_robot(robot_name))) <= set(d.evidence.forms)
 
 
 @pytest.mark.parametrize("robot_name", ["hexapod", "delta"])
@@ -298,14 +298,14 @@ def test_a_gross_row_is_flagged_not_explained(robot_name):
 
 def test_located_mismatch_points_at_time_for_a_drift():
     d = discover_effect(synthetic("hexapod", "thermal_drift", [1e-4], seed=6, noise=NOISE))
-    assert d.located["time_correlation"] > 0.5
-    assert abs(d.located["direction_contrast_se"]) < 4
+    assert d.located.time_correlation > 0.5
+    assert abs(d.located.direction_contrast_se) < 4
 
 
 def test_located_mismatch_points_at_the_direction_of_motion_for_friction_on_the_delta():
     d = discover_effect(synthetic("delta", "joint_friction", [1e-5], seed=6, noise=NOISE))
-    assert abs(d.located["direction_contrast_se"]) > 4
-    assert set(d.located["task_space_rms_per_dof"]) == {"x", "y", "z"}
+    assert abs(d.located.direction_contrast_se) > 4
+    assert d.located.pose_names == ("x", "y", "z") and d.located.task_space_rms_per_dof.shape == (3,)
 
 
 @pytest.mark.parametrize("kw,match", [
@@ -389,11 +389,11 @@ def test_two_effects_at_once_are_both_named_with_units_and_uncertainties():
 
 def test_an_effect_left_out_of_the_candidates_is_said_to_be_unknown_and_what_it_follows():
     d = discover_effects(two_effects(), candidates=("compliance", "joint_friction", "actuator_scale"))
-    assert not d.explained and d.remaining["present"]
-    assert d.remaining["follows"][0] == "time"
+    assert not d.explained and d.remaining.present
+    assert d.remaining.follows[0] == "time"
     assert "thermal_drift" not in d.effects and d.partial == d.effects
-    assert "following time" in d.remaining["summary"]
-    assert d.remaining["pose_drift"] == []  # growing legs, not a drifting pose: said in joint space
+    assert "following time" in d.remaining.summary
+    assert d.remaining.pose_drift == ()  # growing legs, not a drifting pose: said in joint space
     assert d.flagged == ()  # the rows that carry the drift are evidence, not outliers
 
 
@@ -404,18 +404,18 @@ def test_a_frame_drift_left_out_is_not_explained_by_growing_legs_and_is_said_to_
     d = discover_effects(synthetic("hexapod", "instrument_drift", [0, 0, 1e-4], seed=0, noise=NOISE),
                          candidates=("thermal_drift",))
     assert d.effects == ("thermal_drift",) and not d.explained
-    assert d.remaining["follows"][0] == "time" and d.remaining["pose_drift"] == ["z"]
-    time = d.tests["structure"]["time"]
-    assert time["p_value_pose_drift"] < time["p_value_proportional"]
-    assert "the measured pose drifts with time, alike at every pose: z" in d.remaining["summary"]
+    assert d.remaining.follows[0] == "time" and d.remaining.pose_drift == ("z",)
+    time = d.tests.quantity("time")
+    assert time.p_value_pose_drift < time.p_value_proportional
+    assert "the measured pose drifts with time, alike at every pose: z" in d.remaining.summary
 
 
 def test_noise_larger_than_declared_is_not_explained_and_names_nothing_insignificant():
     data = synthetic("hexapod", "none", [], seed=12, n=80)
     big = data.with_measured(data.measured + SensorNoise(0.01, 1e-5, "normal").sample(80, 3, data.robot.pose_units))
     d = discover_effects(big)
-    assert not d.explained and not d.tests["noise"]["consistent"]
-    assert d.remaining["follows"] == []  # white: it follows nothing
+    assert not d.explained and not d.tests.noise.consistent
+    assert d.remaining.follows == ()  # white: it follows nothing
     for name in d.effects:
         assert d.chosen.significance(name)["p_value"] < 1e-3
     assert d.flagged == ()  # gross means gross against the remainder's own spread
@@ -542,7 +542,7 @@ def test_a_trend_every_chain_shares_is_no_lost_count():
     stand in for it, and the remainder says what is left follows time."""
     data = synthetic("hexapod", "thermal_warmup", [3e-4], seed=12, extra=15.0, noise=NOISE)
     d = discover_effects(data, candidates=[e for e in effects_for(data.robot) if e not in effect_family("thermal_warmup")])
-    assert not d.explained and d.remaining["follows"][0] == "time", d.remaining["summary"]
+    assert not d.explained and d.remaining.follows[0] == "time", d.remaining.summary
 
 
 def test_thermal_warmup_is_named_with_its_rate_and_time_constant_on_noisy_data():
@@ -565,7 +565,7 @@ def test_effect_families_are_the_nested_effects_either_way():
 def test_a_pure_drift_is_named_thermal_drift_not_the_warmup_that_contains_it(seed):
     data = synthetic("hexapod", "thermal_drift", [8e-5], seed=seed, noise=NOISE)
     d = discover_effects(data)
-    assert "thermal_warmup" in d.evidence  # it was a candidate
+    assert "thermal_warmup" in d.evidence.forms  # it was a candidate
     assert d.effects == ("thermal_drift",) and d.explained, d.verdict
 
 
@@ -578,8 +578,8 @@ def test_a_warmup_the_data_cannot_tell_from_a_drift_is_named_drift_and_reported_
     assert log_n < gain < log_n + MIN_NESTED_DELTA_BIC
     d = discover_effects(data)
     assert d.effects == ("thermal_drift",) and d.explained, d.verdict
-    assert [(a["named"], a["rival"], a["nested"]) for a in d.aliases] == [("thermal_drift", "thermal_warmup", True)]
-    assert 0 < d.aliases[0]["delta_bic"] < MIN_NESTED_DELTA_BIC
+    assert [(a.named, a.rival, a.nested) for a in d.aliases] == [("thermal_drift", "thermal_warmup", True)]
+    assert 0 < d.aliases[0].delta_bic < MIN_NESTED_DELTA_BIC
 
 
 def test_a_warmup_well_inside_the_recording_is_named_warmup_over_the_drift():
@@ -587,7 +587,7 @@ def test_a_warmup_well_inside_the_recording_is_named_warmup_over_the_drift():
     gain = fit_effects(data, ["thermal_drift"]).chi2 - fit_effects(data, ["thermal_warmup"]).chi2
     assert gain > np.log(data.n * data.robot.n_chains) + MIN_NESTED_DELTA_BIC
     d = discover_effects(data)
-    assert d.effects == ("thermal_warmup",) and d.explained and d.aliases == [], d.verdict
+    assert d.effects == ("thermal_warmup",) and d.explained and d.aliases == (), d.verdict
     assert d.chosen.extra == pytest.approx(25.0, rel=0.3)
 
 
@@ -621,10 +621,9 @@ def test_large_folds_of_the_closed_form_crossvalidation_take_the_woodbury_form(m
     monkeypatch.setattr(calib.effects.search, "DENSE_FOLD_MAX", 0)
     woodbury = discover_effects(two_effects())
     assert woodbury.effects == exact.effects
-    for key in ("cv_whitened_rms_chosen",):
-        assert woodbury.evidence[key] == pytest.approx(exact.evidence[key], rel=1e-9)
-    assert woodbury.evidence["none"]["cv_whitened_rms"] == pytest.approx(exact.evidence["none"]["cv_whitened_rms"],
-                                                                         rel=1e-9)
+    assert woodbury.evidence.cv_whitened_rms_chosen == pytest.approx(exact.evidence.cv_whitened_rms_chosen, rel=1e-9)
+    assert woodbury.evidence.geometry.cv_whitened_rms == pytest.approx(exact.evidence.geometry.cv_whitened_rms,
+                                                                       rel=1e-9)
 
 
 @pytest.mark.parametrize("robot_name", list(ROBOTS))

@@ -338,13 +338,13 @@ def test_what_linuxcnc_cannot_hold_is_named_with_the_accuracy_given_up(tmp_path,
     """A thermal drift follows time, which no joint table can: named on stderr and in NOTES.md,
     with the identified model's error without it over the calibrated workspace (positive; all
     left out together is the drift alone here)."""
-    from pipeline.workflows.discovery import discover, discovery_calibration
+    from pipeline.workflows.discovery import discover
 
     rec = effect_recording("thermal_drift", 7, robot="hexapod")
     report = discover(rec, seed=0, resim=False)
     assert "thermal_drift" in report.summary["effects"]
     path = tmp_path / "d.calibration.json"
-    write_calibration(path, discovery_calibration(rec, report, {}, {}))
+    write_calibration(path, report.calibration)
     assert export_main(["--calibration", str(path), "--to", "linuxcnc", "--out", str(tmp_path / "dir")]) == 0
     err = capsys.readouterr().err
     assert "LinuxCNC cannot hold thermal_drift" in err and "um RMS" in err

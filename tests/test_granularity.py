@@ -81,7 +81,7 @@ def test_discovery_names_the_dead_band_alone_and_says_whether_each_joint_has_its
     d = discover_effects(measurements(per_chain_form(EFFECTS["joint_friction"]), band, seed=7))
     assert d.effects == ("joint_friction",) and d.explained
     p = d.chosen.parameters()["joint_friction"]
-    assert p["granularity"] == granularity and d.evidence["granularity"] == {"joint_friction": granularity}
+    assert p["granularity"] == granularity and dict(d.evidence.granularity) == {"joint_friction": granularity}
     if granularity == SHARED:
         assert p["dead_band"]["value"] == pytest.approx(3e-3, abs=5 * p["dead_band"]["std"])
     else:

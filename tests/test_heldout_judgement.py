@@ -119,26 +119,19 @@ def test_an_effect_whose_resimulation_fits_worse_is_reported_not_named():
     rec = level_grid_recording(6, dead_band=1.0)
     named = discover(rec, resim=False)
     assert named.discovery.effects == ("joint_friction",)
-    # what the judgement saw, rebuilt as discover() builds it
-    from pipeline.workflows.discovery import judged_discovery
-    from pipeline.workflows.calibration import machine_tolerance
-
-    tolerance, _ = machine_tolerance(rec.robot, rec.meta, "sidecar")
-    data = EffectData(rec.robot, rec.robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
-                      tolerance=tolerance.std)
-    cal = np.arange(len(rec.sets))
-    disc, judgement, _ = judged_discovery(rec, data, named.discovery, cal, np.zeros(0, int), heldout_fraction=0.25,
-                                          seed=0, analysed_all=False, candidates=["joint_friction"])
+    # what the judgement saw: the policy's outcome discover() made
+    outcome = named.outcome
     sim = {"mujoco_resimulation": {"before": {"position_um": 300.0, "orientation_urad": 1.0},
                                    "after": {"position_um": 900.0, "orientation_urad": 1.0}}}
-    disc2, j2, block = witnessed(rec, data, disc, cal, judgement, sim, 0)
+    fallen, block = witnessed(outcome, sim)
+    disc2, j2 = fallen.discovery, fallen.judgement
     assert disc2.effects == () and [r.name for r in j2.rejected] == ["joint_friction"]
     r = j2.rejected[0]
     assert r.why == "worse re-simulated" and (r.geometry_mm, r.with_effect_mm) == (0.3, 0.9)
     assert block["mujoco_resimulation"]["after"] == block["mujoco_resimulation"]["before"]
-    kept = witnessed(rec, data, disc, cal, judgement, {"mujoco_resimulation": {
-        "before": {"position_um": 900.0}, "after": {"position_um": 300.0}}}, 0)
-    assert kept[0].effects == ("joint_friction",)
+    kept = witnessed(outcome, {"mujoco_resimulation": {
+        "before": {"position_um": 900.0}, "after": {"position_um": 300.0}}})
+    assert kept[0].discovery.effects == ("joint_friction",)
 
 
 @pytest.mark.slow

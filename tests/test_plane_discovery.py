@@ -84,8 +84,8 @@ def test_on_a_level_grid_with_nothing_left_out_the_remainder_is_the_noise(noise_
     fit = fit_effects(data)
     assert fit.basis is not None and fit.held_design.shape[1] == 24  # the plane leaves 24 to the prior
     tests = remainder_tests(data, fit)
-    assert tests["noise"]["consistent"]
-    assert tests["explained"], {k: v["p_value"] for k, v in tests["structure"].items()}
+    assert tests.noise.consistent
+    assert tests.explained, {q.quantity: q.p_value for q in tests.structure}
 
 
 @pytest.mark.parametrize("noise_seed", [1, 3, 4, 5, 8])
@@ -99,7 +99,7 @@ def test_on_a_level_grid_with_nothing_left_out_discovery_names_nothing_and_expla
                       tolerance=np.full(ROBOT.n_parameters, TOLERANCE["mm"]))
     found = discover_effects(data, laws=False)
     assert found.effects == ()
-    assert found.explained, found.remaining["summary"]
+    assert found.explained, found.remaining.summary
 
 
 def test_a_dead_band_shows_on_a_plane_and_is_found(tmp_path, capsys):
@@ -121,7 +121,7 @@ def test_a_two_millimetre_dead_band_on_a_plane_is_found_and_no_row_flagged(noise
     data = EffectData(ROBOT, ROBOT.table.nominal, rec.joints, rec.measured, rec.t_s, NOISE,
                       tolerance=np.full(ROBOT.n_parameters, TOLERANCE["mm"]))
     found = discover_effects(data, laws=False)
-    assert found.effects == ("joint_friction",) and found.explained, found.remaining["summary"]
+    assert found.effects == ("joint_friction",) and found.explained, found.remaining.summary
     assert found.flagged == ()
 
 
@@ -180,4 +180,4 @@ def test_the_other_robots_level_grids_with_nothing_left_out_are_explained(name):
                       tolerance=np.where(angle, 0.05, 5.0))
     found = discover_effects(data, laws=False)
     assert found.geometry.basis is not None and found.geometry.held_design.shape[1] > 0  # a plane holds some
-    assert found.effects == () and found.explained, found.remaining["summary"]
+    assert found.effects == () and found.explained, found.remaining.summary

@@ -152,7 +152,7 @@ def test_structure_below_a_declared_noise_too_large_is_said_so_with_the_rows_own
     data = EffectData(robot, robot.table.nominal, q, true + actual.sample(80, 4, robot.pose_units), np.arange(80.0),
                       declared)
     tests = remainder_tests(data, fit_effects(data, ()))
-    rem = tests["remaining"]
-    assert not tests["explained"] and rem["rms_mm"] < rem["noise_floor_mm"]
-    assert "the declared noise is larger than the rows show" in rem["summary"]
-    assert f"they show {rem['noise_ratio']:.2f} x it" in rem["summary"] and rem["noise_ratio"] < 1
+    rem = tests.remaining
+    assert not tests.explained and rem.rms_mm < rem.noise_floor_mm
+    assert "the declared noise is larger than the rows show" in rem.summary
+    assert f"they show {rem.noise_ratio:.2f} x it" in rem.summary and rem.noise_ratio < 1

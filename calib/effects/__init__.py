@@ -30,7 +30,8 @@ _discovery_names, __getattr__, __dir__ = lazy_exports(__name__, {
     "joint_fit": ("EffectFit", "fit_effect", "fit_effects"),
     "whitening": ("closure_noise_std",),
     "selection": ("MIN_DELTA_BIC", "candidate_forms", "regressor_correlation"),
-    "remainder": ("locate_mismatch", "remainder_tests"),
+    "remainder": ("remainder_tests",),
+    "located": ("locate_mismatch",),
     "gross_rows": ("outlier_scan",)})
 from .laws import LAW_WORDS, Law, ProposedLaw, law_effect, law_from_dict, law_to_dict, search_law  # noqa: E402
 from .granularity import PER_CHAIN, SHARED, PerChainForm, per_chain_form  # noqa: E402

@@ -3,9 +3,11 @@
 The joint fit of the geometry and the effects in joint space, whitened by the declared noise
 (:mod:`calib.effects.joint_fit`, :mod:`calib.effects.whitening`), linearised for the search of
 the searched parameters and the selection (:mod:`calib.effects.search`,
-:mod:`calib.effects.selection`), the remainder's tests (:mod:`calib.effects.remainder`) and the
-outlier scan (:mod:`calib.effects.gross_rows`) are rooms of their own; this module is the
-discovery itself, and re-exports their public names.
+:mod:`calib.effects.selection`), the selection's evidence and aliases (:mod:`calib.effects.evidence`),
+the remainder's tests (:mod:`calib.effects.remainder`), where the geometry-only residuals
+concentrate (:mod:`calib.effects.located`) and the outlier scan (:mod:`calib.effects.gross_rows`)
+are rooms of their own, each returning typed results; this module is the discovery itself, and
+re-exports their public names.
 
 :func:`discover_effects` then
 
@@ -36,23 +38,26 @@ discovery itself, and re-exports their public names.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..robot import KinematicsError, check_joint_limits
 from .base import Effect, EffectData
 from .compliance import for_payload
-from .gross_rows import MAX_BAD_FRACTION, OUTLIER_ALPHA, outlier_scan
+from .evidence import Alias, Evidence, selection_evidence
+from .gross_rows import MAX_BAD_FRACTION, OUTLIER_ALPHA, OutlierScan, outlier_scan
 from .joint_fit import EffectFit, as_models, check_applies, fit_effect, fit_effects, release_span_bases
 from .laws import LawSpace, ProposedLaw, law_effect, search_law
 from .registry import effects_for
-from .remainder import NOISE_ALPHA, POSE_DRIFT_Z, VERDICT_ALPHA, locate_mismatch, remainder_tests, root_mean_square
-from .search import SEARCH_ROWS_MAX, SEARCH_SUBSAMPLE_ROWS, LinearisedFit, search_subsample
+from .located import Located, locate_mismatch
+from .remainder import NOISE_ALPHA, POSE_DRIFT_Z, VERDICT_ALPHA, Remaining, RemainderTests, remainder_tests, root_mean_square
+from .search import SEARCH_ROWS_MAX, SEARCH_SUBSAMPLE_ROWS, LinearisedFit, SearchForm, search_subsample
 from .selection import (ALIAS_CORRELATION, ALIAS_DELTA_BIC, MIN_DELTA_BIC, MIN_GRANULARITY_DELTA_BIC,
                         MIN_NESTED_DELTA_BIC, SIGNIFICANCE_ALPHA, candidate_forms, choose_effects,
                         regressor_correlation)
-from .separability import HELD_INFORMATION, GeometryBasis, pose_families
+from .separability import (HELD_INFORMATION, GeometryBasis, PoseFamilyReach, Separation, UnseparatedForm,
+                           pose_families)
 from .whitening import (closure_noise_covariance, closure_noise_std, geometry_basis_of, noise_covariance,
                         whiten)
 
@@ -77,51 +82,50 @@ class Discovery:
         effects: names of the effects named (empty: geometry alone).
         explained: whether the remainder is consistent with the declared noise and shows no
             structure (:func:`remainder_tests`).
-        remaining: what is left (numbers and ``summary`` in words; ``present`` False when
-            explained).
+        remaining: what is left (:class:`calib.effects.remainder.Remaining`: numbers and
+            ``summary`` in words; ``present`` False when explained).
         partial: names of named effects that leave structure behind (all of them when not
             explained).
         chosen: the chosen model's joint fit (on the rows kept).
         geometry: the geometry-only fit (on the rows kept).
         evidence: per candidate alone: chi2, BIC evidence, cross-validated whitened RMS; the
-            selection's steps; the geometry-only chi-square test.
-        tests: the remainder's tests (:func:`remainder_tests`).
-        aliases: pairs the data could not tell apart: ``{"named", "rival", "delta_bic",
-            "correlation", "nested"}``; ``nested``: the rival generalises the effect named, which
-            is named because the rival's extra parameters did not gain :data:`MIN_NESTED_DELTA_BIC`
-            (``delta_bic`` is then the rival's gain, positive).
-        outliers: the outlier scan (:func:`outlier_scan`) of the last round.
+            selection's steps; the geometry-only chi-square test
+            (:class:`calib.effects.evidence.Evidence`).
+        tests: the remainder's tests (:func:`remainder_tests`, :class:`calib.effects.remainder.RemainderTests`).
+        aliases: pairs the data could not tell apart (:class:`calib.effects.evidence.Alias`).
+        outliers: the outlier scan (:func:`outlier_scan`, :class:`calib.effects.gross_rows.OutlierScan`)
+            of the last round.
         flagged: indices of rows removed as outliers (gross and isolated).
         kept: indices of the rows used.
-        located: where the geometry-only residuals concentrate (:func:`locate_mismatch`).
+        located: where the geometry-only residuals concentrate (:func:`locate_mismatch`,
+            :class:`calib.effects.remainder.Located`).
         proposed_law: where the library leaves a remainder, the law over joint-space terms that
             explains it (:func:`propose_law`), or None (explained, none found, or not searched).
-        separation: with a prior that the rows leave combinations to (:func:`separation`): the
-            geometric combinations held at the prior mean, the candidate forms that cannot be
-            separated from them on this pose set (never named), and the poses that would
-            separate them; empty otherwise.
+        separation: with a prior that the rows leave combinations to (:func:`separation`,
+            :class:`calib.effects.separability.Separation`): the geometric combinations held at the
+            prior mean, the candidate forms that cannot be separated from them on this pose set
+            (never named), and the poses that would separate them; None otherwise.
         search: how the searched parameters (a pitch, a time constant, a step time) were
-            searched in the last round's selection: ``{"form": "every row"}``, or above
-            ``search_rows_max`` measurements ``{"form": "subsample", "rows", "subsample_rows",
-            "threshold", "effects"}`` (:meth:`LinearisedFit.search_form`).
+            searched in the last round's selection: on every row, or above ``search_rows_max``
+            measurements on a subsample (:class:`calib.effects.search.SearchForm`).
     """
 
     effects: tuple
     explained: bool
-    remaining: dict
+    remaining: Remaining
     partial: tuple
     chosen: EffectFit
     geometry: EffectFit
-    evidence: dict
-    tests: dict
-    aliases: list
-    outliers: dict
+    evidence: Evidence
+    tests: RemainderTests
+    aliases: tuple
+    outliers: OutlierScan
     flagged: tuple
     kept: np.ndarray
-    located: dict
+    located: Located
     proposed_law: ProposedLaw | None = None
-    separation: dict = field(default_factory=dict)
-    search: dict = field(default_factory=lambda: {"form": "every row"})
+    separation: Separation | None = None
+    search: SearchForm = SearchForm()
 
     @property
     def effect(self) -> str:
@@ -135,7 +139,7 @@ class Discovery:
     @property
     def model_wrong(self) -> bool:
         """More than :data:`MAX_BAD_FRACTION` of the rows looked bad."""
-        return bool(self.outliers.get("model_wrong"))
+        return self.outliers.model_wrong
 
 
 def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MAX_EFFECTS, alpha: float = VERDICT_ALPHA,
@@ -188,17 +192,16 @@ def discover_effects(data: EffectData, *, candidates=None, max_effects: int = MA
     sub, geo, fit, sel, scan, kept, flagged = _outlier_rounds(data, choose, outlier_alpha, max_rounds)
     tests = remainder_tests(sub, fit, alpha=alpha)
     release_span_bases(fit)  # the outlier scan and the tests are done with its bases
-    explained = tests["explained"]
+    explained = tests.explained
     separated = separation(sub, fit, models, sel["unseparated"])
-    aliases = [{"named": models[a].name, "rival": b, "delta_bic": gap, "correlation": corr, "nested": nested}
-               for a, b, gap, corr, nested in sel["rivals"]
-               if models[a] in fit.models and (nested or models[b].name not in fit.effects)]
-    evidence = _evidence(geo, sel, models, fit, alpha)
-    remaining = tests["remaining"]
-    if scan["model_wrong"]:
-        remaining = dict(remaining, bad_rows=len(scan["bad"]),
-                         summary=remaining["summary"] + f"; {len(scan['bad'])} of {sub.n} rows look bad (more than "
-                         f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
+    aliases = tuple(Alias(models[a].name, b, gap, corr, nested) for a, b, gap, corr, nested in sel["rivals"]
+                    if models[a] in fit.models and (nested or models[b].name not in fit.effects))
+    evidence = selection_evidence(geo, sel, models, fit, alpha)
+    remaining = tests.remaining
+    if scan.model_wrong:
+        remaining = replace(remaining, bad_rows=len(scan.bad),
+                            summary=remaining.summary + f"; {len(scan.bad)} of {sub.n} rows look bad (more than "
+                            f"{100 * MAX_BAD_FRACTION:.0f}%): the model is wrong, not the data, and no row is left out")
     law = _law_left(sub, fit, channels, kept, folds, seed) if laws and not explained else None
     return Discovery(effects=fit.effects, explained=explained, remaining=remaining,
                      partial=() if explained else fit.effects, chosen=fit, geometry=geo, evidence=evidence,
@@ -216,17 +219,17 @@ def _outlier_rounds(data: EffectData, choose, outlier_alpha: float, max_rounds: 
     for _ in range(max_rounds):
         sub, geo, fit, sel = choose(data.subset(kept))
         scan = outlier_scan(sub, fit, alpha=outlier_alpha)
-        new = scan["flagged"]
-        if scan["model_wrong"] or not new or kept.size - len(new) < MIN_ROWS \
+        new = list(scan.flagged)
+        if scan.model_wrong or not new or kept.size - len(new) < MIN_ROWS \
                 or len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
-            if not scan["model_wrong"] and new and len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
-                scan = dict(scan, model_wrong=True, flagged=[])
+            if not scan.model_wrong and new and len(flagged) + len(new) > MAX_BAD_FRACTION * data.n:
+                scan = scan.cleared(model_wrong=True)
             break
         flagged += [int(kept[j]) for j in new]
         kept = np.delete(kept, new)
     else:  # the last round's removal is not re-checked: re-run the choice on the rows kept
         sub, geo, fit, sel = choose(data.subset(kept))
-        scan = dict(outlier_scan(sub, fit, alpha=outlier_alpha), flagged=[])
+        scan = outlier_scan(sub, fit, alpha=outlier_alpha).cleared()
     return sub, geo, fit, sel, scan, kept, flagged
 
 
@@ -245,7 +248,7 @@ def _law_left(sub: EffectData, fit: EffectFit, channels: dict | None, kept: np.n
         return None
 
 
-def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict) -> dict:
+def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict) -> Separation | None:
     """What the rows cannot separate, and the poses that would (:mod:`calib.effects.separability`).
 
     Args:
@@ -254,8 +257,8 @@ def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict
             "combinations"}}`` of the forms the selection set aside (:meth:`LinearisedFit.unseparated`).
 
     Returns:
-        JSON-ready dict, empty when every geometric combination is determined:
-        ``left_to_prior`` (the held combinations in words, :meth:`GeometryBasis.combinations`),
+        :class:`calib.effects.separability.Separation`, None when every geometric combination is
+        determined: ``left_to_prior`` (the held combinations in words, :meth:`GeometryBasis.combinations`),
         ``determined`` and ``free`` (how many geometric combinations are fitted, of how many),
         ``unseparated`` (per form: ``effect``, ``form``, ``combinations`` each with the geometric
         combination that mimics it, ``separated_by`` the pose families that would separate it),
@@ -265,14 +268,11 @@ def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict
     """
     basis = fit.basis
     if basis is None:
-        return {}
+        return None
     robot = data.robot
     names = [robot.table.names[i] for i in basis.free]
-    out = {"determined": basis.size, "free": int(basis.free.size),
-           "left_to_prior": basis.combinations(names, robot.table.chains[basis.free]),
-           "unseparated": [{"effect": models[k].name, "form": k, "combinations": u["combinations"], "separated_by": []}
-                           for k, u in unseparated.items()],
-           "poses": {}}
+    separated_by = {k: [] for k in unseparated}
+    reach = []
     families = pose_families(data.measured, robot.workspace_bounds(), robot.pose_names, robot.pose_units)
     for family, poses in families.items():
         joints, ok = np.full((len(poses), robot.n_chains), np.nan), np.zeros(len(poses), dtype=bool)
@@ -284,7 +284,7 @@ def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict
             except KinematicsError:
                 pass
         if not ok.any():
-            out["poses"][family] = {"reachable": 0, "tried": len(poses), "determines": 0, "separates": []}
+            reach.append(PoseFamilyReach(family, 0, len(poses), 0))
             continue
         added = EffectData(robot, data.theta, joints[ok], poses[ok], data.t_s[-1] + np.arange(1, ok.sum() + 1), data.noise,
                            payload_kg=None if data.payload_kg is None else np.full(ok.sum(), data.payload_kg.mean()))
@@ -297,14 +297,13 @@ def separation(data: EffectData, fit: EffectFit, models: dict, unseparated: dict
         info = basis.held.T @ (aug.information if aug is not None else _information(both, basis)) @ basis.held
         determines = int(np.sum(np.linalg.eigvalsh(0.5 * (info + info.T)) > HELD_INFORMATION))
         lin = LinearisedFit(both, _Stub(fit.theta, aug))
-        separates = [u["form"] for u in out["unseparated"]
-                     if not lin.unseparated(models[u["form"]], unseparated[u["form"]]["extra"])]
-        for u in out["unseparated"]:
-            if u["form"] in separates:
-                u["separated_by"].append(family)
-        out["poses"][family] = {"reachable": int(ok.sum()), "tried": len(poses), "determines": determines,
-                                "separates": separates}
-    return out
+        separates = tuple(k for k in unseparated if not lin.unseparated(models[k], unseparated[k]["extra"]))
+        for k in separates:
+            separated_by[k].append(family)
+        reach.append(PoseFamilyReach(family, int(ok.sum()), len(poses), determines, separates))
+    return Separation(basis.size, int(basis.free.size), basis.combinations(names, robot.table.chains[basis.free]),
+                      tuple(UnseparatedForm(models[k].name, k, tuple(u["combinations"]), tuple(separated_by[k]))
+                            for k, u in unseparated.items()), tuple(reach))
 
 
 @dataclass(frozen=True)
@@ -371,7 +370,7 @@ def propose_law(data: EffectData, fit: EffectFit, *, channels: dict | None = Non
             (found, eff, exact), dropped = trial, names
     floor = float(root_mean_square(closure_noise_std(data.robot, exact.theta, data)))
     cv_w, cv_mm = space(exact).cv([], folds, seed)
-    return ProposedLaw(found, eff, exact, remainder_tests(data, exact)["remaining"], floor, cv_w, cv_mm, dropped)
+    return ProposedLaw(found, eff, exact, remainder_tests(data, exact).remaining, floor, cv_w, cv_mm, dropped)
 
 
 def reexamined(data: EffectData, exact: EffectFit, law: Effect, extras: dict,
@@ -395,37 +394,6 @@ def reexamined(data: EffectData, exact: EffectFit, law: Effect, extras: dict,
             return exact, tuple(dropped)
         dropped.append(cheapest[1])
         exact = cheapest[2]
-
-
-def _evidence(geo: EffectFit, sel: dict, models: dict, fit: EffectFit, alpha: float) -> dict:
-    """The discovery's ``evidence``: per candidate form alone (keys as in
-    :func:`candidate_forms`), the selection's steps, the chosen model's cross-validated residual
-    and each named effect's granularity."""
-    evidence = {"geometry_chi2_test": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "alpha": alpha},
-                "none": {"chi2": geo.chi2, "dof": geo.dof, "p_value": geo.p_value, "n_params": geo.n_params,
-                         "bic": geo.bic(), "delta_bic_vs_none": 0.0, "cv_whitened_rms": sel["cv_geometry"]}}
-    for name, e in sel["single"].items():
-        evidence[name] = {"chi2_linearised": e["chi2"], "n_params": e["n_params"],
-                          "delta_bic_vs_none": e["delta_bic_vs_none"], "cv_whitened_rms": e["cv_whitened_rms"]}
-    replaced = dict(sel.get("nested_replaced", []))
-    for step in sel["steps"]:
-        if step["added"] in evidence:
-            evidence[step["added"]]["delta_bic_when_added"] = step["trials"][step["added"]]["delta_bic"]
-        new = replaced.get(step["added"])
-        if new in evidence and new in step["trials"]:  # named in its family member's place
-            evidence[new]["delta_bic_when_added"] = step["trials"][new]["delta_bic"]
-    for key, m in models.items():  # a per-chain form named: its evidence under the effect's name too
-        if m in fit.models and key != m.name and "delta_bic_when_added" in evidence.get(key, {}):
-            evidence.setdefault(m.name, {})["delta_bic_when_added"] = evidence[key]["delta_bic_when_added"]
-    evidence["steps"] = [{"added": s["added"], "dropped": s["dropped"],
-                          "delta_bic": {k: v["delta_bic"] for k, v in s["trials"].items()}} for s in sel["steps"]]
-    evidence["cv_whitened_rms_chosen"] = sel["cv_chosen"]
-    evidence["granularity"] = {m.name: m.granularity for m in fit.models}
-    if replaced:
-        evidence["nested_replaced"] = [list(p) for p in replaced.items()]
-    if sel.get("insignificant"):
-        evidence["dropped_not_significant"] = sel["insignificant"]
-    return evidence
 
 
 #: The former name (one effect at a time); the same function.

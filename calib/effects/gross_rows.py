@@ -4,13 +4,15 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from .base import EffectData
 from .joint_fit import EffectFit, span_bases
 
-__all__ = ["OUTLIER_ALPHA", "MAX_BAD_FRACTION", "NEIGHBOURS", "SHARED_Z", "outlier_scan"]
+__all__ = ["OUTLIER_ALPHA", "MAX_BAD_FRACTION", "NEIGHBOURS", "SHARED_Z", "SharedRow", "OutlierScan", "outlier_scan"]
 
 #: Family-wise significance of the outlier test (Bonferroni over the rows).
 OUTLIER_ALPHA = 1e-3
@@ -21,6 +23,41 @@ NEIGHBOURS = 6
 #: A row's residual is shared by its neighbours when their mean residual along it is this many
 #: standard errors from zero.
 SHARED_Z = 3.0
+
+
+@dataclass(frozen=True)
+class SharedRow:
+    """A bad row that is not isolated: ``row`` (0-based, of the rows scanned) and ``by``, per
+    neighbourhood that shares it (``time``, ``workspace``, ``direction of motion``) ``(label,
+    score)``, the neighbours' summed residual along the row's, in standard errors."""
+
+    row: int
+    by: tuple
+
+
+@dataclass(frozen=True, eq=False)
+class OutlierScan:
+    """The outlier scan (:func:`outlier_scan`).
+
+    Attributes:
+        statistic: (N,) each row's statistic over the robust scale.
+        threshold: the Bonferroni-corrected threshold; scale: the robust scale (at least 1).
+        bad: rows (0-based) beyond the threshold; flagged: those of them that are isolated.
+        shared: the bad rows their neighbours share (:class:`SharedRow`).
+        model_wrong: more rows than the limit looked bad: the model is wrong, nothing flagged.
+    """
+
+    statistic: np.ndarray
+    threshold: float
+    scale: float
+    bad: tuple
+    flagged: tuple = ()
+    shared: tuple = ()
+    model_wrong: bool = False
+
+    def cleared(self, *, model_wrong: bool | None = None) -> "OutlierScan":
+        """This scan with no row flagged (and ``model_wrong`` said, when given)."""
+        return replace(self, flagged=(), model_wrong=self.model_wrong if model_wrong is None else model_wrong)
 
 
 def _neighbour_sets(data: EffectData) -> list[np.ndarray]:
@@ -79,7 +116,7 @@ def _deleted(Q: np.ndarray, w: np.ndarray, bad: np.ndarray):
 
 
 def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALPHA,
-                 max_bad_fraction: float = MAX_BAD_FRACTION) -> dict:
+                 max_bad_fraction: float = MAX_BAD_FRACTION) -> OutlierScan:
     """Rows that are gross and isolated (closed-form leave-one-out, no refits).
 
     With ``Q`` an orthonormal basis of the fit's whitened design (the columns it fitted: a
@@ -100,9 +137,9 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
     bad, the model is wrong, not the data: nothing is flagged.
 
     Returns:
-        dict: ``statistic`` (N,), ``threshold``, ``scale``, ``bad`` and ``flagged`` (0-based
-        indices), ``shared`` (bad rows not flagged, with the neighbourhood that shares them),
-        ``model_wrong`` (bool).
+        :class:`OutlierScan`: ``statistic`` (N,), ``threshold``, ``scale``, ``bad`` and ``flagged``
+        (0-based indices), ``shared`` (bad rows not flagged, with the neighbourhood that shares
+        them), ``model_wrong``.
     """
     n, C = data.n, data.robot.n_chains
     Q, Q_det = span_bases(fit)
@@ -122,30 +159,27 @@ def outlier_scan(data: EffectData, fit: EffectFit, *, alpha: float = OUTLIER_ALP
         if np.array_equal(again, bad):
             break
         bad = again
-    out = {"statistic": (stat / scale).tolist(), "threshold": thr, "scale": scale, "bad": bad.tolist(),
-           "flagged": [], "shared": {}, "model_wrong": False}
+    out = OutlierScan(stat / scale, thr, scale, tuple(bad.tolist()))
     if bad.size > max(1, max_bad_fraction * n):
-        out["model_wrong"] = True
-        return out
+        return replace(out, model_wrong=True)
     if bad.size == 0:
         return out
     stat, clean, u = _deleted(Q, w, bad)
     clean = clean / np.sqrt(scale)
     bad_set = set(bad.tolist())
-    flagged = []
+    flagged, shared_rows = [], []
     for b, j in enumerate(bad):
         unit = u[b] / np.linalg.norm(u[b])
-        shared = {}
+        shared = []
         for label, nb in zip(("time", "workspace", "direction of motion"), _neighbour_sets(data)):
             others = [i for i in nb[j] if i not in bad_set]
             if not others:
                 continue
             score = float((clean[others] @ unit).sum() / np.sqrt(len(others)))
             if score > SHARED_Z:
-                shared[label] = score
+                shared.append((label, score))
         if shared:
-            out["shared"][int(j)] = shared
+            shared_rows.append(SharedRow(int(j), tuple(shared)))
         else:
             flagged.append(int(j))
-    out["flagged"] = flagged
-    return out
+    return replace(out, flagged=tuple(flagged), shared=tuple(shared_rows))

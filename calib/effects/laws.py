@@ -29,6 +29,7 @@ At most :data:`MAX_LAW_TERMS` terms.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,9 @@ from .compliance import EFFECT as COMPLIANCE
 from .granularity import PER_CHAIN, SHARED, PerChainForm
 from .periodic_screw_error import EFFECT as SCREW
 from .thermal_warmup import TAU_RANGE_SPANS
+
+if TYPE_CHECKING:  # the remainder's room loads scipy.stats, which reading a kept law does not need
+    from .remainder import Remaining
 
 __all__ = ["LAW_NAME", "LAW_WORDS", "MAX_LAW_TERMS", "LAW_MIN_DELTA_BIC", "LAW_NESTED_DELTA_BIC", "LAW_CV_MARGIN", "LAW_TAU_POINTS",
            "Term", "TermFamily", "term_families", "Law", "law_effect", "LawSpace", "LawSearch", "search_law",
@@ -524,7 +528,7 @@ class ProposedLaw:
         fit: the exact joint fit (geometry, the library's effects and the law; an
             :class:`calib.effects.EffectFit`).
         remaining: the remainder tests' ``remaining`` with the law fitted
-            (:func:`calib.effects.remainder_tests`).
+            (:func:`calib.effects.remainder_tests`, :class:`calib.effects.remainder.Remaining`).
         noise_floor_mm: RMS of the closure noise's standard deviations, mm.
         cv_after, cv_after_mm: cross-validated residual (whitened, mm) of the exact fit with the
             law (the search's own figure is linearised at the library's fit, which a large
@@ -536,7 +540,7 @@ class ProposedLaw:
     search: LawSearch
     effect: Effect
     fit: object
-    remaining: dict
+    remaining: Remaining
     noise_floor_mm: float
     cv_after: float
     cv_after_mm: float
@@ -572,7 +576,7 @@ class ProposedLaw:
                 "cv_rms_before_mm": self.search.cv_before_mm, "cv_rms_after_mm": self.cv_after_mm,
                 "cv_whitened_rms_before": self.search.cv_before, "cv_whitened_rms_after": self.cv_after,
                 "noise_floor_mm": self.noise_floor_mm,
-                "explained_with_law": not self.remaining["present"], "remaining_with_law": self.remaining["summary"],
+                "explained_with_law": not self.remaining.present, "remaining_with_law": self.remaining.summary,
                 "law": law_to_dict(terms, gran, self.fit.coefficients[self.fit.slices()[LAW_NAME]]),
                 "library_effects": [m.name for m in self.fit.models if m.name != LAW_NAME],
                 "library_effects_dropped": list(self.dropped),

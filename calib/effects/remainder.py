@@ -1,6 +1,6 @@
 """What a fitted model leaves: the remainder's tests against the declared noise and for
-structure, in numbers and in words, and where the geometry-only residuals concentrate (a room of
-:mod:`calib.effects.discovery`).
+structure, in numbers and in words (a room of :mod:`calib.effects.discovery`; where the
+geometry-only residuals concentrate is :mod:`calib.effects.located`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import chi2 as chi2_dist, norm
 
-from ..robot import KinematicsError, Robot
+from ..robot import Robot
 from .base import GRAM_BASIS_RTOL, EffectData, closure_regressors
 from .compliance import payload_varies
 from .joint_fit import EffectFit, model_poses, span_bases
@@ -18,7 +18,8 @@ from .registry import EFFECTS
 from .separability import GRAM_MIN_RESIDUALS, flat_coordinates, unseparated_combinations, unseparated_information
 from .whitening import closure_noise_std, noise_covariance, whiten
 
-__all__ = ["VERDICT_ALPHA", "POSE_DRIFT_Z", "NOISE_ALPHA", "remainder_tests", "locate_mismatch", "root_mean_square"]
+__all__ = ["VERDICT_ALPHA", "POSE_DRIFT_Z", "NOISE_ALPHA", "NoiseTest", "QuantityTest", "Remaining", "RemainderTests",
+           "remainder_tests", "root_mean_square"]
 
 #: Significance of the remainder's structure tests (Bonferroni-corrected over chains, quantities
 #: and statistics).
@@ -30,6 +31,155 @@ POSE_DRIFT_Z = 3.0
 #: chain Bonferroni-corrected). Stricter than the structure tests: the omnibus test also reacts to
 #: a declared noise a few percent off, which is no physics left out.
 NOISE_ALPHA = 0.001
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseTest:
+    """The remainder's chi-square tests against the declared noise (:func:`remainder_tests`).
+
+    Attributes:
+        chi2, dof, p_value: the overall test; alpha: its significance.
+        chi2_per_chain: (C,) each chain's sum of squared standardised residuals; dof_per_chain:
+            their degrees of freedom; p_value_per_chain: (C,) their p-values.
+        chains_failing: the chains (1-based) whose test fails (Bonferroni, ``alpha / C``).
+        consistent: the overall test and every chain's pass.
+    """
+
+    chi2: float
+    dof: float
+    p_value: float
+    alpha: float
+    chi2_per_chain: np.ndarray
+    dof_per_chain: float
+    p_value_per_chain: np.ndarray
+    chains_failing: tuple
+    consistent: bool
+
+    def to_dict(self) -> dict:
+        """JSON-ready (the summary's ``tests.noise``)."""
+        return {"chi2": self.chi2, "dof": self.dof, "p_value": self.p_value, "alpha": self.alpha,
+                "chi2_per_chain": self.chi2_per_chain.tolist(), "dof_per_chain": self.dof_per_chain,
+                "p_value_per_chain": self.p_value_per_chain.tolist(), "chains_failing": list(self.chains_failing),
+                "consistent": self.consistent}
+
+
+@dataclass(frozen=True, eq=False)
+class QuantityTest:
+    """The remainder's structure tests against one quantity (:func:`remainder_tests`).
+
+    Attributes:
+        quantity: the quantity (``time``, ``stroke``, ``position x``, ...).
+        p_value_proportional: F test of each chain's joint displaced in proportion to it.
+        p_value_common_smooth: F test of a cubic in it shared by every chain (1 for a binary one).
+        t_per_chain: (C,) the proportional coefficients' t.
+        serial_correlation_per_chain: (C,) the standardised residuals' serial correlation ordered
+            by it, in standard errors; serial_correlation_combined: over the chains.
+        p_value: the smallest p-value, Bonferroni-corrected over every statistic.
+        chains: the chains (0-based) whose own statistics fail.
+        score: ``-log10`` of the smallest uncorrected p-value.
+        pose_drift: time only: the F test of the measured pose drifting with time (its p-value)
+            and the drift's t per pose coordinate (``pose_names`` order); None for the others.
+    """
+
+    quantity: str
+    p_value_proportional: float
+    p_value_common_smooth: float
+    t_per_chain: np.ndarray
+    serial_correlation_per_chain: np.ndarray
+    serial_correlation_combined: float
+    p_value: float
+    chains: tuple
+    score: float
+    p_value_pose_drift: float | None = None
+    t_pose_drift: np.ndarray | None = None
+    pose_names: tuple = ()
+
+    def to_dict(self) -> dict:
+        """JSON-ready (the summary's ``tests.structure[quantity]``)."""
+        out = {"p_value_proportional": self.p_value_proportional, "p_value_common_smooth": self.p_value_common_smooth}
+        if self.p_value_pose_drift is not None:
+            out.update(p_value_pose_drift=self.p_value_pose_drift,
+                       t_pose_drift=dict(zip(self.pose_names, self.t_pose_drift.tolist())))
+        return dict(out, t_per_chain=self.t_per_chain.tolist(),
+                    serial_correlation_per_chain=self.serial_correlation_per_chain.tolist(),
+                    serial_correlation_combined=self.serial_correlation_combined, p_value=self.p_value,
+                    chains=list(self.chains), score=self.score)
+
+
+@dataclass(frozen=True, eq=False)
+class Remaining:
+    """What a fitted model leaves (:func:`remainder_tests`), in numbers and in words.
+
+    Attributes:
+        present: a remainder beyond the declared noise or with structure (not explained).
+        noise_ratio: whitened RMS over the declared noise.
+        rms_mm, noise_floor_mm, excess_rms_mm: the closure residual RMS, the noise's, and the
+            RMS beyond it (mm).
+        rms_per_chain_noise: (C,) each chain's standardised RMS.
+        chains: the chains (1-based) that fail a test.
+        follows: the quantities the remainder follows, strongest first; does_not_follow: the
+            physical ones it does not.
+        pose_drift: the pose coordinates that drift with time, alike at every pose (empty unless
+            time is followed best in pose space).
+        summary: the above in words.
+        bad_rows: in a discovery where more than the limit of the rows looked bad (the model is
+            wrong), how many; None otherwise.
+    """
+
+    present: bool
+    noise_ratio: float
+    rms_mm: float
+    noise_floor_mm: float
+    excess_rms_mm: float
+    rms_per_chain_noise: np.ndarray
+    chains: tuple
+    follows: tuple
+    does_not_follow: tuple
+    pose_drift: tuple
+    summary: str = ""
+    bad_rows: int | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready (the summary's ``remaining``)."""
+        out = {"present": self.present, "noise_ratio": self.noise_ratio, "rms_mm": self.rms_mm,
+               "noise_floor_mm": self.noise_floor_mm, "excess_rms_mm": self.excess_rms_mm,
+               "rms_per_chain_noise": self.rms_per_chain_noise.tolist(), "chains": list(self.chains),
+               "follows": list(self.follows), "does_not_follow": list(self.does_not_follow),
+               "pose_drift": list(self.pose_drift), "summary": self.summary}
+        if self.bad_rows is not None:
+            out["bad_rows"] = self.bad_rows
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class RemainderTests:
+    """The remainder's tests (:func:`remainder_tests`): ``explained`` (every test passes), the
+    tests against the declared noise, the structure tests per quantity (in the order tested),
+    what is left."""
+
+    explained: bool
+    noise: NoiseTest
+    structure: tuple
+    remaining: Remaining
+
+    def quantity(self, name: str) -> QuantityTest:
+        """The structure tests against the quantity ``name``.
+
+        Raises:
+            KeyError: a quantity not tested.
+        """
+        for q in self.structure:
+            if q.quantity == name:
+                return q
+        raise KeyError(name)
+
+    def structure_dict(self) -> dict:
+        """JSON-ready ``{quantity: tests}`` (the summary's ``tests.structure``)."""
+        return {q.quantity: q.to_dict() for q in self.structure}
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``noise`` and ``structure`` (the summary's ``tests``)."""
+        return {"noise": self.noise.to_dict(), "structure": self.structure_dict()}
 
 
 def root_mean_square(v: np.ndarray, axis=None):
@@ -74,7 +224,7 @@ def _lag1(z: np.ndarray, values: np.ndarray) -> float:
     return float(zz[:-1] @ zz[1:] / den * np.sqrt(zz.size))
 
 
-def _noise_tests(fit: EffectFit, z: np.ndarray, noise_alpha: float) -> dict:
+def _noise_tests(fit: EffectFit, z: np.ndarray, noise_alpha: float) -> NoiseTest:
     """The chi-square tests of the remainder against the declared noise: overall (``fit.p_value``)
     and per chain (Bonferroni, ``noise_alpha / C``), as :func:`remainder_tests` reports them."""
     n, C = z.shape
@@ -83,10 +233,8 @@ def _noise_tests(fit: EffectFit, z: np.ndarray, noise_alpha: float) -> dict:
     p_chain = chi2_dist.sf(chain_chi2, dof_chain)
     chains_noisy = [int(i) for i in np.flatnonzero(p_chain < noise_alpha / C)]
     noise_ok = fit.p_value > noise_alpha and not chains_noisy
-    return {"chi2": fit.chi2, "dof": fit.dof, "p_value": fit.p_value, "alpha": noise_alpha,
-            "chi2_per_chain": chain_chi2.tolist(), "dof_per_chain": dof_chain,
-            "p_value_per_chain": p_chain.tolist(), "chains_failing": [c + 1 for c in chains_noisy],
-            "consistent": bool(noise_ok)}
+    return NoiseTest(fit.chi2, fit.dof, fit.p_value, noise_alpha, chain_chi2, dof_chain, np.asarray(p_chain),
+                     tuple(c + 1 for c in chains_noisy), bool(noise_ok))
 
 
 @dataclass(frozen=True, eq=False)
@@ -213,10 +361,10 @@ def _quantity_tests(rem: _Remainder, kind: str, values: np.ndarray, z: np.ndarra
             "p_per": p_per, "p_min": min(p_f, p_comb, p_smooth, float(p_per.min()))}
 
 
-def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -> tuple[dict, np.ndarray, bool]:
-    """Every quantity's tests, Bonferroni over every statistic at ``alpha``: ``(structure, the
-    pose drift's t per coordinate, whether the pose drift is time's strongest)``; the quantities
-    read from a pose at ``data``'s regressor poses."""
+def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -> tuple[tuple, np.ndarray, bool]:
+    """Every quantity's tests (:class:`QuantityTest`, in the order tested), Bonferroni over every
+    statistic at ``alpha``: ``(structure, the pose drift's t per coordinate, whether the pose drift
+    is time's strongest)``; the quantities read from a pose at ``data``'s regressor poses."""
     robot = data.robot
     C = robot.n_chains
     R = np.nan_to_num(np.corrcoef(z.T), nan=0.0) if data.n > 2 else np.eye(C)
@@ -227,59 +375,50 @@ def _structure(data: EffectData, rem: _Remainder, z: np.ndarray, alpha: float) -
     m_tests = len(feats) * (2 * C + 2) + n_ordered + 1
     p_pose, t_pose = _pose_drift_test(data, rem)
     pose_best = False
-    structure = {}
+    structure = []
     for name, kind, values in feats:
         q = _quantity_tests(rem, kind, values, z, R)
         p_min = q["p_min"]
-        extra = {}
+        drift = {}
         if name == "time":
             # Said in the words when the pose-space description beats every joint-space one.
             pose_best = p_pose < p_min
             p_min = min(p_min, p_pose)
-            extra = {"p_value_pose_drift": p_pose, "t_pose_drift": dict(zip(robot.pose_names, t_pose.tolist()))}
-        structure[name] = {"p_value_proportional": q["p_f"], "p_value_common_smooth": q["p_smooth"], **extra,
-                           "t_per_chain": q["t_chain"].tolist(),
-                           "serial_correlation_per_chain": q["lag"].tolist(),
-                           "serial_correlation_combined": q["comb"],
-                           "p_value": min(1.0, p_min * m_tests),
-                           "chains": [int(c) for c in np.flatnonzero(q["p_per"] * m_tests < alpha)],
-                           "score": float(-np.log10(max(p_min, 1e-300)))}
-    return structure, t_pose, pose_best
+            drift = {"p_value_pose_drift": p_pose, "t_pose_drift": t_pose, "pose_names": tuple(robot.pose_names)}
+        structure.append(QuantityTest(name, q["p_f"], q["p_smooth"], q["t_chain"], q["lag"], q["comb"],
+                                      min(1.0, p_min * m_tests),
+                                      tuple(int(c) for c in np.flatnonzero(q["p_per"] * m_tests < alpha)),
+                                      float(-np.log10(max(p_min, 1e-300))), **drift))
+    return tuple(structure), t_pose, pose_best
 
 
-def _remaining(robot: Robot, fit: EffectFit, std: np.ndarray, z: np.ndarray, noise: dict, structure: dict,
-               t_pose: np.ndarray, pose_best: bool, alpha: float) -> dict:
+def _remaining(robot: Robot, fit: EffectFit, std: np.ndarray, z: np.ndarray, noise: NoiseTest, structure: tuple,
+               t_pose: np.ndarray, pose_best: bool, alpha: float) -> Remaining:
     """What the remainder's tests leave (:func:`remainder_tests`' ``remaining``), in numbers and
     in words."""
-    follows = sorted((k for k, v in structure.items() if v["p_value"] < alpha), key=lambda k: -structure[k]["score"])
-    explained = bool(noise["consistent"] and not follows)
+    follows = sorted((q for q in structure if q.p_value < alpha), key=lambda q: -q.score)
+    explained = bool(noise.consistent and not follows)
     floor = float(root_mean_square(std))
     rms = float(root_mean_square(fit.residuals))
-    ratio = float(np.sqrt(fit.chi2 / max(fit.dof, 1)))
-    chains_noisy = [c - 1 for c in noise["chains_failing"]]
-    chains = sorted(set(chains_noisy) | {c for k in follows for c in structure[k]["chains"]})
-    remaining = {
-        "present": not explained,
-        "noise_ratio": ratio,
-        "rms_mm": rms,
-        "noise_floor_mm": floor,
-        "excess_rms_mm": float(np.sqrt(max(rms ** 2 - floor ** 2, 0.0))),
-        "rms_per_chain_noise": root_mean_square(z, axis=0).tolist(),
-        "chains": [c + 1 for c in chains],
-        "follows": follows,
-        "does_not_follow": [k for k in ("time", "direction of the last move", "size of the last move", "stroke", "load")
-                            if k in structure and k not in follows],
+    chains_noisy = [c - 1 for c in noise.chains_failing]
+    chains = sorted(set(chains_noisy) | {c for q in follows for c in q.chains})
+    tested = {q.quantity for q in structure}
+    followed = tuple(q.quantity for q in follows)
+    remaining = Remaining(
+        present=not explained, noise_ratio=float(np.sqrt(fit.chi2 / max(fit.dof, 1))), rms_mm=rms,
+        noise_floor_mm=floor, excess_rms_mm=float(np.sqrt(max(rms ** 2 - floor ** 2, 0.0))),
+        rms_per_chain_noise=root_mean_square(z, axis=0), chains=tuple(c + 1 for c in chains), follows=followed,
+        does_not_follow=tuple(k for k in ("time", "direction of the last move", "size of the last move", "stroke",
+                                          "load") if k in tested and k not in followed),
         # The measured pose drifting with time (alike at every pose; it follows time in pose space
         # better than in any chain's joint): the coordinates that drift.
-        "pose_drift": [k for k, t in zip(robot.pose_names, t_pose) if abs(t) > POSE_DRIFT_Z]
-        if "time" in follows and pose_best else [],
-    }
-    remaining["summary"] = _remaining_words(remaining, robot.chain_word, explained)
-    return remaining
+        pose_drift=tuple(k for k, t in zip(robot.pose_names, t_pose) if abs(t) > POSE_DRIFT_Z)
+        if "time" in followed and pose_best else ())
+    return replace(remaining, summary=_remaining_words(remaining, robot.chain_word, explained))
 
 
 def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_ALPHA,
-                    noise_alpha: float = NOISE_ALPHA) -> dict:
+                    noise_alpha: float = NOISE_ALPHA) -> RemainderTests:
     """Test what the fitted model leaves against the declared noise and for structure.
 
     Noise: the chi-square of the whitened residuals overall (at ``noise_alpha``), and per chain
@@ -303,15 +442,15 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
       through its pose Jacobian and projected like the proportional test; one F test over the
       pose coordinates, counted with time's statistics. Growing legs raise the platform too and
       take most of a frame's drift; what they leave is one displacement in pose space, which no
-      statistic per chain sees as well. ``remaining['pose_drift']`` names the coordinates that
+      statistic per chain sees as well. ``remaining.pose_drift`` names the coordinates that
       drift (drift rate more than :data:`POSE_DRIFT_Z` standard errors from zero) when time is
       followed and this test is time's strongest.
 
     Bonferroni over every statistic, at ``alpha``.
 
     Returns:
-        JSON-ready dict: ``explained`` (every test passes), ``noise`` (the chi-square tests),
-        ``structure`` (per quantity: statistics, corrected p-value, chains), ``remaining``
+        :class:`RemainderTests`: ``explained`` (every test passes), ``noise`` (the chi-square
+        tests), ``structure`` (per quantity: statistics, corrected p-value, chains), ``remaining``
         (what is left, in numbers and in words).
     """
     robot = data.robot
@@ -330,7 +469,7 @@ def remainder_tests(data: EffectData, fit: EffectFit, *, alpha: float = VERDICT_
     quantities = data if poses is data.measured else replace(data, model_poses=poses)
     structure, t_pose, pose_best = _structure(quantities, rem, z, alpha)
     remaining = _remaining(robot, fit, std, z, noise, structure, t_pose, pose_best, alpha)
-    return {"explained": not remaining["present"], "noise": noise, "structure": structure, "remaining": remaining}
+    return RemainderTests(not remaining.present, noise, structure, remaining)
 
 
 def _chain_list(word: str, chains: list) -> str:
@@ -341,89 +480,26 @@ def _chain_list(word: str, chains: list) -> str:
     return f"{word}s {', '.join(map(str, chains[:-1]))} and {chains[-1]}"
 
 
-def _remaining_words(rem: dict, chain: str, explained: bool) -> str:
+def _remaining_words(rem: Remaining, chain: str, explained: bool) -> str:
     if explained:
-        return (f"nothing beyond the declared noise: residual {rem['noise_ratio']:.2f} x the noise, "
+        return (f"nothing beyond the declared noise: residual {rem.noise_ratio:.2f} x the noise, "
                 f"no structure in time, motion, stroke, load or workspace")
-    size = (f"a remainder of RMS {1e3 * rem['rms_mm']:.2f} um against a noise floor of "
-            f"{1e3 * rem['noise_floor_mm']:.2f} um (whitened: {rem['noise_ratio']:.1f} x the declared noise)")
-    if rem["noise_ratio"] < 1.0:  # structure, not size: say that the rows' own noise is smaller
-        size = (f"structure in a remainder of RMS {1e3 * rem['rms_mm']:.2f} um, below the noise floor of "
-                f"{1e3 * rem['noise_floor_mm']:.2f} um the declared noise gives: the declared noise is larger than "
-                f"the rows show (they show {rem['noise_ratio']:.2f} x it), and the structure is judged at the rows' "
+    size = (f"a remainder of RMS {1e3 * rem.rms_mm:.2f} um against a noise floor of "
+            f"{1e3 * rem.noise_floor_mm:.2f} um (whitened: {rem.noise_ratio:.1f} x the declared noise)")
+    if rem.noise_ratio < 1.0:  # structure, not size: say that the rows' own noise is smaller
+        size = (f"structure in a remainder of RMS {1e3 * rem.rms_mm:.2f} um, below the noise floor of "
+                f"{1e3 * rem.noise_floor_mm:.2f} um the declared noise gives: the declared noise is larger than "
+                f"the rows show (they show {rem.noise_ratio:.2f} x it), and the structure is judged at the rows' "
                 f"own noise")
-    where = _chain_list(chain, rem["chains"]) or f"every {chain} alike"
-    if rem["follows"]:
-        what = "following " + ", ".join(rem["follows"][:3])
-        if rem.get("pose_drift"):
+    where = _chain_list(chain, rem.chains) or f"every {chain} alike"
+    if rem.follows:
+        what = "following " + ", ".join(rem.follows[:3])
+        if rem.pose_drift:
             what += (f" (the measured pose drifts with time, alike at every pose: "
-                     f"{', '.join(rem['pose_drift'])})")
-        if rem["does_not_follow"]:
-            what += "; not " + ", ".join(rem["does_not_follow"])
+                     f"{', '.join(rem.pose_drift)})")
+        if rem.does_not_follow:
+            what += "; not " + ", ".join(rem.does_not_follow)
     else:
         what = ("following none of the quantities tested (time, motion, stroke, load, workspace): noise larger than "
                 "declared, or rows off at random")
     return f"{size}, on {where}, {what}"
-
-
-def locate_mismatch(data: EffectData, geometry_fit: EffectFit) -> dict:
-    """Where the residuals of the geometry-only fit concentrate.
-
-    Joint space: RMS of the standardised closure residuals per chain. Task space: RMS of
-    ``measured - FK(identified, q_cmd)`` per pose coordinate over its declared standard
-    deviation (NaN where the forward kinematics fails). Workspace: for each pose coordinate,
-    the per-pose residual RMS in its lower and upper thirds. Time: in the first, middle and last
-    thirds of the record. Direction of motion: the mean residual of chains whose joint last
-    increased minus that of chains whose joint last decreased, in standard errors (hysteresis
-    shows here).
-
-    Returns:
-        JSON-ready dict; ``summary`` holds the findings in words.
-    """
-    robot, theta = data.robot, geometry_fit.theta
-    z = geometry_fit.residuals / closure_noise_std(robot, theta, data)  # standardised closure residuals
-    per_chain = root_mean_square(z, axis=0)
-    try:
-        pred = robot.forward_kinematics(theta, data.joints, initial=data.measured)
-        per_dof = root_mean_square((data.measured - pred) / data.noise.pose_std(robot.pose_units), axis=0)
-    except KinematicsError:
-        per_dof = np.full(robot.pose_dim, np.nan)
-    per_pose = root_mean_square(z, axis=1)
-    region = {}
-    for k, name in enumerate(robot.pose_names):
-        q = np.quantile(data.measured[:, k], [1 / 3, 2 / 3])
-        lo, hi = data.measured[:, k] <= q[0], data.measured[:, k] >= q[1]
-        region[name] = {"low_third_rms": float(root_mean_square(per_pose[lo])), "high_third_rms": float(root_mean_square(per_pose[hi]))}
-    thirds = np.array_split(np.argsort(data.t_s), 3)
-    time_rms = [float(root_mean_square(per_pose[s])) for s in thirds]
-    tc = np.corrcoef(data.t_s, z.mean(axis=1))[0, 1] if np.ptp(data.t_s) > 0 else 0.0
-    up, down = z[data.direction > 0], z[data.direction < 0]
-    if up.size > 1 and down.size > 1:
-        hyst = float((up.mean() - down.mean()) / np.sqrt(up.var() / up.size + down.var() / down.size))
-    else:
-        hyst = 0.0
-    worst = int(np.argmax(per_chain))
-    reg_name, reg = max(region.items(), key=lambda kv: abs(kv[1]["high_third_rms"] - kv[1]["low_third_rms"]))
-    chain = robot.chain_word
-    summary = [
-        f"joint space: residual RMS per {chain} {', '.join(f'{v:.2f}' for v in per_chain)} (in noise standard "
-        f"deviations); largest on {chain} {worst + 1}",
-        f"task space: RMS per coordinate {' '.join(robot.pose_names)} {', '.join(f'{v:.2f}' for v in per_dof)} "
-        f"(noise standard deviations)",
-        f"workspace: largest contrast along {reg_name}: low third {reg['low_third_rms']:.2f}, "
-        f"high third {reg['high_third_rms']:.2f}",
-        f"time: RMS in first/middle/last third {', '.join(f'{v:.2f}' for v in time_rms)}; correlation of the "
-        f"mean residual with time {tc:+.2f}",
-        f"direction of motion: {chain}s whose joint last increased minus those whose joint last decreased: "
-        f"{hyst:+.1f} standard errors",
-    ]
-    return {
-        "joint_space_rms_per_chain": per_chain.tolist(),
-        "task_space_rms_per_dof": dict(zip(robot.pose_names, per_dof.tolist())),
-        "workspace_thirds": region,
-        "time_thirds_rms": time_rms,
-        "time_correlation": float(tc),
-        "direction_contrast_se": hyst,
-        "worst_poses": [int(i) for i in np.argsort(per_pose)[::-1][:5]],
-        "summary": summary,
-    }

@@ -11,12 +11,33 @@ import numpy as np
 
 from ..observability import describe_combination
 from .base import Effect, EffectData, closure_regressors, orthonormal_columns
-from .separability import unseparated_combinations
+from .separability import UnseparatedCombination, unseparated_combinations
 from .whitening import free_indices, noise_covariance, scaled_least_squares, whiten
 
-__all__ = ["LinearisedFit", "DENSE_FOLD_MAX", "SEARCH_GRID_MAX", "SEARCH_BEAM", "SEARCH_ROWS_MAX",
+__all__ = ["LinearisedFit", "SearchForm", "DENSE_FOLD_MAX", "SEARCH_GRID_MAX", "SEARCH_BEAM", "SEARCH_ROWS_MAX",
            "SEARCH_SUBSAMPLE_ROWS", "SEARCH_GOLDEN_ITERATIONS", "SEARCH_CONFIRMED", "SEARCH_REFINE_ITERATIONS",
            "SEARCH_WINDOW_SPACINGS", "SEARCH_UPDATE_ROWS", "search_subsample"]
+
+
+@dataclass(frozen=True)
+class SearchForm:
+    """How the searched parameters (a pitch, a time constant, a step time) were searched
+    (:meth:`LinearisedFit.search_form`): ``form`` ``every row``, or ``subsample`` above
+    ``threshold`` measurements: ``rows`` measurements, the grid scanned on ``subsample_rows`` of
+    them and confirmed on every row, for the ``effects`` named (sorted)."""
+
+    form: str = "every row"
+    rows: int | None = None
+    subsample_rows: int | None = None
+    threshold: int | None = None
+    effects: tuple = ()
+
+    def to_dict(self) -> dict:
+        """JSON-ready (the discovery summary's ``search``)."""
+        if self.form != "subsample":
+            return {"form": self.form}
+        return {"form": self.form, "rows": self.rows, "subsample_rows": self.subsample_rows,
+                "threshold": self.threshold, "effects": list(self.effects)}
 
 
 class LinearisedFit:
@@ -68,30 +89,30 @@ class LinearisedFit:
             self._cols[key] = self.perp(whiten(self.winv, X).reshape(self.n, -1))
         return self._cols[key]
 
-    def unseparated(self, eff: Effect, extra) -> list[dict]:
+    def unseparated(self, eff: Effect, extra) -> tuple[UnseparatedCombination, ...]:
         """The coefficient combinations of ``eff`` the rows cannot separate from the geometry's
         held combinations (:func:`calib.effects.separability.unseparated_combinations`), each
-        with the geometric combination that mimics it: ``[{"combination", "ratio", "geometry"}]``
-        (empty without a held combination)."""
+        with the geometric combination that mimics it (:class:`calib.effects.separability.UnseparatedCombination`;
+        empty without a held combination)."""
         if self.basis is None:
-            return []
+            return ()
         robot = self.data.robot
         X = whiten(self.winv, closure_regressors(self.dF_dq, eff.joint_regressors(robot, self.theta, self.data, extra)))
         X = X.reshape(self.n, -1)
         held = X - self.Q_det @ (self.Q_det.T @ X)
         found = unseparated_combinations(held, self.perp(X))
         if not found:
-            return []
+            return ()
         coef_names = [c.name for c in eff.coefficients(robot)]
         free_names = [robot.table.names[i] for i in self.basis.free]
         out = []
         for v, ratio in found:
             w, *_ = np.linalg.lstsq(self.G_held, held @ v, rcond=None)  # held combinations mimicking it
             u = self.basis.held @ w
-            out.append({"combination": describe_combination(v, coef_names),
-                        "ratio": ratio,
-                        "geometry": describe_combination(u / np.linalg.norm(u), free_names) if np.any(u) else ""})
-        return out
+            out.append(UnseparatedCombination(describe_combination(v, coef_names), ratio,
+                                              describe_combination(u / np.linalg.norm(u), free_names)
+                                              if np.any(u) else ""))
+        return tuple(out)
 
     def chi2(self, blocks: list) -> float:
         if not blocks:
@@ -235,15 +256,13 @@ class LinearisedFit:
         a, b_ = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
         return eff.searched_value(_golden(lambda u: full.cost(eff, u), a, b_, SEARCH_REFINE_ITERATIONS))
 
-    def search_form(self) -> dict:
-        """How the searched parameters were searched, for the discovery's summary: ``{"form":
-        "every row"}`` or, when a search ran on a subsample, ``{"form": "subsample", "rows",
-        "subsample_rows", "threshold", "effects"}`` (the effects so searched)."""
+    def search_form(self) -> SearchForm:
+        """How the searched parameters were searched (:class:`SearchForm`): on every row or, when a
+        search ran on a subsample, its figures and the effects so searched."""
         if not self.searches:
-            return {"form": "every row"}
-        return {"form": "subsample", "rows": int(self.data.n),
-                "subsample_rows": int(min(self.search_subsample_rows, self.data.n)), "threshold": self.search_rows_max,
-                "effects": sorted(set(self.searches))}
+            return SearchForm()
+        return SearchForm("subsample", int(self.data.n), int(min(self.search_subsample_rows, self.data.n)),
+                          self.search_rows_max, tuple(sorted(set(self.searches))))
 
     def cv_rms(self, blocks: list, folds: int, seed: int) -> float:
         """Whitened RMS of the deleted residuals of ``folds``-fold cross-validation (whole

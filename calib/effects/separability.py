@@ -41,7 +41,8 @@ import numpy as np
 from ..observability import describe_combination
 from ..prior import DATA_SOURCE_RATIO
 
-__all__ = ["HELD_INFORMATION", "GRAM_MIN_RESIDUALS", "IN_CHAIN_COSINE", "FLAT_FRACTION", "GeometryBasis", "geometry_basis",
+__all__ = ["HELD_INFORMATION", "GRAM_MIN_RESIDUALS", "IN_CHAIN_COSINE", "FLAT_FRACTION", "HeldCombination",
+           "UnseparatedCombination", "UnseparatedForm", "PoseFamilyReach", "Separation", "GeometryBasis", "geometry_basis",
            "unseparated_combinations", "unseparated_information", "flat_indices", "flat_coordinates", "pose_families"]
 
 #: A geometric combination is left to the prior (held at its mean) when the rows' information
@@ -64,6 +65,91 @@ IN_CHAIN_COSINE = 0.99
 #: A pose coordinate whose recorded spread is below this fraction of the robot's workspace span
 #: in it is one the poses did not vary (a level grid: the height, the tilts, the turn).
 FLAT_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class HeldCombination:
+    """A geometric combination left to the prior (:meth:`GeometryBasis.combinations`): its
+    ``chain`` (1-based; None: across chains), the ``combination`` in words (a unit vector in
+    tolerance units, :func:`calib.observability.describe_combination`) and its maximum a
+    posteriori standard deviation over the tolerance (``std_ratio``)."""
+
+    chain: int | None
+    combination: str
+    std_ratio: float
+
+    def to_dict(self) -> dict:
+        return {"chain": self.chain, "combination": self.combination, "std_ratio": self.std_ratio}
+
+
+@dataclass(frozen=True)
+class UnseparatedCombination:
+    """A coefficient combination of an effect the rows cannot separate from the geometry's held
+    combinations (:meth:`calib.effects.search.LinearisedFit.unseparated`): in words, the ratio of
+    its standard deviations with the geometry held and free (:func:`unseparated_combinations`),
+    and the geometric combination that mimics it in words (empty: none)."""
+
+    combination: str
+    ratio: float
+    geometry: str
+
+    def to_dict(self) -> dict:
+        return {"combination": self.combination, "ratio": self.ratio, "geometry": self.geometry}
+
+
+@dataclass(frozen=True)
+class UnseparatedForm:
+    """A candidate form the selection set aside as not separable from the geometry: its
+    ``effect`` and ``form`` (:func:`calib.effects.granularity.form_key`), its unseparated
+    ``combinations`` (:class:`UnseparatedCombination`), and the pose families that would separate
+    it (``separated_by``)."""
+
+    effect: str
+    form: str
+    combinations: tuple
+    separated_by: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"effect": self.effect, "form": self.form, "combinations": [c.to_dict() for c in self.combinations],
+                "separated_by": list(self.separated_by)}
+
+
+@dataclass(frozen=True)
+class PoseFamilyReach:
+    """A family of added poses (:func:`pose_families`): how many are ``reachable`` of those
+    ``tried``, how many of the held combinations they would determine (``determines``), and the
+    forms they would separate (``separates``)."""
+
+    family: str
+    reachable: int
+    tried: int
+    determines: int
+    separates: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"reachable": self.reachable, "tried": self.tried, "determines": self.determines,
+                "separates": list(self.separates)}
+
+
+@dataclass(frozen=True)
+class Separation:
+    """What a discovery's rows cannot separate, and the poses that would
+    (:func:`calib.effects.discovery.separation`): the geometric combinations ``determined`` (fitted)
+    of the ``free`` ones, those left to the prior (:class:`HeldCombination`), the candidate forms
+    set aside (:class:`UnseparatedForm`), each family of added poses (:class:`PoseFamilyReach`)."""
+
+    determined: int
+    free: int
+    left_to_prior: tuple
+    unseparated: tuple
+    poses: tuple
+
+    def to_dict(self) -> dict:
+        """JSON-ready (the discovery summary's ``separation``, less its ``prior_source``)."""
+        return {"determined": self.determined, "free": self.free,
+                "left_to_prior": [c.to_dict() for c in self.left_to_prior],
+                "unseparated": [u.to_dict() for u in self.unseparated],
+                "poses": {p.family: p.to_dict() for p in self.poses}}
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,7 +205,7 @@ class GeometryBasis:
         ``v`` (F,) in tolerance units."""
         return float(1.0 / np.sqrt(1.0 + max(float(v @ self.information @ v), 0.0)))
 
-    def combinations(self, names, chains, *, n_terms: int = 4) -> list[dict]:
+    def combinations(self, names, chains, *, n_terms: int = 4) -> tuple[HeldCombination, ...]:
         """The held combinations in words, chain by chain where the held space contains a
         chain's own directions (a plane's ``0.71 B3.x + 0.71 P3.x``), then those across chains.
 
@@ -127,10 +213,7 @@ class GeometryBasis:
             names: (F,) the free parameters' names; chains: (F,) their chains (0-based).
 
         Returns:
-            One dict per combination: ``{"chain": 1-based chain or None, "combination": words
-            (unit vector in tolerance units, :func:`calib.observability.describe_combination`),
-            "std_ratio": its maximum a posteriori standard deviation over the tolerance}``, least
-            determined first.
+            One :class:`HeldCombination` per combination, least determined first.
         """
         names, chains = tuple(names), np.asarray(chains)
         found, out = [], []
@@ -143,19 +226,17 @@ class GeometryBasis:
                 v = np.zeros(self.free.size)
                 v[cols] = vt[k]
                 found.append(v)
-                out.append({"chain": int(c) + 1, "vector": v})
+                out.append((int(c) + 1, v))
         rest = self.held
         if found:  # the held space less the chains' own directions
             F = np.array(found).T
             rest = self.held - F @ np.linalg.lstsq(F, self.held, rcond=None)[0]
         if rest.size:
             u, s, _ = np.linalg.svd(rest, full_matrices=False)
-            out += [{"chain": None, "vector": u[:, k]} for k in np.flatnonzero(s > 1 - IN_CHAIN_COSINE)]
-        for d in out:
-            v = d.pop("vector")
-            d["combination"] = describe_combination(v, names, n_terms=n_terms)
-            d["std_ratio"] = self.std_ratio(v / np.linalg.norm(v))
-        return sorted(out, key=lambda d: -d["std_ratio"])
+            out += [(None, u[:, k]) for k in np.flatnonzero(s > 1 - IN_CHAIN_COSINE)]
+        held = [HeldCombination(chain, describe_combination(v, names, n_terms=n_terms),
+                                self.std_ratio(v / np.linalg.norm(v))) for chain, v in out]
+        return tuple(sorted(held, key=lambda h: -h.std_ratio))
 
 
 def geometry_basis(G: np.ndarray, std: np.ndarray, free: np.ndarray) -> GeometryBasis:

@@ -296,7 +296,7 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     held-out targets of its workspace (``seed``; half at the recording's lightest payload and half
     at its heaviest where it has several) three ways: nominal commands, the geometry fitted
     alone compensated, the geometry and the physics found compensated (the calibration discovery
-    gives, :func:`pipeline.workflows.discovery.discovery_calibration`).
+    gives, :attr:`pipeline.workflows.discovery.DiscoveryReport.calibration`).
 
     Returns:
         ``nominal``, ``geometry``, ``physics``: mean position error of the settled poses (noise-free),
@@ -306,11 +306,11 @@ def proof_in_the_testbed(rec, n_targets: int = 50, seed: int = 0) -> dict:
     """
     from pipeline.simulation import command_scenario_machine, heldout_payloads, heldout_targets
 
-    from .discovery import discover, discovery_calibration
+    from .discovery import discover
 
     robot = rec.robot
     report = discover(rec, seed=0, resim=False)
-    cal = discovery_calibration(rec, report, {}, {})
+    cal = report.calibration
     targets, t_s = heldout_targets(rec, n_targets, seed)
     channels = heldout_payloads(rec, n_targets)  # a recording at several payloads: the targets at two
     position = ~robot.angle_pose_mask

@@ -6,9 +6,11 @@ Calibrates the geometry, locates where the residuals concentrate, names the left
 is consistent with the declared noise and, if not, what it is, where and what it follows; shows
 the held-out fit improve, and re-simulates the MuJoCo machine with the effects added (their own
 :meth:`~calib.effects.Effect.machine_settings`), re-fitting a physical parameter there with
-``mujoco.sysid``. :func:`run_discovery` does what ``python -m pipeline.discover`` does (a
-recording or a seeded scenario in, the ``.rrd`` and summary out); :func:`discover` analyses a
-recording in memory. Nothing here depends on the robot or the effect.
+``mujoco.sysid``. The policy (which rows, the held-out judgement, the re-discoveries, the
+calibration found) is calib's (:func:`calib.discovery.discover_machine`); here are the recording's
+edge, the MuJoCo witness and the files. :func:`run_discovery` does what ``python -m pipeline.discover``
+does (a recording or a seeded scenario in, the ``.rrd``, the calibration and the summary out);
+:func:`discover` analyses a recording in memory. Nothing here depends on the robot or the effect.
 """
 
 from __future__ import annotations
@@ -22,20 +24,18 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.effects import Discovery, EffectData, discover_effects, effect as registered_effect, effects_for
-from calib.effects.discovery import MIN_ROWS
-from calib.effects.separability import GRAM_MIN_RESIDUALS
+from calib.discovery import HELDOUT_FRACTION, DiscoveryOutcome, DiscoveryRows, MotionlessRows, discover_machine
+from calib.effects import Discovery
 from calib.effects.base import PAYLOAD_CHANNEL
-from calib.effects.session_zeros import SessionZeros, session_codes, session_zeros_effect
-from calib.effects.heldout import HeldoutJudgement, RejectedEffect, TIME_BLOCKS, heldout_folds, judge_effects
+from calib.effects.session_zeros import SessionZeros
+from calib.effects.heldout import HeldoutJudgement, RejectedEffect
 from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
-from calib.effects.records import EffectRecord, fitted_effects
 from calib.measurement import frame_from_dict
-from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, validity_domain, write_calibration)
-from pipeline.report import summary_document, write_report
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, write_calibration)
+from pipeline.report import REPORT_KEY, Report, build_report, write_report
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.report.text import shift_words, verdict_words
@@ -55,10 +55,24 @@ RESIMULATION_SETTLE_VELOCITY = 1e-7
 
 @dataclass
 class DiscoveryReport:
-    """What :func:`discover` found (``summary`` is the JSON written by ``--summary-json``)."""
+    """What :func:`discover` found.
+
+    Attributes:
+        discovery: the discovery judged (its ``outcome``'s).
+        summary: the JSON written by ``--summary-json``.
+        outcome: the discovery policy's outcome (:class:`calib.discovery.DiscoveryOutcome`).
+        recording: the recording analysed (as read: poses in the base frame).
+        calibration: what the discovery found, as a calibration file holds it.
+        report: the report of it (:class:`pipeline.report.Report`): of the summary so far, and
+            of every file written once :func:`run_discovery` has written them.
+    """
 
     discovery: Discovery
     summary: dict
+    outcome: DiscoveryOutcome | None = None
+    recording: Recording | None = None
+    calibration: Calibration | None = None
+    report: Report | None = None
 
 
 def heldout_block(judgement: HeldoutJudgement) -> dict:
@@ -244,98 +258,30 @@ def sysid_refit(rec: Recording, theta: np.ndarray, settings: dict, eff, param, r
     return _with(settings, param.section, name, xs), report
 
 
-def judged_discovery(rec: Recording, data: EffectData, disc: Discovery, cal: np.ndarray, val: np.ndarray, *,
-                     heldout_fraction: float, seed: int, analysed_all: bool, candidates) -> tuple:
-    """``(discovery, judgement, basis in words)``: what the calibration rows chose, judged by held-out
-    rows (:func:`calib.effects.heldout.judge_effects`: the validation rows, or folds at random, in
-    blocks of time and by session); where the held-out rows reject an effect (or the separability
-    screen set it aside), the discovery is run again without it, and judged again.
-
-    ``disc`` indexes the recording's rows (its ``kept`` and ``flagged``); ``cal`` the rows it analysed."""
-    robot = rec.robot
-    rejected: list = []
-    for round_ in range(MAX_REDISCOVERIES + 1):
-        folds = heldout_folds(rec.t_s, rec.sessions, disc.kept, val, random_fraction=heldout_fraction, seed=seed)
-        start = disc.geometry.theta if folds[0].train.size * robot.n_chains > GRAM_MIN_RESIDUALS else None
-        unseparated = {u["form"] for u in disc.separation.get("unseparated", [])} if disc.separation else set()
-        delta_bic = {n: disc.evidence.get(n, {}).get("delta_bic_when_added") for n in disc.effects}
-        judgement = judge_effects(data, disc.chosen, folds, rec.sessions, unseparated=unseparated,
-                                  delta_bic=delta_bic, start=start)
-        if not judgement.rejected:
-            break
-        rejected += judgement.rejected
-        out = {r.name for r in rejected}
-        # the last round: the geometry alone, which the held-out rows cannot reject
-        narrowed = [] if round_ == MAX_REDISCOVERIES - 1 else \
-            [c for c in candidates if registered_effect(c).name not in out]
-        disc = rediscovered(data, disc, cal, narrowed, seed, rec)
-    judgement = replace(judgement, rejected=tuple(rejected))
-    judgement, disc = judged_law(data, disc, judgement, folds, rec.sessions, start)
-    basis = "recorded validation rows" if val.size else (
-        f"{int(round(100 * heldout_fraction))}% of the rows held out at random (seed {seed}) for the figures; every "
-        f"effect also judged on {TIME_BLOCKS} contiguous blocks in time"
-        + (" and session by session" if len(set(rec.sessions[disc.kept].tolist())) > 1 else ""))
-    if analysed_all:
-        basis += (f"; every row analysed, calibration and validation alike (the {int((rec.sets == 'calibration').sum())} "
-                  f"calibration rows alone are fewer than the {MIN_ROWS} discovery needs)")
-    if start is not None:
-        basis += (f"; the training rows' geometry fitted from that of every row (above {GRAM_MIN_RESIDUALS:,} "
-                  "residuals)")
-    return disc, judgement, basis
-
-
-def witnessed(rec: Recording, data: EffectData, disc: Discovery, cal: np.ndarray, judgement: HeldoutJudgement,
-              resimulated: dict, seed: int) -> tuple:
-    """``(discovery, judgement, resimulation block)`` after the MuJoCo re-simulation's word: where
-    the machine with the effects named fits the recording worse than the machine with the geometry
-    alone, the effects are reported (both figures) and not named: the discovery falls back to the
-    geometry alone, whose re-simulation is the one already made."""
+def witnessed(outcome: DiscoveryOutcome, resimulated: dict) -> tuple[DiscoveryOutcome, dict]:
+    """``(outcome, resimulation block)`` after the MuJoCo re-simulation's word: where the machine
+    with the effects named fits the recording worse than the machine with the geometry alone, the
+    effects are reported (both figures) and not named: the discovery falls back to the geometry
+    alone (:meth:`calib.discovery.DiscoveryOutcome.geometry_alone`), whose re-simulation is the one
+    already made."""
+    disc = outcome.discovery
     sim = resimulated.get("mujoco_resimulation")
     if not disc.effects or sim is None or sim["after"]["position_um"] <= sim["before"]["position_um"]:
-        return disc, judgement, resimulated
+        return outcome, resimulated
     before, after = 1e-3 * sim["before"]["position_um"], 1e-3 * sim["after"]["position_um"]
-    rejected = tuple(RejectedEffect(n, disc.evidence.get(n, {}).get("delta_bic_when_added"), before, after,
+    rejected = tuple(RejectedEffect(n, disc.evidence.delta_bic_when_added(n), before, after,
                                     "MuJoCo re-simulation", "worse re-simulated") for n in disc.effects)
-    geometry = rediscovered(data, disc, cal, [], seed, rec)
-    folds = [judgement.fold]
-    again = judge_effects(data, geometry.chosen, folds, rec.sessions)
     kept = {"before": sim["before"], "after": sim["before"], "wall_time_s": sim.get("wall_time_s"),
             "with_effects_not_named": {k: v for k, v in sim.items() if k != "wall_time_s"}}
-    return geometry, replace(again, rejected=judgement.rejected + rejected), {"mujoco_resimulation": kept}
+    return outcome.geometry_alone(rejected), {"mujoco_resimulation": kept}
 
 
-#: How many times a discovery is run again without the effects the held-out rows rejected (the
-#: last time with the geometry alone).
-MAX_REDISCOVERIES = 3
-
-
-def rediscovered(data: EffectData, disc: Discovery, cal: np.ndarray, candidates, seed: int, rec: Recording) -> Discovery:
-    """The discovery on the same rows with ``candidates`` (rows indexed as the recording's)."""
-    again = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
-                             channels={k: v[cal] for k, v in rec.extras.items()} or None)
-    return replace(again, kept=cal[again.kept], flagged=tuple(int(cal[i]) for i in again.flagged))
-
-
-def judged_law(data: EffectData, disc: Discovery, judgement: HeldoutJudgement, folds, sessions, start) -> tuple:
-    """A proposed law judged as an effect is (:func:`calib.effects.heldout.judge_effects`): one that
-    predicts the held-out rows worse is dropped and reported."""
-    law = disc.proposed_law
-    if law is None:
-        return judgement, disc
-    try:
-        j = judge_effects(data, law.fit, folds, sessions, start=start)
-    except (ValueError, IndexError, np.linalg.LinAlgError):  # a law bound to the analysed rows' channels
-        return judgement, disc
-    law_name = law.fit.models[-1].name
-    dropped = [r for r in j.rejected if r.name == law_name]
-    if not dropped:
-        return judgement, disc
-    return replace(judgement, rejected=judgement.rejected + tuple(dropped)), replace(disc, proposed_law=None)
-
-
-def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, resim: bool = True,
-             sysid: bool = True, candidates=None, exclude=(), kept_law: dict | None = None) -> DiscoveryReport:
-    """Run the whole discovery on a recording (see the module docstring).
+def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = HELDOUT_FRACTION, resim: bool = True,
+             sysid: bool = True, candidates=None, exclude=(), kept_law: dict | None = None,
+             frames: tuple[dict, dict] = ({}, {}), source: dict | None = None) -> DiscoveryReport:
+    """Run the whole discovery on a recording (see the module docstring): the policy
+    (:func:`calib.discovery.discover_machine`), the MuJoCo re-simulation's word, the summary and
+    the calibration.
 
     Args:
         rec: the recording.
@@ -348,81 +294,63 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = 0.25, r
             history still counts them.
         kept_law: a law kept from an earlier recording (:func:`read_kept_law`'s data): one more
             candidate effect, called :data:`KEPT_LAW_NAME`, its constants refitted here.
+        frames: ``({session: (6,) frame}, {session: (6,) std})`` the read of ``rec`` registered
+            (the calibration's instrument frames; empty: the poses were in the base frame).
+        source: the recording the calibration names (:func:`pipeline.formats.recording_source`).
 
     The recording's extra channels (``rec.extras``: a temperature) are quantities a proposed law
     may use.
 
     The summary's ``flagged_poses`` and ``outliers.bad_rows`` are 1-based data rows of the
     recording (the first measurement is row 1).
+
+    Raises:
+        ValueError: the rows analysed never move the machine (in words).
     """
     t0 = time.perf_counter()
     robot = rec.robot
-    if candidates is None:
-        candidates = effects_for(robot)
-    if kept_law is not None:
-        candidates = list(candidates) + [kept_law_effect(kept_law, rec)]
-    names = [registered_effect(c).name for c in candidates]
-    cal, val, analysed_all = analysed_rows(rec, exclude)
-    still = motionless_rows(robot, rec.joints[cal], rec.noise.joint_std)
-    if still is not None:
-        raise ValueError(f"{no_motion_words(still, robot.name)}: nothing to discover")
     tolerance, tolerance_source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
-    codes, session_names = session_codes(rec.sessions)
-    data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
-                      payload_kg=rec.extras.get(PAYLOAD_CHANNEL), tolerance=tolerance.std, sessions=codes)
-    if np.unique(codes[cal]).size > 1:  # rows of several sessions analysed: each later one may have re-homed
-        candidates = list(candidates) + [session_zeros_effect(session_names)]
-    disc = discover_effects(data.subset(cal), candidates=candidates, seed=seed,
-                            channels={k: v[cal] for k, v in rec.extras.items()} or None)
-    kept = cal[disc.kept]
-    flagged = [int(cal[i]) for i in disc.flagged]
-    disc = replace(disc, kept=kept, flagged=tuple(flagged))
-    disc, judgement, basis = judged_discovery(rec, data, disc, cal, val, heldout_fraction=heldout_fraction, seed=seed,
-                                              analysed_all=analysed_all, candidates=candidates)
+    rows = DiscoveryRows(robot, rec.joints, rec.measured, rec.t_s, rec.noise, rec.sets, rec.sessions, rec.extras)
+    try:
+        outcome = discover_machine(rows, tolerance=tolerance, seed=seed, heldout_fraction=heldout_fraction,
+                                   candidates=candidates, exclude=exclude,
+                                   kept_law=None if kept_law is None else kept_law_effect(kept_law, rec))
+    except MotionlessRows as exc:
+        raise ValueError(f"{no_motion_words(exc.rows, robot.name)}: nothing to discover") from None
     resimulated = None
     if resim:  # the second witness: an effect whose MuJoCo machine fits worse is not presented as found
-        resimulated = resimulation_block(rec, disc, sysid, seed)
-        disc, judgement, resimulated = witnessed(rec, data, disc, cal, judgement, resimulated, seed)
-    summary = discovery_summary(rec, disc, judgement, basis, names, tolerance_source, resimulated)
+        resimulated = resimulation_block(rec, outcome.discovery, sysid, seed)
+        outcome, resimulated = witnessed(outcome, resimulated)
+    summary = discovery_summary(rec, outcome, tolerance_source, resimulated)
     summary["wall_time_s"] = time.perf_counter() - t0
-    return DiscoveryReport(discovery=disc, summary=summary)
+    calibration = outcome.calibration(frames=frames[0], frames_std=frames[1], recording=source or {})
+    return DiscoveryReport(discovery=outcome.discovery, summary=summary, outcome=outcome, recording=rec,
+                           calibration=calibration, report=build_report(summary))
 
 
-def analysed_rows(rec: Recording, exclude) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``(rows analysed, validation rows, whether every row is analysed)``: the calibration rows
-    and the validation rows less ``exclude``; where the calibration rows alone are fewer than
-    discovery needs, every row (the validation rows then none)."""
-    cal = np.flatnonzero(rec.sets == "calibration")
-    val = np.flatnonzero(rec.sets == "validation")
-    exclude = np.asarray(exclude, dtype=int)
-    cal, val = np.setdiff1d(cal, exclude), np.setdiff1d(val, exclude)
-    analysed_all = cal.size < MIN_ROWS <= len(rec.sets) - exclude.size
-    if analysed_all:  # too few calibration rows alone: every measured row is evidence of the physics
-        cal, val = np.setdiff1d(np.arange(len(rec.sets)), exclude), np.zeros(0, dtype=int)
-    return cal, val, analysed_all
-
-
-def discovery_summary(rec: Recording, disc: Discovery, judgement: HeldoutJudgement, basis: str, names: list,
-                      tolerance_source: str, resimulated: dict | None) -> dict:
+def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_source: str,
+                      resimulated: dict | None) -> dict:
     """The summary (``--summary-json``) of a discovery judged by its held-out rows."""
     robot = rec.robot
+    disc, judgement, names = outcome.discovery, outcome.judgement, outcome.names
     flagged = list(disc.flagged)
     h = heldout_block(judgement)
     scan = disc.outliers
+    remaining = disc.remaining.to_dict()
     summary = {
         "robot": robot.name,
         "explained": disc.explained,
-        "verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining),
-        "remaining": disc.remaining,
+        "verdict": verdict_words(disc.explained, list(disc.effects), remaining),
+        "remaining": remaining,
         "effects": list(disc.effects),
         "partial": list(disc.partial),
-        "aliases": disc.aliases,
+        "aliases": [a.to_dict() for a in disc.aliases],
         "candidates": [n for n in names if n != "none"],
         "effect_parameters": disc.chosen.parameters(),
         "heldout_rms_before_mm": h["heldout_rms_before_mm"],
         "heldout_rms_after_mm": h["heldout_rms_after_mm"],
         "noise_floor_mm": h["noise_floor_mm"],
-        "heldout_basis": basis,
+        "heldout_basis": outcome.basis,
         "heldout_per_row": h["per_row"],
         "heldout_rms_as_predicted_mm": h["heldout_rms_as_predicted_mm"],
         "heldout_folds": h["heldout_folds"],
@@ -431,26 +359,27 @@ def discovery_summary(rec: Recording, disc: Discovery, judgement: HeldoutJudgeme
                            for s, shift in judgement.shifts.items() if shift.shifted}
         | calibration_session_shifts(rec, disc.chosen),
         "flagged_poses": [i + 1 for i in flagged],
-        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan["bad"]),
-                     "model_wrong": bool(scan["model_wrong"]),
-                     "shared": {str(int(disc.kept[int(j)]) + 1): v for j, v in scan["shared"].items()},
-                     "threshold": scan["threshold"], "scale": scan["scale"]},
-        "tests": {"noise": disc.tests["noise"], "structure": disc.tests["structure"]},
-        "evidence": disc.evidence,
+        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan.bad),
+                     "model_wrong": bool(scan.model_wrong),
+                     "shared": {str(int(disc.kept[r.row]) + 1): dict(r.by) for r in scan.shared},
+                     "threshold": scan.threshold, "scale": scan.scale},
+        "tests": disc.tests.to_dict(),
+        "evidence": disc.evidence.to_dict(),
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
         "identified_std": robot.table.to_dict(np.sqrt(np.clip(np.diag(disc.chosen.geometry_covariance()), 0.0, None))),
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
         "free_parameters": list(robot.free_default),
         "declared_noise": rec.noise.to_dict(),
-        "located": disc.located,
+        "located": disc.located.to_dict(),
         "rows": int(rec.joints.shape[0]),
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
-        "search": disc.search,
+        "search": disc.search.to_dict(),
     }
     summary["implausible_parameters"] = implausibility(rec, disc)
     summary["time"] = "row order" if row_order(rec) else "measured"
     summary["effect_parameters"] = placed_by_row(summary["effect_parameters"], rec, disc.kept, row_order(rec))
-    summary["separation"] = dict(disc.separation, prior_source=tolerance_source) if disc.separation else {}
+    summary["separation"] = {} if disc.separation is None else dict(disc.separation.to_dict(),
+                                                                      prior_source=tolerance_source)
     if rec.meta.get("simulation", {}).get("effect") is not None:
         summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
     if resimulated is not None:
@@ -654,32 +583,11 @@ def frames_of(rec: Recording, block: dict) -> tuple[dict, dict]:
     return {}, {}
 
 
-def discovery_calibration(rec: Recording, report: DiscoveryReport, block: dict, source: dict) -> Calibration:
-    """What discovery found, as a calibration file holds it: the geometry fitted jointly with the
-    effects named (and the proposed law, when one is), the effects with their coefficients, the
-    instrument frames the read registered, the domain of the rows analysed."""
-    disc = report.discovery
-    fit = disc.chosen if disc.proposed_law is None else disc.proposed_law.fit
-    robot = rec.robot
-    cov = fit.geometry_covariance()
-    free = tuple(robot.free_default)
-    idx = robot.table.indices(free)
-    frames, frames_std = frames_of(rec, block)
-    rows = disc.kept
-    payload = rec.extras.get(PAYLOAD_CHANNEL)
-    reference = None if payload is None else float(np.mean(payload[rows]))  # a compliance at several payloads
-    return Calibration(robot=robot, theta=fit.theta, std=np.sqrt(np.clip(np.diag(cov), 0.0, None)), free=free,
-                       covariance=cov[np.ix_(idx, idx)], frames=frames, frames_std=frames_std,
-                       effects=tuple(EffectRecord.from_fitted(fe, robot, reference) for fe in fitted_effects(fit)
-                                     if not isinstance(fe.effect, SessionZeros)),  # a re-homing: re-referenced
-                       validity=validity_domain(robot, rec.measured[rows], rec.joints[rows], rec.t_s[rows]),
-                       noise=rec.noise, recording=source, produced_by="pipeline.discover")
-
-
-def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) -> DiscoveryReport:
+def discover_in_words(rec: Recording, settings: DiscoverySettings, read, source: dict) -> DiscoveryReport:
     """:func:`discover` with its numerical failures said as causes, naming the file: a singular
     fit (the rows do not determine geometry and effects together), a re-simulation that does not
-    settle.
+    settle. ``read``: the recording as a run read it (its gross rows and instrument frames), or
+    None (a scenario); ``source``: the recording the calibration names.
 
     Raises:
         ValueError: the cause in words.
@@ -688,7 +596,8 @@ def discover_in_words(rec: Recording, settings: DiscoverySettings, read=None) ->
     try:
         return discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
                         candidates=settings.candidates, exclude=() if read is None else read.gross_rows,
-                        kept_law=None if settings.use_law is None else read_kept_law(settings.use_law))
+                        kept_law=None if settings.use_law is None else read_kept_law(settings.use_law),
+                        frames=({}, {}) if read is None else frames_of(rec, read.block), source=source)
     except np.linalg.LinAlgError:
         raise ValueError(f"{where}: the rows do not determine the geometry and the candidate effects together "
                          "(a singular fit: too few distinct poses, or a machine that barely moved); measure poses "
@@ -739,7 +648,10 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if settings.real is not None:  # as pipeline.run --real reads it: gross rows named, instrument frame taken out
         read = read_as_a_run_does(settings.real, rec, seed=settings.seed)
         rec = read.recording
-    report = discover_in_words(rec, settings, read)
+    source = recording_source(settings.real) if settings.real is not None else \
+        {"name": None, "simulated": f"scenario {'+'.join(settings.scenario)}, seed {settings.scenario_seed}, "
+                                    f"{settings.scenario_granularity}"}
+    report = discover_in_words(rec, settings, read, source)
     if read is not None:
         report.summary.update(read.block)
         report.summary["warnings"] = warnings
@@ -749,10 +661,7 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
 
     rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
     report.summary["rrd"] = str(rrd)
-    source = recording_source(settings.real) if settings.real is not None else \
-        {"name": None, "simulated": f"scenario {'+'.join(settings.scenario)}, seed {settings.scenario_seed}, "
-                                    f"{settings.scenario_granularity}"}
-    cal = discovery_calibration(rec, report, {} if read is None else read.block, source)
+    cal = report.calibration
     report.summary["calibration"] = str(write_calibration(calibration_path, cal, overwrite=settings.overwrite))
     if settings.export_mjcf is not None:
         report.summary["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=settings.overwrite))
@@ -764,11 +673,12 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if settings.report is not None:
         report.summary["report"] = str(settings.report)
         report.summary["compensation"] = compensation_table(rec, cal, report.summary)
+    report.report = build_report(report.summary)  # every file named: the report of the whole discovery
     if settings.summary_json is not None:
-        atomic_write(settings.summary_json, json.dumps(summary_document(report.summary), indent=1),
-                     overwrite=settings.overwrite)
+        atomic_write(settings.summary_json, json.dumps({**report.summary, REPORT_KEY: report.report.to_dict()},
+                                                       indent=1), overwrite=settings.overwrite)
     if settings.report is not None:
-        write_report(report.summary, settings.report, overwrite=settings.overwrite)
+        write_report(report.report, settings.report, overwrite=settings.overwrite)
     return report
 
 
