@@ -20,6 +20,7 @@ from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearc
                                   NoInformation, NoMotion, Verdict, VerdictEvidence, likely_cause)
 from pipeline.report.text import IMPLAUSIBLE_LINES
 from pipeline.report.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
+from pipeline.report import build_report
 from pipeline.run import print_summary
 
 
@@ -122,7 +123,7 @@ def test_implausible_parameters_are_a_headline_and_a_few_lines(capsys):
     gives a headline, the first few, and the count of the rest."""
     items = [{"name": f"B{k}.y", "words": f"B{k}.y = +2 mm from nominal, 20 times its tolerance 0.1 mm"}
              for k in range(37)]
-    print_summary({"robot": "hexapod", "scenario": "a recording", "implausible_parameters": items})
+    print_summary(build_report({"robot": "hexapod", "scenario": "a recording", "implausible_parameters": items}))
     out = capsys.readouterr().out.strip().splitlines()
     start = next(i for i, line in enumerate(out) if line.lstrip().startswith("implausible:"))
     out = out[start:start + 1 + IMPLAUSIBLE_LINES + 1]

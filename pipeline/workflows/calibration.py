@@ -33,7 +33,8 @@ from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
                               frame_session, row_message, session_measurement)
-from pipeline.report import build_report, render_html
+from pipeline.report import Report, build_report, render_html
+from pipeline.report.calibration import finished_report
 from pipeline.report.verdict_words import verdict_sentence
 
 from .options import check_noise_flags
@@ -102,10 +103,12 @@ class AsRead:
 
 @dataclass
 class RunResult:
-    """Everything a run produced."""
+    """Everything a run produced: its summary (the keys ``--summary-json`` writes), its report (the
+    typed model every rendering reads; its files include the summary JSON's), the identification."""
 
     summary: dict
     result: IdentificationResult
+    report: Report
     paths: dict = field(default_factory=dict)
     #: The recording read from ``RunSettings.real`` (None for a simulated run).
     recording: Recording | None = None
@@ -121,9 +124,11 @@ class RunResult:
 
 @dataclass(frozen=True)
 class RunObjects:
-    """What a run's analysis made besides its summary: the calibration (before its provenance is
-    set), the simulated recording, the suggested poses' file texts, the recording as read."""
+    """What a run's analysis made besides its summary: its report (before its files and timing are
+    known), the calibration (before its provenance is set), the simulated recording, the suggested
+    poses' file texts, the recording as read."""
 
+    report: Report
     calibration: Calibration
     simulated: Recording | None = None
     suggested_poses: tuple | None = None
@@ -363,27 +368,32 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                 summary["suggested_poses_path"] = paths["suggested_poses"]
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
-            calibration = write_data_files(outputs, summary, settings, targets_out, made)
+            report = finished_report(made.report, paths, summary["wall_time_s"], split)
+            written = finished_report(made.report, {k: v for k, v in paths.items() if k != "summary_json"},
+                                      summary["wall_time_s"], split)
+            calibration = write_data_files(outputs, summary, written, settings, targets_out, made)
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=made.as_read,
+    return RunResult(summary=summary, result=result, report=report, paths=paths, recording=rec, as_read=made.as_read,
                      calibration=calibration, simulated=made.simulated, suggested_poses=made.suggested_poses)
 
 
-def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict, made: RunObjects) -> Calibration:
-    """Write the summary JSON (when asked), the simulated recording (when simulating), the
-    calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
+def write_data_files(outputs, summary: dict, report: Report, settings: RunSettings, targets_out: dict,
+                     made: RunObjects) -> Calibration:
+    """Write the summary JSON (when asked: the summary's keys and ``report``'s model), the HTML
+    report (when asked), the simulated recording (when simulating), the calibration file (its
+    recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
     returns the calibration as written."""
     from pipeline.formats import calibration_text, recording_source, recording_texts
-    from pipeline.report import summary_document
+    from pipeline.report import REPORT_KEY
 
     recording, calibration = made.simulated, made.calibration
     if "summary_json" in targets_out:
-        outputs.temp("summary_json").write_text(json.dumps(summary_document(summary), indent=1))
+        outputs.temp("summary_json").write_text(json.dumps({**summary, REPORT_KEY: report.to_dict()}, indent=1))
     if "report" in targets_out:
-        outputs.temp("report").write_text(render_html(build_report(summary)))
+        outputs.temp("report").write_text(render_html(report))
     if recording is not None:
         csv_text, json_text = recording_texts(recording)
         outputs.temp("csv").write_text(csv_text)
@@ -1048,9 +1058,10 @@ def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recordi
         meta={"scenario": inp.scenario, "seed": settings.seed, "simulation": simulation})
 
 
-def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, settings: RunSettings,
-             rrd_path: Path) -> None:
-    """Write the run's ``.rrd`` (its default layout, the robot's application id)."""
+def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, report: Report,
+             settings: RunSettings, rrd_path: Path) -> None:
+    """Write the run's ``.rrd`` (its default layout, the robot's application id; its summary panel
+    ``report`` as markdown)."""
     from calib.observability import analyze_observability
     from pipeline.report import report_markdown
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
@@ -1077,7 +1088,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=inp.actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
                             predicted=predicted, history=result.history, heldout_before=heldout_before,
-                            heldout_after=heldout_after, summary_markdown=report_markdown(build_report(summary)),
+                            heldout_after=heldout_after, summary_markdown=report_markdown(report),
                             observability=analysis, flagged=ident.flagged_idx, history_label=history_label,
                             magnified=magnified)
 
@@ -1126,9 +1137,10 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    log_step(inp, ident, outcome.heldout, summary, settings, outputs.temp("rrd"))
+    report = build_report(summary)
+    log_step(inp, ident, outcome.heldout, summary, report, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
-    return summary, ident.result, RunObjects(outcome.calibration, simulated, suggestion, read)
+    return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
 
 
 def sha256_text(text: str) -> str:
