@@ -19,11 +19,11 @@ import numpy as np
 from calib import paper
 from calib.calibration import Calibration
 from calib.design import augment_poses
-from calib.engine import IdentificationResult, gauge_representative, integrated_error
+from calib.engine import IdentificationResult, gauge_representative
 from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification, SessionSearch, UnreachableRows,
                                   calibrate)
 from calib.measurement import frame_to_dict, measured_gauge_representative
-from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
+from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.observability import identification_jacobian
 from calib.prior import DATA_SOURCE_RATIO, ParameterPrior
@@ -33,8 +33,11 @@ from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
                               frame_session, row_message, session_measurement)
-from pipeline.report import Report, build_report, render_html
-from pipeline.report.calibration import finished_report
+from pipeline.report import Report, render_html
+from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, fit_history,
+                                         flagged_rows, frame_held_words, gross_rows, heldout_basis, heldout_figure_rows,
+                                         heldout_keys, iso_keys, iso_poses, left_to_prior_words, parameter_error,
+                                         per_pose_keys, per_pose_rows, prior_source)
 from pipeline.report.verdict_words import verdict_sentence
 
 from .options import check_noise_flags
@@ -47,9 +50,6 @@ __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_r
 DEFAULT_CONFIGURATIONS = 20
 #: The robot simulated when none is named.
 DEFAULT_ROBOT = "hexapod"
-#: How every message, summary and view names a recording's rows.
-ROW_NUMBERING = ("1-based data row of the recording, as a spreadsheet shows it below the header "
-                 "(row k is file line k + 1)")
 
 
 @dataclass(frozen=True)
@@ -193,36 +193,6 @@ def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress)
                 scenario=scenario)
 
 
-def error_figures(norms: np.ndarray) -> dict:
-    """``{"rms", "mean", "max"}`` of per-pose error norms (N,)."""
-    return {"rms": float(np.sqrt(np.mean(norms ** 2))), "mean": float(norms.mean()), "max": float(norms.max())}
-
-
-def _heldout_block(robot: Robot, before: np.ndarray, after: np.ndarray) -> dict:
-    """Held-out position and orientation errors, before and after: the mean (``before``,
-    ``after``), the largest after (``max_after``), and all three figures of each
-    (``before_figures``, ``after_figures``: RMS, mean, max)."""
-    pb, ob = pose_error_norms(robot, before)
-    pa, oa = pose_error_norms(robot, after)
-
-    def block(b, a):
-        return {"before": float(b.mean()), "after": float(a.mean()), "max_after": float(a.max()),
-                "before_figures": error_figures(b), "after_figures": error_figures(a)}
-
-    return {"heldout_position_error_mm": block(pb, pa),
-            "heldout_orientation_error_rad": block(ob, oa) if robot.angle_pose_mask.any() else None}
-
-
-def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, free) -> dict:
-    idx = robot.table.indices(free)
-    err = (identified - true)[idx]
-    angle = robot.table.angle_mask()[idx]
-    rms = lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else None  # noqa: E731
-    return {"rms_mm": rms(err[~angle]), "rms_rad": rms(err[angle]),
-            "max_abs_mm": float(np.abs(err[~angle]).max()) if (~angle).any() else None,
-            "max_abs_rad": float(np.abs(err[angle]).max()) if angle.any() else None}
-
-
 def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     """(N, D) full poses ``measured`` taken out of their rows' instrument frames (``groups``: each
     row's frame group, :func:`frame_groups`; rows in :data:`calib.identification.BASE_FRAME` as they
@@ -233,37 +203,7 @@ def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     return out
 
 
-def _instrument_basis(fit) -> str:
-    """What the held-out errors of :func:`calib.identification.instrument_heldout` are."""
-    what = "target positions" if fit.n_targets else "poses"
-    return (f"recorded validation rows: measured {what} minus model prediction, instrument frame "
-            "(includes sensor noise)")
-
-
-#: A frame component this many times less certain than one measurement (its noise) is said to be
-#: held by the geometry's tolerances, not determined by the poses.
-FRAME_HELD_RATIO = 10.0
-
-
-def frame_held_words(fit) -> list[str]:
-    """The instrument frame's components the poses cannot separate from the geometry, in words:
-    those whose standard uncertainty is over :data:`FRAME_HELD_RATIO` times one measurement's noise
-    as the data show it (the spread of the fit's residuals, positions and angles; the declared
-    noise may call angles exact) (with the tolerances as a prior the geometry's tolerance holds
-    them; without, the gauge)."""
-    std = np.asarray(fit.frame_std, dtype=float)
-    names = ("x", "y", "z", "rotation about x", "rotation about y", "rotation about z")
-    units = ("mm",) * 3 + ("rad",) * 3
-    res = np.asarray(fit.result.pose_residuals, dtype=float)
-    spread = np.nanstd(res, axis=0) if res.size else np.zeros(6)
-    scale = np.r_[np.full(3, max(np.nanmax(spread[:3]) if spread.size >= 3 else 0.0, 1e-6)),
-                  np.full(3, max(np.nanmax(spread[3:6]) if spread.size >= 6 else 0.0, 1e-9))]
-    held = "the geometry's tolerances" if fit.result.prior is not None else "the gauge"
-    return [f"frame {name}: std {std[k]:.3g} {units[k]}, not separated from the geometry by the poses: held by {held}"
-            for k, name in enumerate(names) if std[k] > FRAME_HELD_RATIO * scale[k]]
-
-
-def _instrument_block(fit, before, after) -> dict:
+def _instrument_block(robot: Robot, fit, before, after) -> dict:
     """Summary keys of an instrument frame or target fit."""
     block = {"method": "forward", "solver": "lm", "weighted": True,
              "measurement_notes": list(fit.notes), "measurement_gauge": list(fit.gauge)}
@@ -275,11 +215,7 @@ def _instrument_block(fit, before, after) -> dict:
         block["measurement_targets_mm"] = fit.targets.tolist()
         block["measurement_targets_estimated"] = fit.targets_estimated
         if before is not None:  # one position error per target and row
-            b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
-            block["heldout_position_error_mm"] = {"before": float(b.mean()), "after": float(a.mean()),
-                                                  "max_after": float(a.max()), "before_figures": error_figures(b),
-                                                  "after_figures": error_figures(a)}
-            block["heldout_orientation_error_rad"] = None
+            block.update(heldout_keys(heldout_figure_rows(robot, before, after, targets=True)))
     return block
 
 
@@ -288,9 +224,9 @@ def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: 
     block = {"rows_used": len(rows), "identified_errors": robot.table.to_dict(result.errors),
              "chi2": result.chi2, "dof": result.dof, "success": result.success, "message": result.message,
              "heldout_position_error_mm": None, "heldout_orientation_error_rad": None,
-             "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free)}
+             "parameter_error": None if truth is None else parameter_error(robot, result.theta, truth, free)}
     if held is not None:
-        block.update(_heldout_block(robot, *held))
+        block.update(heldout_keys(heldout_figure_rows(robot, *held)))
     return block
 
 
@@ -411,8 +347,6 @@ def write_data_files(outputs, summary: dict, report: Report, settings: RunSettin
     return calibration
 
 
-#: What the summary says of the prior with --no-prior.
-NO_PRIOR = "none (--no-prior: plain least squares)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -667,15 +601,6 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
                             tolerance_source=source, tolerance_declared=settings.tolerance is not None)
 
 
-def heldout_basis(inp: CalibrationInput, ident: Identification) -> str:
-    """What the held-out errors are, in words."""
-    if ident.instrument is not None:
-        return _instrument_basis(ident.instrument)
-    if inp.sim is not None:
-        return "simulated machine, compensated commands, noise-free settled poses (before: nominal commands)"
-    return "recorded validation rows: measured minus model prediction (includes sensor noise)"
-
-
 def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray | None:
     """(P,) the true parameters (a simulated machine's, or those a recording's sidecar names) in the
     fit's gauge (:func:`calib.engine.gauge_representative`, or with an instrument fit
@@ -688,11 +613,6 @@ def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray |
     return measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
                                          targets=instrument.targets if instrument.targets_estimated else None,
                                          start=result.start)
-
-
-def flagged_rows(inp: CalibrationInput, ident: Identification) -> list[int]:
-    """The rows named gross or flagged, as 1-based data rows (:data:`ROW_NUMBERING`)."""
-    return [int(inp.rows[i]) + 1 for i in ident.flagged_idx]
 
 
 def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
@@ -726,10 +646,23 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
     return out
 
 
+def truth_figures(inp: CalibrationInput, ident: Identification, truth: np.ndarray | None) -> dict | None:
+    """``{"parameter_error", "gain_G_percent"}`` of the identification against ``truth``
+    (:func:`truth_in_gauge`; None where unknown)."""
+    if truth is None:
+        return None
+    robot, result = inp.robot, ident.result
+    free = result.free_names
+    return {"parameter_error": parameter_error(robot, result.theta, truth, free),
+            "gain_G_percent": {k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
+                                                                 free).as_dict().items() if k != "per_parameter"}}
+
+
 def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.ndarray | None, settings: RunSettings,
-               warnings: list) -> dict:
+               warnings: list, figures: dict | None, implausible: list[dict]) -> dict:
     """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found
-    (``truth``: :func:`truth_in_gauge`)."""
+    (``truth``: :func:`truth_in_gauge`; ``figures``: :func:`truth_figures`; ``implausible``:
+    :func:`implausible_parameters`)."""
     ident, held, data = outcome.identification, outcome.heldout, outcome.data
     robot, result, instrument = inp.robot, ident.result, ident.instrument
     free = result.free_names
@@ -739,10 +672,6 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         comparison = (_variant(robot, ident.result_all, list(ident.kept), outcome.heldout_with_flagged, truth, free),
                       _variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth,
                                free))
-    chainwise_gn = settings.method == "chainwise" and ident.solver == "gn"
-    history = list(result.history) if (chainwise_gn and instrument is None) \
-        else [float(integrated_error(robot, result.pose_residuals if instrument is None else
-                                     ident.measured - robot.forward_kinematics(result.theta, inp.joints))[2].max())]
     misfit = bool(ident.report is not None and ident.report.misfit)
     summary = {
         "robot": robot.name,
@@ -761,17 +690,15 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "injected_errors": None if inp.injected is None else robot.table.to_dict(inp.injected),
         "identified_errors": robot.table.to_dict(result.errors),
         "identified_std": robot.table.to_dict(result.std),
-        "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free),
-        "gain_G_percent": None if truth is None else {
-            k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
-                                              free).as_dict().items() if k != "per_parameter"},
+        "parameter_error": None if figures is None else figures["parameter_error"],
+        "gain_G_percent": None if figures is None else figures["gain_G_percent"],
         "iterations": result.iterations,
         "converged": result.success,
         "success": result.success,
         "message": result.message,
         "chi2": result.chi2,
         "dof": result.dof,
-        "max_dqint_history": history,
+        "max_dqint_history": fit_history(robot, inp, ident, settings.method),
         "condition_numbers": result.condition_numbers.tolist(),
         "row_numbering": ROW_NUMBERING,
         "flagged_poses": flagged,
@@ -790,54 +717,34 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "heldout_orientation_error_rad": None,
     }
     if held is not None and (instrument is None or instrument.targets is None):
-        summary.update(_heldout_block(robot, *held))
+        summary.update(heldout_keys(heldout_figure_rows(robot, *held)))
     if held is not None:
         summary.update(heldout_detail(inp, *held))
     if instrument is not None:
-        summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
+        summary.update(_instrument_block(robot, instrument, *(held if held is not None else (None, None))))
         if inp.n_sessions > 1:
             summary.update(sessions_block(inp, instrument))
     summary.update(prior_block(outcome))
-    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, data.tolerance, result.free_names)
+    summary["implausible_parameters"] = implausible
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
 
 
 def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray) -> dict:
-    """Summary keys of each held-out pose: ``heldout_per_pose`` (the position error norms before
-    and after, mm, and the orientation's, rad; with target data one position per target and row;
-    ``rows``: the 1-based data rows of a recording, None for simulated held-out poses) and
-    ``iso9283`` where validation rows repeat a commanded pose (the same joints, within the declared
-    joint noise; :func:`calib.metrics.iso9283_position` on attained minus predicted positions, before
-    with the nominal model, after with the identified one; None otherwise)."""
+    """Summary keys of each held-out pose: ``heldout_per_pose``
+    (:func:`pipeline.report.calibration.per_pose_keys`: the position error norms before and after,
+    mm, and the orientation's, rad; with target data one position per target and row; ``rows``:
+    the 1-based data rows of a recording, None for simulated held-out poses) and ``iso9283`` where
+    validation rows repeat a commanded pose (:func:`pipeline.report.calibration.iso_poses`; None
+    otherwise)."""
     robot = inp.robot
     rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
-    if before.shape[1] != robot.pose_dim:  # target positions: one norm per target and row
-        b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
-        per = {"position_before_mm": b.tolist(), "position_after_mm": a.tolist(), "orientation_before_rad": None,
-               "orientation_after_rad": None, "rows": rows, "per": "target and row"}
-        return {"heldout_per_pose": per, "iso9283": None}
-    pb, ob = pose_error_norms(robot, before)
-    pa, oa = pose_error_norms(robot, after)
-    angles = robot.angle_pose_mask.any()
-    per = {"position_before_mm": pb.tolist(), "position_after_mm": pa.tolist(),
-           "orientation_before_rad": ob.tolist() if angles else None,
-           "orientation_after_rad": oa.tolist() if angles else None, "rows": rows, "per": "pose"}
+    targets = before.shape[1] != robot.pose_dim  # target positions: one norm per target and row
+    per = per_pose_keys(per_pose_rows(robot, before, after, rows), rows, targets)
     iso = None
-    if inp.rec is not None:
-        groups = repeated_poses(inp.val_joints, inp.noise.joint_std)
-        position = ~robot.angle_pose_mask
-        zero = np.zeros((len(before), 3))
-        b, a = (iso9283_position(e[:, position], zero, groups) for e in (before, after))
-        if len(b.rows):
-            iso = {"standard": "ISO 9283: AP = distance from the barycentre of the attained positions to the command, "
-                               "RP = mean distance to the barycentre + 3 sample standard deviations",
-                   "basis": "validation rows repeating one joint command; the command's position is the model's "
-                            "prediction at it (before: nominal, after: identified)",
-                   "poses": [{"rows": [rows[i] for i in r], "repeats": int(len(r)), "AP_before_mm": float(apb),
-                              "AP_after_mm": float(apa), "RP_mm": float(rp)}
-                             for r, apb, apa, rp in zip(b.rows, b.accuracy, a.accuracy, a.repeatability)]}
+    if inp.rec is not None and not targets:
+        iso = iso_keys(iso_poses(robot, before, after, inp.val_joints, inp.noise.joint_std, rows))
     return {"heldout_per_pose": per, "iso9283": iso}
 
 
@@ -920,10 +827,10 @@ def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
     search = ident.gross
     if search is None:
         return None
+    rows, left_out = gross_rows(inp, ident)
     return {"test": "trimmed fits (random subsets and concentration steps), then rows beyond the chi-square "
                     f"{1 - GROSS_ALPHA:g} quantile of their coordinates named gross",
-            "rows": [int(inp.rows[i]) + 1 for i in ident.gross_idx], "left_out": bool(ident.gross_idx) and
-            len(ident.kept) < len(inp.measured), "frame_estimated": bool(search.frame_estimated),
+            "rows": rows, "left_out": left_out, "frame_estimated": bool(search.frame_estimated),
             "success": bool(search.success), "message": search.message,
             "search": getattr(search, "search", "every row") if not isinstance(search, SessionSearch) else
             "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
@@ -935,13 +842,12 @@ def prior_block(outcome: CalibrationOutcome) -> dict:
     and source (``data`` below half the prior's, else ``prior``; ``held``), the combinations the
     poses left to the prior, in words."""
     data, result = outcome.data, outcome.result
-    left = [c["combination"] + (f" ({data.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
-            + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
+    left = left_to_prior_words(outcome)
     sources = result.parameter_sources()
     est = data.tolerance_estimate
     seen = result.directions_determined()
     return {"prior": {"used": data.prior is not None,
-                      "source": data.tolerance_source if data.prior is not None else NO_PRIOR,
+                      "source": prior_source(data),
                       "tolerance": None if data.prior is None else data.prior.tolerance_by_name(data.robot),
                       "declared": data.tolerance_declared,
                       "learnt": None if est is None else est.summary()},
@@ -951,13 +857,14 @@ def prior_block(outcome: CalibrationOutcome) -> dict:
             "left_to_prior": left}
 
 
-def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, summary: dict):
-    """``(command file CSV text, its sidecar JSON text)``: :data:`SUGGESTED_POSES` poses that
-    determine what the measured ones left to the prior (:func:`calib.design.augment_poses`, over
-    the robot's full workspace), with the joints the nominal controller commands for them, ready to
-    measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words. None where
-    they would determine less than one direction more (:func:`directions_added`: noise that
-    drowns the geometry), ``summary["suggested_poses"]`` saying so with its figures.
+def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, left: list[str]):
+    """``(texts, block)``: ``texts`` = ``(command file CSV text, its sidecar JSON text)``,
+    :data:`SUGGESTED_POSES` poses that determine what the measured ones left to the prior
+    (``left``, in words; :func:`calib.design.augment_poses`, over the robot's full workspace), with
+    the joints the nominal controller commands for them, ready to measure; ``block`` the summary's
+    ``suggested_poses`` (``poses``, ``what``: which kind of pose they are, in words, ``why``).
+    ``texts`` None where they would determine less than one direction more
+    (:func:`directions_added`: noise that drowns the geometry), ``block`` saying so with its figures.
 
     The measured rows inform at the configurations the machine was in: the identified geometry's
     poses at the joints read (a measured pose carries its noise: 1000 mm puts a Delta's outside
@@ -969,23 +876,22 @@ def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings
     prior_std = outcome.data.prior.std
     poses = augment_poses(robot, result.theta, at, SUGGESTED_POSES, inp.noise, prior_std,
                           free=result.free_names, seed=settings.seed)
-    why = f"the measured poses leave {len(summary['left_to_prior'])} parameter combination(s) to the prior"
+    why = f"the measured poses leave {len(left)} parameter combination(s) to the prior"
     added = directions_added(robot, result, at, poses, inp.noise, prior_std)
     if added < DETERMINED_DIRECTION:
-        summary["suggested_poses"] = {
+        return None, {
             "poses": 0, "why": why,
             "what": (f"{len(poses)} more poses at the declared noise would determine {added:.2g} more of the "
                      f"{len(result.free_names)} free directions, not one (a direction determined counts "
                      f"{DETERMINED_DIRECTION:g} at least): measure with less noise")}
-        return None
     joints = robot.inverse_kinematics(robot.table.nominal, poses)
     words = pose_kind_words(robot, measured, poses)
-    summary["suggested_poses"] = {"poses": int(len(poses)), "what": words, "why": why}
+    block = {"poses": int(len(poses)), "what": words, "why": why}
     meta = {"robot": robot.name, "kind": "calibration command file", "purpose": "suggested calibration poses",
             "columns": list(command_columns(robot)),
             "units": "pose and joint units in the column names; joints are the nominal controller's commands",
-            "why": why, "what": words, "left_to_prior": summary["left_to_prior"]}
-    return command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"
+            "why": why, "what": words, "left_to_prior": left}
+    return (command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"), block
 
 
 def machine_poses(robot: Robot, theta, joints, measured) -> np.ndarray:
@@ -1110,7 +1016,11 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     warnings += outcome.warnings
     split["identify"] = seconds["identify"]
     split["simulate"] += seconds["heldout"]  # a simulated run measures its held-out poses
-    summary = summary_of(inp, outcome, truth_in_gauge(inp, ident), settings, warnings)
+    truth = truth_in_gauge(inp, ident)
+    figures = truth_figures(inp, ident, truth)
+    result = ident.result
+    implausible = implausible_parameters(inp.robot, result.errors, outcome.data.tolerance, result.free_names)
+    summary = summary_of(inp, outcome, truth, settings, warnings, figures, implausible)
     if checks is not None:
         summary["checks"] = checks
     split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
@@ -1124,12 +1034,13 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
         summary["session_shifts"] = shifts
     simulated = simulated_recording(inp, settings) if inp.sim is not None else None
     t_s = time.perf_counter()
-    suggestion = read = None
+    suggestion = read = suggested = None
     if summary["left_to_prior"]:
         try:
-            suggestion = suggested_poses(inp, outcome, settings, summary)
+            suggestion, suggested = suggested_poses(inp, outcome, settings, summary["left_to_prior"])
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
-            summary["suggested_poses"] = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
+            suggested = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
+        summary["suggested_poses"] = suggested
     if inp.rec is not None:
         try:
             read = as_read(inp, outcome)
@@ -1137,7 +1048,9 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    report = build_report(summary)
+    report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
+                                implausible=implausible, warnings=warnings,
+                                shift_words=tuple(v["words"] for v in shifts.values()), suggested=suggested)
     log_step(inp, ident, outcome.heldout, summary, report, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
     return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
