@@ -298,3 +298,10 @@ def test_pipeline_export_to_report_from_the_calibration_file_and_the_summary(rea
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--summary" in err[0] and "hexapod" in err[0]
     assert not (tmp_path / "x.html").exists()
+    bare = tmp_path / "bare.json"  # the run's keys without the report they hold
+    bare.write_text(json.dumps({k: v for k, v in s.items() if k != "report_model"}))
+    assert export_main(["--calibration", str(cal_path), "--to", "report", "--out", str(tmp_path / "x.html"),
+                        "--summary", str(bare)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--summary" in err[0] and "report_model" in err[0], err
+    assert not (tmp_path / "x.html").exists()

@@ -22,7 +22,7 @@ from .model import (OUTPUT_KEYS, CrossValidation, Determination, FigureRow, Figu
                     Suggested, Timing, Truth, Verdict)
 from .verdict_words import verdict_sentence
 
-__all__ = ["calibration_report", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
+__all__ = ["calibration_report", "calibration_file_report", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
            "ISO_BASIS", "error_figures", "parameter_error", "heldout_figure_rows", "heldout_keys", "per_pose_rows",
            "per_pose_keys", "iso_poses", "iso_keys", "heldout_basis", "frame_held_words", "flagged_rows", "gross_rows",
            "fit_history", "prior_source", "left_to_prior_words"]
@@ -210,12 +210,11 @@ def left_to_prior_words(outcome) -> list[str]:
             + f": posterior {c['std_ratio']:.2f} x the prior" for c in outcome.identification.result.left_to_prior()]
 
 
-def _source(inp, seed) -> Source:
-    n = inp.noise.to_dict()
-    noise = Noise(float(n.get("position_mm") or 0.0), float(n.get("orientation_rad") or 0.0),
-                  float(n.get("joint") or 0.0), str(n.get("distribution") or ""))
-    return Source(robot=inp.robot.name, chain_word=inp.robot.chain_word, recording=str(inp.scenario), noise=noise,
-                  seed=seed)
+def _source_of(robot, recording: str, noise, seed) -> Source:
+    n = noise.to_dict()
+    declared = Noise(float(n.get("position_mm") or 0.0), float(n.get("orientation_rad") or 0.0),
+                     float(n.get("joint") or 0.0), str(n.get("distribution") or ""))
+    return Source(robot=robot.name, chain_word=robot.chain_word, recording=recording, noise=declared, seed=seed)
 
 
 def _fit(inp, outcome, method: str) -> Fit:
@@ -328,7 +327,7 @@ def calibration_report(inp, outcome, *, method: str, seed: int, truth: dict | No
         determination = replace(determination, suggested=Suggested(int(suggested["poses"]), suggested["what"], ""))
     pe, gain = (truth or {}).get("parameter_error"), (truth or {}).get("gain_G_percent")
     verdict = outcome.verdict
-    return Report(kind="calibration", source=_source(inp, seed),
+    return Report(kind="calibration", source=_source_of(inp.robot, str(inp.scenario), inp.noise, seed),
                   verdict=Verdict(bool(verdict.success), verdict_sentence(verdict), verdict.cause),
                   fit=_fit(inp, outcome, method),
                   truth=None if truth is None else Truth(pe["rms_mm"], pe["rms_rad"], gain.get("mean"), gain.get("norm")),
@@ -336,6 +335,35 @@ def calibration_report(inp, outcome, *, method: str, seed: int, truth: dict | No
                   implausible=Implausible(words=tuple(d["words"] for d in implausible)),
                   heldout=_heldout(inp, outcome, shift_words), frames=_frames(inp, outcome.identification.instrument),
                   effects=None, flagged=_flagged(inp, outcome), warnings=tuple(warnings))
+
+
+#: The prior a calibration file alone names (the file keeps no tolerance).
+FILE_PRIOR = "not stated in the calibration file"
+
+
+def calibration_file_report(cal) -> Report:
+    """The report of a calibration file alone (:class:`calib.calibration.Calibration`): the machine,
+    the recording it names, every free parameter with its standard uncertainty, the instrument
+    frames, the declared noise; no verdict (``success`` and ``words`` None: the run's summary holds
+    it, with the held-out figures and flagged rows)."""
+    from calib.measurement import frame_to_dict
+
+    table = cal.robot.table
+    free = set(cal.free)
+    rows = tuple(ParameterRow(name=n, unit=table.units[k], value=float(cal.theta[k]),
+                              error=float(cal.theta[k] - table.nominal[k]), two_sigma=2.0 * float(cal.std[k]),
+                              tolerance=None, source=None if n in free else "held", implausible=False)
+                 for k, n in enumerate(table.names) if n in free or not free)
+    frames = None
+    if cal.frames:
+        frames = Frames(rows=tuple(FrameRow(name, tuple(d["translation_mm"]), tuple(d["rotation_rad"]), None, None)
+                                   for name, d in ((s, frame_to_dict(f)) for s, f in cal.frames.items())),
+                        sessions=True)
+    recording = str(cal.recording.get("name") or cal.recording.get("simulated") or "")
+    return Report(kind="calibration", source=_source_of(cal.robot, recording, cal.noise, None),
+                  verdict=Verdict(None, None), fit=None, truth=None,
+                  parameters=Parameters(rows=rows, prior=FILE_PRIOR), determination=None, implausible=Implausible(),
+                  heldout=None, frames=frames, effects=None, flagged=Flagged(rows=()))
 
 
 def outputs_of(paths: dict) -> Outputs:
