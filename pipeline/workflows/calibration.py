@@ -42,7 +42,7 @@ from pipeline.report.verdict_words import verdict_sentence
 
 from .options import check_noise_flags
 
-__all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
+__all__ = ["RunSettings", "RunResult", "SuggestedPoses", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "default_name", "OUTPUT_EXTENSIONS", "DETERMINED_DIRECTION", "directions_added"]
 
@@ -118,20 +118,36 @@ class RunResult:
     calibration: Calibration | None = None
     #: The recording a simulated run made (None for a recording read).
     simulated: Recording | None = None
-    #: The poses suggested to measure next, ``(csv text, json text)``, or None.
-    suggested_poses: tuple | None = None
+    #: The poses suggested to measure next (None: none suggested).
+    suggested_poses: SuggestedPoses | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SuggestedPoses:
+    """Poses suggested to measure next (:func:`suggested_poses`): (K, D) poses, (K, C) the joints
+    the nominal controller commands for them, and what their command file's sidecar says (``meta``:
+    robot, kind, purpose, columns, units, why, what, left_to_prior)."""
+
+    robot: Robot
+    poses: np.ndarray
+    joints: np.ndarray
+    meta: dict
+
+    def texts(self) -> tuple[str, str]:
+        """``(command file CSV text, its sidecar JSON text)``, as the run writes them."""
+        return command_csv(self.robot, self.poses, self.joints), json.dumps(self.meta, indent=2) + "\n"
 
 
 @dataclass(frozen=True)
 class RunObjects:
     """What a run's analysis made besides its summary: its report (before its files and timing are
     known), the calibration (before its provenance is set), the simulated recording, the suggested
-    poses' file texts, the recording as read."""
+    poses, the recording as read."""
 
     report: Report
     calibration: Calibration
     simulated: Recording | None = None
-    suggested_poses: tuple | None = None
+    suggested_poses: SuggestedPoses | None = None
     as_read: AsRead | None = None
 
 
@@ -296,8 +312,9 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
                     outputs.drop(key)
                     targets_out.pop(key)
             else:
-                outputs.temp("suggested_poses").write_text(suggestion[0])
-                outputs.temp("suggested_poses_json").write_text(suggestion[1])
+                csv_text, json_text = suggestion.texts()
+                outputs.temp("suggested_poses").write_text(csv_text)
+                outputs.temp("suggested_poses_json").write_text(json_text)
             paths = {k: str(v) for k, v in targets_out.items()}
             summary.update({k: v for k, v in paths.items() if k not in ("summary_json", "suggested_poses")})
             if "suggested_poses" in paths:
@@ -858,12 +875,12 @@ def prior_block(outcome: CalibrationOutcome) -> dict:
 
 
 def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, left: list[str]):
-    """``(texts, block)``: ``texts`` = ``(command file CSV text, its sidecar JSON text)``,
-    :data:`SUGGESTED_POSES` poses that determine what the measured ones left to the prior
-    (``left``, in words; :func:`calib.design.augment_poses`, over the robot's full workspace), with
-    the joints the nominal controller commands for them, ready to measure; ``block`` the summary's
+    """``(suggested, block)``: ``suggested`` (:class:`SuggestedPoses`), :data:`SUGGESTED_POSES`
+    poses that determine what the measured ones left to the prior (``left``, in words;
+    :func:`calib.design.augment_poses`, over the robot's full workspace), with the joints the
+    nominal controller commands for them, ready to measure; ``block`` the summary's
     ``suggested_poses`` (``poses``, ``what``: which kind of pose they are, in words, ``why``).
-    ``texts`` None where they would determine less than one direction more
+    ``suggested`` None where they would determine less than one direction more
     (:func:`directions_added`: noise that drowns the geometry), ``block`` saying so with its figures.
 
     The measured rows inform at the configurations the machine was in: the identified geometry's
@@ -891,7 +908,7 @@ def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings
             "columns": list(command_columns(robot)),
             "units": "pose and joint units in the column names; joints are the nominal controller's commands",
             "why": why, "what": words, "left_to_prior": left}
-    return (command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"), block
+    return SuggestedPoses(robot, poses, joints, meta), block
 
 
 def machine_poses(robot: Robot, theta, joints, measured) -> np.ndarray:
