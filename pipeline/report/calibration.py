@@ -22,7 +22,7 @@ from .model import (OUTPUT_KEYS, CrossValidation, Determination, FigureRow, Figu
                     Suggested, Timing, Truth, Verdict)
 from .verdict_words import verdict_sentence
 
-__all__ = ["calibration_report", "calibration_file_report", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
+__all__ = ["calibration_report", "calibration_file_report", "with_suggested", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
            "ISO_BASIS", "error_figures", "parameter_error", "heldout_figure_rows", "heldout_keys", "per_pose_rows",
            "per_pose_keys", "iso_poses", "iso_keys", "heldout_basis", "frame_held_words", "flagged_rows", "gross_rows",
            "fit_history", "prior_source", "left_to_prior_words"]
@@ -309,7 +309,7 @@ def _flagged(inp, outcome) -> Flagged:
 
 
 def calibration_report(inp, outcome, *, method: str, seed: int, truth: dict | None, implausible: list[dict],
-                       warnings, shift_words: tuple[str, ...] = (), suggested: dict | None = None) -> Report:
+                       warnings, shift_words: tuple[str, ...] = ()) -> Report:
     """The report of one calibration, from its objects.
 
     Args:
@@ -320,11 +320,8 @@ def calibration_report(inp, outcome, *, method: str, seed: int, truth: dict | No
         implausible: the implausible parameters (``{"name", "words", ...}`` each).
         warnings: the run's warnings, in words.
         shift_words: each validation session's shift, in words.
-        suggested: the suggested poses (``{"poses", "what"}``; None: none were looked for).
     """
     parameters, determination = _parameters(outcome, implausible)
-    if suggested is not None:
-        determination = replace(determination, suggested=Suggested(int(suggested["poses"]), suggested["what"], ""))
     pe, gain = (truth or {}).get("parameter_error"), (truth or {}).get("gain_G_percent")
     verdict = outcome.verdict
     return Report(kind="calibration", source=_source_of(inp.robot, str(inp.scenario), inp.noise, seed),
@@ -364,6 +361,14 @@ def calibration_file_report(cal) -> Report:
                   verdict=Verdict(None, None), fit=None, truth=None,
                   parameters=Parameters(rows=rows, prior=FILE_PRIOR), determination=None, implausible=Implausible(),
                   heldout=None, frames=frames, effects=None, flagged=Flagged(rows=()))
+
+
+def with_suggested(report: Report, suggested: dict) -> Report:
+    """``report`` with the poses suggested to determine what the rows left to the prior
+    (``suggested``: ``{"poses", "what"}``, the summary's ``suggested_poses``; their file is named
+    by :func:`finished_report`)."""
+    found = Suggested(int(suggested["poses"]), suggested["what"], "")
+    return replace(report, determination=replace(report.determination, suggested=found))
 
 
 def outputs_of(paths: dict) -> Outputs:

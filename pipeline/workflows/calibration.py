@@ -34,11 +34,9 @@ from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
                               frame_session, row_message, session_measurement)
 from pipeline.report import Report, render_html
-from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, fit_history,
-                                         flagged_rows, frame_held_words, gross_rows, heldout_basis, heldout_figure_rows,
-                                         heldout_keys, iso_keys, iso_poses, left_to_prior_words, parameter_error,
-                                         per_pose_keys, per_pose_rows, prior_source)
-from pipeline.report.verdict_words import verdict_sentence
+from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, frame_held_words,
+                                         gross_rows, heldout_figure_rows, heldout_keys, iso_keys, parameter_error,
+                                         per_pose_keys, with_suggested)
 
 from .options import check_noise_flags
 
@@ -219,7 +217,7 @@ def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     return out
 
 
-def _instrument_block(robot: Robot, fit, before, after) -> dict:
+def _instrument_block(fit) -> dict:
     """Summary keys of an instrument frame or target fit."""
     block = {"method": "forward", "solver": "lm", "weighted": True,
              "measurement_notes": list(fit.notes), "measurement_gauge": list(fit.gauge)}
@@ -230,8 +228,6 @@ def _instrument_block(robot: Robot, fit, before, after) -> dict:
     if fit.targets is not None:
         block["measurement_targets_mm"] = fit.targets.tolist()
         block["measurement_targets_estimated"] = fit.targets_estimated
-        if before is not None:  # one position error per target and row
-            block.update(heldout_keys(heldout_figure_rows(robot, before, after, targets=True)))
     return block
 
 
@@ -675,15 +671,17 @@ def truth_figures(inp: CalibrationInput, ident: Identification, truth: np.ndarra
                                                                  free).as_dict().items() if k != "per_parameter"}}
 
 
-def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.ndarray | None, settings: RunSettings,
-               warnings: list, figures: dict | None, implausible: list[dict]) -> dict:
-    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found
-    (``truth``: :func:`truth_in_gauge`; ``figures``: :func:`truth_figures`; ``implausible``:
+def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report, truth: np.ndarray | None,
+               settings: RunSettings, warnings: list, figures: dict | None, implausible: list[dict]) -> dict:
+    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found;
+    the keys holding what its ``report`` holds (:func:`pipeline.report.calibration.calibration_report`:
+    the fit's figures, the flagged rows, the held-out figures, ...) written from it (``truth``:
+    :func:`truth_in_gauge`; ``figures``: :func:`truth_figures`; ``implausible``:
     :func:`implausible_parameters`)."""
     ident, held, data = outcome.identification, outcome.heldout, outcome.data
-    robot, result, instrument = inp.robot, ident.result, ident.instrument
+    robot, result, instrument, fit = inp.robot, ident.result, ident.instrument, report.fit
     free = result.free_names
-    flagged = flagged_rows(inp, ident)
+    flagged = list(report.flagged.rows)
     comparison = (None, None)
     if ident.result_kept is not None:
         comparison = (_variant(robot, ident.result_all, list(ident.kept), outcome.heldout_with_flagged, truth, free),
@@ -691,14 +689,14 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
                                free))
     misfit = bool(ident.report is not None and ident.report.misfit)
     summary = {
-        "robot": robot.name,
-        "scenario": inp.scenario,
+        "robot": report.source.robot,
+        "scenario": report.source.recording,
         "method": settings.method,
         "solver": ident.solver,
         "weighted": (settings.weighted or data.prior is not None) if settings.method == "chainwise" else True,
-        "calibration_poses": int(len(inp.measured)),
-        "calibration_poses_used": int(ident.used.size),
-        "heldout_poses": 0 if held is None else len(held[0]),
+        "calibration_poses": fit.rows,
+        "calibration_poses_used": fit.rows_used,
+        "heldout_poses": fit.heldout_poses,
         "declared_noise": inp.noise.to_dict(),
         "seed": settings.seed,
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
@@ -709,14 +707,14 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "identified_std": robot.table.to_dict(result.std),
         "parameter_error": None if figures is None else figures["parameter_error"],
         "gain_G_percent": None if figures is None else figures["gain_G_percent"],
-        "iterations": result.iterations,
-        "converged": result.success,
+        "iterations": fit.iterations,
+        "converged": fit.converged,
         "success": result.success,
         "message": result.message,
         "chi2": result.chi2,
         "dof": result.dof,
-        "max_dqint_history": fit_history(robot, inp, ident, settings.method),
-        "condition_numbers": result.condition_numbers.tolist(),
+        "max_dqint_history": list(fit.history),
+        "condition_numbers": list(fit.condition_numbers),
         "row_numbering": ROW_NUMBERING,
         "flagged_poses": flagged,
         "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
@@ -729,51 +727,45 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "with_flagged": comparison[0],
         "without_flagged": comparison[1],
         "warnings": warnings,
-        "heldout_basis": None if held is None else heldout_basis(inp, ident),
+        "heldout_basis": None if held is None else report.heldout.basis,
         "heldout_position_error_mm": None,
         "heldout_orientation_error_rad": None,
     }
-    if held is not None and (instrument is None or instrument.targets is None):
-        summary.update(heldout_keys(heldout_figure_rows(robot, *held)))
     if held is not None:
-        summary.update(heldout_detail(inp, *held))
+        summary.update(heldout_keys(report.heldout.figures))
+        summary.update(heldout_detail(inp, report.heldout, targets=held[0].shape[1] != robot.pose_dim))
     if instrument is not None:
-        summary.update(_instrument_block(robot, instrument, *(held if held is not None else (None, None))))
+        summary.update(_instrument_block(instrument))
         if inp.n_sessions > 1:
             summary.update(sessions_block(inp, instrument))
-    summary.update(prior_block(outcome))
+    summary.update(prior_block(outcome, report))
     summary["implausible_parameters"] = implausible
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
 
 
-def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray) -> dict:
-    """Summary keys of each held-out pose: ``heldout_per_pose``
+def heldout_detail(inp: CalibrationInput, heldout, targets: bool) -> dict:
+    """Summary keys of each held-out pose, from the report's held-out section (``heldout``:
+    :class:`pipeline.report.model.Heldout`): ``heldout_per_pose``
     (:func:`pipeline.report.calibration.per_pose_keys`: the position error norms before and after,
-    mm, and the orientation's, rad; with target data one position per target and row; ``rows``:
-    the 1-based data rows of a recording, None for simulated held-out poses) and ``iso9283`` where
-    validation rows repeat a commanded pose (:func:`pipeline.report.calibration.iso_poses`; None
-    otherwise)."""
-    robot = inp.robot
+    mm, and the orientation's, rad; with target data (``targets``) one position per target and row;
+    ``rows``: the 1-based data rows of a recording, None for simulated held-out poses) and
+    ``iso9283`` where validation rows repeat a commanded pose
+    (:func:`pipeline.report.calibration.iso_keys`; None otherwise)."""
     rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
-    targets = before.shape[1] != robot.pose_dim  # target positions: one norm per target and row
-    per = per_pose_keys(per_pose_rows(robot, before, after, rows), rows, targets)
-    iso = None
-    if inp.rec is not None and not targets:
-        iso = iso_keys(iso_poses(robot, before, after, inp.val_joints, inp.noise.joint_std, rows))
-    return {"heldout_per_pose": per, "iso9283": iso}
+    return {"heldout_per_pose": per_pose_keys(heldout.per_pose, rows, targets), "iso9283": iso_keys(heldout.iso9283)}
 
 
-def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
+def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report) -> dict:
     """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
     recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
-    ``verdict`` (``words``: :func:`pipeline.report.verdict_words.verdict_sentence`, ``cause``,
-    ``evidence``)."""
+    ``verdict`` (``words`` and ``cause`` as ``report`` holds them: the words
+    :func:`pipeline.report.verdict_words.verdict_sentence`'s; ``evidence``)."""
     verdict = outcome.verdict
     return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
-            "success": verdict.success,
-            "verdict": {"words": verdict_sentence(verdict), "cause": verdict.cause,
+            "success": report.verdict.success,
+            "verdict": {"words": report.verdict.words, "cause": report.verdict.cause,
                         "evidence": verdict.evidence.to_dict()}}
 
 
@@ -853,25 +845,24 @@ def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
             "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
 
 
-def prior_block(outcome: CalibrationOutcome) -> dict:
+def prior_block(outcome: CalibrationOutcome, report: Report) -> dict:
     """Summary keys of what the data determined: the prior used (the tolerance learnt where the run
-    learnt one; :data:`NO_PRIOR` with --no-prior), per parameter its posterior standard deviation
-    and source (``data`` below half the prior's, else ``prior``; ``held``), the combinations the
-    poses left to the prior, in words."""
+    learnt one; :data:`pipeline.report.calibration.NO_PRIOR` with --no-prior), per parameter its
+    posterior standard deviation and source (``data`` below half the prior's, else ``prior``;
+    ``held``), the combinations the poses left to the prior, in words (the prior's words, the
+    directions determined and the combinations as ``report`` holds them)."""
     data, result = outcome.data, outcome.result
-    left = left_to_prior_words(outcome)
     sources = result.parameter_sources()
     est = data.tolerance_estimate
-    seen = result.directions_determined()
-    return {"prior": {"used": data.prior is not None,
-                      "source": prior_source(data),
+    return {"prior": {"used": report.determination.prior_used,
+                      "source": report.parameters.prior,
                       "tolerance": None if data.prior is None else data.prior.tolerance_by_name(data.robot),
                       "declared": data.tolerance_declared,
                       "learnt": None if est is None else est.summary()},
             "parameter_determination": result.determination(),
             "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
-            "directions_determined": seen,
-            "left_to_prior": left}
+            "directions_determined": report.determination.directions,
+            "left_to_prior": list(report.parameters.left_to_prior)}
 
 
 def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, left: list[str]):
@@ -1037,27 +1028,31 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     figures = truth_figures(inp, ident, truth)
     result = ident.result
     implausible = implausible_parameters(inp.robot, result.errors, outcome.data.tolerance, result.free_names)
-    summary = summary_of(inp, outcome, truth, settings, warnings, figures, implausible)
+    shifts = validation_session_shifts(inp, outcome)
+    report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
+                                implausible=implausible, warnings=warnings,
+                                shift_words=tuple(v["words"] for v in shifts.values()))
+    summary = summary_of(inp, outcome, report, truth, settings, warnings, figures, implausible)
     if checks is not None:
         summary["checks"] = checks
     split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
     if outcome.crossvalidation is not None:
         summary.update(outcome.crossvalidation.summary())
         split["crossvalidation"] = seconds["crossvalidation"]
-    summary.update(verdict_block(inp, outcome))
+    summary.update(verdict_block(inp, outcome, report))
     split["verdict"] = seconds["verdict"]
-    shifts = validation_session_shifts(inp, outcome)
     if shifts:
         summary["session_shifts"] = shifts
     simulated = simulated_recording(inp, settings) if inp.sim is not None else None
     t_s = time.perf_counter()
-    suggestion = read = suggested = None
-    if summary["left_to_prior"]:
+    suggestion = read = None
+    if report.parameters.left_to_prior:
         try:
-            suggestion, suggested = suggested_poses(inp, outcome, settings, summary["left_to_prior"])
+            suggestion, suggested = suggested_poses(inp, outcome, settings, list(report.parameters.left_to_prior))
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
             suggested = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
         summary["suggested_poses"] = suggested
+        report = with_suggested(report, suggested)
     if inp.rec is not None:
         try:
             read = as_read(inp, outcome)
@@ -1065,9 +1060,6 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
-                                implausible=implausible, warnings=warnings,
-                                shift_words=tuple(v["words"] for v in shifts.values()), suggested=suggested)
     log_step(inp, ident, outcome.heldout, summary, report, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
     return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
