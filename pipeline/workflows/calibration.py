@@ -972,10 +972,11 @@ def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recordi
         meta={"scenario": inp.scenario, "seed": settings.seed, "simulation": simulation})
 
 
-def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, report: Report,
-             settings: RunSettings, rrd_path: Path) -> None:
+def log_step(inp: CalibrationInput, ident: Identification, held, report: Report, settings: RunSettings,
+             rrd_path: Path) -> dict:
     """Write the run's ``.rrd`` (its default layout, the robot's application id; its summary panel
-    ``report`` as markdown)."""
+    ``report`` as markdown); returns the summary keys of what it drew: ``observability`` (the pose
+    set's condition number and Cramer-Rao std per parameter) and ``rerun`` (the poses drawn in 3D)."""
     from calib.observability import analyze_observability
     from pipeline.report import report_markdown
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
@@ -984,17 +985,17 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
     nominal = robot.table.nominal
     analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise, joints=joints[ident.used])
-    summary["observability"] = {"condition_number": float(analysis.condition_number),
-                                "crb_std": robot.table.to_dict(analysis.crb_std)}
+    observability = {"condition_number": float(analysis.condition_number),
+                     "crb_std": robot.table.to_dict(analysis.crb_std)}
     targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)
     predicted = _predicted_or(robot, result.theta, joints, measured)
     magnified = run_magnification(robot, nominal, inp.actual, result.theta, targets, measured)
     history_label = "max dQint (mm)" if (settings.method == "chainwise" and ident.solver == "gn") else "cost"
     heldout_before, heldout_after = (None, None) if held is None else held
     n, shown = len(joints), drawn_poses(len(joints)).size
-    summary["rerun"] = {"machine_poses_drawn": shown, "form": "every calibration pose drawn in 3D" if shown == n else
-                        f"the 3D machines and arrows at {shown:,} evenly spaced poses of the {n:,} ({n:,} rows > "
-                        f"MAX_MACHINE_POSES = {MAX_MACHINE_POSES}); every pose's residuals on the pose timeline"}
+    drawn = {"machine_poses_drawn": shown, "form": "every calibration pose drawn in 3D" if shown == n else
+             f"the 3D machines and arrows at {shown:,} evenly spaced poses of the {n:,} ({n:,} rows > "
+             f"MAX_MACHINE_POSES = {MAX_MACHINE_POSES}); every pose's residuals on the pose timeline"}
     if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim:  # target positions
         heldout_before = heldout_after = None
 
@@ -1009,6 +1010,7 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
                    has_heldout=heldout_before is not None, history_label=history_label, has_truth=inp.actual is not None)
     save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
+    return {"observability": observability, "rerun": drawn}
 
 
 def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None,
@@ -1060,7 +1062,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    log_step(inp, ident, outcome.heldout, summary, report, settings, outputs.temp("rrd"))
+    summary.update(log_step(inp, ident, outcome.heldout, report, settings, outputs.temp("rrd")))
     split["log"] = time.perf_counter() - t3
     return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
 
