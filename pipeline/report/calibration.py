@@ -22,7 +22,7 @@ from .model import (OUTPUT_KEYS, CrossValidation, Determination, FigureRow, Figu
                     Suggested, Timing, Truth, Verdict)
 from .verdict_words import verdict_sentence
 
-__all__ = ["calibration_report", "calibration_file_report", "with_suggested", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
+__all__ = ["calibration_report", "calibration_file_report", "with_suggested", "without_file", "finished_report", "outputs_of", "ROW_NUMBERING", "NO_PRIOR", "ISO_STANDARD",
            "ISO_BASIS", "error_figures", "parameter_error", "heldout_figure_rows", "heldout_keys", "per_pose_rows",
            "per_pose_keys", "iso_poses", "iso_keys", "heldout_basis", "frame_held_words", "flagged_rows", "gross_rows",
            "fit_history", "prior_source", "left_to_prior_words"]
@@ -374,6 +374,11 @@ def with_suggested(report: Report, suggested: dict) -> Report:
 def outputs_of(paths: dict) -> Outputs:
     """The files a run wrote, ``paths`` by summary key (:data:`~pipeline.report.model.OUTPUT_KEYS`, in their order)."""
     return Outputs(files=tuple((k, str(paths[k])) for k in OUTPUT_KEYS if paths.get(k)))
+
+
+def without_file(report: Report, key: str) -> Report:
+    """``report`` without the file of summary key ``key`` among its outputs."""
+    return replace(report, outputs=replace(report.outputs, files=tuple(f for f in report.outputs.files if f[0] != key)))
 
 
 def finished_report(report: Report, paths: dict, wall_time_s: float, split: dict) -> Report:

@@ -1,6 +1,6 @@
-"""The report of a calibration or a discovery: one typed model of its outcome, built from the
-summary ``python -m pipeline.run`` or ``python -m pipeline.discover`` gives (the dict their
-``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
+"""The report of a calibration or a discovery: one typed model of its outcome, built from a
+run's objects (:mod:`pipeline.report.calibration`) or from the summary ``python -m pipeline.discover``
+gives (the dict its ``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
 the parameters and what determined them, the implausible ones, the held-out figures, the
 instrument frames, the effects found, the flagged rows, the compensation, the warnings, the timing
 and the files written.

@@ -2,8 +2,9 @@
 compensate, validate on held-out poses, write the recording, the summary and the ``.rrd``.
 
 ``python -m pipeline.run`` parses its flags into :class:`RunSettings`, calls
-:func:`run_calibration` and prints the :class:`RunResult`'s summary. The summary has the same
-keys for every robot.
+:func:`run_calibration` and prints the :class:`RunResult`'s report (made from the run's objects:
+:func:`pipeline.report.calibration.calibration_report`). The summary has the same keys for every
+robot; those it shares with the report are written from the report.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, co
 from pipeline.report import Report, render_html
 from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, frame_held_words,
                                          gross_rows, heldout_figure_rows, heldout_keys, iso_keys, parameter_error,
-                                         per_pose_keys, with_suggested)
+                                         per_pose_keys, with_suggested, without_file)
 
 from .options import check_noise_flags
 
@@ -162,6 +163,8 @@ def default_name(settings: RunSettings) -> str:
 OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json", ".suggested_poses.csv", ".suggested_poses.json", CALIBRATION_SUFFIX)
 #: Poses suggested when the measured ones leave parameter combinations to the prior.
 SUGGESTED_POSES = 10
+#: The output keys of the suggested poses' command file and its sidecar.
+SUGGESTED_KEYS = ("suggested_poses", "suggested_poses_json")
 
 
 def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str]:
@@ -302,15 +305,10 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
             summary, result, made = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
                                          None if checks is None else {"excitation": checks.excitation})
-            suggestion = made.suggested_poses
-            if suggestion is None:
-                for key in ("suggested_poses", "suggested_poses_json"):
+            if made.suggested_poses is None:
+                for key in SUGGESTED_KEYS:
                     outputs.drop(key)
                     targets_out.pop(key)
-            else:
-                csv_text, json_text = suggestion.texts()
-                outputs.temp("suggested_poses").write_text(csv_text)
-                outputs.temp("suggested_poses_json").write_text(json_text)
             paths = {k: str(v) for k, v in targets_out.items()}
             summary.update({k: v for k, v in paths.items() if k not in ("summary_json", "suggested_poses")})
             if "suggested_poses" in paths:
@@ -318,9 +316,7 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
             report = finished_report(made.report, paths, summary["wall_time_s"], split)
-            written = finished_report(made.report, {k: v for k, v in paths.items() if k != "summary_json"},
-                                      summary["wall_time_s"], split)
-            calibration = write_data_files(outputs, summary, written, settings, targets_out, made)
+            calibration = write_data_files(outputs, summary, report, settings, targets_out, made)
             outputs.publish()
     finally:
         reservation.release()
@@ -334,11 +330,16 @@ def write_data_files(outputs, summary: dict, report: Report, settings: RunSettin
     report (when asked), the simulated recording (when simulating), the calibration file (its
     recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
-    returns the calibration as written."""
+    returns the calibration as written; the suggested poses' command file and sidecar (when
+    suggested). The summary JSON and the page list the files but the summary JSON itself."""
     from pipeline.formats import calibration_text, recording_source, recording_texts
     from pipeline.report import REPORT_KEY
 
+    report = without_file(report, "summary_json")
     recording, calibration = made.simulated, made.calibration
+    if made.suggested_poses is not None:
+        for key, text in zip(SUGGESTED_KEYS, made.suggested_poses.texts()):
+            outputs.temp(key).write_text(text)
     if "summary_json" in targets_out:
         outputs.temp("summary_json").write_text(json.dumps({**summary, REPORT_KEY: report.to_dict()}, indent=1))
     if "report" in targets_out:
