@@ -230,3 +230,31 @@ def test_a_fleet_has_the_documented_columns_and_each_machine_its_run_summary(tmp
     s = json.loads(Path(rep.rows[0]["summary"]).read_text())
     hold_run(s, "hexapod", truth=False)
     assert float(row["heldout_after_um"]) == pytest.approx(1000 * s["heldout_position_error_mm"]["after"], rel=1e-5)
+
+
+@pytest.mark.parametrize("robot_name", ["hexapod", "rus"])
+def test_the_documented_keys_say_what_the_report_says(robot_name, tmp_path):
+    """The keys a run's summary shares with its report (pipeline.report.calibration) hold the
+    report's figures: the verdict, the fit's stop and conditioning, the flagged rows, what the
+    rows left to the prior, the held-out figures (RMS, mean, max before and after)."""
+    from pipeline.run import run
+
+    res = run(["--robot", robot_name, "--out", str(tmp_path), "--quiet"])
+    s, r = res.summary, res.report
+    assert (s["success"], s["verdict"]["words"], s["verdict"]["cause"]) == (r.verdict.success, r.verdict.words,
+                                                                           r.verdict.cause)
+    assert s["condition_numbers"] == list(r.fit.condition_numbers) and s["iterations"] == r.fit.iterations
+    assert s["flagged_poses"] == list(r.flagged.rows) and s["left_to_prior"] == list(r.parameters.left_to_prior)
+    rows = {row.quantity: row for row in r.heldout.figures}
+    for key, quantity in (("heldout_position_error_mm", "position"), ("heldout_orientation_error_rad", "orientation")):
+        if s[key] is None:
+            assert quantity not in rows
+            continue
+        for when in ("before", "after"):
+            figures = getattr(rows[quantity], when)
+            assert s[key][f"{when}_figures"] == {"rms": figures.rms, "mean": figures.mean, "max": figures.max}
+            assert s[key][when] == figures.mean
+    assert [p.name for p in r.parameters.rows] == s["free_parameters"]  # the free ones, in table order
+    for row in r.parameters.rows:
+        d = s["parameter_determination"][row.name]
+        assert (row.error, row.source, row.two_sigma) == (d["error"], d["source"], 2 * d["posterior_std"]), row.name
