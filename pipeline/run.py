@@ -19,7 +19,7 @@ from calib.engine import METHODS, SOLVERS
 from calib.robots import ROBOTS
 
 from .cli import ArgumentParser, cli_main, keep_freed_memory
-from .report.from_summary import build_report
+from .report.model import Report
 from .report.text import terminal_lines
 
 if TYPE_CHECKING:
@@ -168,10 +168,9 @@ def _progress(enabled: bool):
     return report
 
 
-def print_summary(s: dict) -> None:
-    """The summary (``s``: a run's summary dict) in plain words, for the terminal
-    (:func:`pipeline.report.text.terminal_lines` of its report)."""
-    for line in terminal_lines(build_report(s)):
+def print_summary(report: Report) -> None:
+    """A run's report in plain words, for the terminal (:func:`pipeline.report.text.terminal_lines`)."""
+    for line in terminal_lines(report):
         print(line)
 
 
@@ -212,7 +211,7 @@ def run(argv: list[str] | None = None):
     if args.summary_json is not None:
         result.summary["summary_json"] = str(args.summary_json)
     if not args.quiet:
-        print_summary(result.summary)
+        print_summary(result.report)
     return result
 
 

@@ -697,12 +697,13 @@ def test_poses_suggested_under_noise_that_drowns_the_geometry_are_said_rightly(r
     measure 0 more poses (none suggested: configuration 0: position [825.87, -102.24, -201.78] is
     outside the workspace (chain 2 cannot reach it)): ", the noisy measured pose taken for the
     machine's)."""
-    from pipeline.report import build_report, terminal_lines
+    from pipeline.report import terminal_lines
     from pipeline.workflows.calibration import DETERMINED_DIRECTION
 
-    s = run(["--robot", robot_name, "--noise-mm", "1000", "--heldout", "3", "--out", str(tmp_path), "--quiet"]).summary
+    res = run(["--robot", robot_name, "--noise-mm", "1000", "--heldout", "3", "--out", str(tmp_path), "--quiet"])
+    s = res.summary
     sp = s["suggested_poses"]
-    (line,) = [ln for ln in terminal_lines(build_report(s)) if ln.strip().startswith("suggested:")]
+    (line,) = [ln for ln in terminal_lines(res.report) if ln.strip().startswith("suggested:")]
     if sp["poses"] == 0:
         added = float(re.search(r"would determine (\S+) more of the", sp["what"]).group(1))
         assert added < DETERMINED_DIRECTION and sp["what"].endswith("measure with less noise"), sp

@@ -213,11 +213,15 @@ def test_an_existing_report_is_not_overwritten(real_run, capsys):
 
 
 def test_every_string_is_escaped(real_run):
-    from pipeline.report import build_report, render_html
+    from dataclasses import replace
 
-    _, _, s = real_run
-    hostile = dict(s, warnings=['<script>alert("x")</script>'], scenario="<img src=x onerror=alert(1)>")
-    text = render_html(build_report(hostile))
+    from pipeline.report import REPORT_KEY, Report, render_html
+
+    out, _, _ = real_run
+    report = Report.from_dict(json.loads((out / "lab.summary.json").read_text())[REPORT_KEY])
+    hostile = replace(report, warnings=('<script>alert("x")</script>',),
+                      source=replace(report.source, recording="<img src=x onerror=alert(1)>"))
+    text = render_html(hostile)
     assert "<script" not in text and "<img" not in text
     assert "&lt;script&gt;" in text and "&lt;img src=x" in text
 
@@ -297,4 +301,11 @@ def test_pipeline_export_to_report_from_the_calibration_file_and_the_summary(rea
                         "--summary", str(other)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--summary" in err[0] and "hexapod" in err[0]
+    assert not (tmp_path / "x.html").exists()
+    bare = tmp_path / "bare.json"  # the run's keys without the report they hold
+    bare.write_text(json.dumps({k: v for k, v in s.items() if k != "report_model"}))
+    assert export_main(["--calibration", str(cal_path), "--to", "report", "--out", str(tmp_path / "x.html"),
+                        "--summary", str(bare)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--summary" in err[0] and "report_model" in err[0], err
     assert not (tmp_path / "x.html").exists()

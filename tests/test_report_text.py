@@ -15,7 +15,8 @@ from dataclasses import replace
 import pytest
 
 from pipeline.formats import read_recording, write_recording
-from pipeline.report import build_report, report_markdown, terminal_lines
+from pipeline.report import REPORT_KEY, build_report, report_markdown, terminal_lines
+from pipeline.report.calibration import without_file
 from pipeline.report.text import DISCOVERY_IMPLAUSIBLE_LINES, IMPLAUSIBLE_LINES
 from pipeline.run import run
 
@@ -48,16 +49,16 @@ def recording(tmp_path_factory):
 def heldout_run(recording):
     out = recording
     summary_json = out / "gross.summary.json"
-    s = run(["--real", str(out / "gross.csv"), "--tolerance", TIGHT, "--out", str(out), "--name", "g", "--quiet",
-             "--summary-json", str(summary_json)]).summary
-    return s, json.loads(summary_json.read_text())
+    res = run(["--real", str(out / "gross.csv"), "--tolerance", TIGHT, "--out", str(out), "--name", "g", "--quiet",
+               "--summary-json", str(summary_json)])
+    return res, json.loads(summary_json.read_text())
 
 
 @pytest.fixture(scope="module")
 def crossvalidated_run(recording):
     out = recording
     return run(["--real", str(out / "nocv.csv"), "--tolerance", TIGHT, "--out", str(out), "--name", "cv",
-                "--quiet"]).summary
+                "--quiet"])
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +73,8 @@ def discovery():
     return discover(rec, resim=False).summary
 
 
-def renderings(summary: dict) -> tuple[str, str]:
-    report = build_report(summary)
+def renderings(report) -> tuple[str, str]:
+    """The terminal's and the Rerun panel's renderings of a report."""
     return "\n".join(terminal_lines(report)), report_markdown(report)
 
 
@@ -87,8 +88,9 @@ def um(v_mm: float, scale: float = 1e3) -> str:
 
 
 def test_a_calibration_with_heldout_poses_says_every_figure_in_both(heldout_run):
-    s, _ = heldout_run
-    texts = renderings(s)
+    res, _ = heldout_run
+    s = res.summary
+    texts = renderings(res.report)
     assert s["verdict"]["words"] and not s["success"]  # the tolerance is contradicted: not calibrated
     in_both(texts, s["verdict"]["words"], "verdict")
     for key, scale in (("heldout_position_error_mm", 1e3), ("heldout_orientation_error_rad", 1e6)):
@@ -109,9 +111,9 @@ def test_a_calibration_with_heldout_poses_says_every_figure_in_both(heldout_run)
 
 
 def test_a_calibration_without_heldout_poses_says_its_crossvalidated_figures_in_both(crossvalidated_run):
-    s = crossvalidated_run
+    s = crossvalidated_run.summary
     assert s["heldout_position_error_mm"] is None and s["crossvalidation"]  # no held-out poses: cross-validated
-    texts = renderings(s)
+    texts = renderings(crossvalidated_run.report)
     in_both(texts, s["verdict"]["words"], "verdict")
     in_both(texts, s["crossvalidation"]["scheme"], "cross-validation scheme")
     for key, scale in (("crossvalidated_position_error_mm", 1e3), ("crossvalidated_orientation_error_rad", 1e6)):
@@ -123,7 +125,7 @@ def test_a_calibration_without_heldout_poses_says_its_crossvalidated_figures_in_
 
 def test_a_discovery_says_every_figure_in_both(discovery):
     s = discovery
-    texts = renderings(s)
+    texts = renderings(build_report(s))
     terminal, markdown = texts
     assert terminal.splitlines()[0] == s["verdict"]  # the verdict first
     in_both(texts, s["verdict"], "verdict")
@@ -148,10 +150,12 @@ def test_a_discovery_says_every_figure_in_both(discovery):
 
 
 def test_the_summary_json_carries_the_report(heldout_run):
-    s, written = heldout_run
-    model = written.pop("report_model")
+    res, written = heldout_run
+    s = res.summary
+    model = written.pop(REPORT_KEY)
     assert written.keys() <= s.keys()  # today's keys kept; the model beside them
-    assert model == json.loads(json.dumps(build_report(written).to_dict()))
+    # the report the run returns, but that the file does not list itself
+    assert model == json.loads(json.dumps(without_file(res.report, "summary_json").to_dict()))
     figures = model["heldout"]["figures"][0]
     assert figures["quantity"] == "position" and not figures["crossvalidated"]
     for when in ("before", "after"):
@@ -161,10 +165,15 @@ def test_the_summary_json_carries_the_report(heldout_run):
 
 
 def test_a_summary_without_a_verdict_or_a_fit_renders():
-    """The summary a calibration file alone gives (pipeline.export --to report) and one with only
-    the implausible parameters: words for what there is, nothing invented."""
-    s = {"robot": "delta", "scenario": "a recording", "success": None}
-    terminal, markdown = renderings(s)
+    """The report of a calibration file alone (pipeline.export --to report: no verdict judged, no
+    fit): words for what there is, nothing invented."""
+    from pipeline.report import model
+
+    report = model.Report(kind="calibration", source=model.Source("delta", "chain", "a recording"),
+                          verdict=model.Verdict(None, None), fit=None, truth=None, parameters=None, determination=None,
+                          implausible=model.Implausible(), heldout=None, frames=None, effects=None,
+                          flagged=model.Flagged(rows=()))
+    terminal, markdown = renderings(report)
     assert terminal.splitlines() == ["Calibration of the delta - a recording",
                                      "  flagged data rows (row k = file line k + 1): none"]
     assert "method" not in markdown and "Stop:" not in markdown

@@ -84,12 +84,12 @@ def test_parameter_bars_are_named_identified_beside_injected(robot_run):
 def test_summary_is_markdown_tables_with_short_lines(robot_run):
     from rerun.chunk import RrdReader
 
-    from pipeline.report import build_report, report_markdown
+    from pipeline.report import report_markdown
 
     _, rrd, res = robot_run
     chunk = next(c for c in RrdReader(str(rrd)).stream().to_chunks() if str(c.entity_path) == "/summary")
     text = chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
-    assert text == report_markdown(build_report(res.summary))  # the run's report, as the terminal's
+    assert text == report_markdown(res.report)  # the run's report, as the terminal's
     assert "| held-out (5 poses) | before | after |" in text
     for fig in ("RMS", "mean", "max"):  # RMS, mean and max, before and after
         assert f"| position {fig}, um |" in text

@@ -231,8 +231,9 @@ def test_real_model_misfit_is_reported_in_words_and_no_row_is_left_out(tmp_path)
 
 
 def test_a_run_returns_its_objects_and_its_summary_keeps_no_private_key(tmp_path):
-    """``RunResult`` carries the calibration as written, the simulated recording and the suggested
-    poses as objects (issue 47, point 1); the summary has no private (underscore) key."""
+    """``RunResult`` carries the calibration as written, the simulated recording, the suggested
+    poses (their poses and joints as the command file holds them) and the report as objects
+    (issue 47, point 1); the summary has no private (underscore) key."""
     from calib.calibration import Calibration
     from pipeline.workflows.calibration import RunSettings, run_calibration
 
@@ -245,3 +246,11 @@ def test_a_run_returns_its_objects_and_its_summary_keeps_no_private_key(tmp_path
     from pipeline.formats import read_recording
 
     assert np.array_equal(result.simulated.joints, read_recording(tmp_path / "objects.csv").joints)
+    from pipeline.formats import read_command_file
+
+    suggested = result.suggested_poses  # the reference poses leave combinations to the prior: poses suggested
+    poses, joints = read_command_file(tmp_path / "objects.suggested_poses.csv", result.simulated.robot)
+    assert np.array_equal(suggested.poses, poses) and np.array_equal(suggested.joints, joints)
+    assert suggested.texts() == ((tmp_path / "objects.suggested_poses.csv").read_text(),
+                                 (tmp_path / "objects.suggested_poses.json").read_text())
+    assert result.report.determination.suggested.poses == len(poses)

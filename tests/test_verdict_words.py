@@ -21,6 +21,7 @@ from calib.identification import (VERDICT_CAUSES, DescriptionPattern, GrossSearc
                                   likely_cause)
 from pipeline.report.text import IMPLAUSIBLE_LINES
 from pipeline.report.verdict_words import CAUSE_WORDS, NOT_CALIBRATED, verdict_sentence
+from pipeline.report import model
 from pipeline.run import print_summary
 
 
@@ -119,11 +120,14 @@ def test_the_diagnosis_says_a_movement_in_its_unit():
 
 
 def test_implausible_parameters_are_a_headline_and_a_few_lines(capsys):
-    """A summary naming 37 implausible parameters (and nothing else a run prints): the terminal
+    """A report naming 37 implausible parameters (and nothing else a run prints): the terminal
     gives a headline, the first few, and the count of the rest."""
     items = [{"name": f"B{k}.y", "words": f"B{k}.y = +2 mm from nominal, 20 times its tolerance 0.1 mm"}
              for k in range(37)]
-    print_summary({"robot": "hexapod", "scenario": "a recording", "implausible_parameters": items})
+    print_summary(model.Report(kind="calibration", source=model.Source("hexapod", "leg", "a recording"),
+                               verdict=model.Verdict(False, None), fit=None, truth=None, parameters=None,
+                               determination=None, implausible=model.Implausible(words=tuple(i["words"] for i in items)),
+                               heldout=None, frames=None, effects=None, flagged=model.Flagged(rows=())))
     out = capsys.readouterr().out.strip().splitlines()
     start = next(i for i, line in enumerate(out) if line.lstrip().startswith("implausible:"))
     out = out[start:start + 1 + IMPLAUSIBLE_LINES + 1]

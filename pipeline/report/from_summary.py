@@ -1,12 +1,13 @@
-"""Transitional: the report parsed from a summary dict (what :mod:`pipeline.report.model` was built
-from before its builders): ``build_report(summary)``, ``summary_document(summary)``. It goes once the
-builders make the report from the run's and the discovery's objects."""
+"""Transitional: a discovery's report parsed from its summary dict (what :mod:`pipeline.report.model`
+was built from before its builders): ``build_report(summary)``, ``summary_document(summary)``. It
+goes once the builders make the report from the discovery's objects (a calibration's report is made
+from its run's: :mod:`pipeline.report.calibration`)."""
 
 from __future__ import annotations
 
 import math
 
-from .model import (REPORT_KEY, OUTPUT_KEYS, Alias, Candidate, Coefficient, CompensationTable, CrossValidation, Determination, EffectRow, Effects, FigureRow, Figures, Fit, Flagged, FrameRow, Frames, GeometryTest, Heldout, Implausible, IsoPose, Law, LawConstant, Noise, Outputs, ParameterRow, Parameters, PerPose, PoseFamily, Remaining, Report, Resimulation, Search, Separation, Source, Suggested, SysId, Timing, Truth, Unseparated, Verdict)
+from .model import (REPORT_KEY, OUTPUT_KEYS, Alias, Candidate, Coefficient, CompensationTable, CrossValidation, EffectRow, Effects, FigureRow, Figures, Flagged, FrameRow, Frames, GeometryTest, Heldout, Implausible, Law, LawConstant, Noise, Outputs, ParameterRow, Parameters, PerPose, PoseFamily, Remaining, Report, Resimulation, Search, Separation, Source, SysId, Timing, Unseparated, Verdict)
 
 __all__ = ["build_report", "report_kind", "summary_document"]
 
@@ -32,65 +33,14 @@ def _chain_word(robot: str) -> str:
     return getattr(entry.cls, "chain_word", "chain") if entry is not None else "chain"
 
 
-def _source(s: dict, kind: str) -> Source:
+def _source(s: dict) -> Source:
     n = s.get("declared_noise")
     noise = None if not n else Noise(float(n.get("position_mm") or 0.0), float(n.get("orientation_rad") or 0.0),
                                       float(n.get("joint") or 0.0), str(n.get("distribution") or ""))
-    recording = s.get("scenario", "") if kind == "calibration" else s.get("recording") or ""
-    rows = s.get("rows") if kind == "discovery" else None
+    recording = s.get("recording") or ""
+    rows = s.get("rows")
     return Source(robot=s["robot"], chain_word=_chain_word(s["robot"]), recording=str(recording),
                   rows=None if rows is None else int(rows), noise=noise, seed=s.get("seed"))
-
-
-def _fit(s: dict) -> Fit | None:
-    if s.get("method") is None:  # a calibration file alone: no run
-        return None
-    used = s.get("calibration_poses_used")
-    return Fit(method=s["method"], solver=s.get("solver"), iterations=s.get("iterations"),
-               converged=s.get("converged", s.get("success")), message=s.get("message") or "",
-               history=tuple(s.get("max_dqint_history") or ()), condition_numbers=tuple(s.get("condition_numbers") or ()),
-               rows=s.get("calibration_poses"), rows_used=used, heldout_poses=int(s.get("heldout_poses") or 0))
-
-
-def _truth(s: dict) -> Truth | None:
-    pe, g = s.get("parameter_error") or {}, s.get("gain_G_percent") or {}
-    if not pe and not g:
-        return None
-    return Truth(pe.get("rms_mm"), pe.get("rms_rad"), g.get("mean"), g.get("norm"))
-
-
-def _calibration_parameters(s: dict) -> Parameters | None:
-    det = s.get("parameter_determination") or {}
-    if not det:
-        return None
-    prior = s.get("prior") or {}
-    tolerance = prior.get("tolerance") or {}
-    implausible = {d["name"] for d in s.get("implausible_parameters") or ()}
-    free = set(s.get("free_parameters") or det)
-    rows = []
-    for name, d in det.items():
-        if name not in free:
-            continue
-        std = d.get("posterior_std")
-        rows.append(ParameterRow(name=name, unit=d["unit"], value=d["value"], error=d["error"],
-                                 two_sigma=None if std is None else 2.0 * std, tolerance=tolerance.get(name),
-                                 source=d.get("source"), implausible=name in implausible))
-    return Parameters(rows=tuple(rows), prior=prior.get("source") or "none",
-                      left_to_prior=tuple(s.get("left_to_prior") or ()))
-
-
-def _determination(s: dict) -> Determination | None:
-    prior = s.get("prior")
-    if prior is None or ("used" not in prior and not s.get("determined_by")):
-        return None
-    by = s.get("determined_by") or {}
-    sp = s.get("suggested_poses")
-    suggested = None if not sp else Suggested(int(sp.get("poses") or 0), sp.get("what", ""),
-                                              s.get("suggested_poses_path", ""))
-    return Determination(prior_used=bool(prior.get("used")), prior=prior.get("source") or "",
-                         by_data=tuple(by.get("data") or ()), by_prior=tuple(by.get("prior") or ()),
-                         directions=s.get("directions_determined"),
-                         combinations=tuple(s.get("left_to_prior") or ()), suggested=suggested)
 
 
 def _discovery_parameters(s: dict) -> Parameters | None:
@@ -112,34 +62,10 @@ def _discovery_parameters(s: dict) -> Parameters | None:
     return Parameters(rows=tuple(rows), prior=imp.get("tolerance_source") or "not stated")
 
 
-def _implausible(s: dict, kind: str) -> Implausible:
-    imp = s.get("implausible_parameters") or ({} if kind == "discovery" else [])
-    if kind == "calibration":
-        return Implausible(words=tuple(d["words"] for d in imp))
+def _implausible(s: dict) -> Implausible:
+    imp = s.get("implausible_parameters") or {}
     return Implausible(words=tuple(imp.get("words") or ()),
                        with_effects=tuple(d["words"] for d in imp.get("with_effects") or ()))
-
-
-def _per_pose(s: dict) -> tuple[PerPose, ...]:
-    per = s.get("heldout_per_pose")
-    if not per:
-        return ()
-    rows = tuple(per["rows"]) if per.get("rows") else None
-    out = [PerPose("position", "mm", tuple(per["position_before_mm"]), tuple(per["position_after_mm"]),
-                   rows if per.get("per") == "pose" else None)]
-    if per.get("orientation_before_rad") is not None:
-        out.append(PerPose("orientation", "rad", tuple(per["orientation_before_rad"]),
-                           tuple(per["orientation_after_rad"]), rows))
-    return tuple(out)
-
-
-def _iso(s: dict) -> tuple[tuple[IsoPose, ...], str]:
-    iso = s.get("iso9283")
-    if not iso:
-        return (), ""
-    poses = tuple(IsoPose(tuple(p["rows"]), p["repeats"], p["AP_before_mm"], p["AP_after_mm"], p["RP_mm"])
-                  for p in iso["poses"])
-    return poses, f"{iso['standard']}; {iso['basis']}"
 
 
 def _crossvalidation(s: dict) -> CrossValidation | None:
@@ -148,27 +74,6 @@ def _crossvalidation(s: dict) -> CrossValidation | None:
         return None
     return CrossValidation(scheme=str(info.get("scheme", "")), fits=info.get("fits"), model=info.get("model"),
                            message=info.get("message", ""))
-
-
-def _calibration_heldout(s: dict) -> Heldout | None:
-    h, o = s.get("heldout_position_error_mm"), s.get("heldout_orientation_error_rad")
-    if h:
-        rows = [FigureRow("position", "mm", Figures.of(h["before_figures"]), Figures.of(h["after_figures"]))]
-        if o:
-            rows.append(FigureRow("orientation", "rad", Figures.of(o["before_figures"]), Figures.of(o["after_figures"])))
-        iso, standard = _iso(s)
-        return Heldout(basis=s.get("heldout_basis") or "", poses=int(s.get("heldout_poses") or 0), figures=tuple(rows),
-                       per_pose=_per_pose(s), iso9283=iso, iso_standard=standard,
-                       session_shifts=tuple(v["words"] for v in (s.get("session_shifts") or {}).values()))
-    cv, info = s.get("crossvalidated_position_error_mm"), _crossvalidation(s)
-    if not cv or cv.get("rms") is None or info is None:
-        return None
-    rows = [FigureRow("position", "mm", None, Figures.of(cv), crossvalidated=True)]
-    o = s.get("crossvalidated_orientation_error_rad")
-    if o and o.get("rms") is not None:
-        rows.append(FigureRow("orientation", "rad", None, Figures.of(o), crossvalidated=True))
-    return Heldout(basis=info.message, poses=int(s["crossvalidation"].get("rows_predicted") or 0), figures=tuple(rows),
-                   crossvalidation=info)
 
 
 def _discovery_heldout(s: dict) -> Heldout:
@@ -302,18 +207,12 @@ def _effects(s: dict) -> Effects:
                    search=_search(s), not_named=tuple(r["words"] for r in s.get("not_named") or ()))
 
 
-def _flagged(s: dict, kind: str) -> Flagged:
+def _flagged(s: dict) -> Flagged:
     rows = tuple(s.get("flagged_poses") or ())
     g = s.get("gross_rows") or {}
     out = s.get("outliers") or {}
     common = dict(rows=rows, gross=tuple(g.get("rows") or ()), gross_left_out=bool(g.get("left_out")),
                   numbering=s.get("row_numbering"))
-    if kind == "calibration":
-        w, wo = s.get("with_flagged") or {}, s.get("without_flagged") or {}
-        hw, hwo = w.get("heldout_position_error_mm"), wo.get("heldout_position_error_mm")
-        return Flagged(**common, left_out=bool(out.get("left_out")), outlier_verdict=out.get("verdict"),
-                       heldout_after_without_mm=hwo["after"] if hw and hwo else None,
-                       heldout_after_with_mm=hw["after"] if hw and hwo else None)
     return Flagged(**common, left_out=bool(rows), bad_rows=tuple(out.get("bad_rows") or ()),
                    model_wrong=bool(out.get("model_wrong")),
                    shared=tuple((k, tuple(v)) for k, v in (out.get("shared") or {}).items()),
@@ -341,27 +240,22 @@ def _outputs(s: dict) -> Outputs:
 
 
 def build_report(summary: dict) -> Report:
-    """The report of a ``pipeline.run`` or ``pipeline.discover`` summary (:func:`report_kind`).
+    """The report of a ``pipeline.discover`` summary (a calibration's is built from its run's objects:
+    :func:`pipeline.report.calibration.calibration_report`, ``RunResult.report``).
 
     Raises:
-        KeyError: a summary lacking a key every summary of its kind has (``robot``, and a
-            discovery's ``verdict``, ``explained``, held-out RMS).
+        KeyError: a summary lacking a key every discovery's summary has (``robot``, ``verdict``,
+            ``explained``, held-out RMS).
+        ValueError: a calibration's summary (:func:`report_kind`).
     """
-    s, kind = summary, report_kind(summary)
-    if kind == "calibration":
-        v = s.get("verdict") or {}
-        success = None if s.get("success") is None and "success" in s else bool(s.get("success"))
-        verdict = Verdict(success, v.get("words"), v.get("cause"))
-        parameters, heldout, effects = _calibration_parameters(s), _calibration_heldout(s), None
-        fit, truth, determination = _fit(s), _truth(s), _determination(s)
-    else:
-        verdict = Verdict(bool(s["explained"]), s["verdict"], None)
-        parameters, heldout, effects = _discovery_parameters(s), _discovery_heldout(s), _effects(s)
-        fit = truth = determination = None
-    return Report(kind=kind, source=_source(s, kind), verdict=verdict, fit=fit, truth=truth, parameters=parameters,
-                  determination=determination, implausible=_implausible(s, kind), heldout=heldout, frames=_frames(s),
-                  effects=effects, flagged=_flagged(s, kind), compensation=_compensation(s),
-                  warnings=tuple(s.get("warnings") or ()), timing=_timing(s), outputs=_outputs(s))
+    s = summary
+    if report_kind(s) != "discovery":
+        raise ValueError("a calibration's report is built from its run (RunResult.report), not parsed from its summary")
+    return Report(kind="discovery", source=_source(s), verdict=Verdict(bool(s["explained"]), s["verdict"], None),
+                  fit=None, truth=None, parameters=_discovery_parameters(s), determination=None,
+                  implausible=_implausible(s), heldout=_discovery_heldout(s), frames=_frames(s), effects=_effects(s),
+                  flagged=_flagged(s), compensation=_compensation(s), warnings=tuple(s.get("warnings") or ()),
+                  timing=_timing(s), outputs=_outputs(s))
 
 
 def summary_document(summary: dict) -> dict:

@@ -1,6 +1,6 @@
-"""The report of a calibration or a discovery: one typed model of its outcome, built from the
-summary ``python -m pipeline.run`` or ``python -m pipeline.discover`` gives (the dict their
-``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
+"""The report of a calibration or a discovery: one typed model of its outcome, built from a
+run's objects (:mod:`pipeline.report.calibration`) or from the summary ``python -m pipeline.discover``
+gives (the dict its ``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
 the parameters and what determined them, the implausible ones, the held-out figures, the
 instrument frames, the effects found, the flagged rows, the compensation, the warnings, the timing
 and the files written.
@@ -15,6 +15,8 @@ lays it out as one HTML file, and :meth:`Report.to_dict` is its JSON form (the s
 from __future__ import annotations
 
 import dataclasses
+import types
+import typing
 from dataclasses import dataclass, field
 
 __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow", "Parameters", "Suggested",
@@ -538,6 +540,37 @@ class Report:
     def to_dict(self) -> dict:
         """The report as JSON-ready nested dicts and lists (field names as keys)."""
         return _plain(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Report":
+        """The report :meth:`to_dict` wrote (a summary JSON's :data:`REPORT_KEY`).
+
+        Raises:
+            KeyError, TypeError, ValueError: not such a report (a section or field missing or of
+                another type).
+        """
+        return _typed(cls, d)
+
+
+def _typed(kind, value):
+    """``value`` (JSON-ready, as :func:`_plain` wrote it) as the type ``kind`` of a report's field."""
+    if value is None:
+        return None
+    if dataclasses.is_dataclass(kind):
+        if not isinstance(value, dict):
+            raise TypeError(f"{kind.__name__}: expected an object, got {type(value).__name__}")
+        hints = typing.get_type_hints(kind)
+        return kind(**{f.name: _typed(hints[f.name], value[f.name]) for f in dataclasses.fields(kind) if f.name in value})
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin in (typing.Union, types.UnionType):
+        return _typed(next(a for a in args if a is not type(None)), value)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise TypeError(f"expected a list, got {type(value).__name__}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_typed(args[0], v) for v in value)
+        return tuple(_typed(a, v) for a, v in zip(args, value, strict=True))
+    return value
 
 
 def _plain(value):

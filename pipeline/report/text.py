@@ -105,10 +105,18 @@ def report_title(r: Report) -> str:
     return f"{'Calibration of' if r.kind == 'calibration' else 'Discovery on'} the {r.source.robot}"
 
 
+#: The verdict of a calibration file alone (no run judged it here).
+FILE_VERDICT = ("from the calibration file alone: its verdict, held-out figures and flagged rows are in the summary "
+                "of the run that wrote it (pipeline.export --summary S.json)")
+
+
 def verdict_text(r: Report) -> str:
-    """The verdict's words (where the summary states none: whether the fit converged)."""
+    """The verdict's words (where the analysis states none: whether the fit converged; of a
+    calibration file alone, not judged: :data:`FILE_VERDICT`)."""
     if r.verdict.words is not None:
         return r.verdict.words
+    if r.verdict.success is None:
+        return FILE_VERDICT
     return "converged" if r.verdict.success else "not a success"
 
 

@@ -2,8 +2,9 @@
 compensate, validate on held-out poses, write the recording, the summary and the ``.rrd``.
 
 ``python -m pipeline.run`` parses its flags into :class:`RunSettings`, calls
-:func:`run_calibration` and prints the :class:`RunResult`'s summary. The summary has the same
-keys for every robot.
+:func:`run_calibration` and prints the :class:`RunResult`'s report (made from the run's objects:
+:func:`pipeline.report.calibration.calibration_report`). The summary has the same keys for every
+robot; those it shares with the report are written from the report.
 """
 
 from __future__ import annotations
@@ -19,11 +20,11 @@ import numpy as np
 from calib import paper
 from calib.calibration import Calibration
 from calib.design import augment_poses
-from calib.engine import IdentificationResult, gauge_representative, integrated_error
+from calib.engine import IdentificationResult, gauge_representative
 from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification, SessionSearch, UnreachableRows,
                                   calibrate)
 from calib.measurement import frame_to_dict, measured_gauge_representative
-from calib.metrics import calibration_gain, iso9283_position, pose_error_norms, repeated_poses
+from calib.metrics import calibration_gain, pose_error_norms
 from calib.noise import SensorNoise
 from calib.observability import identification_jacobian
 from calib.prior import DATA_SOURCE_RATIO, ParameterPrior
@@ -33,12 +34,14 @@ from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
                               frame_session, row_message, session_measurement)
-from pipeline.report import build_report, render_html
-from pipeline.report.verdict_words import verdict_sentence
+from pipeline.report import Report, render_html
+from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, frame_held_words,
+                                         gross_rows, heldout_figure_rows, heldout_keys, iso_keys, parameter_error,
+                                         per_pose_keys, with_suggested, without_file)
 
 from .options import check_noise_flags
 
-__all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
+__all__ = ["RunSettings", "RunResult", "SuggestedPoses", "AsRead", "run_calibration", "read_as_a_run_does", "machine_tolerance",
            "implausible_parameters", "IMPLAUSIBLE_TOLERANCES", "DEFAULT_CONFIGURATIONS", "DEFAULT_ROBOT", "ROW_NUMBERING",
            "default_name", "OUTPUT_EXTENSIONS", "DETERMINED_DIRECTION", "directions_added"]
 
@@ -46,9 +49,6 @@ __all__ = ["RunSettings", "RunResult", "AsRead", "run_calibration", "read_as_a_r
 DEFAULT_CONFIGURATIONS = 20
 #: The robot simulated when none is named.
 DEFAULT_ROBOT = "hexapod"
-#: How every message, summary and view names a recording's rows.
-ROW_NUMBERING = ("1-based data row of the recording, as a spreadsheet shows it below the header "
-                 "(row k is file line k + 1)")
 
 
 @dataclass(frozen=True)
@@ -102,10 +102,12 @@ class AsRead:
 
 @dataclass
 class RunResult:
-    """Everything a run produced."""
+    """Everything a run produced: its summary (the keys ``--summary-json`` writes), its report (the
+    typed model every rendering reads; its files include the summary JSON's), the identification."""
 
     summary: dict
     result: IdentificationResult
+    report: Report
     paths: dict = field(default_factory=dict)
     #: The recording read from ``RunSettings.real`` (None for a simulated run).
     recording: Recording | None = None
@@ -115,18 +117,36 @@ class RunResult:
     calibration: Calibration | None = None
     #: The recording a simulated run made (None for a recording read).
     simulated: Recording | None = None
-    #: The poses suggested to measure next, ``(csv text, json text)``, or None.
-    suggested_poses: tuple | None = None
+    #: The poses suggested to measure next (None: none suggested).
+    suggested_poses: SuggestedPoses | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class SuggestedPoses:
+    """Poses suggested to measure next (:func:`suggested_poses`): (K, D) poses, (K, C) the joints
+    the nominal controller commands for them, and what their command file's sidecar says (``meta``:
+    robot, kind, purpose, columns, units, why, what, left_to_prior)."""
+
+    robot: Robot
+    poses: np.ndarray
+    joints: np.ndarray
+    meta: dict
+
+    def texts(self) -> tuple[str, str]:
+        """``(command file CSV text, its sidecar JSON text)``, as the run writes them."""
+        return command_csv(self.robot, self.poses, self.joints), json.dumps(self.meta, indent=2) + "\n"
 
 
 @dataclass(frozen=True)
 class RunObjects:
-    """What a run's analysis made besides its summary: the calibration (before its provenance is
-    set), the simulated recording, the suggested poses' file texts, the recording as read."""
+    """What a run's analysis made besides its summary: its report (before its files and timing are
+    known), the calibration (before its provenance is set), the simulated recording, the suggested
+    poses, the recording as read."""
 
+    report: Report
     calibration: Calibration
     simulated: Recording | None = None
-    suggested_poses: tuple | None = None
+    suggested_poses: SuggestedPoses | None = None
     as_read: AsRead | None = None
 
 
@@ -143,6 +163,8 @@ def default_name(settings: RunSettings) -> str:
 OUTPUT_EXTENSIONS = (".rrd", ".csv", ".json", ".suggested_poses.csv", ".suggested_poses.json", CALIBRATION_SUFFIX)
 #: Poses suggested when the measured ones leave parameter combinations to the prior.
 SUGGESTED_POSES = 10
+#: The output keys of the suggested poses' command file and its sidecar.
+SUGGESTED_KEYS = ("suggested_poses", "suggested_poses_json")
 
 
 def _targets(robot: Robot, settings: RunSettings, seed) -> tuple[np.ndarray, str]:
@@ -188,36 +210,6 @@ def _simulate(robot: Robot, settings: RunSettings, noise: SensorNoise, progress)
                 scenario=scenario)
 
 
-def error_figures(norms: np.ndarray) -> dict:
-    """``{"rms", "mean", "max"}`` of per-pose error norms (N,)."""
-    return {"rms": float(np.sqrt(np.mean(norms ** 2))), "mean": float(norms.mean()), "max": float(norms.max())}
-
-
-def _heldout_block(robot: Robot, before: np.ndarray, after: np.ndarray) -> dict:
-    """Held-out position and orientation errors, before and after: the mean (``before``,
-    ``after``), the largest after (``max_after``), and all three figures of each
-    (``before_figures``, ``after_figures``: RMS, mean, max)."""
-    pb, ob = pose_error_norms(robot, before)
-    pa, oa = pose_error_norms(robot, after)
-
-    def block(b, a):
-        return {"before": float(b.mean()), "after": float(a.mean()), "max_after": float(a.max()),
-                "before_figures": error_figures(b), "after_figures": error_figures(a)}
-
-    return {"heldout_position_error_mm": block(pb, pa),
-            "heldout_orientation_error_rad": block(ob, oa) if robot.angle_pose_mask.any() else None}
-
-
-def _parameter_error(robot: Robot, identified: np.ndarray, true: np.ndarray, free) -> dict:
-    idx = robot.table.indices(free)
-    err = (identified - true)[idx]
-    angle = robot.table.angle_mask()[idx]
-    rms = lambda v: float(np.sqrt(np.mean(v ** 2))) if v.size else None  # noqa: E731
-    return {"rms_mm": rms(err[~angle]), "rms_rad": rms(err[angle]),
-            "max_abs_mm": float(np.abs(err[~angle]).max()) if (~angle).any() else None,
-            "max_abs_rad": float(np.abs(err[angle]).max()) if angle.any() else None}
-
-
 def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     """(N, D) full poses ``measured`` taken out of their rows' instrument frames (``groups``: each
     row's frame group, :func:`frame_groups`; rows in :data:`calib.identification.BASE_FRAME` as they
@@ -228,37 +220,7 @@ def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     return out
 
 
-def _instrument_basis(fit) -> str:
-    """What the held-out errors of :func:`calib.identification.instrument_heldout` are."""
-    what = "target positions" if fit.n_targets else "poses"
-    return (f"recorded validation rows: measured {what} minus model prediction, instrument frame "
-            "(includes sensor noise)")
-
-
-#: A frame component this many times less certain than one measurement (its noise) is said to be
-#: held by the geometry's tolerances, not determined by the poses.
-FRAME_HELD_RATIO = 10.0
-
-
-def frame_held_words(fit) -> list[str]:
-    """The instrument frame's components the poses cannot separate from the geometry, in words:
-    those whose standard uncertainty is over :data:`FRAME_HELD_RATIO` times one measurement's noise
-    as the data show it (the spread of the fit's residuals, positions and angles; the declared
-    noise may call angles exact) (with the tolerances as a prior the geometry's tolerance holds
-    them; without, the gauge)."""
-    std = np.asarray(fit.frame_std, dtype=float)
-    names = ("x", "y", "z", "rotation about x", "rotation about y", "rotation about z")
-    units = ("mm",) * 3 + ("rad",) * 3
-    res = np.asarray(fit.result.pose_residuals, dtype=float)
-    spread = np.nanstd(res, axis=0) if res.size else np.zeros(6)
-    scale = np.r_[np.full(3, max(np.nanmax(spread[:3]) if spread.size >= 3 else 0.0, 1e-6)),
-                  np.full(3, max(np.nanmax(spread[3:6]) if spread.size >= 6 else 0.0, 1e-9))]
-    held = "the geometry's tolerances" if fit.result.prior is not None else "the gauge"
-    return [f"frame {name}: std {std[k]:.3g} {units[k]}, not separated from the geometry by the poses: held by {held}"
-            for k, name in enumerate(names) if std[k] > FRAME_HELD_RATIO * scale[k]]
-
-
-def _instrument_block(fit, before, after) -> dict:
+def _instrument_block(fit) -> dict:
     """Summary keys of an instrument frame or target fit."""
     block = {"method": "forward", "solver": "lm", "weighted": True,
              "measurement_notes": list(fit.notes), "measurement_gauge": list(fit.gauge)}
@@ -269,12 +231,6 @@ def _instrument_block(fit, before, after) -> dict:
     if fit.targets is not None:
         block["measurement_targets_mm"] = fit.targets.tolist()
         block["measurement_targets_estimated"] = fit.targets_estimated
-        if before is not None:  # one position error per target and row
-            b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
-            block["heldout_position_error_mm"] = {"before": float(b.mean()), "after": float(a.mean()),
-                                                  "max_after": float(a.max()), "before_figures": error_figures(b),
-                                                  "after_figures": error_figures(a)}
-            block["heldout_orientation_error_rad"] = None
     return block
 
 
@@ -283,9 +239,9 @@ def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: 
     block = {"rows_used": len(rows), "identified_errors": robot.table.to_dict(result.errors),
              "chi2": result.chi2, "dof": result.dof, "success": result.success, "message": result.message,
              "heldout_position_error_mm": None, "heldout_orientation_error_rad": None,
-             "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free)}
+             "parameter_error": None if truth is None else parameter_error(robot, result.theta, truth, free)}
     if held is not None:
-        block.update(_heldout_block(robot, *held))
+        block.update(heldout_keys(heldout_figure_rows(robot, *held)))
     return block
 
 
@@ -349,41 +305,45 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
             summary, result, made = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
                                          None if checks is None else {"excitation": checks.excitation})
-            suggestion = made.suggested_poses
-            if suggestion is None:
-                for key in ("suggested_poses", "suggested_poses_json"):
+            if made.suggested_poses is None:
+                for key in SUGGESTED_KEYS:
                     outputs.drop(key)
                     targets_out.pop(key)
-            else:
-                outputs.temp("suggested_poses").write_text(suggestion[0])
-                outputs.temp("suggested_poses_json").write_text(suggestion[1])
             paths = {k: str(v) for k, v in targets_out.items()}
             summary.update({k: v for k, v in paths.items() if k not in ("summary_json", "suggested_poses")})
             if "suggested_poses" in paths:
                 summary["suggested_poses_path"] = paths["suggested_poses"]
             summary["wall_time_s"] = time.perf_counter() - t0
             summary["wall_time_split_s"] = split
-            calibration = write_data_files(outputs, summary, settings, targets_out, made)
+            report = finished_report(made.report, paths, summary["wall_time_s"], split)
+            calibration = write_data_files(outputs, summary, report, settings, targets_out, made)
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, paths=paths, recording=rec, as_read=made.as_read,
+    return RunResult(summary=summary, result=result, report=report, paths=paths, recording=rec, as_read=made.as_read,
                      calibration=calibration, simulated=made.simulated, suggested_poses=made.suggested_poses)
 
 
-def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out: dict, made: RunObjects) -> Calibration:
-    """Write the summary JSON (when asked), the simulated recording (when simulating), the
-    calibration file (its recording named and hashed) and the identified machine's MJCF (when asked,
+def write_data_files(outputs, summary: dict, report: Report, settings: RunSettings, targets_out: dict,
+                     made: RunObjects) -> Calibration:
+    """Write the summary JSON (when asked: the summary's keys and ``report``'s model), the HTML
+    report (when asked), the simulated recording (when simulating), the calibration file (its
+    recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
-    returns the calibration as written."""
+    returns the calibration as written; the suggested poses' command file and sidecar (when
+    suggested). The summary JSON and the page list the files but the summary JSON itself."""
     from pipeline.formats import calibration_text, recording_source, recording_texts
-    from pipeline.report import summary_document
+    from pipeline.report import REPORT_KEY
 
+    report = without_file(report, "summary_json")
     recording, calibration = made.simulated, made.calibration
+    if made.suggested_poses is not None:
+        for key, text in zip(SUGGESTED_KEYS, made.suggested_poses.texts()):
+            outputs.temp(key).write_text(text)
     if "summary_json" in targets_out:
-        outputs.temp("summary_json").write_text(json.dumps(summary_document(summary), indent=1))
+        outputs.temp("summary_json").write_text(json.dumps({**summary, REPORT_KEY: report.to_dict()}, indent=1))
     if "report" in targets_out:
-        outputs.temp("report").write_text(render_html(build_report(summary)))
+        outputs.temp("report").write_text(render_html(report))
     if recording is not None:
         csv_text, json_text = recording_texts(recording)
         outputs.temp("csv").write_text(csv_text)
@@ -401,8 +361,6 @@ def write_data_files(outputs, summary: dict, settings: RunSettings, targets_out:
     return calibration
 
 
-#: What the summary says of the prior with --no-prior.
-NO_PRIOR = "none (--no-prior: plain least squares)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -657,15 +615,6 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
                             tolerance_source=source, tolerance_declared=settings.tolerance is not None)
 
 
-def heldout_basis(inp: CalibrationInput, ident: Identification) -> str:
-    """What the held-out errors are, in words."""
-    if ident.instrument is not None:
-        return _instrument_basis(ident.instrument)
-    if inp.sim is not None:
-        return "simulated machine, compensated commands, noise-free settled poses (before: nominal commands)"
-    return "recorded validation rows: measured minus model prediction (includes sensor noise)"
-
-
 def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray | None:
     """(P,) the true parameters (a simulated machine's, or those a recording's sidecar names) in the
     fit's gauge (:func:`calib.engine.gauge_representative`, or with an instrument fit
@@ -678,11 +627,6 @@ def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray |
     return measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
                                          targets=instrument.targets if instrument.targets_estimated else None,
                                          start=result.start)
-
-
-def flagged_rows(inp: CalibrationInput, ident: Identification) -> list[int]:
-    """The rows named gross or flagged, as 1-based data rows (:data:`ROW_NUMBERING`)."""
-    return [int(inp.rows[i]) + 1 for i in ident.flagged_idx]
 
 
 def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
@@ -716,33 +660,44 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
     return out
 
 
-def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.ndarray | None, settings: RunSettings,
-               warnings: list) -> dict:
-    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found
-    (``truth``: :func:`truth_in_gauge`)."""
-    ident, held, data = outcome.identification, outcome.heldout, outcome.data
-    robot, result, instrument = inp.robot, ident.result, ident.instrument
+def truth_figures(inp: CalibrationInput, ident: Identification, truth: np.ndarray | None) -> dict | None:
+    """``{"parameter_error", "gain_G_percent"}`` of the identification against ``truth``
+    (:func:`truth_in_gauge`; None where unknown)."""
+    if truth is None:
+        return None
+    robot, result = inp.robot, ident.result
     free = result.free_names
-    flagged = flagged_rows(inp, ident)
+    return {"parameter_error": parameter_error(robot, result.theta, truth, free),
+            "gain_G_percent": {k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
+                                                                 free).as_dict().items() if k != "per_parameter"}}
+
+
+def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report, truth: np.ndarray | None,
+               settings: RunSettings, warnings: list, figures: dict | None, implausible: list[dict]) -> dict:
+    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found;
+    the keys holding what its ``report`` holds (:func:`pipeline.report.calibration.calibration_report`:
+    the fit's figures, the flagged rows, the held-out figures, ...) written from it (``truth``:
+    :func:`truth_in_gauge`; ``figures``: :func:`truth_figures`; ``implausible``:
+    :func:`implausible_parameters`)."""
+    ident, held, data = outcome.identification, outcome.heldout, outcome.data
+    robot, result, instrument, fit = inp.robot, ident.result, ident.instrument, report.fit
+    free = result.free_names
+    flagged = list(report.flagged.rows)
     comparison = (None, None)
     if ident.result_kept is not None:
         comparison = (_variant(robot, ident.result_all, list(ident.kept), outcome.heldout_with_flagged, truth, free),
                       _variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth,
                                free))
-    chainwise_gn = settings.method == "chainwise" and ident.solver == "gn"
-    history = list(result.history) if (chainwise_gn and instrument is None) \
-        else [float(integrated_error(robot, result.pose_residuals if instrument is None else
-                                     ident.measured - robot.forward_kinematics(result.theta, inp.joints))[2].max())]
     misfit = bool(ident.report is not None and ident.report.misfit)
     summary = {
-        "robot": robot.name,
-        "scenario": inp.scenario,
+        "robot": report.source.robot,
+        "scenario": report.source.recording,
         "method": settings.method,
         "solver": ident.solver,
         "weighted": (settings.weighted or data.prior is not None) if settings.method == "chainwise" else True,
-        "calibration_poses": int(len(inp.measured)),
-        "calibration_poses_used": int(ident.used.size),
-        "heldout_poses": 0 if held is None else len(held[0]),
+        "calibration_poses": fit.rows,
+        "calibration_poses_used": fit.rows_used,
+        "heldout_poses": fit.heldout_poses,
         "declared_noise": inp.noise.to_dict(),
         "seed": settings.seed,
         "parameter_units": dict(zip(robot.table.names, robot.table.units)),
@@ -751,18 +706,16 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "injected_errors": None if inp.injected is None else robot.table.to_dict(inp.injected),
         "identified_errors": robot.table.to_dict(result.errors),
         "identified_std": robot.table.to_dict(result.std),
-        "parameter_error": None if truth is None else _parameter_error(robot, result.theta, truth, free),
-        "gain_G_percent": None if truth is None else {
-            k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
-                                              free).as_dict().items() if k != "per_parameter"},
-        "iterations": result.iterations,
-        "converged": result.success,
+        "parameter_error": None if figures is None else figures["parameter_error"],
+        "gain_G_percent": None if figures is None else figures["gain_G_percent"],
+        "iterations": fit.iterations,
+        "converged": fit.converged,
         "success": result.success,
         "message": result.message,
         "chi2": result.chi2,
         "dof": result.dof,
-        "max_dqint_history": history,
-        "condition_numbers": result.condition_numbers.tolist(),
+        "max_dqint_history": list(fit.history),
+        "condition_numbers": list(fit.condition_numbers),
         "row_numbering": ROW_NUMBERING,
         "flagged_poses": flagged,
         "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
@@ -775,71 +728,45 @@ def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, truth: np.nda
         "with_flagged": comparison[0],
         "without_flagged": comparison[1],
         "warnings": warnings,
-        "heldout_basis": None if held is None else heldout_basis(inp, ident),
+        "heldout_basis": None if held is None else report.heldout.basis,
         "heldout_position_error_mm": None,
         "heldout_orientation_error_rad": None,
     }
-    if held is not None and (instrument is None or instrument.targets is None):
-        summary.update(_heldout_block(robot, *held))
     if held is not None:
-        summary.update(heldout_detail(inp, *held))
+        summary.update(heldout_keys(report.heldout.figures))
+        summary.update(heldout_detail(inp, report.heldout, targets=held[0].shape[1] != robot.pose_dim))
     if instrument is not None:
-        summary.update(_instrument_block(instrument, *(held if held is not None else (None, None))))
+        summary.update(_instrument_block(instrument))
         if inp.n_sessions > 1:
             summary.update(sessions_block(inp, instrument))
-    summary.update(prior_block(outcome))
-    summary["implausible_parameters"] = implausible_parameters(robot, result.errors, data.tolerance, result.free_names)
+    summary.update(prior_block(outcome, report))
+    summary["implausible_parameters"] = implausible
     if inp.sim is not None:
         summary.update(simulation_block(inp, settings))
     return summary
 
 
-def heldout_detail(inp: CalibrationInput, before: np.ndarray, after: np.ndarray) -> dict:
-    """Summary keys of each held-out pose: ``heldout_per_pose`` (the position error norms before
-    and after, mm, and the orientation's, rad; with target data one position per target and row;
+def heldout_detail(inp: CalibrationInput, heldout, targets: bool) -> dict:
+    """Summary keys of each held-out pose, from the report's held-out section (``heldout``:
+    :class:`pipeline.report.model.Heldout`): ``heldout_per_pose``
+    (:func:`pipeline.report.calibration.per_pose_keys`: the position error norms before and after,
+    mm, and the orientation's, rad; with target data (``targets``) one position per target and row;
     ``rows``: the 1-based data rows of a recording, None for simulated held-out poses) and
-    ``iso9283`` where validation rows repeat a commanded pose (the same joints, within the declared
-    joint noise; :func:`calib.metrics.iso9283_position` on attained minus predicted positions, before
-    with the nominal model, after with the identified one; None otherwise)."""
-    robot = inp.robot
+    ``iso9283`` where validation rows repeat a commanded pose
+    (:func:`pipeline.report.calibration.iso_keys`; None otherwise)."""
     rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
-    if before.shape[1] != robot.pose_dim:  # target positions: one norm per target and row
-        b, a = (np.linalg.norm(e.reshape(len(e), -1, 3), axis=2).ravel() for e in (before, after))
-        per = {"position_before_mm": b.tolist(), "position_after_mm": a.tolist(), "orientation_before_rad": None,
-               "orientation_after_rad": None, "rows": rows, "per": "target and row"}
-        return {"heldout_per_pose": per, "iso9283": None}
-    pb, ob = pose_error_norms(robot, before)
-    pa, oa = pose_error_norms(robot, after)
-    angles = robot.angle_pose_mask.any()
-    per = {"position_before_mm": pb.tolist(), "position_after_mm": pa.tolist(),
-           "orientation_before_rad": ob.tolist() if angles else None,
-           "orientation_after_rad": oa.tolist() if angles else None, "rows": rows, "per": "pose"}
-    iso = None
-    if inp.rec is not None:
-        groups = repeated_poses(inp.val_joints, inp.noise.joint_std)
-        position = ~robot.angle_pose_mask
-        zero = np.zeros((len(before), 3))
-        b, a = (iso9283_position(e[:, position], zero, groups) for e in (before, after))
-        if len(b.rows):
-            iso = {"standard": "ISO 9283: AP = distance from the barycentre of the attained positions to the command, "
-                               "RP = mean distance to the barycentre + 3 sample standard deviations",
-                   "basis": "validation rows repeating one joint command; the command's position is the model's "
-                            "prediction at it (before: nominal, after: identified)",
-                   "poses": [{"rows": [rows[i] for i in r], "repeats": int(len(r)), "AP_before_mm": float(apb),
-                              "AP_after_mm": float(apa), "RP_mm": float(rp)}
-                             for r, apb, apa, rp in zip(b.rows, b.accuracy, a.accuracy, a.repeatability)]}
-    return {"heldout_per_pose": per, "iso9283": iso}
+    return {"heldout_per_pose": per_pose_keys(heldout.per_pose, rows, targets), "iso9283": iso_keys(heldout.iso9283)}
 
 
-def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome) -> dict:
+def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report) -> dict:
     """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
     recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
-    ``verdict`` (``words``: :func:`pipeline.report.verdict_words.verdict_sentence`, ``cause``,
-    ``evidence``)."""
+    ``verdict`` (``words`` and ``cause`` as ``report`` holds them: the words
+    :func:`pipeline.report.verdict_words.verdict_sentence`'s; ``evidence``)."""
     verdict = outcome.verdict
     return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
-            "success": verdict.success,
-            "verdict": {"words": verdict_sentence(verdict), "cause": verdict.cause,
+            "success": report.verdict.success,
+            "verdict": {"words": report.verdict.words, "cause": report.verdict.cause,
                         "evidence": verdict.evidence.to_dict()}}
 
 
@@ -910,44 +837,43 @@ def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
     search = ident.gross
     if search is None:
         return None
+    rows, left_out = gross_rows(inp, ident)
     return {"test": "trimmed fits (random subsets and concentration steps), then rows beyond the chi-square "
                     f"{1 - GROSS_ALPHA:g} quantile of their coordinates named gross",
-            "rows": [int(inp.rows[i]) + 1 for i in ident.gross_idx], "left_out": bool(ident.gross_idx) and
-            len(ident.kept) < len(inp.measured), "frame_estimated": bool(search.frame_estimated),
+            "rows": rows, "left_out": left_out, "frame_estimated": bool(search.frame_estimated),
             "success": bool(search.success), "message": search.message,
             "search": getattr(search, "search", "every row") if not isinstance(search, SessionSearch) else
             "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
 
 
-def prior_block(outcome: CalibrationOutcome) -> dict:
+def prior_block(outcome: CalibrationOutcome, report: Report) -> dict:
     """Summary keys of what the data determined: the prior used (the tolerance learnt where the run
-    learnt one; :data:`NO_PRIOR` with --no-prior), per parameter its posterior standard deviation
-    and source (``data`` below half the prior's, else ``prior``; ``held``), the combinations the
-    poses left to the prior, in words."""
+    learnt one; :data:`pipeline.report.calibration.NO_PRIOR` with --no-prior), per parameter its
+    posterior standard deviation and source (``data`` below half the prior's, else ``prior``;
+    ``held``), the combinations the poses left to the prior, in words (the prior's words, the
+    directions determined and the combinations as ``report`` holds them)."""
     data, result = outcome.data, outcome.result
-    left = [c["combination"] + (f" ({data.robot.chain_word} {c['chain'] + 1})" if c["chain"] is not None else "")
-            + f": posterior {c['std_ratio']:.2f} x the prior" for c in result.left_to_prior()]
     sources = result.parameter_sources()
     est = data.tolerance_estimate
-    seen = result.directions_determined()
-    return {"prior": {"used": data.prior is not None,
-                      "source": data.tolerance_source if data.prior is not None else NO_PRIOR,
+    return {"prior": {"used": report.determination.prior_used,
+                      "source": report.parameters.prior,
                       "tolerance": None if data.prior is None else data.prior.tolerance_by_name(data.robot),
                       "declared": data.tolerance_declared,
                       "learnt": None if est is None else est.summary()},
             "parameter_determination": result.determination(),
             "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
-            "directions_determined": seen,
-            "left_to_prior": left}
+            "directions_determined": report.determination.directions,
+            "left_to_prior": list(report.parameters.left_to_prior)}
 
 
-def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, summary: dict):
-    """``(command file CSV text, its sidecar JSON text)``: :data:`SUGGESTED_POSES` poses that
-    determine what the measured ones left to the prior (:func:`calib.design.augment_poses`, over
-    the robot's full workspace), with the joints the nominal controller commands for them, ready to
-    measure; ``summary["suggested_poses"]`` says which kind of pose they are, in words. None where
-    they would determine less than one direction more (:func:`directions_added`: noise that
-    drowns the geometry), ``summary["suggested_poses"]`` saying so with its figures.
+def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, left: list[str]):
+    """``(suggested, block)``: ``suggested`` (:class:`SuggestedPoses`), :data:`SUGGESTED_POSES`
+    poses that determine what the measured ones left to the prior (``left``, in words;
+    :func:`calib.design.augment_poses`, over the robot's full workspace), with the joints the
+    nominal controller commands for them, ready to measure; ``block`` the summary's
+    ``suggested_poses`` (``poses``, ``what``: which kind of pose they are, in words, ``why``).
+    ``suggested`` None where they would determine less than one direction more
+    (:func:`directions_added`: noise that drowns the geometry), ``block`` saying so with its figures.
 
     The measured rows inform at the configurations the machine was in: the identified geometry's
     poses at the joints read (a measured pose carries its noise: 1000 mm puts a Delta's outside
@@ -959,23 +885,22 @@ def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings
     prior_std = outcome.data.prior.std
     poses = augment_poses(robot, result.theta, at, SUGGESTED_POSES, inp.noise, prior_std,
                           free=result.free_names, seed=settings.seed)
-    why = f"the measured poses leave {len(summary['left_to_prior'])} parameter combination(s) to the prior"
+    why = f"the measured poses leave {len(left)} parameter combination(s) to the prior"
     added = directions_added(robot, result, at, poses, inp.noise, prior_std)
     if added < DETERMINED_DIRECTION:
-        summary["suggested_poses"] = {
+        return None, {
             "poses": 0, "why": why,
             "what": (f"{len(poses)} more poses at the declared noise would determine {added:.2g} more of the "
                      f"{len(result.free_names)} free directions, not one (a direction determined counts "
                      f"{DETERMINED_DIRECTION:g} at least): measure with less noise")}
-        return None
     joints = robot.inverse_kinematics(robot.table.nominal, poses)
     words = pose_kind_words(robot, measured, poses)
-    summary["suggested_poses"] = {"poses": int(len(poses)), "what": words, "why": why}
+    block = {"poses": int(len(poses)), "what": words, "why": why}
     meta = {"robot": robot.name, "kind": "calibration command file", "purpose": "suggested calibration poses",
             "columns": list(command_columns(robot)),
             "units": "pose and joint units in the column names; joints are the nominal controller's commands",
-            "why": why, "what": words, "left_to_prior": summary["left_to_prior"]}
-    return command_csv(robot, poses, joints), json.dumps(meta, indent=2) + "\n"
+            "why": why, "what": words, "left_to_prior": left}
+    return SuggestedPoses(robot, poses, joints, meta), block
 
 
 def machine_poses(robot: Robot, theta, joints, measured) -> np.ndarray:
@@ -1048,9 +973,11 @@ def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recordi
         meta={"scenario": inp.scenario, "seed": settings.seed, "simulation": simulation})
 
 
-def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, settings: RunSettings,
-             rrd_path: Path) -> None:
-    """Write the run's ``.rrd`` (its default layout, the robot's application id)."""
+def log_step(inp: CalibrationInput, ident: Identification, held, report: Report, settings: RunSettings,
+             rrd_path: Path) -> dict:
+    """Write the run's ``.rrd`` (its default layout, the robot's application id; its summary panel
+    ``report`` as markdown); returns the summary keys of what it drew: ``observability`` (the pose
+    set's condition number and Cramer-Rao std per parameter) and ``rerun`` (the poses drawn in 3D)."""
     from calib.observability import analyze_observability
     from pipeline.report import report_markdown
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
@@ -1059,17 +986,17 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
     robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
     nominal = robot.table.nominal
     analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise, joints=joints[ident.used])
-    summary["observability"] = {"condition_number": float(analysis.condition_number),
-                                "crb_std": robot.table.to_dict(analysis.crb_std)}
+    observability = {"condition_number": float(analysis.condition_number),
+                     "crb_std": robot.table.to_dict(analysis.crb_std)}
     targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)
     predicted = _predicted_or(robot, result.theta, joints, measured)
     magnified = run_magnification(robot, nominal, inp.actual, result.theta, targets, measured)
     history_label = "max dQint (mm)" if (settings.method == "chainwise" and ident.solver == "gn") else "cost"
     heldout_before, heldout_after = (None, None) if held is None else held
     n, shown = len(joints), drawn_poses(len(joints)).size
-    summary["rerun"] = {"machine_poses_drawn": shown, "form": "every calibration pose drawn in 3D" if shown == n else
-                        f"the 3D machines and arrows at {shown:,} evenly spaced poses of the {n:,} ({n:,} rows > "
-                        f"MAX_MACHINE_POSES = {MAX_MACHINE_POSES}); every pose's residuals on the pose timeline"}
+    drawn = {"machine_poses_drawn": shown, "form": "every calibration pose drawn in 3D" if shown == n else
+             f"the 3D machines and arrows at {shown:,} evenly spaced poses of the {n:,} ({n:,} rows > "
+             f"MAX_MACHINE_POSES = {MAX_MACHINE_POSES}); every pose's residuals on the pose timeline"}
     if heldout_before is not None and heldout_before.shape[1] != robot.pose_dim:  # target positions
         heldout_before = heldout_after = None
 
@@ -1077,13 +1004,14 @@ def log_step(inp: CalibrationInput, ident: Identification, held, summary: dict, 
         log_calibration_run(stream, robot=robot, nominal=nominal, actual=inp.actual, identified=result.theta,
                             std=result.std, joints=joints, targets=targets, measured=measured,
                             predicted=predicted, history=result.history, heldout_before=heldout_before,
-                            heldout_after=heldout_after, summary_markdown=report_markdown(build_report(summary)),
+                            heldout_after=heldout_after, summary_markdown=report_markdown(report),
                             observability=analysis, flagged=ident.flagged_idx, history_label=history_label,
                             magnified=magnified)
 
     bp = blueprint(robot, eye=run_eye(robot, nominal, targets), magnified=magnified,
                    has_heldout=heldout_before is not None, history_label=history_label, has_truth=inp.actual is not None)
     save_recording(rrd_path, log, application_id=application_id("run", robot.name), overwrite=True, bp=bp)
+    return {"observability": observability, "rerun": drawn}
 
 
 def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: float, outputs, diagnosis=None,
@@ -1099,26 +1027,35 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     warnings += outcome.warnings
     split["identify"] = seconds["identify"]
     split["simulate"] += seconds["heldout"]  # a simulated run measures its held-out poses
-    summary = summary_of(inp, outcome, truth_in_gauge(inp, ident), settings, warnings)
+    truth = truth_in_gauge(inp, ident)
+    figures = truth_figures(inp, ident, truth)
+    result = ident.result
+    implausible = implausible_parameters(inp.robot, result.errors, outcome.data.tolerance, result.free_names)
+    shifts = validation_session_shifts(inp, outcome)
+    report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
+                                implausible=implausible, warnings=warnings,
+                                shift_words=tuple(v["words"] for v in shifts.values()))
+    summary = summary_of(inp, outcome, report, truth, settings, warnings, figures, implausible)
     if checks is not None:
         summary["checks"] = checks
     split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
     if outcome.crossvalidation is not None:
         summary.update(outcome.crossvalidation.summary())
         split["crossvalidation"] = seconds["crossvalidation"]
-    summary.update(verdict_block(inp, outcome))
+    summary.update(verdict_block(inp, outcome, report))
     split["verdict"] = seconds["verdict"]
-    shifts = validation_session_shifts(inp, outcome)
     if shifts:
         summary["session_shifts"] = shifts
     simulated = simulated_recording(inp, settings) if inp.sim is not None else None
     t_s = time.perf_counter()
     suggestion = read = None
-    if summary["left_to_prior"]:
+    if report.parameters.left_to_prior:
         try:
-            suggestion = suggested_poses(inp, outcome, settings, summary)
+            suggestion, suggested = suggested_poses(inp, outcome, settings, list(report.parameters.left_to_prior))
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
-            summary["suggested_poses"] = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
+            suggested = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
+        summary["suggested_poses"] = suggested
+        report = with_suggested(report, suggested)
     if inp.rec is not None:
         try:
             read = as_read(inp, outcome)
@@ -1126,9 +1063,9 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    log_step(inp, ident, outcome.heldout, summary, settings, outputs.temp("rrd"))
+    summary.update(log_step(inp, ident, outcome.heldout, report, settings, outputs.temp("rrd")))
     split["log"] = time.perf_counter() - t3
-    return summary, ident.result, RunObjects(outcome.calibration, simulated, suggestion, read)
+    return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
 
 
 def sha256_text(text: str) -> str:

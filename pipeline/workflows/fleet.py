@@ -178,18 +178,26 @@ def calibrate_machine(job: dict) -> dict:
         text = one_line(exc)
         row["error"] = text if isinstance(exc, (ValueError, OSError, KeyError)) else f"{type(exc).__name__}: {text}"
     else:
-        s = result.summary
-        held = s.get("heldout_position_error_mm")
-        row.update(robot=s["robot"], status="calibrated",
-                   verdict="success" if s["success"] else f"no: {s['verdict']['cause']}", poses=s["calibration_poses"],
-                   poses_used=s["calibration_poses_used"], flagged_rows=list(s["flagged_poses"]),
-                   heldout_before_um=None if not held else 1e3 * held["before"],
-                   heldout_after_um=None if not held else 1e3 * held["after"],
-                   rrd=s.get("rrd"), summary=str(summary_path), calibration=s.get("calibration"))
+        r = result.report
+        held = heldout_position(r)
+        files = dict(r.outputs.files)
+        row.update(robot=r.source.robot, status="calibrated",
+                   verdict="success" if r.verdict.success else f"no: {r.verdict.cause}", poses=r.fit.rows,
+                   poses_used=r.fit.rows_used, flagged_rows=list(r.flagged.rows),
+                   heldout_before_um=None if held is None else 1e3 * held.before.mean,
+                   heldout_after_um=None if held is None else 1e3 * held.after.mean,
+                   rrd=files.get("rrd"), summary=str(summary_path), calibration=files.get("calibration"))
         if searched:
             row.update(_discovered(result.as_read, out / f"{machine}.discovery.json"))
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def heldout_position(report):
+    """The held-out position errors of a run's report (:class:`pipeline.report.model.FigureRow`),
+    None where it has none (a cross-validated figure is not a held-out one)."""
+    rows = () if report.heldout is None else report.heldout.figures
+    return next((f for f in rows if f.quantity == "position" and not f.crossvalidated), None)
 
 
 def _discovered(read, summary_path: Path) -> dict:
