@@ -38,6 +38,12 @@ def bed_of(cal: Calibration) -> np.ndarray:
     return np.array([bed.get("z_mm", 0.0), bed.get("tilt_x_rad", 0.0), bed.get("tilt_y_rad", 0.0)], dtype=float)
 
 
+def fixes_no_shift(cal: Calibration) -> bool:
+    """Whether the calibration's data leave a shift of the whole print in x, y open: a probe
+    calibration's (touches, manual heights and distances see none)."""
+    return "bed_mode" in cal.recording
+
+
 def calibrated_radius(cal: Calibration) -> float:
     """The radius the calibration saw (mm): the largest |x| or |y| of its validity box, within the
     robot's print radius."""
@@ -91,6 +97,7 @@ def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: 
     by = cal.robot.table.to_dict(cal.theta)
     std = cal.robot.table.to_dict(cal.std)
     leans = ", ".join(f"{n} {1e3 * by[n]:+.2f} +- {1e3 * std[n]:.2f} mrad" for n in by if n.startswith("lean"))
+    rods = ", ".join(f"{n} {by[n]:+.3f} +- {std[n]:.3f} mm" for n in by if n.startswith("arm_diff"))
     rows = "\n".join(f"| {k} | {v['rms_mm']:.4f} | {v['max_mm']:.4f} | {v['z_rms_mm']:.4f} | {v['z_max_mm']:.4f} |"
                      for k, v in res.items())
     steps = ("rotation_distance written per stepper (the config's times the fitted step factor)" if rotation
@@ -117,8 +124,8 @@ take the value at the nearest point of its circle.
 ## What Klipper cannot hold (the accuracy given up is the residual above)
 
 - Tower lean: {leans}.
-- Unequal rods within a pair (`arm_diff`, the effector's tilt): not seen by the kinematics, left
-  at its tolerance; Klipper's equal-rod model has no term for it.
+- Unequal rods within a pair (the effector's tilt): {rods}; Klipper's equal-rod model has no
+  term for it.
 - Per-tower radius: Klipper has one `delta_radius`; the identified radii differ by
   {np.ptp([by[f'radius{i}'] for i in (1, 2, 3)]):.3f} mm.
 - Thermal growth: none identified in this calibration; Klipper has no temperature term
@@ -132,7 +139,7 @@ def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
     robot, bed = cal.robot, bed_of(cal)
     radius = calibrated_radius(cal)
     grid = volume_grid(radius)
-    kappa, errors = fit_klipper(robot, cal.theta, bed, grid)
+    kappa, errors = fit_klipper(robot, cal.theta, bed, grid, free_shift=fixes_no_shift(cal))
     axis, points = mesh_points(robot, cal.theta, bed, kappa, radius, MESH_COUNT)
     res = residuals(errors, grid)
     rotation = rotation_distances(cal)
