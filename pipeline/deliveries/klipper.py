@@ -58,8 +58,9 @@ def rotation_distances(cal: Calibration) -> list | None:
     return source.get("rotation_distances_mm") if isinstance(source, dict) else None
 
 
-def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray, points: np.ndarray) -> str:
-    """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh."""
+def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray, points: np.ndarray | None) -> str:
+    """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh
+    (``points`` None: none)."""
     k = dict(zip(KLIPPER_PARAMETERS, kappa))
     lines = ["[printer]", f"delta_radius = {k['delta_radius']:.6f}", ""]
     for i, stepper in enumerate(STEPPERS):
@@ -69,11 +70,13 @@ def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray,
         if rotation is not None:
             lines.append(f"rotation_distance = {rotation[i] * k[f'step_factor_{t}']:.6f}")
         lines.append("")
-    lines += [f"[bed_mesh {MESH_PROFILE}]", f"version = {MESH_VERSION}", "points ="]
-    lines += ["\t" + ", ".join(f"{v:.6f}" for v in row) for row in points]
-    lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
-              f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
-              f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}", f"max_y = {axis[-1]:.6f}"]
+    if points is not None:
+        lines += [f"[bed_mesh {MESH_PROFILE}]", f"version = {MESH_VERSION}", "points ="]
+        lines += ["\t" + ", ".join(f"{v:.6f}" for v in row) for row in points]
+        lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
+                  f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
+                  f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}",
+                  f"max_y = {axis[-1]:.6f}"]
     block = [f"{SAVE_CONFIG_NOTICE}. The contents are auto-generated.", ""] + lines
     return "\n".join([SAVE_CONFIG_HEADER] + [f"{SAVE_CONFIG_PREFIX}{line}".rstrip() for line in block]) + "\n"
 
@@ -92,8 +95,30 @@ def residuals(errors: np.ndarray, grid: np.ndarray) -> dict:
     return out
 
 
+def mesh_lowers_the_residual(res: dict) -> bool:
+    """Whether the mesh lowers the projection's RMS over the volume (:func:`residuals`): Klipper
+    applies it at every height, so a z error at the bed that is not the z error above it may
+    make the volume worse; the mesh is written only where it does not."""
+    return res["with mesh"]["rms_mm"] < res["without mesh"]["rms_mm"]
+
+
+def mesh_paragraph(res: dict) -> str:
+    """NOTES.md's words on the mesh: how to load it, or why none was written."""
+    if mesh_lowers_the_residual(res):
+        return f""""with mesh": the `[bed_mesh {MESH_PROFILE}]` profile removes the z error at the bed under each point
+(taken at its exact values; Klipper interpolates between its {MESH_COUNT} x {MESH_COUNT} nodes). Load it
+with `BED_MESH_PROFILE LOAD={MESH_PROFILE}`. Nodes outside the print radius (the square's corners)
+take the value at the nearest point of its circle."""
+    return f""""with mesh": what a mesh of the z error at the bed would leave (the error at the bed under each
+point removed at every height, as Klipper applies a mesh). It would not lower the residual over
+the volume (RMS {res['with mesh']['rms_mm']:.4f} against {res['without mesh']['rms_mm']:.4f} mm without): the z
+error left at the bed is not the one above it, so no `[bed_mesh]` profile was written."""
+
+
 def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: int, radius: float, rotation) -> str:
     """NOTES.md: the projection's residual, what Klipper cannot hold, the accuracy given up."""
+    shift = (", after the best shift of the whole print in x, y (the probe data fix none: the print as a whole "
+             "may sit elsewhere in x, y than under the old settings)") if fixes_no_shift(cal) else ""
     by = cal.robot.table.to_dict(cal.theta)
     std = cal.robot.table.to_dict(cal.std)
     leans = ", ".join(f"{n} {1e3 * by[n]:+.2f} +- {1e3 * std[n]:.2f} mrad" for n in by if n.startswith("lean"))
@@ -108,7 +133,7 @@ def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: 
 Klipper's linear Delta holds `delta_radius`, per tower `angle`, `arm_length`, `position_endstop`,
 and per stepper `rotation_distance` ({steps}). They were fitted to the identified machine by
 least squares of the tool-point error over {n_points} points of the print volume (every
-{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it), in the bed's frame.
+{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it), in the bed's frame{shift}.
 
 ## The projection's residual over the volume (mm)
 
@@ -116,10 +141,7 @@ least squares of the tool-point error over {n_points} points of the print volume
 |---|---|---|---|---|
 {rows}
 
-"with mesh": the `[bed_mesh {MESH_PROFILE}]` profile removes the z error at the bed under each point
-(taken at its exact values; Klipper interpolates between its {MESH_COUNT} x {MESH_COUNT} nodes). Load it
-with `BED_MESH_PROFILE LOAD={MESH_PROFILE}`. Nodes outside the print radius (the square's corners)
-take the value at the nearest point of its circle.
+{mesh_paragraph(res)}
 
 ## What Klipper cannot hold (the accuracy given up is the residual above)
 
@@ -143,13 +165,17 @@ def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
     axis, points = mesh_points(robot, cal.theta, bed, kappa, radius, MESH_COUNT)
     res = residuals(errors, grid)
     rotation = rotation_distances(cal)
-    texts = {SAVE_CONFIG_NAME: save_config_text(kappa, rotation, axis, points),
+    texts = {SAVE_CONFIG_NAME: save_config_text(kappa, rotation, axis,
+                                                points if mesh_lowers_the_residual(res) else None),
              KLIPPER_NOTES_NAME: notes_text(cal, settings, res, len(grid), radius, rotation)}
     paths = write_export_folder(settings.out, texts, overwrite=settings.overwrite)
     lines = [f"projection onto Klipper's parameters over {len(grid)} points: {k} RMS {v['rms_mm']:.4f} mm, max "
              f"{v['max_mm']:.4f} mm" for k, v in res.items()]
+    if not mesh_lowers_the_residual(res):
+        lines.append("no [bed_mesh] profile written: the mesh would not lower the residual over the volume")
     return ExportReport(format="klipper", robot=robot.name, paths={k: str(v) for k, v in paths.items()}, messages=lines,
-                        summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res})
+                        summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res,
+                                 "mesh_written": mesh_lowers_the_residual(res)})
 
 
 DELIVERY = Delivery(name="klipper", robots=("linear_delta",), write=write_klipper,
