@@ -11,7 +11,9 @@ that the probe data do not fix (before both, seed 3 (a) was 0.337 against Klippe
 
 The export read back by the reference implementation moves the MuJoCo machine's tool where
 pipeline.compensate's commands do, within 1.5x (RMS over 300 held-out points of the volume), through
-the files from a printer.cfg (measured ratios 0.88-0.99 over seeds 1-3, with and without gauges).
+the files from a printer.cfg, and is never worse than Klipper's fit there either (0.7x with the
+gauges): the converted robot, the prior's centre, is the config as built (the sections above the
+SAVE_CONFIG block), not Klipper's saved fit (which cost seed 2 0.673 mm against Klipper's 0.475).
 """
 
 import pytest
@@ -50,6 +52,10 @@ COMPENSATE_RATIO = 1.5
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("gauges", [False, True])
-def test_the_export_read_back_moves_the_tool_where_compensate_does(seed, gauges, tmp_path):
+def test_the_export_read_back_moves_the_tool_where_compensate_does_and_beats_klipper(seed, gauges, tmp_path):
+    """Through the files too (the converted robot centred on the config as built, not on Klipper's
+    saved fit), the export is never worse than Klipper's fit, and with the gauges at most 0.7x."""
     r = kc.compare_with_compensate(seed, gauges, tmp_path)
     assert r["klipper_export"]["rms_mm"] <= COMPENSATE_RATIO * r["compensate"]["rms_mm"], r
+    klipper = min(kc.compare(seed, g)["klipper"]["rms_mm"] for g in {False, gauges})
+    assert r["klipper_export"]["rms_mm"] <= (GAUGED_RATIO if gauges else 1.0) * klipper, (r, klipper)
