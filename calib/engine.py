@@ -1221,15 +1221,17 @@ def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, m
                                    ftol, chain_prior=None, noise=None) -> _ChainwiseFit:
     """Each chain fitted to convergence by Levenberg-Marquardt (the Delta paper's IKM), in chain
     order; ``chain_prior`` and ``noise`` as :func:`_chainwise_gauss_newton`'s. Where a chain's
-    closure moves with other chains' parameters too (:func:`_chains_coupled`: the linear Delta's
-    unequal rods tilt the effector that all its chains hold), the chains are swept again, each fitted
-    with the others' latest values, until a sweep moves no parameter by more than ``xtol`` relative
-    (at most ``max_iter`` sweeps)."""
+    closure moves with other chains' free parameters too (:func:`_chains_coupled`: the linear
+    Delta's rod-pair differences, :attr:`calib.robot.Robot.chain_coupled`, where a caller frees
+    them, or any of its parameters where its effector is tilted), the chains are swept again, each
+    fitted with the others' latest values, until a sweep moves no parameter by more than ``xtol``
+    relative (at most ``max_iter`` sweeps)."""
     theta = theta0.copy()
     history: list[float] = []
     iterations = 0
     in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
-    sweeps = max_iter if _chains_coupled(robot, theta, joints[:1], measured[:1]) else 1
+    free = np.sort(np.concatenate([ix for _, ix in in_order]))
+    sweeps = max_iter if _chains_coupled(robot, theta, joints[:1], measured[:1], free) else 1
     for _ in range(sweeps):
         before = theta.copy()
         messages, oks = [], []
@@ -1247,14 +1249,14 @@ def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, m
     return _ChainwiseFit(theta, ev, corrected, history, iterations, all(oks), "; ".join(messages))
 
 
-def _chains_coupled(robot, theta, joints, poses) -> bool:
-    """Whether some chain's closure moves with another chain's parameters (a nonzero entry of the
-    parameter Jacobian off each parameter's own chain, at the first row)."""
+def _chains_coupled(robot, theta, joints, poses, free) -> bool:
+    """Whether some chain's closure moves with another chain's ``free`` parameters (a nonzero
+    entry of the parameter Jacobian off each parameter's own chain, at the first row)."""
     jac = robot.closure_jacobians(theta, joints, poses)
     if jac.own_for(robot.table.chains) is not None:
         return False
-    off = np.arange(robot.n_chains)[:, None] != robot.table.chains[None, :]
-    return bool(np.any(jac.parameters[:, off] != 0))
+    off = np.arange(robot.n_chains)[:, None] != robot.table.chains[None, free]
+    return bool(np.any(jac.parameters[:, :, free][:, off] != 0))
 
 
 def _chain_levenberg_marquardt(robot, joints, measured, theta, c, ix, w, max_iter, xtol, ftol, chain_prior,

@@ -234,6 +234,9 @@ class LinearDelta(Robot):
     #: seeded errors leave them at nominal.
     machine_only = TOOL_PARAMETERS
     gauge_fixed = machine_only
+    #: The rod-pair differences tilt the effector that all three chains hold (module docstring):
+    #: identified where a fit names them (:func:`calib.probe.fit_probe` does), not chain by chain.
+    chain_coupled = ("arm_diff1", "arm_diff2", "arm_diff3")
     #: Tolerance of the parameters, the default prior's standard deviation, with its reasons:
     #: ``radius`` 0.5 mm (frame extrusions cut and printed vertices assembled: a few tenths, and
     #: Klipper's fits move ``delta_radius`` by up to a millimetre); ``angle`` 5 mrad (0.3 degree:
@@ -501,10 +504,12 @@ class LinearDelta(Robot):
         """(N, 3, 3, 3) mm: each tower's foot on the bed, its carriage's joint midpoint and the
         effector's joint midpoint: the reduced model shifted by the effector's joint offset
         ``E_i`` (at the tower's angle) less the tool offset ``t`` (the physical tower is the
-        reduced one's line through ``F_i - t + E_i``)."""
+        reduced one's line through ``F_i - t + E_i``); the effector's, turned with it where a
+        pair's rods differ (:meth:`pairs`)."""
         P, p = self.carriage_points(theta, joints)
         shift = self.effector_radius_mm * p["e_r"] - p["tool"]
         u = p["u"]
         foot = p["radius"][:, None] * p["e_r"] + shift - (shift[:, 2] / u[:, 2])[:, None] * u  # at z = 0
-        effector = np.asarray(poses, dtype=float)[:, None, :] + shift
+        pairs = self.pairs(theta, joints, poses)
+        effector = np.asarray(poses, dtype=float)[:, None, :] + shift + (pairs.rotated_offsets - pairs.offsets)
         return np.stack([np.broadcast_to(foot, P.shape), P + shift, effector], axis=2)
