@@ -11,10 +11,18 @@ that the probe data do not fix (before both, seed 3 (a) was 0.337 against Klippe
 
 The export read back by the reference implementation moves the MuJoCo machine's tool where
 pipeline.compensate's commands do, within 1.5x (RMS over 300 held-out points of the volume), through
-the files from a printer.cfg, and is never worse than Klipper's fit there either (0.7x with the
-gauges): the converted robot, the prior's centre, is the config as built (the sections above the
-SAVE_CONFIG block), not Klipper's saved fit (which cost seed 2 0.673 mm against Klipper's 0.475).
+the files from a printer.cfg (measured ratios 1.05-1.42), but for seed 2 with the gauges: the
+calibration's own commands reach 0.065 mm there, the export 0.130 (2.0x), and Klipper's parameters
+cannot do better on that machine (their best projection of the true machine, the tilt and the leans
+known exactly, leaves 0.116 mm): a strict expected failure, seen, of a bound that the workbench's own
+accuracy outgrew. Through the files the export is never worse than Klipper's fit either (0.7x with
+the gauges): the converted robot, the prior's centre, is the config as built (the sections above
+the SAVE_CONFIG block), not Klipper's saved fit (which cost seed 2 0.673 mm against Klipper's 0.475).
 """
+
+import tempfile
+from functools import lru_cache
+from pathlib import Path
 
 import pytest
 
@@ -49,13 +57,28 @@ def test_never_worse_than_klipper_and_better_with_gauge_heights(seed):
 COMPENSATE_RATIO = 1.5
 
 
+@lru_cache(maxsize=None)
+def through_the_files(seed: int, gauges: bool) -> dict:
+    """:func:`klipper_comparison.compare_with_compensate` in a folder of its own, once per case."""
+    with tempfile.TemporaryDirectory() as folder:
+        return kc.compare_with_compensate(seed, gauges, Path(folder))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed, gauges", [(1, False), (1, True), (2, False), pytest.param(2, True, marks=pytest.mark.xfail(
+    strict=True, reason="compensate 0.065 mm, the export 0.130 (2.0x): Klipper's parameters cannot hold this machine "
+                        "closer (their best projection of the true machine leaves 0.116 mm)")), (3, False), (3, True)])
+def test_the_export_read_back_moves_the_tool_where_compensate_does(seed, gauges):
+    r = through_the_files(seed, gauges)
+    assert r["klipper_export"]["rms_mm"] <= COMPENSATE_RATIO * r["compensate"]["rms_mm"], r
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("gauges", [False, True])
-def test_the_export_read_back_moves_the_tool_where_compensate_does_and_beats_klipper(seed, gauges, tmp_path):
-    """Through the files too (the converted robot centred on the config as built, not on Klipper's
-    saved fit), the export is never worse than Klipper's fit, and with the gauges at most 0.7x."""
-    r = kc.compare_with_compensate(seed, gauges, tmp_path)
-    assert r["klipper_export"]["rms_mm"] <= COMPENSATE_RATIO * r["compensate"]["rms_mm"], r
+def test_through_the_files_never_worse_than_klipper_and_better_with_gauge_heights(seed, gauges):
+    """The converted robot, the prior's centre, is the config as built, not Klipper's saved fit:
+    through the files too the export is never worse than Klipper's fit, at most 0.7x with the gauges."""
+    r = through_the_files(seed, gauges)
     klipper = min(kc.compare(seed, g)["klipper"]["rms_mm"] for g in {False, gauges})
     assert r["klipper_export"]["rms_mm"] <= (GAUGED_RATIO if gauges else 1.0) * klipper, (r, klipper)
