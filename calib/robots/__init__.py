@@ -53,7 +53,7 @@ class RobotEntry:
 #: name -> entry. The hexapod's reference experiment is its paper's (Table 2 machine, Table 3
 #: errors, Table 4 poses); the Delta's its paper's primary study (errors within 1 mm / 1 deg); the
 #: linear Delta's errors within 0.3 mm / 0.3 deg (tenths of a millimetre and degree, step
-#: distances within 0.3 percent) on what its kinematics sees, its rods equal.
+#: distances within 0.3 percent) on what it identifies by default, its rods equal.
 ROBOTS: dict[str, RobotEntry] = {
     Hexapod.name: RobotEntry(Hexapod, paper_hexapod, lambda r, s: paper.TABLE3_ERRORS.ravel().copy(),
                              paper.TABLE4_NOMINAL_POSES),
