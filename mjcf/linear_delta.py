@@ -166,7 +166,7 @@ def _add_tower(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOpti
     for side, sign in enumerate((-1.0, 1.0)):
         name = f"rod{k}{'ab'[side]}"
         at = sign * spacing_m / 2 * geo.axles[i]
-        reach = geo.centre + geo.rotation @ (geo.joints[i] + at) - (geo.carriages[i] + at)
+        reach = geo.centre + geo.rotation @ geo.joints[i] + geo.rotation @ at - (geo.carriages[i] + at)
         length = float(geo.rods[i, side])
         rod = carriage.add_body(name=name, pos=at, quat=_rod_frame(reach / np.linalg.norm(reach), geo.axles[i]))
         for axis, label in (([1.0, 0.0, 0.0], "u1"), ([0.0, 1.0, 0.0], "u2")):

@@ -65,9 +65,10 @@ def through_the_files(seed: int, gauges: bool) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed, gauges", [(1, False), (1, True), (2, False), pytest.param(2, True, marks=pytest.mark.xfail(
-    strict=True, reason="compensate 0.065 mm, the export 0.130 (2.0x): Klipper's parameters cannot hold this machine "
-                        "closer (their best projection of the true machine leaves 0.116 mm)")), (3, False), (3, True)])
+@pytest.mark.parametrize("seed, gauges", [(1, False), (1, True), (2, False), pytest.param(
+    2, True, marks=pytest.mark.xfail(strict=True, reason="compensate 0.065 mm, the export 0.130 (2.0x): Klipper's "
+                                     "parameters cannot hold this machine closer (their best projection of the true "
+                                     "machine leaves 0.116 mm)")), (3, False), (3, True)])
 def test_the_export_read_back_moves_the_tool_where_compensate_does(seed, gauges):
     r = through_the_files(seed, gauges)
     assert r["klipper_export"]["rms_mm"] <= COMPENSATE_RATIO * r["compensate"]["rms_mm"], r

@@ -186,7 +186,8 @@ class RodPairs:
 
     def length_differences(self) -> np.ndarray:
         """(N, 3) mm^2: ``m_i.d_i - arm_i arm_diff_i / 2`` (zero at the effector's rotation)."""
-        return np.einsum("nij,nij->ni", self.mean, self.half_difference) - self.parts["arm"] * self.parts["arm_diff"] / 2
+        half_product = self.parts["arm"] * self.parts["arm_diff"] / 2
+        return np.einsum("nij,nij->ni", self.mean, self.half_difference) - half_product
 
     def rotation_jacobians(self) -> tuple[np.ndarray, np.ndarray]:
         """``(dF/dw, dG/dw)`` (N, 3, 3): the closure's and the length differences' derivatives in

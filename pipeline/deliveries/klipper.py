@@ -133,7 +133,8 @@ def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: 
 Klipper's linear Delta holds `delta_radius`, per tower `angle`, `arm_length`, `position_endstop`,
 and per stepper `rotation_distance` ({steps}). They were fitted to the identified machine by
 least squares of the tool-point error over {n_points} points of the print volume (every
-{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it), in the bed's frame{shift}.
+{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it),
+in the bed's frame{shift}.
 
 ## The projection's residual over the volume (mm)
 
