@@ -63,8 +63,9 @@ What the closure does not determine, and why (:attr:`LinearDelta.machine_only`, 
 
 It is named with its tolerance so that an identification says it is left to it.
 
-Identifiable from tool positions: each tower's eight others (the line the carriage rides, its
-origin and scale along it, the arm and the rods' difference), 24 in all. Physical sizes for the
+Identifiable from tool positions: each tower's seven others (the line the carriage rides, its
+origin and scale along it, and the arm), 21 in all, identified by default, and the pairs' rod
+differences, where a fit names them (:attr:`LinearDelta.chain_coupled`). Physical sizes for the
 kinematics' tilt, the MuJoCo machine and pictures (not parameters): the effector's joint offset
 ``effector_radius_mm`` and the spacing of a pair's rods ``rod_spacing_mm``.
 """
