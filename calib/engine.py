@@ -1220,45 +1220,74 @@ def _chainwise_stop(robot, theta, joints, measured, dQ, history, epsilon, update
 def _chainwise_levenberg_marquardt(robot, joints, measured, theta0, groups, w, max_iter, xtol,
                                    ftol, chain_prior=None, noise=None) -> _ChainwiseFit:
     """Each chain fitted to convergence by Levenberg-Marquardt (the Delta paper's IKM), in chain
-    order; ``chain_prior`` and ``noise`` as :func:`_chainwise_gauss_newton`'s."""
+    order; ``chain_prior`` and ``noise`` as :func:`_chainwise_gauss_newton`'s. Where a chain's
+    closure moves with other chains' free parameters too (:func:`_chains_coupled`: the linear
+    Delta's rod-pair differences, :attr:`calib.robot.Robot.chain_coupled`, where a caller frees
+    them, or any of its parameters where its effector is tilted), the chains are swept again, each
+    fitted with the others' latest values, until a sweep moves no parameter by more than ``xtol``
+    relative (at most ``max_iter`` sweeps)."""
     theta = theta0.copy()
     history: list[float] = []
     iterations = 0
-    messages, oks = [], []
     in_order = sorted((int(c), ix) for chains, params in groups for c, ix in zip(chains, params))
-    for c, ix in in_order:
-
-        def full(x, ix=ix):
-            th = theta.copy()
-            th[ix] = x
-            return th
-
-        def fun(x, c=c, ix=ix, full=full):
-            r = robot.closure(full(x), joints, measured)[:, c]
-            r = r if w is None else r * w[:, c]
-            if chain_prior is None:
-                return r
-            return np.concatenate([r, (x - chain_prior[0][ix]) * chain_prior[1][ix]])
-
-        def jac(x, c=c, ix=ix, full=full):
-            A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
-            A = A if w is None else A * w[:, c, None]
-            return A if chain_prior is None else np.vstack([A, np.diag(chain_prior[1][ix])])
-
-        if chain_prior is None:
-            x, it, ok, msg = _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
-        else:  # in offsets from the prior's mean, as the forward fit (its relative step test)
-            origin = chain_prior[0][ix]
-            x, it, ok, msg = _least_squares(lambda v, f=fun, o=origin: f(o + v), lambda v, j=jac, o=origin: j(o + v),
-                                            theta[ix] - origin, "lm", max_iter, xtol, ftol, history)
-            x = origin + x
-        theta[ix] = x
-        iterations += it
-        oks.append(ok)
-        messages.append(f"{robot.chain_word} {c + 1}: {msg}")
+    free = np.sort(np.concatenate([ix for _, ix in in_order]))
+    sweeps = max_iter if _chains_coupled(robot, theta, joints[:1], measured[:1], free) else 1
+    for _ in range(sweeps):
+        before = theta.copy()
+        messages, oks = [], []
+        for c, ix in in_order:
+            x, it, ok, msg = _chain_levenberg_marquardt(robot, joints, measured, theta, c, ix, w, max_iter, xtol,
+                                                        ftol, chain_prior, history)
+            theta[ix] = x
+            iterations += it
+            oks.append(ok)
+            messages.append(f"{robot.chain_word} {c + 1}: {msg}")
+        if np.all(np.abs(theta - before) <= xtol * np.maximum(1.0, np.abs(theta))):
+            break
     corrected = _predicted(robot, theta, joints, measured)
     ev = _chain_evaluation(robot, theta, joints, measured, groups, w, noise)
     return _ChainwiseFit(theta, ev, corrected, history, iterations, all(oks), "; ".join(messages))
+
+
+def _chains_coupled(robot, theta, joints, poses, free) -> bool:
+    """Whether some chain's closure moves with another chain's ``free`` parameters (a nonzero
+    entry of the parameter Jacobian off each parameter's own chain, at the first row)."""
+    jac = robot.closure_jacobians(theta, joints, poses)
+    if jac.own_for(robot.table.chains) is not None:
+        return False
+    off = np.arange(robot.n_chains)[:, None] != robot.table.chains[None, free]
+    return bool(np.any(jac.parameters[:, :, free][:, off] != 0))
+
+
+def _chain_levenberg_marquardt(robot, joints, measured, theta, c, ix, w, max_iter, xtol, ftol, chain_prior,
+                               history) -> tuple:
+    """Chain ``c``'s parameters ``ix`` fitted by Levenberg-Marquardt, the others held at ``theta``:
+    ``(x, iterations, ok, message)``."""
+
+    def full(x):
+        th = theta.copy()
+        th[ix] = x
+        return th
+
+    def fun(x):
+        r = robot.closure(full(x), joints, measured)[:, c]
+        r = r if w is None else r * w[:, c]
+        if chain_prior is None:
+            return r
+        return np.concatenate([r, (x - chain_prior[0][ix]) * chain_prior[1][ix]])
+
+    def jac(x):
+        A = robot.closure_jacobians(full(x), joints, measured).parameters[:, c, ix]
+        A = A if w is None else A * w[:, c, None]
+        return A if chain_prior is None else np.vstack([A, np.diag(chain_prior[1][ix])])
+
+    if chain_prior is None:
+        return _least_squares(fun, jac, theta[ix], "lm", max_iter, xtol, ftol, history)
+    # in offsets from the prior's mean, as the forward fit (its relative step test)
+    origin = chain_prior[0][ix]
+    x, it, ok, msg = _least_squares(lambda v: fun(origin + v), lambda v: jac(origin + v), theta[ix] - origin, "lm",
+                                    max_iter, xtol, ftol, history)
+    return origin + x, it, ok, msg
 
 
 def _chainwise_result(robot, free, idx, theta0, joints, measured, groups, w, noise, fit: _ChainwiseFit,

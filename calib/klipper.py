@@ -151,17 +151,27 @@ def klipper_tool_errors(robot: LinearDelta, theta, bed, kappa, targets) -> np.nd
     return reached - bed_to_base(targets, bed)
 
 
-def fit_klipper(robot: LinearDelta, theta, bed, targets) -> tuple[np.ndarray, np.ndarray]:
+def fit_klipper(robot: LinearDelta, theta, bed, targets, *, free_shift: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``(kappa, errors)``: Klipper's parameters (13,) that minimise the squared tool-point errors
     of the identified machine over ``targets`` (N, 3, above the bed), and the (N, 3) errors left.
-    Gauss-Newton with central-difference columns (the errors are smooth in kappa)."""
+    With ``free_shift`` the errors are taken after the best shift of the whole print in x, y (fitted
+    along, removed from the errors returned): where the data fix no such shift (probe touches and
+    distances do not), the projection spends none of Klipper's parameters on it. Gauss-Newton with
+    central-difference columns (the errors are smooth in kappa)."""
     from scipy.optimize import least_squares
 
-    kappa0 = klipper_vector(robot)
-    scale = np.concatenate([[1.0], np.full(3, 1e-3), np.ones(6), np.full(3, 1e-3)])
-    fit = least_squares(lambda k: klipper_tool_errors(robot, theta, bed, k, targets).ravel(), kappa0,
-                        x_scale=scale, diff_step=1e-7, xtol=1e-12, ftol=1e-12)
-    return fit.x, klipper_tool_errors(robot, theta, bed, fit.x, targets)
+    shifts = 2 if free_shift else 0
+    start = np.concatenate([klipper_vector(robot), np.zeros(shifts)])
+    scale = np.concatenate([[1.0], np.full(3, 1e-3), np.ones(6), np.full(3, 1e-3), np.ones(shifts)])
+
+    def errors(x):
+        e = klipper_tool_errors(robot, theta, bed, x[:len(KLIPPER_PARAMETERS)], targets)
+        if shifts:
+            e[:, :2] -= x[len(KLIPPER_PARAMETERS):]
+        return e
+
+    fit = least_squares(lambda x: errors(x).ravel(), start, x_scale=scale, diff_step=1e-7, xtol=1e-12, ftol=1e-12)
+    return fit.x[:len(KLIPPER_PARAMETERS)], errors(fit.x)
 
 
 def mesh_points(robot: LinearDelta, theta, bed, kappa, radius_mm: float, count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -220,7 +220,7 @@ class ProbeFit:
                          f"determined by: {fix}.")
         held = [n for n in self.names if self.sources[n] == "held"]
         if held:
-            lines.append(f"Held at nominal (the kinematics cannot see them): {', '.join(held)}.")
+            lines.append(f"Held at nominal (no measurement tells them from the towers): {', '.join(held)}.")
         return "\n".join(lines)
 
 

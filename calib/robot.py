@@ -211,12 +211,17 @@ class Robot(ABC):
     #: that parameter of chain ``i`` moved by ``d``). A re-homing, an encoder re-zeroed or a spool
     #: re-wound moves these and nothing else (:mod:`calib.session_shift`).
     joint_zero_names: ClassVar[tuple[str, ...]] = ()
-    #: Parameters of the physical machine that the closure does not see (their columns are zero),
-    #: e.g. the linear Delta's rod-pair differences, which tilt its effector where its kinematics
-    #: only translates it: the MuJoCo machine builds them, the kinematics cannot identify them
-    #: (they are among :attr:`gauge_fixed`), and seeded errors leave them at nominal so that a
-    #: machine and its kinematics agree unless a case sets them on purpose.
+    #: Parameters of the physical machine that no pose data tell from the others, e.g. the linear
+    #: Delta's tool offset (its towers are taken relative to the tool point): held (they are
+    #: among :attr:`gauge_fixed`), and seeded errors leave them at nominal so that a machine and
+    #: its kinematics agree unless a case sets them on purpose.
     machine_only: ClassVar[tuple[str, ...]] = ()
+    #: Parameters that move every chain's closure, not only their own chain's (the linear Delta's
+    #: rod-pair differences tilt the effector all its chains hold): the chain-wise identification,
+    #: which fits chain by chain, cannot separate them, so they are not among :attr:`free_default`
+    #: (a fit that names them, as :func:`calib.probe.fit_probe` does, identifies them), and
+    #: seeded errors leave them at nominal.
+    chain_coupled: ClassVar[tuple[str, ...]] = ()
 
     # -- description ----------------------------------------------------------------------
     @property
@@ -239,8 +244,9 @@ class Robot(ABC):
 
     @property
     def free_default(self) -> tuple[str, ...]:
-        """Names identified by default: every parameter not in :attr:`gauge_fixed`."""
-        return tuple(n for n in self.table.names if n not in self.gauge_fixed)
+        """Names identified by default: every parameter not in :attr:`gauge_fixed` nor in
+        :attr:`chain_coupled`."""
+        return tuple(n for n in self.table.names if n not in self.gauge_fixed and n not in self.chain_coupled)
 
     @property
     def angle_pose_mask(self) -> np.ndarray:

@@ -18,6 +18,7 @@ __all__ = [
     "quaternion_from_euler",
     "euler_from_quaternion",
     "matrix_from_quaternion",
+    "matrix_from_rotation_vector",
 ]
 
 
@@ -172,6 +173,15 @@ def matrix_from_quaternion(q: np.ndarray) -> np.ndarray:
     R[..., 2, 1] = 2 * (y * z + w * x)
     R[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return R
+
+
+def matrix_from_rotation_vector(v: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors ``v`` (..., 3), rad: the turn by ``|v|``
+    about ``v`` (the quaternion ``[cos |v|/2, sin(|v|/2) v/|v|]``, exact at ``v = 0``)."""
+    v = np.asarray(v, dtype=float)
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    half_sinc = 0.5 * np.sinc(angle / (2 * np.pi))  # sin(|v|/2) / |v|
+    return matrix_from_quaternion(np.concatenate([np.cos(angle / 2), half_sinc * v], axis=-1))
 
 
 def euler_from_quaternion(q: np.ndarray) -> np.ndarray:

@@ -27,7 +27,9 @@ The machine (see docs/linear_delta.md):
   with equal rods the effector's centre sits at ``X - t`` and the closures are exactly those of
   :mod:`calib.robots.linear_delta`, whatever ``t``; with unequal rods ``t`` is the tilt's lever.
 * Contacts off; the keyframe ``home``: every slide and hinge at 0, the effector where the
-  machine's forward kinematics puts it at the home joints.
+  machine's forward kinematics puts it at the home joints, turned as the kinematics solves its
+  rods (:meth:`calib.robots.linear_delta.LinearDelta.pairs`: level for equal rods), so that the
+  six rods close there.
 """
 
 from __future__ import annotations
@@ -103,7 +105,8 @@ class _Geometry:
     ``carriages`` (3, 3) the carriages' joint midpoints, ``down`` (3, 3) the slides' axes,
     ``axles`` (3, 3) the pairs' axles, ``centre`` (3,) the effector's centre, ``joints`` (3, 3) its
     pairs' joint midpoints (effector frame), ``tool`` (3,) the tool point (effector frame),
-    ``rods`` (3, 2) the rods' lengths, ``scale`` (3,) ``1 + step_error / 100``."""
+    ``rods`` (3, 2) the rods' lengths, ``scale`` (3,) ``1 + step_error / 100``, ``rotation`` (3, 3)
+    the effector's (level for equal rods; tilted as the kinematics solves it for unequal ones)."""
 
     home_q: np.ndarray
     carriages: np.ndarray
@@ -114,18 +117,28 @@ class _Geometry:
     tool: np.ndarray
     rods: np.ndarray
     scale: np.ndarray
+    rotation: np.ndarray
 
 
 def _geometry(robot: LinearDelta, theta: np.ndarray) -> _Geometry:
     home_q = robot.inverse_kinematics(theta, robot.home_pose[None])[0]
     tool_point = robot.forward_kinematics(theta, home_q[None], initial=robot.home_pose)[0]
     reduced, p = robot.carriage_points(theta, home_q[None])
+    rotation = robot.pairs(theta, home_q[None], tool_point[None]).rotation[0]
     nominal_angle = robot.split(robot.table.nominal)["angle"]
     e_r, e_t, _ = tower_directions(nominal_angle, np.zeros(3), np.zeros(3))
     offsets = robot.effector_radius_mm * e_r
     return _Geometry(home_q=home_q, carriages=mm_to_m(reduced[0] - p["tool"] + offsets), down=-p["u"], axles=e_t,
-                     centre=mm_to_m(tool_point - p["tool"]), joints=mm_to_m(offsets), tool=mm_to_m(p["tool"]),
-                     rods=mm_to_m(rod_lengths(robot, theta)), scale=p["scale"])
+                     centre=mm_to_m(tool_point - rotation @ p["tool"]), joints=mm_to_m(offsets),
+                     tool=mm_to_m(p["tool"]), rods=mm_to_m(rod_lengths(robot, theta)), scale=p["scale"],
+                     rotation=rotation)
+
+
+def _effector_quaternion(geo: _Geometry) -> np.ndarray:
+    """(4,) the effector's orientation at home, MuJoCo's ``[w, x, y, z]``."""
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(geo.rotation).ravel())
+    return q
 
 
 def _rod_frame(direction: np.ndarray, axle: np.ndarray) -> np.ndarray:
@@ -153,7 +166,7 @@ def _add_tower(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOpti
     for side, sign in enumerate((-1.0, 1.0)):
         name = f"rod{k}{'ab'[side]}"
         at = sign * spacing_m / 2 * geo.axles[i]
-        reach = geo.centre + geo.joints[i] + at - (geo.carriages[i] + at)
+        reach = geo.centre + geo.rotation @ geo.joints[i] + geo.rotation @ at - (geo.carriages[i] + at)
         length = float(geo.rods[i, side])
         rod = carriage.add_body(name=name, pos=at, quat=_rod_frame(reach / np.linalg.norm(reach), geo.axles[i]))
         for axis, label in (([1.0, 0.0, 0.0], "u1"), ([0.0, 1.0, 0.0], "u2")):
@@ -171,7 +184,7 @@ def _add_tower(spec: mujoco.MjSpec, geo: _Geometry, i: int, options: MachineOpti
 
 def _add_effector(world, geo: _Geometry, options: MachineOptions, spacing_m: float) -> None:
     """The effector on its free joint: the rods' joint sites, the tool site, the payload."""
-    effector = world.add_body(name="effector", pos=geo.centre)
+    effector = world.add_body(name="effector", pos=geo.centre, quat=_effector_quaternion(geo))
     effector.add_freejoint(name="effector_free")
     effector.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER, mass=_effector_mass(options), rgba=[0.3, 0.6, 0.8, 1.0],
                       size=[float(np.linalg.norm(geo.joints, axis=1).max()) + 0.005, 0.004, 0.0])
@@ -211,7 +224,7 @@ def build_spec(robot: LinearDelta, theta: np.ndarray, options: MachineOptions = 
     spec.add_sensor(name=SENSOR_POS, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE,
                     objname=PLATFORM_SITE)
     # Home: every slide and hinge at 0 (3 x slide, 2 x 2 hinges), the effector where it was placed.
-    spec.add_key(name=HOME_KEY, qpos=np.r_[np.zeros(15), geo.centre, 1.0, 0.0, 0.0, 0.0], ctrl=np.zeros(3))
+    spec.add_key(name=HOME_KEY, qpos=np.r_[np.zeros(15), geo.centre, _effector_quaternion(geo)], ctrl=np.zeros(3))
     return spec
 
 

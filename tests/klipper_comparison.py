@@ -165,7 +165,7 @@ def compare(seed: int, gauges: bool) -> dict:
     and the held-out bed's flatness under the workbench's export with its mesh (:func:`bed_flatness`)."""
     testbed, rng, data, found = klipper_case(seed, gauges)
     fit = fit_probe(ROBOT, data.touches, noise=NOISE)
-    kappa, _ = fit_klipper(ROBOT, fit.theta, fit.bed_plane, volume_grid(PROBE_RADIUS))
+    kappa, _ = fit_klipper(ROBOT, fit.theta, fit.bed_plane, volume_grid(PROBE_RADIUS), free_shift=True)
     held = volume_grid(HELD_OUT_RADIUS)
     held = held[rng.choice(len(held), 300, replace=False)]
     out = {}

@@ -165,15 +165,19 @@ def test_forward_normal_equations_three_ways_are_one_fit(monkeypatch, name, join
 @pytest.mark.parametrize("name", NAMES)
 def test_chain_owners_are_the_parameter_tables_chains(name):
     """Every robot's closure of chain c moves with chain c's parameters alone (what the chain-wise
-    fit and the forward fit's chain products assume): the owners are the table's chains; a
-    parameter Jacobian with one entry of another chain's parameter set gives None."""
+    fit and the forward fit's chain products assume), those it identifies by default
+    (``free_default``, all but the chain-coupled: the linear Delta's rod differences tilt the
+    effector all its chains hold, and with them free the owners are None): the owners are the
+    table's chains; a parameter Jacobian with one entry of another chain's parameter set gives None."""
     robot, joints, measured, _ = _data(name, n=30)
-    idx = np.arange(robot.n_parameters)
+    idx = np.sort(robot.table.indices(robot.free_default + robot.gauge_fixed))
     jac = robot.closure_jacobians(robot.table.nominal, joints, measured)
-    np.testing.assert_array_equal(engine._chain_owners(robot, jac, idx), robot.table.chains)
+    np.testing.assert_array_equal(engine._chain_owners(robot, jac, idx), robot.table.chains[idx])
+    every = np.arange(robot.n_parameters)
+    assert (engine._chain_owners(robot, jac, every) is None) == bool(robot.chain_coupled)
     # The dense Jacobian alone (no declared structure) shows the same owners...
     dense = ClosureJacobians(jac.pose, jac.joints, jac.parameters.copy())
-    np.testing.assert_array_equal(engine._chain_owners(robot, dense, idx), robot.table.chains)
+    np.testing.assert_array_equal(engine._chain_owners(robot, dense, idx), robot.table.chains[idx])
     # ... and one entry of another chain's parameter set breaks them.
     other = (int(robot.table.chains[0]) + 1) % robot.n_chains
     dense.parameters[3, other, 0] = 1e-300

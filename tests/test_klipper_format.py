@@ -257,3 +257,22 @@ def test_windows_line_ends_and_a_byte_order_mark_read_the_same(tmp_path, fixture
     np.testing.assert_array_equal(a.machine.angles_rad, b.machine.angles_rad)
     np.testing.assert_array_equal(a.machine.endstops_mm, b.machine.endstops_mm)
     np.testing.assert_array_equal(a.probe.touch_steps, b.probe.touch_steps)
+
+
+def test_the_machine_as_built_is_the_sections_above_the_block_with_what_save_config_commented_out(tmp_path):
+    """The prior's centre (pipeline.convert --klipper): the owner's values above the block, those
+    Klipper's SAVE_CONFIG commented out (``#key: value``) read again, Klipper's defaults where the
+    owner wrote none, not the block's fit; the machine as Klipper runs it is the block's."""
+    fixture = read_klipper_printer(LINEAR)
+    assert fixture.built.radius_mm == 174.75  # [printer]'s, not the old '#delta_radius: 180' below it
+    np.testing.assert_array_equal(fixture.built.endstops_mm, [297.05] * 3)  # stepper_a's, the default
+    text = LINEAR.read_text().replace("delta_radius: 174.75\n", "#delta_radius: 174.5\n", 1)
+    # two commented-out values of one key: which was the owner's is not known, none is read, and
+    # without a delta_radius above the block the machine as built is the machine as run
+    both = read_klipper_printer(written(tmp_path, text, "both.cfg"))
+    assert both.built is both.machine and both.machine.radius_mm == 174.358713
+    text = text.replace("#delta_radius: 180", "# delta_radius was 180", 1)
+    printer = read_klipper_printer(written(tmp_path, text))
+    assert printer.built.radius_mm == 174.5 and printer.machine.radius_mm == 174.358713
+    plain = read_klipper_printer(written(tmp_path, LINEAR.read_text().split(SAVE_CONFIG_HEADER)[0], "plain.cfg"))
+    assert plain.built is plain.machine and plain.machine.radius_mm == 174.75  # no block: the config itself

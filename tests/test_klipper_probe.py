@@ -79,5 +79,5 @@ def test_fewer_touches_than_parameters_refused(tmp_path, capsys):
     assert code == 0, out.err
     code = probe_main([str(tmp_path / "p.probe.json"), "--out", str(tmp_path / "cal")])
     err = capsys.readouterr().err
-    assert code == 2 and "7 measurements (7 touches, 0 manual heights, 0 distances) for 24 parameters" in err
+    assert code == 2 and "7 measurements (7 touches, 0 manual heights, 0 distances) for 27 parameters" in err
     assert not (tmp_path / "cal" / "p.calibration.json").exists()

@@ -18,7 +18,7 @@ from pipeline.simulation import Testbed
 
 ROBOT = default_robot("linear_delta")
 NOMINAL = ROBOT.table.nominal
-# Every parameter the kinematics sees off by up to 0.5 mm / 0.5 degree (the rods equal).
+# Every parameter identified by default off by up to 0.5 mm / 0.5 degree (the rods equal).
 TRUE = NOMINAL + uniform_errors(ROBOT, 42, 0.5, np.deg2rad(0.5))
 #: Settled against the kinematics: at rest means every joint slower than the testbed's 1e-9 m/s,
 #: which leaves the carriages and effector within nanometres of their equilibrium (measured
@@ -120,8 +120,10 @@ def _settle_direct(machine, joints, seconds=3.0):
 
 def test_one_rod_pair_a_millimetre_long_tilts_the_effector_as_six_rods_say():
     """Pair 1's second rod 1 mm longer than its first (the arm's mean unchanged): the effector
-    tilts by about arm_diff / rod spacing (20 mrad), where the six rods' geometry puts it, and the
-    tool point, 50 mm under the effector's joints, leaves the translating kinematics."""
+    tilts by about arm_diff / rod spacing (20 mrad), where the six rods' geometry puts it and where
+    the kinematics (calib.robots.linear_delta.RodPairs) solves it, and the tool point, 50 mm under
+    the effector's joints, goes where the kinematics puts it (measured 2e-11 mm), not where a
+    translating effector would (measured 0.24 mm away)."""
     theta = TRUE.copy()
     theta[ROBOT.table.index("arm_diff1")] = 1.0
     machine = build_machine(ROBOT, theta)
@@ -139,14 +141,20 @@ def test_one_rod_pair_a_millimetre_long_tilts_the_effector_as_six_rods_say():
     first_order = np.linalg.solve(ROBOT.rod_spacing_mm * np.cross(axles, rods), ROBOT.split(theta)["arm_diff"])
     omega = rotation.as_rotvec()
     assert np.linalg.norm(omega - first_order) < 2 * np.linalg.norm(omega) ** 2, (omega, first_order)
-    # the kinematics cannot see arm_diff: its tool point is the untilted one (measured 0.24 mm
-    # away: the tilt moves the tool through its 50 mm offset and the effector's centre through
-    # its joints' 30 mm, partly against each other)
-    departure = np.linalg.norm(tool - ROBOT.forward_kinematics(theta, joints[None])[0])
+    # the kinematics holds the tilt: its rotation and tool point are the machine's
+    pairs = ROBOT.pairs(theta, joints[None], tool[None])
+    assert (Rotation.from_matrix(pairs.rotation[0]) * rotation.inv()).magnitude() < 1e-8
+    np.testing.assert_allclose(ROBOT.forward_kinematics(theta, joints[None])[0], tool, atol=SETTLED_MM)
+    # a translating effector (the pair's rods equal) would put the tool elsewhere: the tilt moves
+    # the tool through its 50 mm offset and the effector's centre through its joints' 30 mm,
+    # partly against each other
+    level = theta.copy()
+    level[ROBOT.table.indices(["arm_diff1", "arm_diff2", "arm_diff3"])] = 0.0
+    departure = np.linalg.norm(tool - ROBOT.forward_kinematics(level, joints[None])[0])
     assert departure > 0.1, departure
     # equal rods: no tilt
-    _, level, _, _ = _settle_direct(build_machine(ROBOT, TRUE), target)
-    assert level.magnitude() < 1e-9
+    _, untilted, _, _ = _settle_direct(build_machine(ROBOT, level), target)
+    assert untilted.magnitude() < 1e-9
 
 
 def test_friction_dead_band_and_transmission_scale_on_the_carriages():
@@ -179,3 +187,26 @@ def test_validation():
         build_spec(ROBOT, NOMINAL[:26])
     with pytest.raises(ValueError, match=r"transmission_scale must have 3 values \(one per chain\), got 6"):
         build_spec(ROBOT, NOMINAL, MachineOptions(transmission_scale=(0.0,) * 6))
+
+
+def test_the_tilting_kinematics_derivatives_and_inverse_with_every_pair_unequal():
+    """Every pair's rods unequal by up to 0.5 mm (the effector tilts, every chain's closure moves
+    with every pair): the closure's derivatives match central differences (h = 1e-6: rounding eps
+    |intermediates ~500 mm| / h ~1e-7, as the contract test's), the inverse kinematics returns the
+    forward kinematics' joints, and the chains are coupled (an off-chain rod-difference column)."""
+    theta = TRUE.copy()
+    theta[ROBOT.table.indices(["arm_diff1", "arm_diff2", "arm_diff3"])] = [0.5, -0.3, 0.4]
+    poses = reachable_poses(ROBOT, 5, 2, theta=theta)
+    joints = ROBOT.inverse_kinematics(theta, poses)
+    np.testing.assert_allclose(ROBOT.forward_kinematics(theta, joints), poses, atol=1e-9)
+    joints = joints + 1e-3  # off the closure on purpose
+    jac = ROBOT.closure_jacobians(theta, joints, poses)
+    h = 1e-6
+    for analytic, vary, x0 in ((jac.pose, lambda x: ROBOT.closure(theta, joints, x), poses),
+                               (jac.joints, lambda q: ROBOT.closure(theta, q, poses), joints),
+                               (jac.parameters, lambda th: ROBOT.closure(th, joints, poses), theta)):
+        steps = np.eye(x0.shape[-1]) * h
+        fd = np.stack([(vary(x0 + d) - vary(x0 - d)) / (2 * h) for d in steps], axis=-1)
+        np.testing.assert_allclose(analytic, fd, atol=1e-6)
+    arm_diff1 = ROBOT.table.index("arm_diff1")
+    assert np.abs(jac.parameters[:, 1:, arm_diff1]).min() > 1e-3  # pair 1's difference moves towers 2, 3

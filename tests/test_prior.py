@@ -41,8 +41,11 @@ FD_STEP = 1e-4
 
 
 def _tolerance_errors(robot, seed: int) -> np.ndarray:
-    """(P,) errors drawn uniformly within the robot's declared default tolerance."""
-    tol = ParameterPrior.default(robot).std
+    """(P,) errors drawn uniformly within the robot's declared default tolerance; none on what is
+    not identified by default and seeded errors leave at nominal (``machine_only``,
+    ``chain_coupled``: the linear Delta's tool offset and rod differences)."""
+    tol = ParameterPrior.default(robot).std.copy()
+    tol[robot.table.indices(robot.machine_only + robot.chain_coupled)] = 0.0
     return np.random.default_rng(seed).uniform(-1.0, 1.0, robot.n_parameters) * tol
 
 

@@ -147,8 +147,9 @@ def test_robot_of_klipper_parameters_is_klippers_kinematics():
 
 def test_observability_statement_names_the_arms_and_the_gauge_blocks():
     """Probe heights alone: the step errors are not determined, and a combination of the three arms
-    (all one sign) is left to the tolerances; the statement says the gauge blocks would determine
-    the step errors' combination. With the gauge heights the step errors are determined."""
+    (all one sign) is left to the tolerances, as are the pairs' rod differences (the effector's
+    tilt), in combinations with the step errors; the statement says the gauge blocks would
+    determine those a step error leads. With the gauge heights the step errors are determined."""
     robot = LinearDelta.default()
     rng = np.random.default_rng(5)
     truth = perturbed(robot, rng)
@@ -158,8 +159,9 @@ def test_observability_statement_names_the_arms_and_the_gauge_blocks():
     arms = [c for c in only.left if all(f"arm{i}" in c["combination"] for i in (1, 2, 3)) and "-" not in
             c["combination"].split("radius")[0]]
     assert arms, only.statement()
-    steps = [c for c in only.left if c["combination"].count("step_error") == 3]
+    steps = [c for c in only.left if c["combination"].split()[1].startswith("step_error")]
     assert steps and all("manual" in c["determined_by"] for c in steps)
+    assert any("arm_diff" in c["combination"] for c in only.left)
     assert "manual heights on 50 and 100 mm gauge blocks" in only.statement()
     gauged = fit_probe(robot, synthetic(robot, truth, bed, rng, gauges=(50.0, 100.0), noise=ProbeNoise()))
     assert all(gauged.sources[f"step_error{i}"] == "data" for i in (1, 2, 3))
@@ -181,7 +183,7 @@ def test_held_parameters_keep_their_tolerance_and_the_bed_is_named():
 def test_fewer_touches_than_parameters_is_refused():
     robot = LinearDelta.default()
     data = synthetic(robot, robot.table.nominal, np.zeros(3), np.random.default_rng(7), n=10)
-    with pytest.raises(ProbeError, match="10 measurements .* for 24 parameters asked for"):
+    with pytest.raises(ProbeError, match="10 measurements .* for 27 parameters asked for"):
         fit_probe(robot, data)
     fit = fit_probe(robot, data, free=["radius1", "radius2", "radius3", "endstop_drop1"])
     assert fit.sources["arm1"] == "held"

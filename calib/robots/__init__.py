@@ -25,10 +25,11 @@ __all__ = ["ROBOTS", "RobotEntry", "robot_class", "default_robot", "robot_from_d
 
 def uniform_errors(robot: Robot, seed, error_mm: float, error_rad: float) -> np.ndarray:
     """(P,) seeded errors uniform within +-``error_mm`` on lengths and +-``error_rad`` on angles;
-    zero on the robot's :attr:`~calib.robot.Robot.machine_only` parameters (its kinematics cannot
-    see them)."""
+    zero on the robot's :attr:`~calib.robot.Robot.machine_only` parameters (no pose data tell
+    them from the others) and :attr:`~calib.robot.Robot.chain_coupled` ones (not identified by
+    default)."""
     half = np.where(robot.table.angle_mask(), error_rad, error_mm)
-    half[robot.table.indices(robot.machine_only)] = 0.0
+    half[robot.table.indices(robot.machine_only + robot.chain_coupled)] = 0.0
     return np.random.default_rng(seed).uniform(-1.0, 1.0, robot.n_parameters) * half
 
 
@@ -52,7 +53,7 @@ class RobotEntry:
 #: name -> entry. The hexapod's reference experiment is its paper's (Table 2 machine, Table 3
 #: errors, Table 4 poses); the Delta's its paper's primary study (errors within 1 mm / 1 deg); the
 #: linear Delta's errors within 0.3 mm / 0.3 deg (tenths of a millimetre and degree, step
-#: distances within 0.3 percent) on what its kinematics sees, its rods equal.
+#: distances within 0.3 percent) on what it identifies by default, its rods equal.
 ROBOTS: dict[str, RobotEntry] = {
     Hexapod.name: RobotEntry(Hexapod, paper_hexapod, lambda r, s: paper.TABLE3_ERRORS.ravel().copy(),
                              paper.TABLE4_NOMINAL_POSES),

@@ -1,5 +1,6 @@
-"""The linear Delta (a Delta 3D printer): three towers, a carriage riding each, a pair of equal
-rods (a parallelogram) from each carriage down to a translating effector that carries the tool.
+"""The linear Delta (a Delta 3D printer): three towers, a carriage riding each, a pair of rods (a
+parallelogram where they are equal) from each carriage down to the effector that carries the tool
+(translating, or tilted where a pair's rods differ).
 
 Frames and conventions (mm, rad):
 
@@ -25,50 +26,64 @@ Frames and conventions (mm, rad):
   counted travel (the real step distance is the nominal one times ``1 + step_error_i / 100``).
   Klipper's carriage height ``abs_endstop - position`` is ``s_i`` with ``H_i - endstop_drop_i``
   its absolute endstop and ``q_i`` its position.
-* Closure of chain i (mm): ``F_i = |F_i + s_i u_i - X| - arm_i``.
+* The effector turns by ``R`` when a pair's rods differ (below); pair i's mean rod is ``m_i = P_i
+  - X + (I - R) o_i`` (``P_i = F_i + s_i u_i`` the reduced carriage point, ``o_i`` the pair's
+  joint midpoint on the effector from the tool point, effector frame) and half their difference
+  ``d_i = h (I - R) w_i`` (``w_i`` the pair's axle, ``h`` half the rods' spacing).
+* Closure of chain i (mm): ``F_i = sqrt(|m_i|^2 + |d_i|^2) - sqrt(arm_i^2 + arm_diff_i^2 / 4)``,
+  with ``R`` solving ``m_i.d_i = arm_i arm_diff_i / 2`` for the three pairs (:class:`RodPairs`):
+  together, the six rods ``m_i -+ d_i`` have their lengths ``arm_i -+ arm_diff_i / 2``. With
+  equal rods ``R = I`` and ``F_i = |P_i - X| - arm_i``, Klipper's model.
 
 Parameters (27): per tower ``radius angle lean_r lean_t arm arm_diff endstop_drop step_error``
 (:data:`CHAIN_PARAMETERS`), then the tool offset ``tool.x tool.y tool.z`` (from the effector's
 centre to the tool point, effector frame).
 
-What the closure cannot see, and why (:attr:`LinearDelta.machine_only`, held by default):
+* ``arm_diff_i``: the second rod of pair i (counter-clockwise) minus the first, mm. Unequal rods
+  make no parallelogram: the effector tilts, about ``arm_diff / rod spacing`` (1 mm over 50 mm:
+  20 mrad), by an amount that varies with the rods' directions over the volume, and the tilt
+  moves the tool point through the tool offset and the effector's joints (0.28 mm RMS over the
+  print volume for a 1 mm pair, measured on the MuJoCo machine). The closure holds it exactly:
+  the effector's rotation is solved from the three pairs' length differences by Newton's method
+  (a few steps from level), each closure's derivatives through it by the implicit function
+  theorem, so that every chain's closure moves with every pair's ``arm_diff`` (and, where the
+  effector is tilted, with every carriage): the chains are coupled. The MuJoCo machine
+  (:mod:`mjcf.linear_delta`), six rods closed on a free effector, agrees to 2e-9 mm.
+
+What the closure does not determine, and why (:attr:`LinearDelta.machine_only`, held by default):
 
 * ``tool.x tool.y tool.z`` (mm): the tool offset. With a translating effector the towers' points
   are taken relative to the tool point (Klipper's), so the tool offset is in them: another tool
   offset on the same physical printer moves the three reduced towers by its difference together,
-  which their radii, angles and endstops do exactly. The closure does not see it, and pose data
-  could not tell it from the towers. It places the effector behind the tool in the MuJoCo machine
-  (the effector's centre is ``X - t``), where it is the lever of the effector's tilt. It belongs
-  to no tower (the table files it under tower 3, after it, so that the table stays in tower
-  order; its column is zero).
-* ``arm_diff_i``: the second rod of pair i (counter-clockwise) minus the first, mm. Unequal rods
-  make no parallelogram: the effector tilts, about ``arm_diff / rod spacing`` (1 mm over 50 mm:
-  20 mrad), by an amount that varies with the rods' directions over the volume, and the tilt
-  moves the tool point through the tool offset and the effector's joints. A translating
-  effector's kinematics has no tilt: its closure does not see ``arm_diff`` (the column is zero),
-  the parameter is held, left to its tolerance, and only the MuJoCo machine
-  (:mod:`mjcf.linear_delta`) carries it (:attr:`LinearDelta.machine_only`). The part of a tilt
-  that is the same everywhere moves the tool point by a constant the towers absorb; its variation
-  is a model error of this robot, which these docs say rather than hide.
+  which their radii, angles and endstops do exactly. The closure sees it only as the lever of the
+  effector's tilt (a second-order term: none with equal rods), and pose data could not tell it
+  from the towers. It places the effector behind the tool in the MuJoCo machine (the effector's
+  centre is ``X - R t``). It belongs to no tower (the table files it under tower 3, after it, so
+  that the table stays in tower order).
 
-Both are named with their tolerances so that an identification says they are left to them.
+It is named with its tolerance so that an identification says it is left to it.
 
 Identifiable from tool positions: each tower's seven others (the line the carriage rides, its
-origin and scale along it, and the arm), 21 in all. Physical sizes for the MuJoCo machine and
-pictures (not parameters): the effector's joint offset ``effector_radius_mm`` and the spacing of a
-pair's rods ``rod_spacing_mm``.
+origin and scale along it, and the arm), 21 in all, identified by default, and the pairs' rod
+differences, where a fit names them (:attr:`LinearDelta.chain_coupled`). Physical sizes for the
+kinematics' tilt, the MuJoCo machine and pictures (not parameters): the effector's joint offset
+``effector_radius_mm`` and the spacing of a pair's rods ``rod_spacing_mm``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..robot import (JOINT_RANGES_KEY, ClosureJacobians, KinematicsError, Parameter, ParameterTable, Robot,
                      checked_joint_ranges, newton_forward_kinematics)
+from ..rotation import matrix_from_rotation_vector
 from ..validation import as_array
 
 __all__ = ["LinearDelta", "CHAIN_PARAMETERS", "CHAIN_UNITS", "TOOL_PARAMETERS", "STEP_ERROR_REFERENCE_MM",
-           "KLIPPER_ANGLES_DEG", "DEFAULT_GEOMETRY", "tower_directions"]
+           "KLIPPER_ANGLES_DEG", "DEFAULT_GEOMETRY", "tower_directions", "RodPairs", "TILT_STEP_TOL_RAD",
+           "TILT_MAX_ITER", "IK_STEP_TOL_MM"]
 
 #: Names of a tower's eight parameters; ``{i}`` is the 1-based tower number.
 CHAIN_PARAMETERS = ("radius{i}", "angle{i}", "lean_r{i}", "lean_t{i}", "arm{i}", "arm_diff{i}", "endstop_drop{i}",
@@ -117,6 +132,81 @@ def _tolerances() -> dict[str, float]:
     return out
 
 
+#: Newton's method on the effector's rotation stops when its step is below this, rad (it converges
+#: quadratically: the step after it would be at rounding), or after :data:`TILT_MAX_ITER` steps;
+#: the inverse kinematics alternates the rotation and the carriages' travels until the travels
+#: move less than :data:`IK_STEP_TOL_MM`.
+TILT_STEP_TOL_RAD, TILT_MAX_ITER, IK_STEP_TOL_MM = 1e-13, 20, 1e-11
+
+
+@dataclass(frozen=True, eq=False)
+class RodPairs:
+    """The three rod pairs at N configurations, the effector turned by ``rotation`` (mm).
+
+    Pair i's rods run from the effector's joints ``X + R (o_i -+ h w_i)`` to the carriage's ``P_i
+    - t + E_i -+ h w_i`` (``o_i = E_i - t`` the pair's joint midpoint from the tool point in the
+    effector frame, ``w_i`` the pair's axle, ``h`` half the rods' spacing, ``P_i`` the reduced
+    carriage point): they are ``m_i -+ d_i`` with ``m_i = P_i - X + (I - R) o_i`` (:attr:`mean`)
+    and ``d_i = h (I - R) w_i`` (:attr:`half_difference`). Their lengths are ``arm_i -+
+    arm_diff_i / 2`` exactly when ``|m_i|^2 + |d_i|^2 = arm_i^2 + arm_diff_i^2 / 4`` (the closure,
+    :meth:`closure`, in mm: the root of the left side minus that of the right) and ``m_i.d_i =
+    arm_i arm_diff_i / 2`` (:meth:`length_differences`, which fix the rotation).
+    """
+
+    rotation: np.ndarray
+    mean: np.ndarray
+    half_difference: np.ndarray
+    offsets: np.ndarray
+    rotated_offsets: np.ndarray
+    rotated_axles: np.ndarray
+    half_spacing: float
+    length: np.ndarray
+    target: np.ndarray
+    parts: dict
+
+    @classmethod
+    def at(cls, rotation, reach, offsets, axles, half_spacing: float, parts: dict) -> "RodPairs":
+        """The pairs with the effector turned by ``rotation`` (N, 3, 3): ``reach`` (N, 3, 3) ``P_i -
+        X``, ``offsets`` (3, 3) ``o_i``, ``axles`` (3, 3) ``w_i``, ``parts`` the carriage points'."""
+        turned = np.einsum("nij,cj->nci", rotation, offsets)
+        turned_axles = np.einsum("nij,cj->nci", rotation, axles)
+        mean = reach + (offsets - turned)
+        half = half_spacing * (axles - turned_axles)
+        length = np.sqrt(np.einsum("nij,nij->ni", mean, mean) + np.einsum("nij,nij->ni", half, half))
+        target = np.sqrt(parts["arm"] ** 2 + parts["arm_diff"] ** 2 / 4)
+        return cls(rotation, mean, half, offsets, turned, turned_axles, half_spacing, length, target, parts)
+
+    @property
+    def unit_mean(self) -> np.ndarray:
+        """(N, 3, 3) ``m_i / sqrt(|m_i|^2 + |d_i|^2)``: the closure's derivative in ``m_i``."""
+        return self.mean / self.length[..., None]
+
+    def closure(self) -> np.ndarray:
+        """(N, 3) mm: ``sqrt(|m_i|^2 + |d_i|^2) - sqrt(arm_i^2 + arm_diff_i^2 / 4)``."""
+        return self.length - self.target
+
+    def length_differences(self) -> np.ndarray:
+        """(N, 3) mm^2: ``m_i.d_i - arm_i arm_diff_i / 2`` (zero at the effector's rotation)."""
+        half_product = self.parts["arm"] * self.parts["arm_diff"] / 2
+        return np.einsum("nij,nij->ni", self.mean, self.half_difference) - half_product
+
+    def rotation_jacobians(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(dF/dw, dG/dw)`` (N, 3, 3): the closure's and the length differences' derivatives in
+        a small turn ``w`` of the effector (``R -> (I + [w]x) R``), which moves ``m_i`` by
+        ``R o_i x w`` and ``d_i`` by ``h R w_i x w``."""
+        h = self.half_spacing
+        m, d, o, w = self.mean, self.half_difference, self.rotated_offsets, self.rotated_axles
+        return ((np.cross(m, o) + h * np.cross(d, w)) / self.length[..., None],
+                np.cross(d, o) + h * np.cross(m, w))
+
+    def coupling(self) -> np.ndarray:
+        """(N, 3, 3) ``K = dF/dw (dG/dw)^-1``: a change that moves the length differences by
+        ``dG`` turns the effector so that the closure moves by ``-K dG`` (the implicit function
+        theorem on ``G = 0``)."""
+        f, g = self.rotation_jacobians()
+        return np.swapaxes(np.linalg.solve(np.swapaxes(g, 1, 2), np.swapaxes(f, 1, 2)), 1, 2)
+
+
 class LinearDelta(Robot):
     """A linear Delta printer's nominal geometry (see the module docstring).
 
@@ -141,11 +231,14 @@ class LinearDelta(Robot):
     joint_symbol = "q"
     chain_word = "tower"
     joint_zero_names = ("endstop_drop1", "endstop_drop2", "endstop_drop3")
-    #: Parameters of the machine that the closure cannot see (their columns are zero): the MuJoCo
-    #: machine builds them, the kinematics does not (module docstring); seeded errors leave them
-    #: at nominal.
-    machine_only = ("arm_diff1", "arm_diff2", "arm_diff3") + TOOL_PARAMETERS
+    #: Parameters of the machine that no measurement tells from the towers (the tool offset: the
+    #: closure sees it only as the lever of the effector's tilt, module docstring); held, and
+    #: seeded errors leave them at nominal.
+    machine_only = TOOL_PARAMETERS
     gauge_fixed = machine_only
+    #: The rod-pair differences tilt the effector that all three chains hold (module docstring):
+    #: identified where a fit names them (:func:`calib.probe.fit_probe` does), not chain by chain.
+    chain_coupled = ("arm_diff1", "arm_diff2", "arm_diff3")
     #: Tolerance of the parameters, the default prior's standard deviation, with its reasons:
     #: ``radius`` 0.5 mm (frame extrusions cut and printed vertices assembled: a few tenths, and
     #: Klipper's fits move ``delta_radius`` by up to a millimetre); ``angle`` 5 mrad (0.3 degree:
@@ -180,7 +273,10 @@ class LinearDelta(Robot):
             raise ValueError("towers: the arm lengths must be > 0")
         self.travel_mm, self.effector_radius_mm, self.rod_spacing_mm = (float(travel_mm), float(effector_radius_mm),
                                                                         float(rod_spacing_mm))
-        for a in (self.towers, self.tool, self.endstop_height_mm, self._home, self._workspace, self._full):
+        radial, self._axles, _ = tower_directions(self.towers[:, 1], np.zeros(3), np.zeros(3))
+        self._joint_offsets = self.effector_radius_mm * radial  # the pairs' joints, effector frame
+        for a in (self._axles, self._joint_offsets, self.towers, self.tool, self.endstop_height_mm, self._home,
+                  self._workspace, self._full):
             a.setflags(write=False)
         self.joint_ranges = checked_joint_ranges(joint_ranges, self)
         self.table = ParameterTable(
@@ -262,66 +358,85 @@ class LinearDelta(Robot):
         return foot + p["s"][:, :, None] * p["u"], p
 
     # -- kinematics -----------------------------------------------------------------------
-    def _rods(self, theta, joints, poses):
-        """``(w, norm, parts)``: (N, 3, 3) each reduced rod from the tool point to its carriage
-        point, (N, 3) their lengths, and :meth:`carriage_points`' parts."""
+    def pairs(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray, *, rotation=None) -> RodPairs:
+        """The rod pairs at ``joints`` with the tool at ``poses`` (:class:`RodPairs`), the
+        effector's rotation solved from the pairs' rod-length differences (module docstring) by
+        Newton's method from ``rotation`` (N, 3, 3; default level); level where every pair's rods
+        are equal."""
         P, p = self.carriage_points(theta, joints)
-        w = P - np.asarray(poses, dtype=float)[:, None, :]
-        return w, np.sqrt(np.einsum("nij,nij->ni", w, w)), p
+        reach = P - np.asarray(poses, dtype=float)[:, None, :]
+        offsets = self._joint_offsets - p["tool"]
+        R = np.broadcast_to(np.eye(3), (reach.shape[0], 3, 3)) if rotation is None else rotation
+        if np.any(p["arm_diff"] != 0):
+            for _ in range(TILT_MAX_ITER):
+                pairs = RodPairs.at(R, reach, offsets, self._axles, self.rod_spacing_mm / 2, p)
+                step = np.linalg.solve(pairs.rotation_jacobians()[1], -pairs.length_differences()[..., None])[..., 0]
+                R = matrix_from_rotation_vector(step) @ R
+                if np.all(np.abs(step) < TILT_STEP_TOL_RAD):
+                    break
+        return RodPairs.at(R, reach, offsets, self._axles, self.rod_spacing_mm / 2, p)
 
     def closure(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        w, norm, p = self._rods(theta, joints, poses)
-        return norm - p["arm"]
+        return self.pairs(theta, joints, poses).closure()
 
     def closure_pose_jacobian(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        w, norm, _ = self._rods(theta, joints, poses)
-        return -w / norm[:, :, None]
+        return self.closure_and_pose_jacobian(theta, joints, poses)[1]
 
     def closure_and_pose_jacobian(self, theta, joints, poses):
-        w, norm, p = self._rods(theta, joints, poses)
-        return norm - p["arm"], -w / norm[:, :, None]
+        pairs = self.pairs(theta, joints, poses)
+        coupling = pairs.coupling()
+        return pairs.closure(), -pairs.unit_mean + coupling @ pairs.half_difference
 
     def closure_jacobians(self, theta: np.ndarray, joints: np.ndarray, poses: np.ndarray) -> ClosureJacobians:
         return self.closure_with_jacobians(theta, joints, poses)[1]
 
     def closure_with_jacobians(self, theta, joints, poses):
-        """The closure and its derivatives; with ``n`` the unit rod (effector to carriage): pose
-        ``-n``; joint and ``endstop_drop`` ``-(1 + step_error/100) n.u``; ``step_error``
-        ``-(q + endstop_drop) / 100 n.u``; ``radius`` ``n.e_r``; ``angle`` ``n.(radius e_t + s
-        du/da)``; the leans ``s n.du/dlean``; ``arm`` -1; ``arm_diff`` and the tool 0. Each
-        tower's closure moves with its own parameters alone: the (N, P) own entries."""
-        w, norm, p = self._rods(theta, joints, poses)
-        n = w / norm[:, :, None]
-        rows = n.shape[0]
-        nu = np.einsum("nij,ij->ni", n, p["u"])
-        s = p["s"]
-        a, lr, lt = p["angle"], p["lean_r"], p["lean_t"]
-        e_r, e_t = p["e_r"], p["e_t"]
-        e_z = np.array([0.0, 0.0, 1.0])
-        sr, cr, st, ct = np.sin(lr), np.cos(lr), np.sin(lt), np.cos(lt)
-        du_da = (sr * ct)[:, None] * e_t - st[:, None] * e_r
-        du_dlr = (cr * ct)[:, None] * e_r - (sr * ct)[:, None] * e_z
-        du_dlt = -(sr * st)[:, None] * e_r + ct[:, None] * e_t - (cr * st)[:, None] * e_z
-        dq = -p["scale"] * nu
-        towers = np.empty((rows, 3, len(CHAIN_PARAMETERS)))
-        towers[:, :, 0] = np.einsum("nij,ij->ni", n, e_r)
-        towers[:, :, 1] = np.einsum("nij,ij->ni", n, p["radius"][:, None] * e_t) + s * np.einsum("nij,ij->ni", n, du_da)
-        towers[:, :, 2] = s * np.einsum("nij,ij->ni", n, du_dlr)
-        towers[:, :, 3] = s * np.einsum("nij,ij->ni", n, du_dlt)
-        towers[:, :, 4] = -1.0
-        towers[:, :, 5] = 0.0
-        towers[:, :, 6] = dq
-        towers[:, :, 7] = -p["travel"] / STEP_ERROR_REFERENCE_MM * nu
-        own = np.concatenate([towers.reshape(rows, -1), np.zeros((rows, len(TOOL_PARAMETERS)))], axis=1)
-        jq = np.zeros((rows, 3, 3))
-        jq[:, np.arange(3), np.arange(3)] = dq
-        return norm - p["arm"], ClosureJacobians(pose=-n, joints=jq, own=own, chains=self.table.chains)
+        """The closure and its derivatives. Each variable ``z`` moves a pair's mean rod ``m`` and
+        half difference ``d`` directly (partials ``dF/dz``, ``dG/dz`` of the closure ``F`` and of
+        the length differences ``G = m.d - arm arm_diff / 2``) and through the effector's rotation,
+        which keeps ``G = 0``: ``dF/dz - K dG/dz``, ``K = dF/dw (dG/dw)^-1`` (:meth:`RodPairs.coupling`).
+        Directly: the carriage point ``P`` moves ``F`` by ``m/|.|`` and ``G`` by ``d``; the pose by
+        minus these; ``arm`` ``-arm/L``, ``-arm_diff/2``; ``arm_diff`` ``-arm_diff/(4L)``,
+        ``-arm/2`` (``L = sqrt(arm^2 + arm_diff^2/4)``); the tool ``-(m/|.|) (I - R)``, ``-d (I - R)``."""
+        pairs = self.pairs(theta, joints, poses)
+        p = pairs.parts
+        rows, k = pairs.mean.shape[0], len(CHAIN_PARAMETERS)
+        moves = np.zeros((rows, 3, k, 3))  # dP / d(tower parameter)
+        moves[:, :, 0] = p["e_r"]
+        sr, cr, st, ct = np.sin(p["lean_r"]), np.cos(p["lean_r"]), np.sin(p["lean_t"]), np.cos(p["lean_t"])
+        e_r, e_t, e_z = p["e_r"], p["e_t"], np.array([0.0, 0.0, 1.0])
+        s = p["s"][:, :, None]
+        moves[:, :, 1] = p["radius"][:, None] * e_t + s * ((sr * ct)[:, None] * e_t - st[:, None] * e_r)
+        moves[:, :, 2] = s * ((cr * ct)[:, None] * e_r - (sr * ct)[:, None] * e_z)
+        moves[:, :, 3] = s * (-(sr * st)[:, None] * e_r + ct[:, None] * e_t - (cr * st)[:, None] * e_z)
+        moves[:, :, 6] = -p["scale"][:, None] * p["u"]
+        moves[:, :, 7] = -(p["travel"] / STEP_ERROR_REFERENCE_MM)[..., None] * p["u"]
+        direct = [np.zeros((rows, 3, self.n_parameters)) for _ in range(2)]
+        for j, along in enumerate((pairs.unit_mean, pairs.half_difference)):
+            towers = np.einsum("nik,nijk->nij", along, moves)
+            towers[:, :, 4] = (-p["arm"] / pairs.target, -p["arm_diff"] / 2)[j]
+            towers[:, :, 5] = (-p["arm_diff"] / (4 * pairs.target), -p["arm"] / 2)[j]
+            for c in range(3):
+                direct[j][:, c, c * k:(c + 1) * k] = towers[:, c]
+            direct[j][:, :, 3 * k:] = -(along - np.einsum("nik,nkj->nij", along, pairs.rotation))
+        coupling = pairs.coupling()
+        dq = -p["scale"] * np.einsum("nij,ij->ni", pairs.unit_mean, p["u"])
+        dg = -p["scale"] * np.einsum("nij,ij->ni", pairs.half_difference, p["u"])
+        eye = np.eye(3)
+        jac = ClosureJacobians(pose=-pairs.unit_mean + coupling @ pairs.half_difference,
+                               joints=dq[:, :, None] * eye - coupling * dg[:, None, :],
+                               parameters=direct[0] - coupling @ direct[1])
+        return pairs.closure(), jac
 
     def inverse_kinematics(self, theta: np.ndarray, poses: np.ndarray) -> np.ndarray:
-        """(N, 3) carriage travels below the endstops, mm: per tower, the carriage point at
-        distance ``s`` along the tower from ``F`` with ``|F + s u - X| = arm``, the upper root
-        ``s = u.d + sqrt((u.d)^2 - |d|^2 + arm^2)``, ``d = X - F`` (the carriage above the
-        effector), then ``q = (H - s) / (1 + step_error/100) - endstop_drop``.
+        """(N, 3) carriage travels below the endstops, mm. With the effector's rotation ``R``
+        given, each tower's carriage point sits at distance ``s`` along the tower from ``F`` with
+        ``|F + s u - Y| = a``, ``Y = X - (I - R) o`` (``o`` the pair's joint offset less the tool
+        offset) and ``a^2 = arm^2 + arm_diff^2/4 - |d|^2``: the upper root ``s = u.e +
+        sqrt((u.e)^2 - |e|^2 + a^2)``, ``e = Y - F`` (the carriage above the effector), then ``q
+        = (H - s) / (1 + step_error/100) - endstop_drop``; the rotation is then solved at these
+        joints (:meth:`pairs`), and the two alternate until the travels move less than
+        :data:`IK_STEP_TOL_MM` (once, for equal rods: the effector is level).
 
         Raises:
             KinematicsError: the arm cannot reach the tower, or is square to it (a serial
@@ -329,18 +444,28 @@ class LinearDelta(Robot):
         """
         p = self.split(theta)
         e_r, _, u = tower_directions(p["angle"], p["lean_r"], p["lean_t"])
-        d = np.asarray(poses, dtype=float)[:, None, :] - p["radius"][:, None] * e_r
-        b = np.einsum("nij,ij->ni", d, u)
-        disc = b * b - np.einsum("nij,nij->ni", d, d) + p["arm"] ** 2
-        bad = ~(disc > (1e-6 * p["arm"]) ** 2)
-        if np.any(bad):
-            row, chain = (int(x) for x in np.argwhere(bad)[0])
-            why = "cannot reach its tower" if not disc[row, chain] >= 0 else "is square to its tower (singular)"
-            raise KinematicsError(f"row {row} is unreachable: the arm of {self.chain_word} {chain + 1} {why} "
-                                  f"(pose {np.array2string(np.asarray(poses)[row], precision=4)})", row)
-        s = b + np.sqrt(disc)
-        scale = 1.0 + p["step_error"] / STEP_ERROR_REFERENCE_MM
-        return (self.endstop_height_mm - s) / scale - p["endstop_drop"]
+        poses = np.asarray(poses, dtype=float)
+        X = np.broadcast_to(poses[:, None, :], (poses.shape[0], 3, 3))
+        offset, arm2, R, q = np.zeros(3), p["arm"] ** 2, None, None
+        for _ in range(TILT_MAX_ITER):
+            d = X - offset - p["radius"][:, None] * e_r
+            b = np.einsum("nij,ij->ni", d, u)
+            disc = b * b - np.einsum("nij,nij->ni", d, d) + arm2
+            bad = ~(disc > (1e-6 * p["arm"]) ** 2)
+            if np.any(bad):
+                row, chain = (int(x) for x in np.argwhere(bad)[0])
+                why = "cannot reach its tower" if not disc[row, chain] >= 0 else "is square to its tower (singular)"
+                raise KinematicsError(f"row {row} is unreachable: the arm of {self.chain_word} {chain + 1} {why} "
+                                      f"(pose {np.array2string(poses[row], precision=4)})", row)
+            scale = 1.0 + p["step_error"] / STEP_ERROR_REFERENCE_MM
+            q, before = (self.endstop_height_mm - (b + np.sqrt(disc))) / scale - p["endstop_drop"], q
+            if not np.any(p["arm_diff"] != 0) or (before is not None and np.all(np.abs(q - before) < IK_STEP_TOL_MM)):
+                return q
+            pairs = self.pairs(theta, q, poses, rotation=R)
+            R = pairs.rotation
+            offset = pairs.offsets - pairs.rotated_offsets
+            arm2 = pairs.target ** 2 - np.einsum("nij,nij->ni", pairs.half_difference, pairs.half_difference)
+        return q
 
     def forward_kinematics(self, theta: np.ndarray, joints: np.ndarray, *, initial=None) -> np.ndarray:
         """(N, 3) tool points: the trilateration of the three spheres (carriage points, arms), the
@@ -381,10 +506,12 @@ class LinearDelta(Robot):
         """(N, 3, 3, 3) mm: each tower's foot on the bed, its carriage's joint midpoint and the
         effector's joint midpoint: the reduced model shifted by the effector's joint offset
         ``E_i`` (at the tower's angle) less the tool offset ``t`` (the physical tower is the
-        reduced one's line through ``F_i - t + E_i``)."""
+        reduced one's line through ``F_i - t + E_i``); the effector's, turned with it where a
+        pair's rods differ (:meth:`pairs`)."""
         P, p = self.carriage_points(theta, joints)
         shift = self.effector_radius_mm * p["e_r"] - p["tool"]
         u = p["u"]
         foot = p["radius"][:, None] * p["e_r"] + shift - (shift[:, 2] / u[:, 2])[:, None] * u  # at z = 0
-        effector = np.asarray(poses, dtype=float)[:, None, :] + shift
+        pairs = self.pairs(theta, joints, poses)
+        effector = np.asarray(poses, dtype=float)[:, None, :] + shift + (pairs.rotated_offsets - pairs.offsets)
         return np.stack([np.broadcast_to(foot, P.shape), P + shift, effector], axis=2)

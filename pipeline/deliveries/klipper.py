@@ -42,6 +42,12 @@ def bed_of(cal: Calibration) -> np.ndarray:
     return np.array([bed.get("z_mm", 0.0), bed.get("tilt_x_rad", 0.0), bed.get("tilt_y_rad", 0.0)], dtype=float)
 
 
+def fixes_no_shift(cal: Calibration) -> bool:
+    """Whether the calibration's data leave a shift of the whole print in x, y open: a probe
+    calibration's (touches, manual heights and distances see none)."""
+    return "bed_mode" in cal.recording
+
+
 def calibrated_radius(cal: Calibration) -> float:
     """The radius the calibration saw (mm): the largest |x| or |y| of its validity box, within the
     robot's print radius."""
@@ -56,8 +62,9 @@ def rotation_distances(cal: Calibration) -> list | None:
     return source.get("rotation_distances_mm") if isinstance(source, dict) else None
 
 
-def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray, points: np.ndarray) -> str:
-    """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh."""
+def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray, points: np.ndarray | None) -> str:
+    """The SAVE_CONFIG block: Klipper's parameters (``%.6f``, angles in degrees) and the mesh
+    (``points`` None: none)."""
     k = dict(zip(KLIPPER_PARAMETERS, kappa))
     lines = ["[printer]", f"delta_radius = {k['delta_radius']:.6f}", ""]
     for i, stepper in enumerate(STEPPERS):
@@ -67,11 +74,13 @@ def save_config_text(kappa: np.ndarray, rotation: list | None, axis: np.ndarray,
         if rotation is not None:
             lines.append(f"rotation_distance = {rotation[i] * k[f'step_factor_{t}']:.6f}")
         lines.append("")
-    lines += [f"[bed_mesh {MESH_PROFILE}]", f"version = {MESH_VERSION}", "points ="]
-    lines += ["\t" + ", ".join(f"{v:.6f}" for v in row) for row in points]
-    lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
-              f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
-              f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}", f"max_y = {axis[-1]:.6f}"]
+    if points is not None:
+        lines += [f"[bed_mesh {MESH_PROFILE}]", f"version = {MESH_VERSION}", "points ="]
+        lines += ["\t" + ", ".join(f"{v:.6f}" for v in row) for row in points]
+        lines += [f"x_count = {MESH_COUNT}", f"y_count = {MESH_COUNT}", f"mesh_x_pps = {MESH_PPS}",
+                  f"mesh_y_pps = {MESH_PPS}", f"algo = {MESH_ALGO}", f"tension = {MESH_TENSION}",
+                  f"min_x = {axis[0]:.6f}", f"max_x = {axis[-1]:.6f}", f"min_y = {axis[0]:.6f}",
+                  f"max_y = {axis[-1]:.6f}"]
     block = [f"{SAVE_CONFIG_NOTICE}. The contents are auto-generated.", ""] + lines
     return "\n".join([SAVE_CONFIG_HEADER] + [f"{SAVE_CONFIG_PREFIX}{line}".rstrip() for line in block]) + "\n"
 
@@ -90,11 +99,34 @@ def residuals(errors: np.ndarray, grid: np.ndarray) -> dict:
     return out
 
 
+def mesh_lowers_the_residual(res: dict) -> bool:
+    """Whether the mesh lowers the projection's RMS over the volume (:func:`residuals`): Klipper
+    applies it at every height, so a z error at the bed that is not the z error above it may
+    make the volume worse; the mesh is written only where it does not."""
+    return res["with mesh"]["rms_mm"] < res["without mesh"]["rms_mm"]
+
+
+def mesh_paragraph(res: dict) -> str:
+    """NOTES.md's words on the mesh: how to load it, or why none was written."""
+    if mesh_lowers_the_residual(res):
+        return f""""with mesh": the `[bed_mesh {MESH_PROFILE}]` profile removes the z error at the bed under each point
+(taken at its exact values; Klipper interpolates between its {MESH_COUNT} x {MESH_COUNT} nodes). Load it
+with `BED_MESH_PROFILE LOAD={MESH_PROFILE}`. Nodes outside the print radius (the square's corners)
+take the value at the nearest point of its circle."""
+    return f""""with mesh": what a mesh of the z error at the bed would leave (the error at the bed under each
+point removed at every height, as Klipper applies a mesh). It would not lower the residual over
+the volume (RMS {res['with mesh']['rms_mm']:.4f} against {res['without mesh']['rms_mm']:.4f} mm without): the z
+error left at the bed is not the one above it, so no `[bed_mesh]` profile was written."""
+
+
 def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: int, radius: float, rotation) -> str:
     """NOTES.md: the projection's residual, what Klipper cannot hold, the accuracy given up."""
+    shift = (", after the best shift of the whole print in x, y (the probe data fix none: the print as a whole "
+             "may sit elsewhere in x, y than under the old settings)") if fixes_no_shift(cal) else ""
     by = cal.robot.table.to_dict(cal.theta)
     std = cal.robot.table.to_dict(cal.std)
     leans = ", ".join(f"{n} {1e3 * by[n]:+.2f} +- {1e3 * std[n]:.2f} mrad" for n in by if n.startswith("lean"))
+    rods = ", ".join(f"{n} {by[n]:+.3f} +- {std[n]:.3f} mm" for n in by if n.startswith("arm_diff"))
     rows = "\n".join(f"| {k} | {v['rms_mm']:.4f} | {v['max_mm']:.4f} | {v['z_rms_mm']:.4f} | {v['z_max_mm']:.4f} |"
                      for k, v in res.items())
     steps = ("rotation_distance written per stepper (the config's times the fitted step factor)" if rotation
@@ -105,7 +137,8 @@ def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: 
 Klipper's linear Delta holds `delta_radius`, per tower `angle`, `arm_length`, `position_endstop`,
 and per stepper `rotation_distance` ({steps}). They were fitted to the identified machine by
 least squares of the tool-point error over {n_points} points of the print volume (every
-{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it), in the bed's frame.
+{VOLUME_STEP_MM:g} mm across the calibrated radius, {radius:.1f} mm, from the bed to 150 mm above it),
+in the bed's frame{shift}.
 
 ## The projection's residual over the volume (mm)
 
@@ -113,16 +146,13 @@ least squares of the tool-point error over {n_points} points of the print volume
 |---|---|---|---|---|
 {rows}
 
-"with mesh": the `[bed_mesh {MESH_PROFILE}]` profile removes the z error at the bed under each point
-(taken at its exact values; Klipper interpolates between its {MESH_COUNT} x {MESH_COUNT} nodes). Load it
-with `BED_MESH_PROFILE LOAD={MESH_PROFILE}`. Nodes outside the print radius (the square's corners)
-take the value at the nearest point of its circle.
+{mesh_paragraph(res)}
 
 ## What Klipper cannot hold (the accuracy given up is the residual above)
 
 - Tower lean: {leans}.
-- Unequal rods within a pair (`arm_diff`, the effector's tilt): not seen by the kinematics, left
-  at its tolerance; Klipper's equal-rod model has no term for it.
+- Unequal rods within a pair (the effector's tilt): {rods}; Klipper's equal-rod model has no
+  term for it.
 - Per-tower radius: Klipper has one `delta_radius`; the identified radii differ by
   {np.ptp([by[f'radius{i}'] for i in (1, 2, 3)]):.3f} mm.
 - Thermal growth: none identified in this calibration; Klipper has no temperature term
@@ -136,17 +166,21 @@ def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
     robot, bed = cal.robot, bed_of(cal)
     radius = calibrated_radius(cal)
     grid = volume_grid(radius)
-    kappa, errors = fit_klipper(robot, cal.theta, bed, grid)
+    kappa, errors = fit_klipper(robot, cal.theta, bed, grid, free_shift=fixes_no_shift(cal))
     axis, points = mesh_points(robot, cal.theta, bed, kappa, radius, MESH_COUNT)
     res = residuals(errors, grid)
     rotation = rotation_distances(cal)
-    texts = {SAVE_CONFIG_NAME: save_config_text(kappa, rotation, axis, points),
+    texts = {SAVE_CONFIG_NAME: save_config_text(kappa, rotation, axis,
+                                                points if mesh_lowers_the_residual(res) else None),
              KLIPPER_NOTES_NAME: notes_text(cal, settings, res, len(grid), radius, rotation)}
     paths = write_export_folder(settings.out, texts, overwrite=settings.overwrite)
     lines = [f"projection onto Klipper's parameters over {len(grid)} points: {k} RMS {v['rms_mm']:.4f} mm, max "
              f"{v['max_mm']:.4f} mm" for k, v in res.items()]
+    if not mesh_lowers_the_residual(res):
+        lines.append("no [bed_mesh] profile written: the mesh would not lower the residual over the volume")
     return ExportReport(format="klipper", robot=robot.name, paths={k: str(v) for k, v in paths.items()}, messages=lines,
-                        summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res})
+                        summary={"parameters": dict(zip(KLIPPER_PARAMETERS, map(float, kappa))), "residual": res,
+                                 "mesh_written": mesh_lowers_the_residual(res)})
 
 
 def write_klipper_rotary(cal: Calibration, settings: ExportSettings) -> ExportReport:

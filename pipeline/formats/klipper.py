@@ -9,6 +9,14 @@ and the SAVE_CONFIG block (``#*# <---- SAVE_CONFIG ---->``, every line after it 
 read after the rest, so that it overrides it. Lines prefixed ``#*# `` in a file without the header
 (a block pasted on its own) are read as if it were there.
 
+The machine *as built* (:attr:`KlipperConfig.built`, :attr:`KlipperPrinter.built`): the sections
+above the block alone, as the owner wrote them, which SAVE_CONFIG overrides, and where it commented
+a key out (Klipper's SAVE_CONFIG puts ``#`` before a key of the main config that its block now
+sets, ``#delta_radius: 140``) the value so commented; Klipper's defaults where the owner wrote
+none (stepper_b's ``arm_length`` is stepper_a's). It is the build before calibration, a prior's
+centre, where the block holds a fit's; where the main sections cannot be read alone (the owner's
+values are all in the block), the machine as Klipper runs it.
+
 Units: lengths in mm; the towers' angles, which Klipper writes in degrees, are held in radians;
 a rotary Delta's step size in radians. Stable positions (the steps counted from each tower's
 endstop) are held as Klipper writes them, in steps.
@@ -77,10 +85,11 @@ class Entry:
 @dataclass(frozen=True, eq=False)
 class KlipperConfig:
     """The sections of a config after includes and the SAVE_CONFIG block: ``{section: {key: Entry}}``
-    (keys lower case)."""
+    (keys lower case); ``built``: the config as built (module docstring), None where it is itself."""
 
     path: Path
     sections: dict
+    built: "KlipperConfig | None" = None
 
     def entry(self, section: str, key: str) -> Entry | None:
         return self.sections.get(section, {}).get(key)
@@ -234,13 +243,39 @@ def parse_lines(lines: list) -> dict:
     return sections
 
 
+#: A key of the main config that Klipper's SAVE_CONFIG commented out: ``#`` then ``key: value``.
+COMMENTED_OUT = re.compile(r"#([A-Za-z0-9_]+\s*[:=].*)$")
+
+
 def parse_klipper_text(text: str, path) -> KlipperConfig:
     """The config of ``text`` (read from ``path``: named in messages, includes relative to it)."""
     path = Path(path)
     regular, block = split_save_config(text, path)
     lines = resolve_includes(regular, path, frozenset({path.resolve()}))
-    lines += [(f"{path}: line {n} (SAVE_CONFIG)", line) for n, line in block]
-    return KlipperConfig(path, parse_lines(lines))
+    saved = [(f"{path}: line {n} (SAVE_CONFIG)", line) for n, line in block]
+    sections = parse_lines(lines + saved)
+    built = parse_lines(restored_lines(lines, parse_lines(saved), parse_lines(lines))) if block else None
+    return KlipperConfig(path, sections, None if built is None else KlipperConfig(path, built))
+
+
+def restored_lines(lines: list, saved: dict, main: dict) -> list:
+    """``lines`` of the main config (its sections ``main``) with the keys Klipper's SAVE_CONFIG
+    commented out read again: ``#key: value`` in a section where its block ``saved`` sets the key
+    and the main config does not, the one such line of that key in that section (several: which
+    was the owner's is not known, none is read)."""
+    found, section = [], None
+    for where, raw in lines:
+        text = strip_comment(raw).strip()
+        if text.startswith("[") and text.endswith("]"):
+            section = text[1:-1].strip()
+        m = COMMENTED_OUT.match(raw)
+        key = re.split(r"\s*[:=]", m.group(1))[0].lower() if m else None
+        restore = m and key in saved.get(section, {}) and key not in main.get(section, {})
+        found.append((section, key, m.group(1)) if restore else None)
+    counts: dict = {}
+    for f in filter(None, found):
+        counts[f[:2]] = counts.get(f[:2], 0) + 1
+    return [(where, f[2] if f and counts[f[:2]] == 1 else raw) for (where, raw), f in zip(lines, found)]
 
 
 def read_klipper_config(path) -> KlipperConfig:
@@ -317,13 +352,16 @@ class ProbeData:
 
 @dataclass(frozen=True, eq=False)
 class KlipperPrinter:
-    """What a printer.cfg says of a Delta: ``kinematics`` (one of :data:`KINEMATICS`), the machine,
-    and the probe data (None without a ``[delta_calibrate]`` section)."""
+    """What a printer.cfg says of a Delta: ``kinematics`` (one of :data:`KINEMATICS`), the machine
+    (as Klipper runs it: the SAVE_CONFIG block's values win), the machine as built (the module
+    docstring; the machine itself without a block), and the probe data (None without a
+    ``[delta_calibrate]`` section)."""
 
     path: Path
     kinematics: str
     machine: KlipperDelta | KlipperRotaryDelta
     probe: ProbeData | None
+    built: KlipperDelta | KlipperRotaryDelta
 
 
 def step_size(cfg: KlipperConfig, section: str, in_radians: bool) -> float:
@@ -442,8 +480,14 @@ def klipper_printer(cfg: KlipperConfig) -> KlipperPrinter:
     for s in STEPPERS:
         if s not in cfg.sections:
             raise KlipperError(f"{cfg.path}: no [{s}] section: a Delta has [{'], ['.join(STEPPERS)}]")
-    machine = linear_delta(cfg) if kinematics == "delta" else rotary_delta(cfg)
-    return KlipperPrinter(path=cfg.path, kinematics=kinematics, machine=machine, probe=probe_data(cfg))
+    read = linear_delta if kinematics == "delta" else rotary_delta
+    machine = built = read(cfg)
+    if cfg.built is not None:
+        try:
+            built = read(cfg.built)
+        except KlipperError:  # the owner's values are in the block alone: none before it to read
+            pass
+    return KlipperPrinter(path=cfg.path, kinematics=kinematics, machine=machine, probe=probe_data(cfg), built=built)
 
 
 def read_klipper_printer(path) -> KlipperPrinter:

@@ -75,10 +75,10 @@ def convert_klipper(config, out: str, *, overwrite: bool = False) -> KlipperConv
     if probe is None or not len(probe.touch_z_mm):
         raise KlipperError(f"{printer.path}: [{CALIBRATE_SECTION}] has no height0/height0_pos: run DELTA_CALIBRATE "
                            "and SAVE_CONFIG first")
-    m = printer.machine
-    robot = linear_delta_from_klipper(m.radius_mm, m.angles_rad, m.arm_lengths_mm, m.endstops_mm,
-                                      print_radius_mm=m.print_radius_mm)
-    sd = m.step_distances_mm
+    b = printer.built  # the prior's centre: the build, not a fit's values (docs/klipper.md)
+    robot = linear_delta_from_klipper(b.radius_mm, b.angles_rad, b.arm_lengths_mm, b.endstops_mm,
+                                      print_radius_mm=printer.machine.print_radius_mm)
+    sd = printer.machine.step_distances_mm  # the steps were counted with these
     data = ProbeData(joints_from_stable(probe.touch_steps, sd), probe.touch_z_mm,
                      joints_from_stable(probe.manual_steps, sd), probe.manual_z_mm,
                      joints_from_stable(probe.distance_steps, sd), probe.distance_mm)
