@@ -258,14 +258,17 @@ class RotaryProjection:
         return dict(zip(KLIPPER_ROTARY_PARAMETERS, map(float, self.kappa)))
 
 
-def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=None) -> RotaryProjection:
+def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=None, *,
+                                bed_depth_mm: float | None = None) -> RotaryProjection:
     """Klipper's parameters that minimise the squared tool-point errors of the identified machine
     (``robot`` with parameters ``theta``) over :func:`rotary_volume_grid` of the box
     ``pose_min``..``pose_max`` (base frame; default the robot's workspace), started from
-    :func:`klipper_of_delta_params` (central-difference Gauss-Newton: the errors are smooth)."""
+    :func:`klipper_of_delta_params` (central-difference Gauss-Newton: the errors are smooth), in
+    the Klipper frame whose bed is ``bed_depth_mm`` below the base frame's origin (default
+    :func:`bed_depth`; a probe fit's estimated bed)."""
     from scipy.optimize import least_squares
 
-    depth = bed_depth(robot)
+    depth = bed_depth(robot) if bed_depth_mm is None else float(bed_depth_mm)
     box = robot.workspace_bounds()
     lo = box[:, 0] if pose_min is None else pose_min
     hi = box[:, 1] if pose_max is None else pose_max

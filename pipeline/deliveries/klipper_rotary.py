@@ -101,10 +101,24 @@ Klipper's steps count the arms' turn from there.
 """
 
 
+def projection_box(cal: Calibration) -> tuple:
+    """``(pose_min, pose_max)`` the projection's box: the box the calibration saw; a probe
+    calibration's (its touches on the bed see no height) the robot's workspace (None, None)."""
+    if "bed_mode" in cal.recording:
+        return None, None
+    return cal.validity["pose_min"], cal.validity["pose_max"]
+
+
+def probe_bed_depth(cal: Calibration) -> float | None:
+    """The bed a probe calibration estimated, below the base frame's origin (mm; Klipper's z = 0),
+    None for any other calibration (the bottom of the robot's workspace)."""
+    bed = cal.recording.get("bed") if "bed_mode" in cal.recording else None
+    return None if bed is None else -float(bed["z_mm"])
+
+
 def rotary_export(cal: Calibration, settings: ExportSettings) -> RotaryExport:
     """The texts of the rotary Delta's Klipper export of ``cal`` (module docstring)."""
-    v = cal.validity
-    projection = project_onto_klipper_rotary(cal.robot, cal.theta, v["pose_min"], v["pose_max"])
+    projection = project_onto_klipper_rotary(cal.robot, cal.theta, *projection_box(cal), bed_depth_mm=probe_bed_depth(cal))
     message = (f"projection onto Klipper's parameters over {len(projection.targets)} points: RMS "
                f"{projection.rms_mm:.4f} mm, max {projection.max_mm:.4f} mm")
     summary = {"parameters": projection.parameters(), "bed_depth_mm": projection.bed_depth_mm,

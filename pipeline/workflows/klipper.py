@@ -29,7 +29,7 @@ from calib.probe import ProbeData, ProbeFit, ProbeNoise, fit_probe
 from pipeline.formats.klipper import (CALIBRATE_SECTION, STEPPERS, KlipperError, klipper_printer,
                                       read_klipper_config)
 from pipeline.formats.outputs import check_outputs, output_folder
-from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, write_probe_file
+from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, step_key, write_probe_file
 
 from .klipper_rotary import RotaryConvertResult, convert_rotary_klipper
 
@@ -130,7 +130,7 @@ def probe_calibration(fit: ProbeFit, data: ProbeData, probe_path: Path, d: dict)
     bed = dict(zip(("z_mm", "tilt_x_rad", "tilt_y_rad"), map(float, fit.bed_plane)))
     recording = {"name": probe_path.name, "sha256": hashlib.sha256(probe_path.read_bytes()).hexdigest(),
                  "sidecar_sha256": None, "source": d["source"], "bed": bed, "bed_mode": fit.bed,
-                 "step_distances_mm": d["step_distances_mm"]}
+                 step_key(robot): d[step_key(robot)]}
     return Calibration(robot=robot, theta=fit.theta, std=std, free=free, covariance=fit.covariance[np.ix_(idx, idx)],
                        validity=validity_domain(robot, poses, joints, np.zeros(len(joints))), recording=recording,
                        produced_by="python -m pipeline.probe")
