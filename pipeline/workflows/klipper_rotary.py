@@ -101,9 +101,12 @@ def rotary_probe_data(printer: KlipperPrinter, robot) -> ProbeData | None:
     joints = data.all_joints()
     try:
         robot.forward_kinematics(robot.table.nominal, joints)
-        bad = np.flatnonzero(~np.all(np.isfinite(joints), axis=1))
-        if bad.size:
-            raise KinematicsError("not finite", int(bad[0]))
+        ranges = np.asarray(robot.joint_ranges)
+        outside = ~np.all((joints >= ranges[:, 0]) & (joints <= ranges[:, 1]), axis=1)
+        if np.any(outside):
+            row = int(np.flatnonzero(outside)[0])
+            raise KinematicsError("an arm beyond its endstop or past hanging straight down (its range "
+                                  f"{np.round(ranges, 4).tolist()} rad)", row)
     except KinematicsError as exc:
         row = exc.index
         raise KlipperError(f"{printer.path}: [{CALIBRATE_SECTION}] {stable_key(row, data.counts)}: the arms turned "
