@@ -74,13 +74,15 @@ def rotary_notes_text(cal: Calibration, settings: ExportSettings, projection: Ro
     box = " x ".join(f"{a:.1f}..{b:.1f}" for a, b in zip(lo, hi))
     unheld = "\n".join(unheld_lines(projection, cal.effects))
     start = projection.start_figures()
+    seen = "the robot's workspace (a probe calibration's touches see no height)" if "bed_mode" in cal.recording \
+        else "the box the calibration saw"
     return f"""# Klipper export of {settings.calibration or 'a calibration made in memory'}
 
 Klipper's rotary Delta holds `shoulder_radius`, `shoulder_height` and per stepper `angle`,
 `upper_arm_length`, `lower_arm_length` and `position_endstop` (its own `DELTA_CALIBRATE` saves
 the first two, the angles and the endstops; this block also writes the arms). They were fitted to
-the identified machine by least squares of the tool-point error over {len(projection.targets)} points of the box
-the calibration saw (every {ROTARY_GRID_STEP_MM:g} mm in x and y, {ROTARY_GRID_STEP_MM / 2:g} mm in z; in Klipper's
+the identified machine by least squares of the tool-point error over {len(projection.targets)} points of {seen}
+(every {ROTARY_GRID_STEP_MM:g} mm in x and y, {ROTARY_GRID_STEP_MM / 2:g} mm in z; in Klipper's
 frame {box} mm).
 
 Klipper's frame: the bed (z = 0) at the bottom of the robot's workspace,
