@@ -8,7 +8,7 @@ injected is the machine the touches are made on, so what the fit recovers is com
 was injected and nothing else.
 
 Errors: every parameter the fit frees (all but the gauge's Lay1..3) drawn from the Delta's
-tolerances (seeded), the bed 0.3 mm off its nominal height, level. Touches: Klipper's probe
+tolerances (seeded), the bed 0.3 mm off its nominal height and tilted by BED_TILT_RAD. Touches: Klipper's probe
 points (the centre and rings at a third, two thirds and all of [delta_calibrate] radius), the tool
 at the probe's z offset above the true bed plus 0.01 mm noise; stable positions the true arms'
 turns below their endstops over the step angles, written %.3f as SAVE_CONFIG does.
@@ -31,6 +31,8 @@ PROBED_CONFIG = DATA / "rotary_delta_probed.cfg"
 #: The probe's z offset (Klipper's heightN), the touches' noise and the bed's error (mm).
 Z_OFFSET_MM, NOISE_MM, BED_OFFSET_MM = 0.1, 0.01, 0.3
 SEED = 49
+#: The bed's slopes along x and y (rad): 0.1 mm and 0.05 mm over 50 mm.
+BED_TILT_RAD = (0.002, -0.001)
 #: Points per ring of the probe pattern (centre, a third, two thirds, all of the radius).
 RING_POINTS = (1, 6, 12, 18)
 
@@ -48,7 +50,7 @@ def truth(robot, seed: int = SEED) -> tuple[np.ndarray, np.ndarray]:
     theta = robot.table.nominal + rng.normal(size=robot.n_parameters) * ParameterPrior.default(robot).std
     held = robot.table.indices(robot.gauge_fixed)
     theta[held] = robot.table.nominal[held]
-    return theta, nominal_bed(robot) + [BED_OFFSET_MM, 0.0, 0.0]
+    return theta, nominal_bed(robot) + [BED_OFFSET_MM, *BED_TILT_RAD]
 
 
 def probe_points(radius_mm: float) -> np.ndarray:
