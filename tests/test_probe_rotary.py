@@ -15,12 +15,13 @@ import klipper_rotary_reference as ref
 import rotary_probe_simulation as sim
 from calib.klipper_rotary import bed_depth, project_onto_klipper_rotary, rotary_volume_grid
 from calib.prior import DATA_SOURCE_RATIO
-from calib.probe import ProbeData, fit_probe, probe_rows
+from calib.probe import ProbeData, fit_probe, probe_rows, tool_points_and_jacobian
 from pipeline.convert import main as convert_main
 from pipeline.export import main as export_main
 from pipeline.formats.klipper import parse_klipper_text, read_klipper_config
 from pipeline.formats.probe_file import read_probe_file
 from pipeline.probe import main as probe_main
+from test_probe import FD_RTOL, FD_STEP
 
 #: A determined direction's error beyond this many of its posterior standard deviations is a
 #: failure of the stated uncertainty (a 4-sigma event: 6e-5 per direction).
@@ -35,6 +36,21 @@ def calibrated(tmp_path_factory):
     assert export_main(["--calibration", str(d / "cal" / "rotary.calibration.json"), "--to", "klipper",
                         "--out", str(d / "out")]) == 0
     return d
+
+
+def test_the_delta_tool_point_jacobian_matches_central_differences():
+    """The implicit function theorem on the Delta's closure, as on the linear Delta's (test_probe.py)."""
+    robot, _ = sim.base_robot()
+    theta, bed = sim.truth(robot)
+    rng = np.random.default_rng(2)
+    box = robot.workspace_bounds()
+    q = robot.inverse_kinematics(theta, rng.uniform(box[:, 0], box[:, 1], (6, 3)))
+    _, dX = tool_points_and_jacobian(robot, theta, q)
+    eye = np.eye(theta.size) * FD_STEP
+    fd = np.stack([(robot.forward_kinematics(theta + e, q) - robot.forward_kinematics(theta - e, q)) / (2 * FD_STEP)
+                   for e in eye], axis=-1)
+    assert np.allclose(dX, fd, rtol=0, atol=FD_RTOL * np.abs(fd).max())
+    assert np.abs(fd).max() > 1.0  # the columns are not all zero
 
 
 def test_the_committed_config_is_the_simulations_output():
@@ -149,3 +165,21 @@ def test_touches_improve_on_the_config_and_gauge_heights_on_the_touches(seed):
         kappa = project_onto_klipper_rotary(robot, fit.theta, bed=fit.bed_plane).kappa
         figures.append(tool_error_rms(reference_params(kappa), robot, truth, bed))
     assert figures[1] <= figures[0] and figures[2] <= figures[1], figures
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("robot", "hexapod", "key 'robot' is 'hexapod'; probe data are read for the linear_delta, delta"),
+    ("step_angles_rad", None, "key 'step_angles_rad' is missing"),
+])
+def test_a_probe_file_it_cannot_read_is_refused_in_one_line(calibrated, tmp_path, capsys, key, value, words):
+    d = json.loads((calibrated / "rotary.probe.json").read_text())
+    if value is None:
+        del d[key]
+    else:
+        d[key] = value
+    bad = tmp_path / "bad.probe.json"
+    bad.write_text(json.dumps(d))
+    assert probe_main([str(bad), "--out", str(tmp_path / "cal")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(bad) in err and words in err
+    assert not (tmp_path / "cal" / "bad.calibration.json").exists()

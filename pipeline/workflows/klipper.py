@@ -3,13 +3,15 @@
 :func:`convert_klipper` (``python -m pipeline.convert printer.cfg --klipper --out NAME``): the
 linear Delta of a printer.cfg and the touches, manual heights and distances of its
 ``[delta_calibrate]`` block as a probe-data file ``NAME.probe.json``
-(:mod:`pipeline.formats.probe_file`); joints = stable positions x each stepper's step distance.
+(:mod:`pipeline.formats.probe_file`); joints = stable positions x each stepper's step distance (a
+rotary Delta's: its robot ``NAME.json`` too, joints = stable positions x step angles,
+:mod:`pipeline.workflows.klipper_rotary`).
 :func:`fit_probe_file` (``python -m pipeline.probe NAME.probe.json --out DIR``): the MAP fit of
 :func:`calib.probe.fit_probe`, written as a calibration file ``DIR/NAME.calibration.json`` (what
 ``pipeline.export`` reads) with the observability statement beside it
 (``DIR/NAME.observability.txt``).
 
-Refused in one line, nothing written: a config that is not a linear Delta or has no
+Refused in one line, nothing written: a config that is not a Delta or (a linear one) has no
 ``[delta_calibrate]`` touches (naming the file, section and key), stable positions counted with
 another step distance (the factor that would fit), fewer measurements than parameters asked for.
 """
