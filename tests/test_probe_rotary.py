@@ -15,13 +15,12 @@ import klipper_rotary_reference as ref
 import rotary_probe_simulation as sim
 from calib.klipper_rotary import bed_depth, project_onto_klipper_rotary, rotary_volume_grid
 from calib.prior import DATA_SOURCE_RATIO
-from calib.probe import ProbeData, fit_probe, probe_rows, tool_points_and_jacobian
+from calib.probe import ProbeData, fit_probe, probe_rows
 from pipeline.convert import main as convert_main
 from pipeline.export import main as export_main
 from pipeline.formats.klipper import parse_klipper_text, read_klipper_config
 from pipeline.formats.probe_file import read_probe_file
 from pipeline.probe import main as probe_main
-from test_probe import FD_RTOL, FD_STEP
 
 #: A determined direction's error beyond this many of its posterior standard deviations is a
 #: failure of the stated uncertainty (a 4-sigma event: 6e-5 per direction).
@@ -36,21 +35,6 @@ def calibrated(tmp_path_factory):
     assert export_main(["--calibration", str(d / "cal" / "rotary.calibration.json"), "--to", "klipper",
                         "--out", str(d / "out")]) == 0
     return d
-
-
-def test_the_delta_tool_point_jacobian_matches_central_differences():
-    """The implicit function theorem on the Delta's closure, as on the linear Delta's (test_probe.py)."""
-    robot, _ = sim.base_robot()
-    theta, bed = sim.truth(robot)
-    rng = np.random.default_rng(2)
-    box = robot.workspace_bounds()
-    q = robot.inverse_kinematics(theta, rng.uniform(box[:, 0], box[:, 1], (6, 3)))
-    _, dX = tool_points_and_jacobian(robot, theta, q)
-    eye = np.eye(theta.size) * FD_STEP
-    fd = np.stack([(robot.forward_kinematics(theta + e, q) - robot.forward_kinematics(theta - e, q)) / (2 * FD_STEP)
-                   for e in eye], axis=-1)
-    assert np.allclose(dX, fd, rtol=0, atol=FD_RTOL * np.abs(fd).max())
-    assert np.abs(fd).max() > 1.0  # the columns are not all zero
 
 
 def test_the_committed_config_is_the_simulations_output():
