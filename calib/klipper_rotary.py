@@ -200,11 +200,14 @@ def rotary_volume_grid(pose_min, pose_max, bed_depth_mm: float) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def rotary_tool_errors(robot: Delta, theta, kappa, bed_depth_mm: float, targets) -> np.ndarray:
+def rotary_tool_errors(robot: Delta, theta, kappa, bed_depth_mm: float, targets, bed_tilt=(0.0, 0.0)) -> np.ndarray:
     """(N, 3) where the identified machine (``theta``) puts the tool when Klipper with ``kappa`` is
-    commanded to ``targets`` (N, 3, Klipper frame), minus the targets, mm."""
+    commanded to ``targets`` (N, 3, Klipper frame), minus the targets, mm. The Klipper frame's z is
+    the height above the bed: ``bed_depth_mm`` below the base frame's origin at x = y = 0, sloped
+    by ``bed_tilt`` (``tilt_x``, ``tilt_y``: a probe fit's bed plane) in the base frame."""
     reached = robot.forward_kinematics(theta, klipper_rotary_joints(kappa, targets))
-    return reached + [0.0, 0.0, bed_depth_mm] - targets
+    slope = targets[:, :2] @ np.asarray(bed_tilt, dtype=float)
+    return reached + [0.0, 0.0, bed_depth_mm] - targets - np.column_stack([np.zeros((len(slope), 2)), slope])
 
 
 def unheld_geometry(params: DeltaParams) -> dict:
@@ -258,14 +261,18 @@ class RotaryProjection:
         return dict(zip(KLIPPER_ROTARY_PARAMETERS, map(float, self.kappa)))
 
 
-def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=None) -> RotaryProjection:
+def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=None, *,
+                                bed=None) -> RotaryProjection:
     """Klipper's parameters that minimise the squared tool-point errors of the identified machine
     (``robot`` with parameters ``theta``) over :func:`rotary_volume_grid` of the box
     ``pose_min``..``pose_max`` (base frame; default the robot's workspace), started from
-    :func:`klipper_of_delta_params` (central-difference Gauss-Newton: the errors are smooth)."""
+    :func:`klipper_of_delta_params` (central-difference Gauss-Newton: the errors are smooth), in
+    the Klipper frame of the bed plane ``bed`` (``z`` mm, ``tilt_x``, ``tilt_y`` rad, base frame: a
+    probe fit's estimated bed; default level at :func:`bed_depth` below the origin)."""
     from scipy.optimize import least_squares
 
-    depth = bed_depth(robot)
+    plane = np.array([-bed_depth(robot), 0.0, 0.0]) if bed is None else as_array(bed, "bed", (3,))
+    depth, tilt = -float(plane[0]), plane[1:]
     box = robot.workspace_bounds()
     lo = box[:, 0] if pose_min is None else pose_min
     hi = box[:, 1] if pose_max is None else pose_max
@@ -273,8 +280,8 @@ def project_onto_klipper_rotary(robot: Delta, theta, pose_min=None, pose_max=Non
     params = robot.params(theta)
     start = klipper_of_delta_params(params, depth)
     scale = np.array([1.0, 1.0, 1e-3, 1e-3, 1e-3] + [1.0] * 9)
-    fit = least_squares(lambda k: rotary_tool_errors(robot, theta, k, depth, targets).ravel(), start,
+    fit = least_squares(lambda k: rotary_tool_errors(robot, theta, k, depth, targets, tilt).ravel(), start,
                         x_scale=scale, diff_step=1e-8, xtol=1e-14, ftol=1e-14, gtol=1e-14)
-    return RotaryProjection(kappa=fit.x, targets=targets, errors=rotary_tool_errors(robot, theta, fit.x, depth, targets),
+    return RotaryProjection(kappa=fit.x, targets=targets, errors=rotary_tool_errors(robot, theta, fit.x, depth, targets, tilt),
                             bed_depth_mm=depth, unheld=unheld_geometry(params),
-                            start_errors=rotary_tool_errors(robot, theta, start, depth, targets))
+                            start_errors=rotary_tool_errors(robot, theta, start, depth, targets, tilt))

@@ -1,8 +1,11 @@
-"""A linear Delta identified from what a printer owner can measure: probe touches, manual heights
-and caliper distances (issue 49, point 2; docs/klipper.md).
+"""A Delta printer identified from what its owner can measure: probe touches, manual heights and
+caliper distances (issue 49, point 2; docs/klipper.md).
 
-Measurements (mm), each at commanded joints (the carriages' counted travel below their endstops,
-:class:`calib.robots.linear_delta.LinearDelta`'s joints):
+The robot is any whose pose is its tool point ``(x, y, z)`` (mm, base frame) given by the forward
+kinematics of its closure: the linear Delta (:class:`calib.robots.linear_delta.LinearDelta`, joints
+the carriages' counted travel below their endstops, mm) and the rotary Delta
+(:class:`calib.robots.delta.Delta` of a Klipper ``rotary_delta`` config, joints the arms' turns
+below their endstops, rad). Measurements (mm), each at commanded joints:
 
 * a *probe touch*: the tool point met the bed; ``z`` is the tool point's height above the bed
   there (Klipper's ``heightN``: the probe's z offset);
@@ -12,8 +15,9 @@ Measurements (mm), each at commanded joints (the carriages' counted travel below
   printed object (Klipper's ``distanceN``).
 
 The bed is the instrument's frame: the plane ``z = bed.z + bed.tilt_x x + bed.tilt_y y`` of the
-robot's base frame, estimated along with the robot (a prior of :data:`BED_TOLERANCE`: a bed placed
-and levelled by hand) or declared flat (``bed.* = 0``, held). A touch's residual is the model's
+robot's base frame, estimated along with the robot (a prior of :data:`BED_TOLERANCE` about
+:func:`nominal_bed`: a bed placed and levelled by hand) or declared flat (held at
+:func:`nominal_bed`). A touch's residual is the model's
 tool height minus the bed's height under it minus ``z``.
 
 The fit (:func:`fit_probe`) is the maximum a posteriori estimate: Gauss-Newton on the whitened
@@ -23,7 +27,7 @@ closure by the implicit function theorem ``dX/dtheta = -(dF/dX)^-1 dF/dtheta``. 
 each parameter's posterior standard deviation, which parameters and combinations the data leave
 to their tolerances (the posterior's eigenvectors in tolerance units whose standard deviation the
 data did not halve, :data:`calib.prior.DATA_SOURCE_RATIO`) and which further measurement would
-determine each of them (:data:`CANDIDATES`).
+determine each of them (:data:`CANDIDATES`, per robot: :func:`candidates_of`).
 """
 
 from __future__ import annotations
@@ -34,11 +38,12 @@ import numpy as np
 
 from .observability import describe_combination
 from .prior import DATA_SOURCE_RATIO, ParameterPrior, parameter_sources
+from .robot import KinematicsError, Robot
 from .robots.linear_delta import LinearDelta
 from .validation import as_array
 
 __all__ = ["ProbeData", "ProbeNoise", "ProbeFit", "ProbeError", "fit_probe", "tool_points_and_jacobian",
-           "probe_rows", "BED_PARAMETERS", "BED_TOLERANCE", "BED_MODES", "CANDIDATES", "GAUGE_HEIGHTS_MM",
+           "probe_rows", "nominal_bed", "candidates_of", "BED_PARAMETERS", "BED_TOLERANCE", "BED_MODES", "CANDIDATES", "GAUGE_HEIGHTS_MM",
            "CALIBRATION_OBJECT_ANGLES_RAD", "CALIBRATION_OBJECT_RADII_MM", "calibration_object_points"]
 
 #: The bed plane's parameters: its height at the origin (mm) and its slopes along x and y (rad).
@@ -59,6 +64,11 @@ CALIBRATION_OBJECT_RADII_MM = (4.5, 65.0)
 CANDIDATES = {"manual": "manual heights on 50 and 100 mm gauge blocks at the touches",
               "distance": "the calibration object's 12 caliper distances",
               "position": "tool positions (x, y, z) measured at the touches"}
+#: The rotary Delta's entries where they differ: its arms' lengths and its joint zeros move the tool
+#: alike on the bed, and an arm's angle at its endstop is what a digital level on the arm reads.
+ROTARY_CANDIDATES = {**CANDIDATES, "joint zero": "each arm's angle at its endstop (a digital level on the arm)"}
+#: The standard deviation of an arm's angle read with a digital level (0.1 degree), rad.
+JOINT_ZERO_STD_RAD = float(np.radians(0.1))
 #: Gauss-Newton stops when the step changes no whitened residual by more than this.
 STEP_TOL = 1e-9
 
@@ -122,7 +132,7 @@ class ProbeData:
         return np.concatenate([self.touch_joints, self.manual_joints, self.distance_joints.reshape(-1, 3)])
 
 
-def tool_points_and_jacobian(robot: LinearDelta, theta, joints) -> tuple[np.ndarray, np.ndarray]:
+def tool_points_and_jacobian(robot: Robot, theta, joints) -> tuple[np.ndarray, np.ndarray]:
     """``(X, dX/dtheta)``: (N, 3) tool points at ``joints`` (N, 3) and (N, 3, P) their derivatives
     with respect to the parameters, ``-(dF/dX)^-1 dF/dtheta`` of the closure ``F``."""
     X = robot.forward_kinematics(theta, joints)
@@ -130,8 +140,8 @@ def tool_points_and_jacobian(robot: LinearDelta, theta, joints) -> tuple[np.ndar
     return X, -np.linalg.solve(jac.pose, jac.parameters)
 
 
-def probe_rows(robot: LinearDelta, theta, bed, data: ProbeData, noise: ProbeNoise) -> tuple[np.ndarray, np.ndarray,
-                                                                                             np.ndarray]:
+def probe_rows(robot: Robot, theta, bed, data: ProbeData, noise: ProbeNoise) -> tuple[np.ndarray, np.ndarray,
+                                                                                       np.ndarray]:
     """``(r, J, kinds)``: the whitened residuals (R,) of ``data`` (model minus measured), their
     Jacobian (R, P + 3) in the robot's parameters then :data:`BED_PARAMETERS`, and each row's kind
     (``"touch"``, ``"manual"``, ``"distance"``)."""
@@ -156,7 +166,7 @@ def probe_rows(robot: LinearDelta, theta, bed, data: ProbeData, noise: ProbeNois
 
 @dataclass(frozen=True, eq=False)
 class ProbeFit:
-    """A linear Delta identified from probe data (:func:`fit_probe`).
+    """A Delta identified from probe data (:func:`fit_probe`).
 
     Attributes:
         robot: the robot (nominal) fitted.
@@ -176,7 +186,7 @@ class ProbeFit:
             columns for the held ones.
     """
 
-    robot: LinearDelta
+    robot: Robot
     names: tuple
     values: np.ndarray
     std: np.ndarray
@@ -215,16 +225,19 @@ class ProbeFit:
         if not self.left:
             lines.append("No combination is left to its tolerance.")
         for c in self.left:
-            fix = " or ".join(CANDIDATES[k] for k in c["determined_by"]) or "none of " + ", ".join(CANDIDATES.values())
+            words = candidates_of(self.robot)
+            fix = " or ".join(words[k] for k in c["determined_by"]) or "none of " + ", ".join(words.values())
             lines.append(f"Left to the tolerances (posterior {c['std_ratio']:.2f} of the prior): {c['combination']}; "
                          f"determined by: {fix}.")
         held = [n for n in self.names if self.sources[n] == "held"]
         if held:
-            lines.append(f"Held at nominal (no measurement tells them from the towers): {', '.join(held)}.")
+            why = "no measurement tells them from the towers" if isinstance(self.robot, LinearDelta) else \
+                "a gauge choice: each with its arm's joint zero is one direction no measurement fixes"
+            lines.append(f"Held at nominal ({why}): {', '.join(held)}.")
         return "\n".join(lines)
 
 
-def fit_probe(robot: LinearDelta, data: ProbeData, *, noise: ProbeNoise | None = None,
+def fit_probe(robot: Robot, data: ProbeData, *, noise: ProbeNoise | None = None,
               prior: ParameterPrior | None = None, free=None, max_iter: int = 30) -> ProbeFit:
     """The maximum a posteriori fit of ``robot``'s parameters and the bed to ``data`` (module
     docstring).
@@ -234,7 +247,8 @@ def fit_probe(robot: LinearDelta, data: ProbeData, *, noise: ProbeNoise | None =
         data: the measurements.
         noise: their standard deviations (default :class:`ProbeNoise`'s).
         prior: the tolerances (default the robot's ``default_parameter_tolerance``).
-        free: names of the robot's parameters to fit (default all but ``robot.machine_only``);
+        free: names of the robot's parameters to fit (default all but ``robot.machine_only`` and
+            ``robot.gauge_fixed``);
             the bed's are added unless ``data.bed`` is ``"flat"``.
         max_iter: Gauss-Newton iterations at most.
 
@@ -250,17 +264,31 @@ def fit_probe(robot: LinearDelta, data: ProbeData, *, noise: ProbeNoise | None =
     if rows < free_idx.size:
         raise ProbeError(f"{rows} measurements ({', '.join(f'{v} {k}' for k, v in data.counts.items())}) for "
                          f"{free_idx.size} parameters asked for: give at least {free_idx.size} or free fewer")
-    mean = np.concatenate([prior.mean, np.zeros(3)])
+    mean = np.concatenate([prior.mean, nominal_bed(robot)])
     tol = np.concatenate([prior.std, BED_TOLERANCE])
     x, iterations = gauss_newton(robot, data, noise, mean, tol, free_idx, max_iter)
     r, J, kinds = probe_rows(robot, x[:-3], x[-3:], data, noise)
     return fit_result(robot, data, noise, names, x, tol, free_idx, r, J, kinds, iterations)
 
 
-def free_indices(robot: LinearDelta, data: ProbeData, free) -> np.ndarray:
+def nominal_bed(robot: Robot) -> np.ndarray:
+    """(3,) the bed plane as built: level, at the linear Delta's base frame (its z is measured from
+    the bed), at the bottom of any other robot's workspace (a rotary Delta's base frame is at its
+    shoulders, the bed below: :func:`calib.klipper_rotary.bed_depth`)."""
+    height = 0.0 if isinstance(robot, LinearDelta) else float(robot.workspace_bounds()[2, 0])
+    return np.array([height, 0.0, 0.0])
+
+
+def candidates_of(robot: Robot) -> dict[str, str]:
+    """The further measurements the observability statement tries for ``robot``, in words."""
+    return CANDIDATES if isinstance(robot, LinearDelta) else ROTARY_CANDIDATES
+
+
+def free_indices(robot: Robot, data: ProbeData, free) -> np.ndarray:
     """(K,) the free parameters' indices in the robot's parameters then the bed's."""
     names = list(robot.table.names)
-    chosen = [n for n in names if n not in robot.machine_only] if free is None else list(free)
+    held = set(robot.machine_only) | set(robot.gauge_fixed)
+    chosen = [n for n in names if n not in held] if free is None else list(free)
     unknown = [n for n in chosen if n not in names]
     if unknown:
         raise ProbeError(f"free: {unknown[0]!r} is not a parameter of the {robot.name} (e.g. {', '.join(names[:3])})")
@@ -296,7 +324,7 @@ def fit_result(robot, data, noise, names, x, tol, idx, r, J, kinds, iterations) 
     covariance = np.zeros((tol.size, tol.size))
     covariance[np.ix_(idx, idx)] = cov_w * np.outer(tol[idx], tol[idx])
     sources = dict.fromkeys(names, "held")
-    src = parameter_sources(std[idx], tol[idx], x[idx] - np.concatenate([robot.table.nominal, np.zeros(3)])[idx])
+    src = parameter_sources(std[idx], tol[idx], x[idx] - np.concatenate([robot.table.nominal, nominal_bed(robot)])[idx])
     sources.update({names[i]: str(s) for i, s in zip(idx, src)})
     sigma = {"touch": noise.touch_mm, "manual": noise.manual_mm, "distance": noise.distance_mm}
     rms = {k: float(np.sqrt(np.mean((r[kinds == k] * sigma[k]) ** 2))) for k in sigma if np.any(kinds == k)}
@@ -336,25 +364,45 @@ def calibration_object_points() -> np.ndarray:
 
 
 def candidate_information(robot, x, data: ProbeData, noise: ProbeNoise, tol, idx) -> dict[str, np.ndarray]:
-    """``{key of CANDIDATES: (K, K) information}`` each further measurement would add, in
-    tolerance units, at the fitted machine (its joints from the fitted inverse kinematics)."""
+    """``{key of candidates_of(robot): (K, K) information}`` each further measurement would add, in
+    tolerance units, at the fitted machine (its joints from the fitted inverse kinematics); a
+    measurement the robot cannot reach (a gauge block above a rotary Delta's workspace) is left out."""
     p = robot.n_parameters
     theta, bed = x[:p], x[p:]
     touch = robot.forward_kinematics(theta, data.touch_joints) if len(data.touch_z_mm) else np.zeros((0, 3))
-    gauge = np.concatenate([touch + [0.0, 0.0, h] for h in GAUGE_HEIGHTS_MM])
-    ends = calibration_object_points()
-    ends[..., 2] = bed[0] + ends[..., :2] @ bed[1:]
-    manual = ProbeData(np.zeros((0, 3)), np.zeros(0), robot.inverse_kinematics(theta, gauge),
-                       gauge[:, 2] - bed[0] - gauge[:, :2] @ bed[1:], bed=data.bed)
-    distance = ProbeData(np.zeros((0, 3)), np.zeros(0), distance_joints=robot.inverse_kinematics(
-        theta, ends.reshape(-1, 3)).reshape(-1, 2, 3), distance_mm=np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1),
-        bed=data.bed)
     out = {}
-    for key, extra in (("manual", manual), ("distance", distance)):
+    for key, extra in further_data(robot, theta, bed, touch, data.bed).items():
         J = probe_rows(robot, theta, bed, extra, noise)[1][:, idx] * tol[idx]
         out[key] = J.T @ J
     if len(touch):
         dX = tool_points_and_jacobian(robot, theta, data.touch_joints)[1].reshape(-1, p) / noise.touch_mm
         J = np.concatenate([dX, np.zeros((dX.shape[0], 3))], axis=1)[:, idx] * tol[idx]
         out["position"] = J.T @ J
+    if "joint zero" in candidates_of(robot):
+        J = np.zeros((len(robot.joint_zero_names), p + 3))
+        J[np.arange(J.shape[0]), robot.table.indices(robot.joint_zero_names)] = 1.0 / JOINT_ZERO_STD_RAD
+        J = J[:, idx] * tol[idx]
+        out["joint zero"] = J.T @ J
     return out
+
+
+def further_data(robot, theta, bed, touch, bed_mode) -> dict[str, ProbeData]:
+    """``{"manual", "distance": ProbeData}``: the gauge blocks on the touches and the calibration
+    object as the fitted machine would measure them, those it can reach."""
+    gauge = np.concatenate([touch + [0.0, 0.0, h] for h in GAUGE_HEIGHTS_MM])
+    ends = calibration_object_points()
+    ends[..., 2] = bed[0] + ends[..., :2] @ bed[1:]
+    out = {}
+    try:
+        out["manual"] = ProbeData(np.zeros((0, 3)), np.zeros(0), robot.inverse_kinematics(theta, gauge),
+                                  gauge[:, 2] - bed[0] - gauge[:, :2] @ bed[1:], bed=bed_mode)
+    except KinematicsError:
+        pass
+    try:
+        out["distance"] = ProbeData(np.zeros((0, 3)), np.zeros(0), distance_joints=robot.inverse_kinematics(
+            theta, ends.reshape(-1, 3)).reshape(-1, 2, 3), distance_mm=np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1),
+            bed=bed_mode)
+    except KinematicsError:
+        pass
+    return out
+

@@ -68,7 +68,7 @@ def run(argv: list[str] | None = None) -> ConvertResult:
 
 
 def run_klipper(parser, args) -> KlipperConvertResult | RotaryConvertResult:
-    """``--klipper``: one printer.cfg to NAME.probe.json (a rotary Delta's: its robot, NAME.json);
+    """``--klipper``: one printer.cfg to NAME.probe.json (a rotary Delta's: its robot, NAME.json, too);
     print what was written."""
     if len(args.files) != 1 or args.map is not None:
         parser.error("--klipper converts one printer.cfg and takes no --map")

@@ -1,6 +1,6 @@
-"""``python -m pipeline.probe NAME.probe.json --out DIR``: a linear Delta calibrated from probe
-touches, manual heights and distances (a probe-data file written by ``python -m pipeline.convert
-printer.cfg --klipper``): ``DIR/NAME.calibration.json`` (for ``python -m pipeline.export``) and the
+"""``python -m pipeline.probe NAME.probe.json --out DIR``: a Delta printer (linear, or rotary: the
+``delta`` robot of a ``rotary_delta`` config) calibrated from probe touches, manual heights and
+distances (a probe-data file written by ``python -m pipeline.convert printer.cfg --klipper``): ``DIR/NAME.calibration.json`` (for ``python -m pipeline.export``) and the
 observability statement ``DIR/NAME.observability.txt``, printed too (docs/klipper.md).
 
 A dedicated command rather than ``pipeline.run --real``: a run fits poses at joints and judges
@@ -19,7 +19,7 @@ __all__ = ["build_parser", "run", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="python -m pipeline.probe",
-                       description="Calibrate a linear Delta from a probe-data file (touches, manual heights, "
+                       description="Calibrate a Delta printer (linear or rotary) from a probe-data file (touches, manual heights, "
                                    "distances): the MAP fit with the robot's tolerances as the prior.")
     p.add_argument("probe", help="the probe-data file NAME.probe.json (python -m pipeline.convert --klipper)")
     p.add_argument("--out", required=True, help="folder for NAME.calibration.json and NAME.observability.txt")

@@ -12,6 +12,7 @@ import pytest
 import klipper_rotary_reference as ref
 from calib.robots import robot_from_description
 from pipeline.convert import main as convert_main
+from pipeline.probe import main as probe_main
 from pipeline.formats.klipper import read_klipper_config
 from pipeline.workflows.design import load_robot
 from test_klipper_rotary import SAME_FORMULAS, grid_of
@@ -46,12 +47,25 @@ def test_the_description_is_what_geometry_flags_read(converted):
     assert robot.workspace_bounds()[2, 0] == -ref.read_params(read_klipper_config(FIXTURE)).shoulder_height
 
 
-def test_the_touches_left_are_said(tmp_path, capsys):
+def test_the_touches_are_converted_and_too_few_for_the_fit_are_refused(tmp_path, capsys):
     assert convert_main([str(FIXTURE), "--klipper", "--out", str(tmp_path / "r")]) == 0
     out, err = capsys.readouterr()
     assert out.startswith(f"wrote {tmp_path / 'r.json'}: the delta robot of the rotary_delta config")
-    assert err.strip() == ("warning: not converted: the 3 touches of [delta_calibrate]: the probe fit (pipeline.probe) "
-                           "is for the linear Delta (kinematics: delta)")
+    assert f"wrote {tmp_path / 'r.probe.json'}: 3 touches, 0 manual heights, 0 distances" in out and not err
+    assert probe_main([str(tmp_path / "r.probe.json"), "--out", str(tmp_path / "cal")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "3 measurements (3 touches, 0 manual heights, 0 distances) for 24 parameters" in err
+    assert not (tmp_path / "cal" / "r.calibration.json").exists()
+
+
+def test_a_touch_the_robot_cannot_assemble_is_refused_in_one_line(tmp_path, capsys):
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text(FIXTURE.read_text().replace("height1_pos = 4620.500,4618.250,3880.000",
+                                               "height1_pos = 4620.500,4618.250,-30000.000"))
+    assert convert_main([str(cfg), "--klipper", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(cfg) in err and "[delta_calibrate] height1_pos" in err and "do not assemble" in err
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.probe.json").exists()
 
 
 @pytest.mark.parametrize("old, new, words", [

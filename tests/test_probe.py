@@ -46,11 +46,28 @@ def synthetic(robot, truth, bed, rng, n=100, gauges=(), noise=None):
     return ProbeData(robot.inverse_kinematics(truth, on_bed), z_t, robot.inverse_kinematics(truth, gauge), z_m)
 
 
-def test_tool_point_jacobian_matches_central_differences():
+def linear_case():
+    """The default linear Delta off by its tolerances, at six joints over its volume."""
     robot = LinearDelta.default()
     rng = np.random.default_rng(0)
     theta = perturbed(robot, rng)
-    q = robot.inverse_kinematics(theta, np.column_stack([disc(6, rng), rng.uniform(0, 150, 6)]))
+    return robot, theta, robot.inverse_kinematics(theta, np.column_stack([disc(6, rng), rng.uniform(0, 150, 6)]))
+
+
+def rotary_case():
+    """The rotary Delta of the reader's fixture off by its tolerances (tests/rotary_probe_simulation.py),
+    at six joints over its workspace."""
+    import rotary_probe_simulation as sim
+
+    robot, _ = sim.base_robot()
+    theta, _ = sim.truth(robot)
+    box = robot.workspace_bounds()
+    return robot, theta, robot.inverse_kinematics(theta, np.random.default_rng(2).uniform(box[:, 0], box[:, 1], (6, 3)))
+
+
+@pytest.mark.parametrize("case", [linear_case, rotary_case])
+def test_tool_point_jacobian_matches_central_differences(case):
+    robot, theta, q = case()
     X, dX = tool_points_and_jacobian(robot, theta, q)
     eye = np.eye(theta.size) * FD_STEP
     fd = np.stack([(robot.forward_kinematics(theta + e, q) - robot.forward_kinematics(theta - e, q)) / (2 * FD_STEP)

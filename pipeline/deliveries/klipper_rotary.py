@@ -72,18 +72,25 @@ def rotary_notes_text(cal: Calibration, settings: ExportSettings, projection: Ro
     """NOTES.md: the projection's residual, what Klipper cannot hold, the accuracy given up."""
     lo, hi = projection.targets.min(axis=0), projection.targets.max(axis=0)
     box = " x ".join(f"{a:.1f}..{b:.1f}" for a, b in zip(lo, hi))
-    unheld = "\n".join(unheld_lines(projection, cal.effects))
+    bed = probe_bed(cal)
+    tilt = [] if bed is None else [f"- The bed tilted against the shoulders' plane ({1e3 * bed[1]:+.3f}, {1e3 * bed[2]:+.3f} mrad "
+                                   "in x, y): Klipper's shoulders stand at one height above a level bed."]
+    unheld = "\n".join(unheld_lines(projection, cal.effects) + tilt)
     start = projection.start_figures()
+    where = "at the bottom of the robot's workspace" if bed is None else \
+        f"the plane the probe fit estimated (tilt {1e3 * bed[1]:+.3f}, {1e3 * bed[2]:+.3f} mrad in x, y)"
+    seen = "the robot's workspace (a probe calibration's touches see no height)" if "bed_mode" in cal.recording \
+        else "the box the calibration saw"
     return f"""# Klipper export of {settings.calibration or 'a calibration made in memory'}
 
 Klipper's rotary Delta holds `shoulder_radius`, `shoulder_height` and per stepper `angle`,
 `upper_arm_length`, `lower_arm_length` and `position_endstop` (its own `DELTA_CALIBRATE` saves
 the first two, the angles and the endstops; this block also writes the arms). They were fitted to
-the identified machine by least squares of the tool-point error over {len(projection.targets)} points of the box
-the calibration saw (every {ROTARY_GRID_STEP_MM:g} mm in x and y, {ROTARY_GRID_STEP_MM / 2:g} mm in z; in Klipper's
+the identified machine by least squares of the tool-point error over {len(projection.targets)} points of {seen}
+(every {ROTARY_GRID_STEP_MM:g} mm in x and y, {ROTARY_GRID_STEP_MM / 2:g} mm in z; in Klipper's
 frame {box} mm).
 
-Klipper's frame: the bed (z = 0) at the bottom of the robot's workspace,
+Klipper's frame: the bed (z = 0) {where},
 {projection.bed_depth_mm:.3f} mm below the base frame's origin; x, y and the turn about z are the
 calibration's base frame. The joints' zero is taken to be where Klipper homes (the endstops):
 Klipper's steps count the arms' turn from there.
@@ -101,10 +108,24 @@ Klipper's steps count the arms' turn from there.
 """
 
 
+def projection_box(cal: Calibration) -> tuple:
+    """``(pose_min, pose_max)`` the projection's box: the box the calibration saw; a probe
+    calibration's (its touches on the bed see no height) the robot's workspace (None, None)."""
+    if "bed_mode" in cal.recording:
+        return None, None
+    return cal.validity["pose_min"], cal.validity["pose_max"]
+
+
+def probe_bed(cal: Calibration) -> np.ndarray | None:
+    """(3,) the bed plane a probe calibration estimated (``z`` mm, ``tilt_x``, ``tilt_y`` rad:
+    Klipper's z = 0), None for any other calibration (level at the bottom of the robot's workspace)."""
+    bed = cal.recording.get("bed") if "bed_mode" in cal.recording else None
+    return None if bed is None else np.array([bed["z_mm"], bed["tilt_x_rad"], bed["tilt_y_rad"]], dtype=float)
+
+
 def rotary_export(cal: Calibration, settings: ExportSettings) -> RotaryExport:
     """The texts of the rotary Delta's Klipper export of ``cal`` (module docstring)."""
-    v = cal.validity
-    projection = project_onto_klipper_rotary(cal.robot, cal.theta, v["pose_min"], v["pose_max"])
+    projection = project_onto_klipper_rotary(cal.robot, cal.theta, *projection_box(cal), bed=probe_bed(cal))
     message = (f"projection onto Klipper's parameters over {len(projection.targets)} points: RMS "
                f"{projection.rms_mm:.4f} mm, max {projection.max_mm:.4f} mm")
     summary = {"parameters": projection.parameters(), "bed_depth_mm": projection.bed_depth_mm,

@@ -3,13 +3,15 @@
 :func:`convert_klipper` (``python -m pipeline.convert printer.cfg --klipper --out NAME``): the
 linear Delta of a printer.cfg and the touches, manual heights and distances of its
 ``[delta_calibrate]`` block as a probe-data file ``NAME.probe.json``
-(:mod:`pipeline.formats.probe_file`); joints = stable positions x each stepper's step distance.
+(:mod:`pipeline.formats.probe_file`); joints = stable positions x each stepper's step distance (a
+rotary Delta's: its robot ``NAME.json`` too, joints = stable positions x step angles,
+:mod:`pipeline.workflows.klipper_rotary`).
 :func:`fit_probe_file` (``python -m pipeline.probe NAME.probe.json --out DIR``): the MAP fit of
 :func:`calib.probe.fit_probe`, written as a calibration file ``DIR/NAME.calibration.json`` (what
 ``pipeline.export`` reads) with the observability statement beside it
 (``DIR/NAME.observability.txt``).
 
-Refused in one line, nothing written: a config that is not a linear Delta or has no
+Refused in one line, nothing written: a config that is not a Delta or (a linear one) has no
 ``[delta_calibrate]`` touches (naming the file, section and key), stable positions counted with
 another step distance (the factor that would fit), fewer measurements than parameters asked for.
 """
@@ -29,7 +31,7 @@ from calib.probe import ProbeData, ProbeFit, ProbeNoise, fit_probe
 from pipeline.formats.klipper import (CALIBRATE_SECTION, STEPPERS, KlipperError, klipper_printer,
                                       read_klipper_config)
 from pipeline.formats.outputs import check_outputs, output_folder
-from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, write_probe_file
+from pipeline.formats.probe_file import PROBE_SUFFIX, read_probe_file, step_key, write_probe_file
 
 from .klipper_rotary import RotaryConvertResult, convert_rotary_klipper
 
@@ -130,7 +132,7 @@ def probe_calibration(fit: ProbeFit, data: ProbeData, probe_path: Path, d: dict)
     bed = dict(zip(("z_mm", "tilt_x_rad", "tilt_y_rad"), map(float, fit.bed_plane)))
     recording = {"name": probe_path.name, "sha256": hashlib.sha256(probe_path.read_bytes()).hexdigest(),
                  "sidecar_sha256": None, "source": d["source"], "bed": bed, "bed_mode": fit.bed,
-                 "step_distances_mm": d["step_distances_mm"]}
+                 step_key(robot): d[step_key(robot)]}
     return Calibration(robot=robot, theta=fit.theta, std=std, free=free, covariance=fit.covariance[np.ix_(idx, idx)],
                        validity=validity_domain(robot, poses, joints, np.zeros(len(joints))), recording=recording,
                        produced_by="python -m pipeline.probe")
