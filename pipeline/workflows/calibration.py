@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +26,7 @@ from calib.measurement import frame_to_dict, measured_gauge_representative
 from calib.metrics import calibration_gain
 from calib.noise import SensorNoise
 from calib.observability import identification_jacobian
-from calib.prior import DATA_SOURCE_RATIO, ParameterPrior
+from calib.prior import DATA_SOURCE_RATIO, IMPLAUSIBLE_TOLERANCES, ParameterPrior, implausible_errors
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
 from calib.workspace import reachable_poses
@@ -37,6 +37,7 @@ from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, fini
                                          with_suggested, without_file)
 from pipeline.report.summary import (diagnosis_summary, gross_keys, gross_stage, instrument_fit, run_record,
                                      session_keys, summary_keys)
+from pipeline.report.verdict_words import implausible_sentence
 
 from .options import check_noise_flags
 
@@ -92,11 +93,15 @@ class AsRead:
         gross_rows: 0-based rows of the recording named gross (left out of any fit).
         block: summary keys: ``gross_rows``, and ``measurement_frame``/``measurement_frame_std``
             where an instrument frame was registered.
+        frames, frames_std: ``{session: (6,) frame}`` the instrument frames registered and their
+            standard uncertainties (:func:`instrument_frames`; empty: the base frame).
     """
 
     recording: Recording
     gross_rows: list
     block: dict
+    frames: dict = field(default_factory=dict)
+    frames_std: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -489,22 +494,11 @@ def declared_tolerance(robot: Robot, meta: dict | None, where: str, flag: dict |
         raise ValueError(f"--tolerance: {exc}") from None
 
 
-#: An identified error beyond this many tolerances is physically implausible.
-IMPLAUSIBLE_TOLERANCES = 3.0
-
-
 def implausible_parameters(robot: Robot, errors: np.ndarray, tolerance: ParameterPrior, names) -> list[dict]:
-    """The identified errors (P,) beyond :data:`IMPLAUSIBLE_TOLERANCES` times their tolerance, of the
-    parameters ``names``: ``{"name", "error", "tolerance", "unit", "words"}`` each, largest first."""
-    out = []
-    for name in names:
-        k = robot.table.index(name)
-        tol, err, unit = float(tolerance.std[k]), float(errors[k]), robot.table.units[k]
-        if abs(err) > IMPLAUSIBLE_TOLERANCES * tol:
-            out.append({"name": name, "error": err, "tolerance": tol, "unit": unit,
-                        "words": f"{name} = {err:+.4g} {unit} from nominal, {abs(err) / tol:.3g} times its tolerance "
-                                 f"{tol:.4g} {unit}"})
-    return sorted(out, key=lambda d: -abs(d["error"]) / d["tolerance"])
+    """The identified errors (P,) beyond :data:`calib.prior.IMPLAUSIBLE_TOLERANCES` times their
+    tolerance, of the parameters ``names`` (:func:`calib.prior.implausible_errors`): ``{"name",
+    "error", "tolerance", "unit", "words"}`` each, largest first."""
+    return [dict(asdict(e), words=implausible_sentence(e)) for e in implausible_errors(robot, errors, tolerance, names)]
 
 
 def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
@@ -653,7 +647,7 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
     ident, data = outcome.identification, outcome.data
     rec, instrument = inp.rec, ident.instrument
     block = {"gross_rows": gross_keys(gross_stage(inp, ident))}
-    measured = rec.measured
+    measured, frames, frames_std = rec.measured, {}, {}
     if instrument is not None:
         if instrument.targets is not None:
             raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
@@ -664,6 +658,7 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
         block["measurement_frame_std"] = frame_to_dict(instrument.frame_std)
         if several:
             block.update(session_keys(instrument_fit(inp, instrument)))
+        frames, frames_std = instrument_frames(inp, instrument, several)
     gross = [int(inp.rows[i]) for i in ident.gross_idx]
     meta = rec.meta
     if not data.tolerance_declared and data.tolerance_estimate is not None:
@@ -671,7 +666,19 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
         # (discovery's) takes it as the run did, and says where it came from.
         meta = {**rec.meta, "parameter_tolerance": data.tolerance.tolerance_by_name(inp.robot),
                 TOLERANCE_SOURCE_KEY: data.tolerance_source}
-    return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block)
+    return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block, frames=frames,
+                  frames_std=frames_std)
+
+
+def instrument_frames(inp: CalibrationInput, fit, several: bool) -> tuple[dict, dict]:
+    """``({session: (6,) frame}, {session: (6,) std})`` the instrument fit ``fit`` registered: every
+    frame session's (``several``), else the recording's first session's."""
+    if several:
+        names = inp.frame_sessions
+        return ({names[s]: np.array(f, dtype=float) for s, f in enumerate(fit.frames)},
+                {names[s]: np.array(sd, dtype=float) for s, sd in enumerate(fit.frames_std)})
+    first = inp.rec.session_names[0]
+    return {first: np.array(fit.frame, dtype=float)}, {first: np.array(fit.frame_std, dtype=float)}
 
 
 def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
