@@ -31,7 +31,8 @@ import numpy as np
 from .robot import Robot
 from .validation import as_array, frozen_array
 
-__all__ = ["ParameterPrior", "PARAMETER_UNITS", "DATA_SOURCE_RATIO", "MOVED_BY_DATA", "parameter_sources"]
+__all__ = ["ParameterPrior", "PARAMETER_UNITS", "DATA_SOURCE_RATIO", "MOVED_BY_DATA", "parameter_sources",
+           "IMPLAUSIBLE_TOLERANCES", "ImplausibleError", "implausible_errors"]
 
 #: The units a ``parameter_tolerance`` mapping may name as keys (one value for every parameter
 #: in that unit).
@@ -160,3 +161,30 @@ def parameter_sources(posterior_std, prior_std, moved=None) -> np.ndarray:
     if moved is not None:
         data |= np.abs(np.asarray(moved, dtype=float)) > MOVED_BY_DATA * prior
     return np.where(data, "data", "prior")
+
+
+#: An identified error beyond this many tolerances is physically implausible.
+IMPLAUSIBLE_TOLERANCES = 3.0
+
+
+@dataclass(frozen=True)
+class ImplausibleError:
+    """An identified error from nominal beyond :data:`IMPLAUSIBLE_TOLERANCES` times its tolerance
+    (one standard deviation), both in the parameter's ``unit``."""
+
+    name: str
+    error: float
+    tolerance: float
+    unit: str
+
+
+def implausible_errors(robot: Robot, errors, tolerance: ParameterPrior, names) -> list[ImplausibleError]:
+    """The identified errors (P,) beyond :data:`IMPLAUSIBLE_TOLERANCES` times their ``tolerance``,
+    of the parameters ``names``, the farthest (in tolerances) first."""
+    out = []
+    for name in names:
+        k = robot.table.index(name)
+        tol, err = float(tolerance.std[k]), float(errors[k])
+        if abs(err) > IMPLAUSIBLE_TOLERANCES * tol:
+            out.append(ImplausibleError(name, err, tol, robot.table.units[k]))
+    return sorted(out, key=lambda e: -abs(e.error) / e.tolerance)

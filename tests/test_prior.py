@@ -342,3 +342,27 @@ def test_prior_refuses_bad_arrays_and_a_foreign_robot():
     joints, measured = _measure(hexapod, hexapod.table.nominal, hexapod.home_pose[None], 1)
     with pytest.raises(ValueError, match="parameters"):
         identify_forward(hexapod, joints, measured, NOISE, prior=ParameterPrior.default(delta))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_implausible_errors_are_those_beyond_three_tolerances_farthest_first(name):
+    """Errors at 2.9, 3.1 and 5 tolerances on three free parameters: the last two named, 5 first,
+    each with its error, tolerance and unit; the parameters not asked about never named."""
+    from calib.prior import IMPLAUSIBLE_TOLERANCES, implausible_errors
+
+    robot = default_robot(name)
+    prior = ParameterPrior.default(robot)
+    names = list(robot.free_default)[:3]
+    errors = np.zeros(robot.n_parameters)
+    for name_, times in zip(names, (2.9, 3.1, 5.0)):
+        k = robot.table.index(name_)
+        errors[k] = -times * prior.std[k]
+    other = robot.table.index(robot.table.names[-1]) if robot.table.names[-1] not in names else None
+    if other is not None:
+        errors[other] = 10 * prior.std[other]
+    found = implausible_errors(robot, errors, prior, names)
+    assert [e.name for e in found] == [names[2], names[1]]
+    for e in found:
+        k = robot.table.index(e.name)
+        assert (e.error, e.tolerance, e.unit) == (errors[k], prior.std[k], robot.table.units[k])
+        assert abs(e.error) > IMPLAUSIBLE_TOLERANCES * e.tolerance

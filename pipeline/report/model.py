@@ -23,7 +23,8 @@ __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow
            "Determination", "Implausible", "Figures", "FigureRow", "PerPose", "IsoPose", "CrossValidation", "Heldout",
            "FrameRow", "Frames", "Coefficient", "EffectRow", "Candidate", "Remaining", "GeometryTest", "Alias",
            "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Search", "Effects",
-           "Flagged", "CompensationTable", "Timing", "Outputs", "REPORT_KEY", "OUTPUT_KEYS"]
+           "Flagged", "CompensationTable", "Timing", "Outputs", "Variant", "Outliers", "GrossStage", "InstrumentFit",
+           "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "REPORT_KEY", "OUTPUT_KEYS"]
 
 #: The key of the report model in a summary JSON (:func:`summary_document`).
 REPORT_KEY = "report_model"
@@ -515,6 +516,161 @@ class Outputs:
     law_kept: str | None = None
 
 
+#: ``(name, value)`` of each parameter, in the robot's table order (a summary's ``{name: value}``).
+Named = tuple[tuple[str, float], ...]
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One identification of a calibration's rows, for the with/without-flagged-rows comparison:
+    the rows used, the identified errors from nominal, chi-square and degrees of freedom, whether
+    it converged and the solver's message, the held-out figures (none: no held-out poses), the
+    parameter error against a known truth (``rms_mm``, ``rms_rad``, ``max_abs_mm``,
+    ``max_abs_rad``; None: unknown)."""
+
+    rows_used: int
+    identified_errors: Named
+    chi2: float
+    dof: int
+    success: bool
+    message: str | None
+    heldout: tuple[FigureRow, ...] = ()
+    parameter_error: dict | None = None
+
+
+@dataclass(frozen=True)
+class Outliers:
+    """The outlier test after the fit: what it is (words), its verdict (words), the rows it flagged
+    (1-based), whether they were left out, whether the residuals say the model misfits, how it
+    searched (words; None: not searched)."""
+
+    test: str
+    verdict: str | None
+    flagged_rows: tuple[int, ...]
+    left_out: bool
+    model_misfit: bool
+    search: str | None
+
+
+@dataclass(frozen=True)
+class GrossStage:
+    """The gross-row stage before any fit (a recording's): what it is (words), the rows named
+    (1-based), whether they were left out, whether an instrument frame was inferred from the rest,
+    whether the search succeeded and its message, how it searched (words)."""
+
+    test: str
+    rows: tuple[int, ...]
+    left_out: bool
+    frame_estimated: bool
+    success: bool
+    message: str
+    search: str
+
+
+@dataclass(frozen=True)
+class InstrumentFit:
+    """The instrument frame or target fit of a recording's run: its notes and gauge (words), the
+    frame and its standard uncertainty (``{"translation_mm", "rotation_rad"}``; None: not
+    estimated) and the components held (words), the targets (mm; None: poses measured) and
+    whether they were estimated; with several sessions each session's frame, its standard
+    uncertainty and its motion from the first (``{session: {"motion", "std"}}``; None: one)."""
+
+    notes: tuple[str, ...]
+    gauge: tuple[str, ...]
+    frame: dict | None = None
+    frame_std: dict | None = None
+    frame_held: tuple[str, ...] = ()
+    targets_mm: tuple | None = None
+    targets_estimated: bool | None = None
+    session_frames: dict | None = None
+    session_frames_std: dict | None = None
+    session_motion: dict | None = None
+
+
+@dataclass(frozen=True)
+class PriorUsed:
+    """The prior of a calibration beyond :class:`Determination`: each parameter's tolerance (its
+    unit; None: no prior), whether one was declared, the tolerance learnt from the rows (its
+    summary; None: none learnt), per parameter what determined it (value, error, posterior std,
+    source: :meth:`calib.engine.IdentificationResult.determination`), the parameters held."""
+
+    tolerance: dict | None
+    declared: bool
+    learnt: dict | None
+    determination: dict
+    by_held: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ImplausibleParameter:
+    """An identified error beyond its tolerance's multiple: its name, error and tolerance (its
+    unit), the sentence."""
+
+    name: str
+    error: float
+    tolerance: float
+    unit: str
+    words: str
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """A simulated run's machine: settle steps per pose (``{"mean", "max"}``), its options (gravity,
+    payload, stiffness, friction), how far the settled machine departs from its own kinematics
+    (``{"position_mm", "orientation_rad"}``, each ``{"mean", "max"}``)."""
+
+    settle_steps: dict
+    options: dict
+    departure: dict
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a calibration run's summary holds beyond the other sections (the keys
+    :func:`pipeline.report.summary.summary_keys` writes from it): the settings (method, solver,
+    weighting, seed, the declared noise), the parameters (units, free and fixed, injected,
+    identified and their std), the figures against a known truth, the fit's chi-square, the outlier
+    test, the gross-row stage, the with/without-flagged comparison, the held-out rows, the
+    instrument fit, the prior, the implausible parameters, the simulation, and what the later
+    steps found (checks, cross-validation, diagnosis, verdict evidence, session shifts, suggested
+    poses, observability, the 3D drawing, the suggested poses' sidecar)."""
+
+    method: str
+    solver: str | None
+    weighted: bool
+    declared_noise: dict
+    parameter_units: tuple[tuple[str, str], ...]
+    free: tuple[str, ...]
+    fixed: tuple[str, ...]
+    injected_errors: Named | None
+    identified_errors: Named
+    identified_std: Named
+    parameter_error: dict | None
+    gain_percent: dict | None
+    message: str | None
+    chi2: float
+    dof: int
+    outliers: Outliers
+    gross: GrossStage | None
+    with_flagged: Variant | None
+    without_flagged: Variant | None
+    heldout_rows: tuple[int, ...] | None
+    heldout_targets: bool
+    instrument: InstrumentFit | None
+    prior: PriorUsed
+    implausible: tuple[ImplausibleParameter, ...]
+    simulation: Simulation | None
+    checks: dict | None = None
+    crossvalidation: dict | None = None
+    diagnosis: dict | None = None
+    evidence: dict | None = None
+    session_shifts: dict | None = None
+    suggested_poses: dict | None = None
+    observability: dict | None = None
+    drawn: dict | None = None
+    suggested_poses_json: str | None = None
+
+
 @dataclass(frozen=True)
 class Report:
     """One calibration's or discovery's report (``kind``: ``calibration`` or ``discovery``); a
@@ -536,10 +692,16 @@ class Report:
     warnings: tuple[str, ...] = field(default_factory=tuple)
     timing: Timing | None = None
     outputs: Outputs = field(default_factory=Outputs)
+    #: A calibration run's record of what its summary holds beyond the sections above (None: not a run's).
+    run: RunRecord | None = None
 
     def to_dict(self) -> dict:
-        """The report as JSON-ready nested dicts and lists (field names as keys)."""
-        return _plain(dataclasses.asdict(self))
+        """The report as JSON-ready nested dicts and lists (field names as keys), but its ``run``
+        record: a summary JSON holds that one as its own keys (:func:`pipeline.report.summary.summary_keys`),
+        once."""
+        plain = dataclasses.asdict(dataclasses.replace(self, run=None))
+        del plain["run"]
+        return _plain(plain)
 
     @classmethod
     def from_dict(cls, d: dict) -> "Report":

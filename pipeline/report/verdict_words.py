@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from dataclasses import asdict
 
-__all__ = ["CAUSE_WORDS", "NOT_CALIBRATED", "CALIBRATED_PREDICTED", "verdict_sentence", "no_motion_words"]
+__all__ = ["CAUSE_WORDS", "NOT_CALIBRATED", "CALIBRATED_PREDICTED", "verdict_sentence", "no_motion_words",
+           "implausible_sentence"]
 
 #: What every failed verdict's sentence begins with.
 NOT_CALIBRATED = "not calibrated: "
@@ -87,3 +88,10 @@ def no_motion_words(rows: int, robot: str, what: str = "calibration rows") -> st
     """The words of ``rows`` rows at one pose (:func:`calib.diagnosis.motionless_rows`) of a ``robot``
     (its name): :data:`CAUSE_WORDS`'s ``"no_motion"``, the ``what`` naming the rows."""
     return CAUSE_WORDS["no_motion"].format(what=what, rows=rows, robot=robot)
+
+
+def implausible_sentence(e) -> str:
+    """An implausible identified error (:class:`calib.prior.ImplausibleError`) in words: its value
+    from nominal and how many times its tolerance it is."""
+    return (f"{e.name} = {e.error:+.4g} {e.unit} from nominal, {abs(e.error) / e.tolerance:.3g} times its tolerance "
+            f"{e.tolerance:.4g} {e.unit}")

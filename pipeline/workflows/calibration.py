@@ -4,7 +4,7 @@ compensate, validate on held-out poses, write the recording, the summary and the
 ``python -m pipeline.run`` parses its flags into :class:`RunSettings`, calls
 :func:`run_calibration` and prints the :class:`RunResult`'s report (made from the run's objects:
 :func:`pipeline.report.calibration.calibration_report`). The summary has the same keys for every
-robot; those it shares with the report are written from the report.
+robot, written from the report (:func:`pipeline.report.summary.summary_keys`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,23 +21,23 @@ from calib import paper
 from calib.calibration import Calibration
 from calib.design import augment_poses
 from calib.engine import IdentificationResult, gauge_representative
-from calib.identification import (BASE_FRAME, CalibrationOutcome, Identification, SessionSearch, UnreachableRows,
-                                  calibrate)
+from calib.identification import BASE_FRAME, CalibrationOutcome, Identification, UnreachableRows, calibrate
 from calib.measurement import frame_to_dict, measured_gauge_representative
-from calib.metrics import calibration_gain, pose_error_norms
+from calib.metrics import calibration_gain
 from calib.noise import SensorNoise
 from calib.observability import identification_jacobian
-from calib.prior import DATA_SOURCE_RATIO, ParameterPrior
+from calib.prior import DATA_SOURCE_RATIO, IMPLAUSIBLE_TOLERANCES, ParameterPrior, implausible_errors
 from calib.robot import KinematicsError, Robot, check_joint_limits
 from calib.robots import default_robot, reference_errors, reference_poses
-from calib.robust import GROSS_ALPHA
 from calib.workspace import reachable_poses
 from pipeline.formats import (CALIBRATION_SUFFIX, NameReservation, Recording, command_columns, command_csv, output_folder,
                               frame_session, row_message, session_measurement)
 from pipeline.report import Report, render_html
-from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, frame_held_words,
-                                         gross_rows, heldout_figure_rows, heldout_keys, iso_keys, parameter_error,
-                                         per_pose_keys, with_suggested, without_file)
+from pipeline.report.calibration import (ROW_NUMBERING, calibration_report, finished_report, parameter_error,
+                                         with_suggested, without_file)
+from pipeline.report.summary import (diagnosis_summary, gross_keys, gross_stage, instrument_fit, run_record,
+                                     session_keys, summary_keys)
+from pipeline.report.verdict_words import implausible_sentence
 
 from .options import check_noise_flags
 
@@ -93,11 +93,15 @@ class AsRead:
         gross_rows: 0-based rows of the recording named gross (left out of any fit).
         block: summary keys: ``gross_rows``, and ``measurement_frame``/``measurement_frame_std``
             where an instrument frame was registered.
+        frames, frames_std: ``{session: (6,) frame}`` the instrument frames registered and their
+            standard uncertainties (:func:`instrument_frames`; empty: the base frame).
     """
 
     recording: Recording
     gross_rows: list
     block: dict
+    frames: dict = field(default_factory=dict)
+    frames_std: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -220,31 +224,6 @@ def in_base_frame(fit, measured, groups, several: bool) -> np.ndarray:
     return out
 
 
-def _instrument_block(fit) -> dict:
-    """Summary keys of an instrument frame or target fit."""
-    block = {"method": "forward", "solver": "lm", "weighted": True,
-             "measurement_notes": list(fit.notes), "measurement_gauge": list(fit.gauge)}
-    if fit.frame_estimated:
-        block["measurement_frame"] = fit.frame_dict()
-        block["measurement_frame_std"] = frame_to_dict(fit.frame_std)
-        block["measurement_frame_held"] = frame_held_words(fit)
-    if fit.targets is not None:
-        block["measurement_targets_mm"] = fit.targets.tolist()
-        block["measurement_targets_estimated"] = fit.targets_estimated
-    return block
-
-
-def _variant(robot: Robot, result: IdentificationResult, rows: list[int], held: tuple | None, truth, free) -> dict:
-    """One identification's outcome, for the with/without-flagged-rows comparison."""
-    block = {"rows_used": len(rows), "identified_errors": robot.table.to_dict(result.errors),
-             "chi2": result.chi2, "dof": result.dof, "success": result.success, "message": result.message,
-             "heldout_position_error_mm": None, "heldout_orientation_error_rad": None,
-             "parameter_error": None if truth is None else parameter_error(robot, result.theta, truth, free)}
-    if held is not None:
-        block.update(heldout_keys(heldout_figure_rows(robot, *held)))
-    return block
-
-
 def run_calibration(settings: RunSettings, progress=lambda label, done, total: None) -> RunResult:
     """Run one calibration (see the module docstring).
 
@@ -303,30 +282,27 @@ def run_calibration(settings: RunSettings, progress=lambda label, done, total: N
         flags = {k: "--out" for k in targets_out} | {"summary_json": "--summary-json", "mjcf": "--export-mjcf",
                                                       "report": "--report"}
         with ResultSet(targets_out, overwrite=settings.overwrite, flags=flags) as outputs:
-            summary, result, made = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
-                                         None if checks is None else {"excitation": checks.excitation})
+            result, made = _run(settings, rec, warnings, progress, split, t0, outputs, diagnosis,
+                                None if checks is None else {"excitation": checks.excitation})
             if made.suggested_poses is None:
                 for key in SUGGESTED_KEYS:
                     outputs.drop(key)
                     targets_out.pop(key)
             paths = {k: str(v) for k, v in targets_out.items()}
-            summary.update({k: v for k, v in paths.items() if k not in ("summary_json", "suggested_poses")})
-            if "suggested_poses" in paths:
-                summary["suggested_poses_path"] = paths["suggested_poses"]
-            summary["wall_time_s"] = time.perf_counter() - t0
-            summary["wall_time_split_s"] = split
-            report = finished_report(made.report, paths, summary["wall_time_s"], split)
-            calibration = write_data_files(outputs, summary, report, settings, targets_out, made)
+            report = finished_report(made.report, paths, time.perf_counter() - t0, split)
+            report = replace(report, run=replace(report.run, suggested_poses_json=paths.get("suggested_poses_json")))
+            calibration = write_data_files(outputs, report, settings, targets_out, made)
             outputs.publish()
     finally:
         reservation.release()
-    return RunResult(summary=summary, result=result, report=report, paths=paths, recording=rec, as_read=made.as_read,
+    return RunResult(summary=summary_keys(report), result=result, report=report, paths=paths, recording=rec, as_read=made.as_read,
                      calibration=calibration, simulated=made.simulated, suggested_poses=made.suggested_poses)
 
 
-def write_data_files(outputs, summary: dict, report: Report, settings: RunSettings, targets_out: dict,
+def write_data_files(outputs, report: Report, settings: RunSettings, targets_out: dict,
                      made: RunObjects) -> Calibration:
-    """Write the summary JSON (when asked: the summary's keys and ``report``'s model), the HTML
+    """Write the summary JSON (when asked: the summary's keys written from ``report``,
+    :func:`pipeline.report.summary.summary_keys`, and its model), the HTML
     report (when asked), the simulated recording (when simulating), the calibration file (its
     recording named and hashed) and the identified machine's MJCF (when asked,
     :func:`pipeline.simulation.mjcf_export.mjcf_text`) to their temporary files in ``outputs``;
@@ -341,14 +317,15 @@ def write_data_files(outputs, summary: dict, report: Report, settings: RunSettin
         for key, text in zip(SUGGESTED_KEYS, made.suggested_poses.texts()):
             outputs.temp(key).write_text(text)
     if "summary_json" in targets_out:
-        outputs.temp("summary_json").write_text(json.dumps({**summary, REPORT_KEY: report.to_dict()}, indent=1))
+        outputs.temp("summary_json").write_text(json.dumps({**summary_keys(report), REPORT_KEY: report.to_dict()},
+                                                           indent=1))
     if "report" in targets_out:
         outputs.temp("report").write_text(render_html(report))
     if recording is not None:
         csv_text, json_text = recording_texts(recording)
         outputs.temp("csv").write_text(csv_text)
         outputs.temp("json").write_text(json_text)
-        source = {"name": Path(targets_out["csv"]).name, "simulated": summary["scenario"],
+        source = {"name": Path(targets_out["csv"]).name, "simulated": report.source.recording,
                   "sha256": sha256_text(csv_text), "sidecar_sha256": sha256_text(json_text)}
     else:
         source = recording_source(settings.real)
@@ -517,22 +494,11 @@ def declared_tolerance(robot: Robot, meta: dict | None, where: str, flag: dict |
         raise ValueError(f"--tolerance: {exc}") from None
 
 
-#: An identified error beyond this many tolerances is physically implausible.
-IMPLAUSIBLE_TOLERANCES = 3.0
-
-
 def implausible_parameters(robot: Robot, errors: np.ndarray, tolerance: ParameterPrior, names) -> list[dict]:
-    """The identified errors (P,) beyond :data:`IMPLAUSIBLE_TOLERANCES` times their tolerance, of the
-    parameters ``names``: ``{"name", "error", "tolerance", "unit", "words"}`` each, largest first."""
-    out = []
-    for name in names:
-        k = robot.table.index(name)
-        tol, err, unit = float(tolerance.std[k]), float(errors[k]), robot.table.units[k]
-        if abs(err) > IMPLAUSIBLE_TOLERANCES * tol:
-            out.append({"name": name, "error": err, "tolerance": tol, "unit": unit,
-                        "words": f"{name} = {err:+.4g} {unit} from nominal, {abs(err) / tol:.3g} times its tolerance "
-                                 f"{tol:.4g} {unit}"})
-    return sorted(out, key=lambda d: -abs(d["error"]) / d["tolerance"])
+    """The identified errors (P,) beyond :data:`calib.prior.IMPLAUSIBLE_TOLERANCES` times their
+    tolerance, of the parameters ``names`` (:func:`calib.prior.implausible_errors`): ``{"name",
+    "error", "tolerance", "unit", "words"}`` each, largest first."""
+    return [dict(asdict(e), words=implausible_sentence(e)) for e in implausible_errors(robot, errors, tolerance, names)]
 
 
 def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
@@ -672,112 +638,6 @@ def truth_figures(inp: CalibrationInput, ident: Identification, truth: np.ndarra
                                                                  free).as_dict().items() if k != "per_parameter"}}
 
 
-def summary_of(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report, truth: np.ndarray | None,
-               settings: RunSettings, warnings: list, figures: dict | None, implausible: list[dict]) -> dict:
-    """The run's summary (the same keys for every robot) of what :func:`calibrate_input` found;
-    the keys holding what its ``report`` holds (:func:`pipeline.report.calibration.calibration_report`:
-    the fit's figures, the flagged rows, the held-out figures, ...) written from it (``truth``:
-    :func:`truth_in_gauge`; ``figures``: :func:`truth_figures`; ``implausible``:
-    :func:`implausible_parameters`)."""
-    ident, held, data = outcome.identification, outcome.heldout, outcome.data
-    robot, result, instrument, fit = inp.robot, ident.result, ident.instrument, report.fit
-    free = result.free_names
-    flagged = list(report.flagged.rows)
-    comparison = (None, None)
-    if ident.result_kept is not None:
-        comparison = (_variant(robot, ident.result_all, list(ident.kept), outcome.heldout_with_flagged, truth, free),
-                      _variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth,
-                               free))
-    misfit = bool(ident.report is not None and ident.report.misfit)
-    summary = {
-        "robot": report.source.robot,
-        "scenario": report.source.recording,
-        "method": settings.method,
-        "solver": ident.solver,
-        "weighted": (settings.weighted or data.prior is not None) if settings.method == "chainwise" else True,
-        "calibration_poses": fit.rows,
-        "calibration_poses_used": fit.rows_used,
-        "heldout_poses": fit.heldout_poses,
-        "declared_noise": inp.noise.to_dict(),
-        "seed": settings.seed,
-        "parameter_units": dict(zip(robot.table.names, robot.table.units)),
-        "free_parameters": list(free),
-        "fixed_parameters": [n for n in robot.table.names if n not in free],
-        "injected_errors": None if inp.injected is None else robot.table.to_dict(inp.injected),
-        "identified_errors": robot.table.to_dict(result.errors),
-        "identified_std": robot.table.to_dict(result.std),
-        "parameter_error": None if figures is None else figures["parameter_error"],
-        "gain_G_percent": None if figures is None else figures["gain_G_percent"],
-        "iterations": fit.iterations,
-        "converged": fit.converged,
-        "success": result.success,
-        "message": result.message,
-        "chi2": result.chi2,
-        "dof": result.dof,
-        "max_dqint_history": list(fit.history),
-        "condition_numbers": list(fit.condition_numbers),
-        "row_numbering": ROW_NUMBERING,
-        "flagged_poses": flagged,
-        "outliers": {"test": "closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
-                             "against the declared noise), forward model",
-                     "verdict": ident.outlier_verdict, "flagged_rows": flagged, "left_out": ident.left_out,
-                     "model_misfit": misfit,
-                     "search": None if ident.report is None else ident.report.search},
-        "model_misfit": misfit,
-        "gross_rows": gross_block(inp, ident),
-        "with_flagged": comparison[0],
-        "without_flagged": comparison[1],
-        "warnings": warnings,
-        "heldout_basis": None if held is None else report.heldout.basis,
-        "heldout_position_error_mm": None,
-        "heldout_orientation_error_rad": None,
-    }
-    if held is not None:
-        summary.update(heldout_keys(report.heldout.figures))
-        summary.update(heldout_detail(inp, report.heldout, targets=held[0].shape[1] != robot.pose_dim))
-    if instrument is not None:
-        summary.update(_instrument_block(instrument))
-        if inp.n_sessions > 1:
-            summary.update(sessions_block(inp, instrument))
-    summary.update(prior_block(outcome, report))
-    summary["implausible_parameters"] = implausible
-    if inp.sim is not None:
-        summary.update(simulation_block(inp, settings))
-    return summary
-
-
-def heldout_detail(inp: CalibrationInput, heldout, targets: bool) -> dict:
-    """Summary keys of each held-out pose, from the report's held-out section (``heldout``:
-    :class:`pipeline.report.model.Heldout`): ``heldout_per_pose``
-    (:func:`pipeline.report.calibration.per_pose_keys`: the position error norms before and after,
-    mm, and the orientation's, rad; with target data (``targets``) one position per target and row;
-    ``rows``: the 1-based data rows of a recording, None for simulated held-out poses) and
-    ``iso9283`` where validation rows repeat a commanded pose
-    (:func:`pipeline.report.calibration.iso_keys`; None otherwise)."""
-    rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
-    return {"heldout_per_pose": per_pose_keys(heldout.per_pose, rows, targets), "iso9283": iso_keys(heldout.iso9283)}
-
-
-def verdict_block(inp: CalibrationInput, outcome: CalibrationOutcome, report: Report) -> dict:
-    """Summary keys of the verdict (:class:`calib.identification.Verdict`): ``diagnosis`` (the
-    recording's diagnosis made by the checks before any fit, rows 1-based; None), ``success`` and
-    ``verdict`` (``words`` and ``cause`` as ``report`` holds them: the words
-    :func:`pipeline.report.verdict_words.verdict_sentence`'s; ``evidence``)."""
-    verdict = outcome.verdict
-    return {"diagnosis": None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
-            "success": report.verdict.success,
-            "verdict": {"words": report.verdict.words, "cause": report.verdict.cause,
-                        "evidence": verdict.evidence.to_dict()}}
-
-
-def diagnosis_summary(diagnosis, inp: CalibrationInput) -> dict:
-    """The diagnosis' summary with its gross rows as 1-based data rows of the recording."""
-    out = diagnosis.summary()
-    if "gross_rows" in out:
-        out["gross_rows"] = [int(r) + 1 for r in out["gross_rows"]]
-    return out
-
-
 def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
     """The recording as the run read it (see :class:`AsRead`).
 
@@ -786,8 +646,8 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
     """
     ident, data = outcome.identification, outcome.data
     rec, instrument = inp.rec, ident.instrument
-    block = {"gross_rows": gross_block(inp, ident)}
-    measured = rec.measured
+    block = {"gross_rows": gross_keys(gross_stage(inp, ident))}
+    measured, frames, frames_std = rec.measured, {}, {}
     if instrument is not None:
         if instrument.targets is not None:
             raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
@@ -797,7 +657,8 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
         block["measurement_frame"] = instrument.frame_dict()
         block["measurement_frame_std"] = frame_to_dict(instrument.frame_std)
         if several:
-            block.update(sessions_block(inp, instrument))
+            block.update(session_keys(instrument_fit(inp, instrument)))
+        frames, frames_std = instrument_frames(inp, instrument, several)
     gross = [int(inp.rows[i]) for i in ident.gross_idx]
     meta = rec.meta
     if not data.tolerance_declared and data.tolerance_estimate is not None:
@@ -805,20 +666,19 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
         # (discovery's) takes it as the run did, and says where it came from.
         meta = {**rec.meta, "parameter_tolerance": data.tolerance.tolerance_by_name(inp.robot),
                 TOLERANCE_SOURCE_KEY: data.tolerance_source}
-    return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block)
+    return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block, frames=frames,
+                  frames_std=frames_std)
 
 
-def sessions_block(inp: CalibrationInput, fit) -> dict:
-    """Summary keys of a recording with several sessions: each session's instrument frame and its
-    standard uncertainty, and how each moved from the first (the gauge-free figure)."""
-    names = inp.frame_sessions
-    motion = {}
-    for s in range(1, len(names)):
-        m, sd = fit.session_motion(s, 0)
-        motion[names[s]] = {"motion": frame_to_dict(m), "std": frame_to_dict(sd)}
-    return {"measurement_frames": {names[s]: d for s, d in fit.frames_dict().items()},
-            "measurement_frames_std": {names[s]: frame_to_dict(fit.frames_std[s]) for s in range(len(names))},
-            "session_motion": motion}
+def instrument_frames(inp: CalibrationInput, fit, several: bool) -> tuple[dict, dict]:
+    """``({session: (6,) frame}, {session: (6,) std})`` the instrument fit ``fit`` registered: every
+    frame session's (``several``), else the recording's first session's."""
+    if several:
+        names = inp.frame_sessions
+        return ({names[s]: np.array(f, dtype=float) for s, f in enumerate(fit.frames)},
+                {names[s]: np.array(sd, dtype=float) for s, sd in enumerate(fit.frames_std)})
+    first = inp.rec.session_names[0]
+    return {first: np.array(fit.frame, dtype=float)}, {first: np.array(fit.frame_std, dtype=float)}
 
 
 def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
@@ -828,42 +688,6 @@ def read_as_a_run_does(path, rec: Recording, *, seed: int = 0) -> AsRead:
     settings = RunSettings(real=Path(path), seed=seed)
     inp = read_input(settings, rec)
     return as_read(inp, calibrate_input(inp, settings, assess=False))
-
-
-def gross_block(inp: CalibrationInput, ident: Identification) -> dict | None:
-    """Summary key of the gross-row stage (None for a simulated run): the rows named (1-based data
-    rows), whether they were left out, whether an instrument frame was inferred from the rest, the
-    finding in words."""
-    search = ident.gross
-    if search is None:
-        return None
-    rows, left_out = gross_rows(inp, ident)
-    return {"test": "trimmed fits (random subsets and concentration steps), then rows beyond the chi-square "
-                    f"{1 - GROSS_ALPHA:g} quantile of their coordinates named gross",
-            "rows": rows, "left_out": left_out, "frame_estimated": bool(search.frame_estimated),
-            "success": bool(search.success), "message": search.message,
-            "search": getattr(search, "search", "every row") if not isinstance(search, SessionSearch) else
-            "; ".join(f"session {s + 1}: {one.search}" for s, one in enumerate(search.searches))}
-
-
-def prior_block(outcome: CalibrationOutcome, report: Report) -> dict:
-    """Summary keys of what the data determined: the prior used (the tolerance learnt where the run
-    learnt one; :data:`pipeline.report.calibration.NO_PRIOR` with --no-prior), per parameter its
-    posterior standard deviation and source (``data`` below half the prior's, else ``prior``;
-    ``held``), the combinations the poses left to the prior, in words (the prior's words, the
-    directions determined and the combinations as ``report`` holds them)."""
-    data, result = outcome.data, outcome.result
-    sources = result.parameter_sources()
-    est = data.tolerance_estimate
-    return {"prior": {"used": report.determination.prior_used,
-                      "source": report.parameters.prior,
-                      "tolerance": None if data.prior is None else data.prior.tolerance_by_name(data.robot),
-                      "declared": data.tolerance_declared,
-                      "learnt": None if est is None else est.summary()},
-            "parameter_determination": result.determination(),
-            "determined_by": {src: [n for n, v in sources.items() if v == src] for src in ("data", "prior", "held")},
-            "directions_determined": report.determination.directions,
-            "left_to_prior": list(report.parameters.left_to_prior)}
 
 
 def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings: RunSettings, left: list[str]):
@@ -945,20 +769,6 @@ def pose_kind_words(robot: Robot, measured: np.ndarray, suggested: np.ndarray) -
     return "; ".join(parts) if parts else "poses like the measured ones, more of them"
 
 
-def simulation_block(inp: CalibrationInput, settings: RunSettings) -> dict:
-    """Summary keys of a simulated run: settling, the machine's options, how far the settled
-    machine departs from its own kinematics (load, compliance, ...)."""
-    robot, cal = inp.robot, inp.sim["cal"]
-    options = {"gravity": settings.gravity, "payload_kg": settings.payload_kg, "stiffness": settings.stiffness,
-               "friction": settings.friction}
-    dep = cal.true_poses - robot.forward_kinematics(inp.actual, cal.commanded, initial=cal.true_poses)
-    pos, ang = pose_error_norms(robot, dep)
-    return {"settle_steps_per_pose": {"mean": float(cal.steps.mean()), "max": int(cal.steps.max())},
-            "simulation": options,
-            "kinematic_departure": {"position_mm": {"mean": float(pos.mean()), "max": float(pos.max())},
-                                    "orientation_rad": {"mean": float(ang.mean()), "max": float(ang.max())}}}
-
-
 def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recording:
     """The recording of a simulated run (calibration rows, then the held-out rows measured under
     nominal commands)."""
@@ -1035,17 +845,16 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
                                 implausible=implausible, warnings=warnings,
                                 shift_words=tuple(v["words"] for v in shifts.values()))
-    summary = summary_of(inp, outcome, report, truth, settings, warnings, figures, implausible)
-    if checks is not None:
-        summary["checks"] = checks
+    record = run_record(inp, outcome, settings, truth=truth, figures=figures, implausible=implausible)
     split.update(gross_rows=seconds["gross_rows"], outlier_test=seconds["outlier_test"])
     if outcome.crossvalidation is not None:
-        summary.update(outcome.crossvalidation.summary())
         split["crossvalidation"] = seconds["crossvalidation"]
-    summary.update(verdict_block(inp, outcome, report))
     split["verdict"] = seconds["verdict"]
-    if shifts:
-        summary["session_shifts"] = shifts
+    verdict = outcome.verdict
+    record = replace(record, checks=checks,
+                     crossvalidation=None if outcome.crossvalidation is None else outcome.crossvalidation.summary(),
+                     diagnosis=None if verdict.diagnosis is None else diagnosis_summary(verdict.diagnosis, inp),
+                     evidence=verdict.evidence.to_dict(), session_shifts=shifts)
     simulated = simulated_recording(inp, settings) if inp.sim is not None else None
     t_s = time.perf_counter()
     suggestion = read = None
@@ -1054,7 +863,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             suggestion, suggested = suggested_poses(inp, outcome, settings, list(report.parameters.left_to_prior))
         except (ValueError, ArithmeticError) as exc:  # KinematicsError and LinAlgError are ValueErrors
             suggested = {"poses": 0, "what": f"the suggestion failed: {exc}", "why": ""}
-        summary["suggested_poses"] = suggested
+        record = replace(record, suggested_poses=suggested)
         report = with_suggested(report, suggested)
     if inp.rec is not None:
         try:
@@ -1063,9 +872,10 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
             pass
     split["summary"] = time.perf_counter() - t_s
     t3 = time.perf_counter()
-    summary.update(log_step(inp, ident, outcome.heldout, report, settings, outputs.temp("rrd")))
+    drawn = log_step(inp, ident, outcome.heldout, report, settings, outputs.temp("rrd"))
     split["log"] = time.perf_counter() - t3
-    return summary, ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
+    report = replace(report, run=replace(record, observability=drawn["observability"], drawn=drawn["rerun"]))
+    return ident.result, RunObjects(report, outcome.calibration, simulated, suggestion, read)
 
 
 def sha256_text(text: str) -> str:

@@ -597,7 +597,7 @@ def discover_in_words(rec: Recording, settings: DiscoverySettings, read, source:
         return discover(rec, seed=settings.seed, resim=settings.resim, sysid=settings.sysid,
                         candidates=settings.candidates, exclude=() if read is None else read.gross_rows,
                         kept_law=None if settings.use_law is None else read_kept_law(settings.use_law),
-                        frames=({}, {}) if read is None else frames_of(rec, read.block), source=source)
+                        frames=({}, {}) if read is None else (read.frames, read.frames_std), source=source)
     except np.linalg.LinAlgError:
         raise ValueError(f"{where}: the rows do not determine the geometry and the candidate effects together "
                          "(a singular fit: too few distinct poses, or a machine that barely moved); measure poses "
