@@ -15,7 +15,6 @@ from calib.effects import EFFECTS, EffectData
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.robot import Robot
 from pipeline.formats import Recording
-from pipeline.report import build_report
 from pipeline.report.text import model_words, report_markdown
 
 from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, chart_view, log_named_bars,
@@ -125,7 +124,7 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
                        unit="signed log10(1 + |BIC drop|)", groups=[1 if c in named else 0 for c in order],
                        group_names=["not named", "named (in the model)"], title="Evidence per candidate",
                        note="an effect needs a BIC drop of 10 (1.04 here) and a lower CV residual", name_px=130.0)
-        r.log("summary", rr.TextDocument(report_markdown(build_report(s)), media_type=rr.MediaType.MARKDOWN),
+        r.log("summary", rr.TextDocument(report_markdown(report.report), media_type=rr.MediaType.MARKDOWN),
               static=True)
         r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
         r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)

@@ -77,13 +77,12 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.report import build_report
     from pipeline.report.text import terminal_lines
     from pipeline.workflows.discovery import discover
 
     rep = discover(rec, seed=seed, resim=False, candidates=candidates)
     s = rep.summary
-    lines = terminal_lines(build_report(s))
+    lines = terminal_lines(rep.report)
     said_explained = any("explains the recording to the noise" in line for line in lines) or \
         lines[0].startswith("Explained")
     tests_pass = s["tests"]["noise"]["consistent"] and not s["remaining"]["follows"]

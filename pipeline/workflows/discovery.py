@@ -35,7 +35,8 @@ from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, write_calibration)
-from pipeline.report import REPORT_KEY, Report, build_report, write_report
+from pipeline.report import REPORT_KEY, Report, write_report
+from pipeline.report.discovery import discovery_report, not_named_words, outlier_keys, with_files, with_read
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.report.text import shift_words, verdict_words
@@ -98,20 +99,6 @@ def heldout_block(judgement: HeldoutJudgement) -> dict:
             "not_named": [{"effect": r.name, "delta_bic": r.delta_bic, "geometry_rms_mm": r.geometry_mm,
                            "with_effect_rms_mm": r.with_effect_mm, "judged_on": r.fold, "why": r.why,
                            "words": not_named_words(r)} for r in judgement.rejected]}
-
-
-def not_named_words(r: RejectedEffect) -> str:
-    """Why an effect the calibration rows chose is not named, with its figures."""
-    bic = "" if r.delta_bic is None else f" (BIC {r.delta_bic:+.0f})"
-    rows = "the validation rows" if r.fold == "validation" else f"rows held out ({r.fold})"
-    if r.why == "not separable":
-        return (f"{r.name} fits the calibration rows{bic} but cannot be separated from the geometry on this pose set: "
-                f"not named")
-    if r.why == "worse re-simulated":
-        return (f"{r.name} fits the calibration rows{bic} but its MuJoCo re-simulation fits worse than the geometry "
-                f"alone ({1e3 * r.geometry_mm:.1f} -> {1e3 * r.with_effect_mm:.1f} um): not named")
-    return (f"{r.name} fits the calibration rows{bic} but predicts {rows} worse ({r.geometry_mm:.3g} -> "
-            f"{r.with_effect_mm:.3g} mm): not named")
 
 
 def _with(settings: dict, section: str, field: str, value: float) -> dict:
@@ -321,32 +308,48 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = HELDOUT
     if resim:  # the second witness: an effect whose MuJoCo machine fits worse is not presented as found
         resimulated = resimulation_block(rec, outcome.discovery, sysid, seed)
         outcome, resimulated = witnessed(outcome, resimulated)
-    summary = discovery_summary(rec, outcome, tolerance_source, resimulated)
-    summary["wall_time_s"] = time.perf_counter() - t0
+    parts = discovery_parts(rec, outcome)
+    summary = discovery_summary(rec, outcome, tolerance_source, resimulated, parts)
+    summary["wall_time_s"] = wall = time.perf_counter() - t0
     calibration = outcome.calibration(frames=frames[0], frames_std=frames[1], recording=source or {})
+    report = discovery_report(rec, outcome, **parts, prior_source=tolerance_source, resimulated=resimulated,
+                              wall_time_s=wall)
     return DiscoveryReport(discovery=outcome.discovery, summary=summary, outcome=outcome, recording=rec,
-                           calibration=calibration, report=build_report(summary))
+                           calibration=calibration, report=report)
+
+
+def discovery_parts(rec: Recording, outcome: DiscoveryOutcome) -> dict:
+    """What the summary and the report of a discovery both hold, made once from its objects: the
+    verdict in words, the implausible errors (:func:`implausibility`), the effect parameters placed
+    by row (:func:`placed_by_row`), the sessions shifted (``{session: {..., words}}``)."""
+    disc, judgement, robot = outcome.discovery, outcome.judgement, rec.robot
+    return {"verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining.to_dict()),
+            "implausible": implausibility(rec, disc),
+            "effect_parameters": placed_by_row(disc.chosen.parameters(), rec, disc.kept, row_order(rec)),
+            "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
+                               for s, shift in judgement.shifts.items() if shift.shifted}
+            | calibration_session_shifts(rec, disc.chosen)}
 
 
 def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_source: str,
-                      resimulated: dict | None) -> dict:
-    """The summary (``--summary-json``) of a discovery judged by its held-out rows."""
+                      resimulated: dict | None, parts: dict) -> dict:
+    """The summary (``--summary-json``) of a discovery judged by its held-out rows (``parts``:
+    :func:`discovery_parts`)."""
     robot = rec.robot
     disc, judgement, names = outcome.discovery, outcome.judgement, outcome.names
     flagged = list(disc.flagged)
     h = heldout_block(judgement)
-    scan = disc.outliers
     remaining = disc.remaining.to_dict()
     summary = {
         "robot": robot.name,
         "explained": disc.explained,
-        "verdict": verdict_words(disc.explained, list(disc.effects), remaining),
+        "verdict": parts["verdict"],
         "remaining": remaining,
         "effects": list(disc.effects),
         "partial": list(disc.partial),
         "aliases": [a.to_dict() for a in disc.aliases],
         "candidates": [n for n in names if n != "none"],
-        "effect_parameters": disc.chosen.parameters(),
+        "effect_parameters": parts["effect_parameters"],
         "heldout_rms_before_mm": h["heldout_rms_before_mm"],
         "heldout_rms_after_mm": h["heldout_rms_after_mm"],
         "noise_floor_mm": h["noise_floor_mm"],
@@ -355,14 +358,9 @@ def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_sourc
         "heldout_rms_as_predicted_mm": h["heldout_rms_as_predicted_mm"],
         "heldout_folds": h["heldout_folds"],
         "not_named": h["not_named"],
-        "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
-                           for s, shift in judgement.shifts.items() if shift.shifted}
-        | calibration_session_shifts(rec, disc.chosen),
+        "session_shifts": parts["session_shifts"],
         "flagged_poses": [i + 1 for i in flagged],
-        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan.bad),
-                     "model_wrong": bool(scan.model_wrong),
-                     "shared": {str(int(disc.kept[r.row]) + 1): dict(r.by) for r in scan.shared},
-                     "threshold": scan.threshold, "scale": scan.scale},
+        "outliers": outlier_keys(disc),
         "tests": disc.tests.to_dict(),
         "evidence": disc.evidence.to_dict(),
         "identified_errors": robot.table.to_dict(disc.chosen.errors),
@@ -375,9 +373,8 @@ def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_sourc
         "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
         "search": disc.search.to_dict(),
     }
-    summary["implausible_parameters"] = implausibility(rec, disc)
+    summary["implausible_parameters"] = parts["implausible"]
     summary["time"] = "row order" if row_order(rec) else "measured"
-    summary["effect_parameters"] = placed_by_row(summary["effect_parameters"], rec, disc.kept, row_order(rec))
     summary["separation"] = {} if disc.separation is None else dict(disc.separation.to_dict(),
                                                                       prior_source=tolerance_source)
     if rec.meta.get("simulation", {}).get("effect") is not None:
@@ -655,30 +652,44 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if read is not None:
         report.summary.update(read.block)
         report.summary["warnings"] = warnings
-        if not np.any(rec.sets == "validation"):
-            report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
+        cv = None if np.any(rec.sets == "validation") else geometry_crossvalidation(rec, read, settings.seed)
+        report.summary.update(cv or {})
+        report.report = with_read(report.report, read.block, warnings, cv)
+    return write_discovery_files(report, settings, rrd_path, calibration_path,
+                                 recording=str(settings.real) if settings.real is not None else source["simulated"],
+                                 law_source=str(settings.real or stem))
+
+
+def write_discovery_files(report: DiscoveryReport, settings: DiscoverySettings, rrd_path: Path, calibration_path: Path,
+                          *, recording: str, law_source: str) -> DiscoveryReport:
+    """Write what ``settings`` asks of ``report`` (the ``.rrd``, the calibration; the MJCF, the kept
+    law, the summary JSON, the HTML report where asked), each named in its summary and report
+    (``recording``: the recording in words; ``law_source``: where a kept law was found)."""
     from pipeline.views import write_discovery_rrd  # Rerun for the file alone: the analysis and its words load none
 
-    rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
-    report.summary["rrd"] = str(rrd)
-    cal = report.calibration
-    report.summary["calibration"] = str(write_calibration(calibration_path, cal, overwrite=settings.overwrite))
+    rec, cal, overwrite = report.recording, report.calibration, settings.overwrite
+    files = {"rrd": str(write_discovery_rrd(rrd_path, rec.robot, rec, report, overwrite=overwrite))}
+    report.summary["rrd"] = files["rrd"]
+    report.summary["calibration"] = files["calibration"] = str(write_calibration(calibration_path, cal,
+                                                                                 overwrite=overwrite))
     if settings.export_mjcf is not None:
-        report.summary["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=settings.overwrite))
+        report.summary["mjcf"] = files["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=overwrite))
+    law_kept = None
     if settings.law_out is not None:
-        kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
-                        overwrite=settings.overwrite)
-        report.summary["law_kept"] = None if kept is None else str(kept)
-    report.summary["recording"] = str(settings.real) if settings.real is not None else source["simulated"]
+        kept = keep_law(settings.law_out, dict(report.summary, source=law_source), overwrite=overwrite)
+        report.summary["law_kept"] = law_kept = None if kept is None else str(kept)
+    report.summary["recording"] = recording
+    compensation = None
     if settings.report is not None:
-        report.summary["report"] = str(settings.report)
-        report.summary["compensation"] = compensation_table(rec, cal, report.summary)
-    report.report = build_report(report.summary)  # every file named: the report of the whole discovery
+        report.summary["report"] = files["report"] = str(settings.report)
+        report.summary["compensation"] = compensation = compensation_table(rec, cal, report.outcome.judgement)
+    report.report = with_files(report.report, recording=recording, files=files, law_asked=settings.law_out is not None,
+                               law_kept=law_kept, compensation=compensation)  # every file named
     if settings.summary_json is not None:
         atomic_write(settings.summary_json, json.dumps({**report.summary, REPORT_KEY: report.report.to_dict()},
-                                                       indent=1), overwrite=settings.overwrite)
+                                                       indent=1), overwrite=overwrite)
     if settings.report is not None:
-        write_report(report.report, settings.report, overwrite=settings.overwrite)
+        write_report(report.report, settings.report, overwrite=overwrite)
     return report
 
 
@@ -686,7 +697,7 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
 COMPENSATION_TARGETS = 20
 
 
-def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict | None:
+def compensation_table(rec: Recording, cal: Calibration, judgement: HeldoutJudgement) -> dict | None:
     """The summary's ``compensation`` (for the report): the commands ``pipeline.compensate`` gives
     for the first :data:`COMPENSATION_TARGETS` held-out rows' measured poses as targets, commanded in
     the recording's order at its times (:func:`calib.compensation.compensated_commands` with the
@@ -696,7 +707,7 @@ def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict 
     if not cal.effects:
         return None
     robot = rec.robot
-    rows = np.asarray(summary["heldout_per_row"]["rows"][:COMPENSATION_TARGETS], dtype=int) - 1
+    rows = np.asarray([int(i) for i in judgement.fold.held[:COMPENSATION_TARGETS]], dtype=int)
     channels = {k: v[rows] for k, v in rec.extras.items()}
     try:
         comp = compensated_commands(robot, cal.theta, rec.measured[rows], cal.fitted_effects(channels),
