@@ -147,24 +147,26 @@ def _effects(outcome, effect_parameters: dict, prior_source: str, resimulated: d
     """What the discovery found (``outcome.discovery``) with its evidence; ``effect_parameters``:
     the effects' coefficients as the summary gives them (placed by row)."""
     disc = outcome.discovery
-    ev = disc.evidence.to_dict()
+    ev = disc.evidence
     partial = set(disc.partial)
     rows = []
     for name in disc.effects:
         params = effect_parameters.get(name, {})
-        sig, e = params.get("significance") or {}, ev.get(name) or {}
+        sig, e = params.get("significance") or {}, ev.of(name)
         rows.append(EffectRow(name=name, granularity=str(params.get("granularity", "shared")),
-                              coefficients=_coefficients(params), delta_bic_when_added=e.get("delta_bic_when_added"),
+                              coefficients=_coefficients(params),
+                              delta_bic_when_added=None if e is None else e.delta_bic_when_added,
                               wald_chi2=sig.get("wald_chi2"), dof=sig.get("dof"), p_value=sig.get("p_value"),
-                              cv_whitened_rms=e.get("cv_whitened_rms"), partial=name in partial))
+                              cv_whitened_rms=None if e is None else e.cv_whitened_rms, partial=name in partial))
     named = set(disc.effects)
-    candidates = tuple(Candidate(c, (ev.get(c) or {}).get("delta_bic_vs_none"), (ev.get(c) or {}).get("cv_whitened_rms"),
-                                 c in named) for c in outcome.names if c != "none")
-    t = disc.evidence.geometry_test
+    candidates = tuple(Candidate(c, None if ev.of(c) is None else ev.of(c).delta_bic_vs_none,
+                                 None if ev.of(c) is None else ev.of(c).cv_whitened_rms, c in named)
+                       for c in outcome.names if c != "none")
+    t = ev.geometry_test
     return Effects(effects=tuple(rows), candidates=candidates, remaining=_remaining(disc.remaining),
                    geometry_test=GeometryTest(t.chi2, t.dof, t.p_value, t.alpha),
-                   located=tuple(disc.located.summary or ()), cv_whitened_rms_geometry=ev["none"].get("cv_whitened_rms"),
-                   cv_whitened_rms_chosen=ev.get("cv_whitened_rms_chosen"), aliases=_aliases(disc),
+                   located=tuple(disc.located.summary or ()), cv_whitened_rms_geometry=ev.geometry.cv_whitened_rms,
+                   cv_whitened_rms_chosen=ev.cv_whitened_rms_chosen, aliases=_aliases(disc),
                    separation=_separation(disc, prior_source), law=_law(disc.proposed_law),
                    resimulation=_resimulation(resimulated), search=_search(disc.search),
                    not_named=tuple(not_named_words(r) for r in outcome.judgement.rejected))
