@@ -134,19 +134,20 @@ def test_a_term_is_each_joints_own_variable():
 
 def test_the_summary_and_the_report_say_the_proposed_law():
     from pipeline.simulation.scenarios import make_recording
-    from pipeline.report import build_report, terminal_lines
+    from pipeline.report import terminal_lines
     from pipeline.workflows.discovery import discover
 
     terms, draw, law = LAWS["scale quadratic in stroke"]
     c = draw(5)
     data = recording(lambda q: law(q, c), seed=5)
     rec = make_recording(HEXAPOD, data.t_s, data.joints, data.measured, NOISE, {})
-    s = discover(rec, resim=False).summary
+    found = discover(rec, resim=False)
+    s = found.summary
     law_s = s["proposed_law"]
     assert law_s["terms"] == ["stroke^2"] and set(law_s) >= {"terms", "constants", "cv_rms_before_mm", "cv_rms_after_mm",
                                                            "granularity"}
     assert len(law_s["constants"]["stroke^2"]) == 6
-    text = "\n".join(terminal_lines(build_report(s)))
+    text = "\n".join(terminal_lines(found.report))
     assert "Proposed law, not in the library" in text and "stroke^2" in text
 
 
@@ -226,13 +227,14 @@ def test_the_law_is_searched_again_without_the_library_effects_it_makes_redundan
     spread (searched beside it, the law came out with one constant for every joint); searched
     again without the dead band, it has its constant per joint and the dead band is dropped."""
     from pipeline.simulation import law_recording
-    from pipeline.report import build_report, terminal_lines
+    from pipeline.report import terminal_lines
     from pipeline.workflows.discovery import discover
 
-    s = discover(law_recording("friction proportional to load", 705, robot="delta"), resim=False).summary
+    found = discover(law_recording("friction proportional to load", 705, robot="delta"), resim=False)
+    s = found.summary
     law = s["proposed_law"]
     assert s["effects"] == ["joint_friction"]
     assert law["terms"] == ["sign(last move) * load"] and law["granularity"] == "per_chain"
     assert law["library_effects_dropped"] == ["joint_friction"] and law["library_effects"] == []
     assert law["explained_with_law"]
-    assert any("joint_friction no longer earns" in line for line in terminal_lines(build_report(s)))
+    assert any("joint_friction no longer earns" in line for line in terminal_lines(found.report))

@@ -15,7 +15,7 @@ from dataclasses import replace
 import pytest
 
 from pipeline.formats import read_recording, write_recording
-from pipeline.report import REPORT_KEY, build_report, report_markdown, terminal_lines
+from pipeline.report import REPORT_KEY, report_markdown, terminal_lines
 from pipeline.report.calibration import without_file
 from pipeline.report.text import DISCOVERY_IMPLAUSIBLE_LINES, IMPLAUSIBLE_LINES
 from pipeline.run import run
@@ -70,7 +70,7 @@ def discovery():
     measured = rec.measured.copy()
     measured[[7, 30], 2] += 0.5  # isolated gross rows 8 and 31
     rec = replace(rec, measured=measured, meta=dict(rec.meta, parameter_tolerance={"mm": 0.002, "rad": 2e-5}))
-    return discover(rec, resim=False).summary
+    return discover(rec, resim=False)
 
 
 def renderings(report) -> tuple[str, str]:
@@ -124,8 +124,8 @@ def test_a_calibration_without_heldout_poses_says_its_crossvalidated_figures_in_
 
 
 def test_a_discovery_says_every_figure_in_both(discovery):
-    s = discovery
-    texts = renderings(build_report(s))
+    s = discovery.summary
+    texts = renderings(discovery.report)
     terminal, markdown = texts
     assert terminal.splitlines()[0] == s["verdict"]  # the verdict first
     in_both(texts, s["verdict"], "verdict")

@@ -14,7 +14,6 @@ import math
 from pathlib import Path
 
 from pipeline.formats.outputs import atomic_write
-from .from_summary import build_report
 from .model import Report
 from .text import (DISPLAY_SCALE, determined_by, effect_evidence, effect_notes, figure_label, flagged_words,
                           heldout_basis, implausible_notes, law_words, machine_facts, no_effect_words, per_pose_label,
@@ -345,12 +344,10 @@ def render_html(report: Report) -> str:
             + "</body></html>\n")
 
 
-def write_report(source: dict | Report, path: str | Path, *, overwrite: bool = False) -> Path:
-    """Write the report of ``source`` (a ``pipeline.run`` / ``pipeline.discover`` summary dict, or a
-    :class:`~pipeline.report.model.Report`) to ``path`` as HTML, atomically.
+def write_report(report: Report, path: str | Path, *, overwrite: bool = False) -> Path:
+    """Write ``report`` (:class:`~pipeline.report.model.Report`) to ``path`` as HTML, atomically.
 
     Raises:
         FileExistsError: ``path`` exists and ``overwrite`` is off.
     """
-    report = source if isinstance(source, Report) else build_report(source)
     return atomic_write(path, render_html(report), overwrite=overwrite)

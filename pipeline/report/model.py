@@ -1,6 +1,6 @@
 """The report of a calibration or a discovery: one typed model of its outcome, built from a
-run's objects (:mod:`pipeline.report.calibration`) or from the summary ``python -m pipeline.discover``
-gives (the dict its ``--summary-json`` writes), in sections: the machine and recording, the verdict, how the fit ran,
+run's objects (:mod:`pipeline.report.calibration`) or a discovery's (:mod:`pipeline.report.discovery`),
+in sections: the machine and recording, the verdict, how the fit ran,
 the parameters and what determined them, the implausible ones, the held-out figures, the
 instrument frames, the effects found, the flagged rows, the compensation, the warnings, the timing
 and the files written.
@@ -26,7 +26,7 @@ __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow
            "Flagged", "CompensationTable", "Timing", "Outputs", "Variant", "Outliers", "GrossStage", "InstrumentFit",
            "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "REPORT_KEY", "OUTPUT_KEYS"]
 
-#: The key of the report model in a summary JSON (:func:`summary_document`).
+#: The key of the report model in a summary JSON (what ``--summary-json`` writes beside the summary's keys).
 REPORT_KEY = "report_model"
 #: The summary keys of the files a run or a discovery writes, in the order they are listed.
 OUTPUT_KEYS = ("rrd", "csv", "json", "calibration", "mjcf", "summary_json", "report")

@@ -1,6 +1,7 @@
 """The discovery's Rerun view (rerun-sdk 0.41 API): residuals against time, stroke, the direction
 of the last move and the verdict's quantity, candidate evidence bars named by effect, and the
-report's markdown (:func:`pipeline.report.text.report_markdown`) as its summary panel."""
+report's markdown (:func:`pipeline.report.text.report_markdown`) as its summary panel; read from
+the discovery's :class:`pipeline.report.Report` and its :class:`calib.effects.Discovery`."""
 
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from calib.effects import EFFECTS, EffectData
 from calib.effects.base import PAYLOAD_CHANNEL
 from calib.robot import Robot
 from pipeline.formats import Recording
-from pipeline.report import build_report
 from pipeline.report.text import model_words, report_markdown
 
 from .charts import (FLAG_COLOR, MACHINE_COLORS, application_id, chain_colors, chart_view, log_named_bars,
@@ -61,23 +61,25 @@ def quantity_values(data: EffectData, name: str) -> tuple[np.ndarray, str]:
     raise ValueError(f"unknown quantity {name!r}")
 
 
-def verdict_quantity(s: dict) -> tuple[str, str]:
+def verdict_quantity(report, tests) -> tuple[str, str]:
     """The quantity the discovery file plots beside time, stroke and direction, and why: what the
     remainder follows, else what a named effect follows, else the quantity whose structure test is
-    the strongest (the size of the last move or the load before a pose coordinate)."""
+    the strongest (the size of the last move or the load before a pose coordinate). ``report``: the
+    discovery's :class:`pipeline.report.Report`; ``tests``: its remainder's structure tests
+    (:class:`calib.effects.remainder.RemainderTests`)."""
     fixed = set(PLOTTED_QUANTITIES)
-    for q in s["remaining"].get("follows", []):
+    for q in report.effects.remaining.follows:
         if q not in fixed:
             return q, "the remainder follows it"
-    for e in s["effects"]:
+    for e in (row.name for row in report.effects.effects):
         q = EFFECTS[e].follows if e in EFFECTS else None  # a kept law (pipeline.discover --use-law) follows its terms
         if q and q not in fixed:
             return q, f"{e} follows it"
-    structure = s["tests"]["structure"]  # the physical quantities first, then the pose coordinates
+    structure = {t.quantity: t for t in tests.structure}  # the physical quantities first, then the pose coordinates
     rest = sorted((q for q in structure if q not in fixed), key=lambda q: (q.startswith("position "),
-                                                                         -structure[q]["score"]))
+                                                                         -structure[q].score))
     if rest:
-        p = structure[rest[0]]["p_value"]
+        p = structure[rest[0]].p_value
         return rest[0], f"strongest test left, p = {p:.2g}"
     return "stroke", "no other quantity tested"
 
@@ -87,7 +89,7 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
     the verdict first, the residuals before and after against time, stroke, the direction of the
     last move and the quantity the verdict names, the candidates' evidence by name, flagged rows
     marked (see docs/rerun_views.md)."""
-    disc, s = report.discovery, report.summary
+    disc, found = report.discovery, report.report
     rows = np.union1d(disc.kept, np.asarray(disc.flagged, dtype=int))  # flagged rows drawn too, marked
     data = EffectData(robot, robot.table.nominal, rec.joints, rec.measured, rec.t_s, rec.noise,
                       payload_kg=rec.extras.get(PAYLOAD_CHANNEL)).subset(rows)
@@ -95,13 +97,14 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
     after = 1e3 * disc.chosen.predict(data)[0]
     flagged = [int(i) for i in np.flatnonzero(np.isin(rows, disc.flagged))]
     chains = [f"{robot.chain_word} {i + 1}" for i in range(robot.n_chains)]
-    model = model_words(s["effects"])
+    named = [e.name for e in found.effects.effects]
+    model = model_words(named)
     models = ("geometry alone", f"{model}, own scale")
-    follows = set(s["remaining"].get("follows", []))
-    extra, why = verdict_quantity(s)
+    follows = set(found.effects.remaining.follows)
+    extra, why = verdict_quantity(found, disc.tests)
     charts = [(q, "the remainder follows it" if q in follows else "") for q in PLOTTED_QUANTITIES] + [(extra, why)]
-    candidates = s["candidates"]
-    ev = s["evidence"]
+    candidates = [c.name for c in found.effects.candidates]
+    alone_bic = {c.name: c.delta_bic_vs_none for c in found.effects.candidates}
 
     def log(r):
         for q, _ in charts:
@@ -116,19 +119,18 @@ def write_discovery_rrd(path: Path, robot: Robot, rec: Recording, report, *, ove
                                                     for j in range(len(chains))], radii=3.0,
                                                    colors=chain_colors(len(chains)), labels=chains,
                                                    show_labels=True), static=True)
-        named = set(s["effects"])
         order = [c for c in candidates if c in named] + [c for c in candidates if c not in named]
-        alone = [ev.get(c, {}).get("delta_bic_vs_none", np.nan) for c in order]
-        entered = [ev.get(c, {}).get("delta_bic_when_added", np.nan) for c in order]
+        alone = [np.nan if alone_bic[c] is None else alone_bic[c] for c in order]
+        entered = [np.nan if (b := disc.evidence.delta_bic_when_added(c)) is None else b for c in order]
         log_named_bars(r, "evidence", order, [("alone (vs geometry)", signed_log(alone), (235, 205, 60)),
                                               ("when it entered", signed_log(entered), MACHINE_COLORS["calibrated"])],
                        unit="signed log10(1 + |BIC drop|)", groups=[1 if c in named else 0 for c in order],
                        group_names=["not named", "named (in the model)"], title="Evidence per candidate",
                        note="an effect needs a BIC drop of 10 (1.04 here) and a lower CV residual", name_px=130.0)
-        r.log("summary", rr.TextDocument(report_markdown(build_report(s)), media_type=rr.MediaType.MARKDOWN),
+        r.log("summary", rr.TextDocument(report_markdown(found), media_type=rr.MediaType.MARKDOWN),
               static=True)
-        r.log("verdict", rr.TextDocument(s["verdict"]), static=True)
-        r.log("remaining", rr.TextDocument(json.dumps(s["remaining"], indent=1)), static=True)
+        r.log("verdict", rr.TextDocument(found.verdict.words), static=True)
+        r.log("remaining", rr.TextDocument(json.dumps(disc.remaining.to_dict(), indent=1)), static=True)
         # The RMS of each row's residual on the `measurement` timeline (the recording's 1-based row).
         grey, blue = MACHINE_COLORS["nominal"], MACHINE_COLORS["calibrated"]
         r.log("per_row/rms_um", rr.SeriesLines(names=["geometry alone", model], colors=[grey, blue]), static=True)

@@ -77,28 +77,29 @@ GEOMETRY_SCALE = 1.1
 
 
 def _analyse(rec, candidates, seed: int) -> dict:
-    from pipeline.report import build_report
     from pipeline.report.text import terminal_lines
     from pipeline.workflows.discovery import discover
 
-    rep = discover(rec, seed=seed, resim=False, candidates=candidates)
-    s = rep.summary
-    lines = terminal_lines(build_report(s))
+    found = discover(rec, seed=seed, resim=False, candidates=candidates)
+    report, disc = found.report, found.discovery
+    lines = terminal_lines(report)
     said_explained = any("explains the recording to the noise" in line for line in lines) or \
         lines[0].startswith("Explained")
-    tests_pass = s["tests"]["noise"]["consistent"] and not s["remaining"]["follows"]
-    insignificant = [e for e, p in s["effect_parameters"].items() if p["significance"]["p_value"] > SIGNIFICANCE_ALPHA]
-    law = s["proposed_law"]
-    return {"named": s["effects"], "explained": s["explained"], "follows": s["remaining"]["follows"],
+    effects, remaining, heldout = report.effects.effects, report.effects.remaining, report.heldout
+    tests_pass = disc.tests.noise.consistent and not remaining.follows
+    insignificant = [e.name for e in effects if e.p_value > SIGNIFICANCE_ALPHA]
+    law = None if disc.proposed_law is None else disc.proposed_law.summary()
+    return {"named": [e.name for e in effects], "explained": report.verdict.success,
+            "follows": list(remaining.follows),
             "law_proposed": law is not None, "law_terms": [] if law is None else law["terms"],
             "law_granularity": {} if law is None else law["term_granularity"],
             "law_cv_after_mm": None if law is None else law["cv_rms_after_mm"],
             "law_noise_floor_mm": None if law is None else law["noise_floor_mm"],
-            "granularity": {e: p["granularity"] for e, p in s["effect_parameters"].items()},
-            "flagged": s["flagged_poses"], "rows": s["rows"], "model_wrong": s["outliers"]["model_wrong"],
-            "heldout_before_mm": s["heldout_rms_before_mm"], "heldout_after_mm": s["heldout_rms_after_mm"],
-            "noise_floor_mm": s["noise_floor_mm"], "verdict": s["verdict"],
-            "consistent": bool(said_explained == s["explained"] == tests_pass) and not insignificant,
+            "granularity": {e.name: e.granularity for e in effects},
+            "flagged": list(report.flagged.rows), "rows": report.source.rows, "model_wrong": report.flagged.model_wrong,
+            "heldout_before_mm": heldout.figures[0].before.rms, "heldout_after_mm": heldout.figures[0].after.rms,
+            "noise_floor_mm": heldout.noise_floor_mm, "verdict": report.verdict.words,
+            "consistent": bool(said_explained == report.verdict.success == tests_pass) and not insignificant,
             "insignificant": insignificant}
 
 

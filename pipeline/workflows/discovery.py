@@ -10,7 +10,9 @@ the held-out fit improve, and re-simulates the MuJoCo machine with the effects a
 calibration found) is calib's (:func:`calib.discovery.discover_machine`); here are the recording's
 edge, the MuJoCo witness and the files. :func:`run_discovery` does what ``python -m pipeline.discover``
 does (a recording or a seeded scenario in, the ``.rrd``, the calibration and the summary out);
-:func:`discover` analyses a recording in memory. Nothing here depends on the robot or the effect.
+:func:`discover` analyses a recording in memory. Its summary is :mod:`.discovery_summary`'s, its
+report :mod:`pipeline.report.discovery`'s, a kept law's file :mod:`.kept_law`'s. Nothing here
+depends on the robot or the effect.
 """
 
 from __future__ import annotations
@@ -34,14 +36,16 @@ from calib.crossval import crossvalidate
 from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from calib.measurement import frame_from_dict
-from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_json_file, read_recording, recording_checks, recording_source, write_calibration)
-from pipeline.report import REPORT_KEY, Report, build_report, write_report
+from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks, recording_source, write_calibration)
+from pipeline.report import REPORT_KEY, Report, write_report
+from pipeline.report.discovery import discovery_report, with_files, with_read
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
-from pipeline.report.text import shift_words, verdict_words
 from pipeline.report.verdict_words import no_motion_words
 
-from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
+from .calibration import machine_tolerance, read_as_a_run_does
+from .discovery_summary import discovery_parts, discovery_summary
+from .kept_law import KEPT_LAW_NAME, keep_law, kept_law_effect, read_kept_law
 
 __all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
            "RESIMULATION_SETTLE_VELOCITY", "DEFAULT_SCENARIO_ROBOT", "KEPT_LAW_NAME", "keep_law", "read_kept_law",
@@ -73,45 +77,6 @@ class DiscoveryReport:
     recording: Recording | None = None
     calibration: Calibration | None = None
     report: Report | None = None
-
-
-def heldout_block(judgement: HeldoutJudgement) -> dict:
-    """The summary's held-out figures (closure residual RMS, mm) of the geometry alone and of the
-    effects named, both fitted on the training rows, with each shifted session's shift taken out;
-    the noise floor; each row's RMS over the joints; the shifts found by session; the effects the
-    held-out rows did not confirm; every fold's figures."""
-    g, m = judgement.geometry, judgement.model
-    held = judgement.fold.held
-    per_row = {"rows": [int(i) + 1 for i in held], "before_mm": g.per_row_mm.tolist(), "after_mm": m.per_row_mm.tolist(),
-               "before_mean_mm": float(g.per_row_mm.mean()), "before_max_mm": float(g.per_row_mm.max()),
-               "after_mean_mm": float(m.per_row_mm.mean()), "after_max_mm": float(m.per_row_mm.max()),
-               "what": "closure residual RMS over the joints of each held-out row (1-based data rows), each shifted "
-                       "session's shift taken out"}
-    return {"heldout_rms_before_mm": g.unshifted_rms_mm, "heldout_rms_after_mm": m.unshifted_rms_mm,
-            # as predicted, a shifted session's shift left in: said only where a session shifted
-            "heldout_rms_as_predicted_mm": {"before": g.rms_mm, "after": m.rms_mm}
-            if any(s.shifted for s in judgement.shifts.values()) else None,
-            "noise_floor_mm": judgement.floor_mm, "after_over_floor": m.unshifted_rms_mm / judgement.floor_mm,
-            "heldout_rows": [int(i) for i in held], "per_row": per_row,
-            "heldout_folds": [{"kind": k, "rows": n, "geometry_rms_mm": gb, "model_rms_mm": mb}
-                              for k, n, gb, mb in judgement.folds],
-            "not_named": [{"effect": r.name, "delta_bic": r.delta_bic, "geometry_rms_mm": r.geometry_mm,
-                           "with_effect_rms_mm": r.with_effect_mm, "judged_on": r.fold, "why": r.why,
-                           "words": not_named_words(r)} for r in judgement.rejected]}
-
-
-def not_named_words(r: RejectedEffect) -> str:
-    """Why an effect the calibration rows chose is not named, with its figures."""
-    bic = "" if r.delta_bic is None else f" (BIC {r.delta_bic:+.0f})"
-    rows = "the validation rows" if r.fold == "validation" else f"rows held out ({r.fold})"
-    if r.why == "not separable":
-        return (f"{r.name} fits the calibration rows{bic} but cannot be separated from the geometry on this pose set: "
-                f"not named")
-    if r.why == "worse re-simulated":
-        return (f"{r.name} fits the calibration rows{bic} but its MuJoCo re-simulation fits worse than the geometry "
-                f"alone ({1e3 * r.geometry_mm:.1f} -> {1e3 * r.with_effect_mm:.1f} um): not named")
-    return (f"{r.name} fits the calibration rows{bic} but predicts {rows} worse ({r.geometry_mm:.3g} -> "
-            f"{r.with_effect_mm:.3g} mm): not named")
 
 
 def _with(settings: dict, section: str, field: str, value: float) -> dict:
@@ -186,25 +151,6 @@ def rehomed(rec: Recording, fit) -> Recording:
                 moved[rec.sessions == session] += d
             return replace(rec, joints=moved)
     return rec
-
-
-def calibration_session_shifts(rec: Recording, fit) -> dict:
-    """``{session: {shift, words}}`` of the later sessions a named ``session_zeros`` moved (fitted
-    with the geometry from the calibration rows of every session)."""
-    for m in fit.models:
-        if isinstance(m, SessionZeros):
-            sl = fit.slices()[m.name]
-            zeros, stds = m.zeros(fit.coefficients[sl], rec.robot), m.zeros(fit.coefficient_std[sl], rec.robot)
-            unit = rec.robot.joint_unit
-            return {s: {"model": "joint zeros", "fitted_with": "the geometry, on the calibration rows of every session",
-                        "shift": {f"zero.{j}": {"value": float(v), "std": float(e), "unit": unit}
-                                  for j, v, e in zip(rec.robot.joint_names, d, stds[s])},
-                        "words": f"the machine re-homed before session {s!r}: each joint's zero moved by "
-                                 + ", ".join(f"{v:+.3g} +- {e:.2g}" for v, e in zip(d, stds[s]))
-                                 + f" {unit} (fitted with the geometry); the calibration file holds the first "
-                                   f"session's zeros: re-reference a later session (pipeline.run --from)"}
-                    for s, d in zeros.items()}
-    return {}
 
 
 def replay(rec: Recording, theta: np.ndarray, settings: dict, which: np.ndarray, history: bool = True) -> np.ndarray:
@@ -321,97 +267,14 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = HELDOUT
     if resim:  # the second witness: an effect whose MuJoCo machine fits worse is not presented as found
         resimulated = resimulation_block(rec, outcome.discovery, sysid, seed)
         outcome, resimulated = witnessed(outcome, resimulated)
-    summary = discovery_summary(rec, outcome, tolerance_source, resimulated)
-    summary["wall_time_s"] = time.perf_counter() - t0
+    parts = discovery_parts(rec, outcome)
+    summary = discovery_summary(rec, outcome, tolerance_source, resimulated, parts)
+    summary["wall_time_s"] = wall = time.perf_counter() - t0
     calibration = outcome.calibration(frames=frames[0], frames_std=frames[1], recording=source or {})
+    report = discovery_report(rec, outcome, **parts, prior_source=tolerance_source, resimulated=resimulated,
+                              wall_time_s=wall)
     return DiscoveryReport(discovery=outcome.discovery, summary=summary, outcome=outcome, recording=rec,
-                           calibration=calibration, report=build_report(summary))
-
-
-def discovery_summary(rec: Recording, outcome: DiscoveryOutcome, tolerance_source: str,
-                      resimulated: dict | None) -> dict:
-    """The summary (``--summary-json``) of a discovery judged by its held-out rows."""
-    robot = rec.robot
-    disc, judgement, names = outcome.discovery, outcome.judgement, outcome.names
-    flagged = list(disc.flagged)
-    h = heldout_block(judgement)
-    scan = disc.outliers
-    remaining = disc.remaining.to_dict()
-    summary = {
-        "robot": robot.name,
-        "explained": disc.explained,
-        "verdict": verdict_words(disc.explained, list(disc.effects), remaining),
-        "remaining": remaining,
-        "effects": list(disc.effects),
-        "partial": list(disc.partial),
-        "aliases": [a.to_dict() for a in disc.aliases],
-        "candidates": [n for n in names if n != "none"],
-        "effect_parameters": disc.chosen.parameters(),
-        "heldout_rms_before_mm": h["heldout_rms_before_mm"],
-        "heldout_rms_after_mm": h["heldout_rms_after_mm"],
-        "noise_floor_mm": h["noise_floor_mm"],
-        "heldout_basis": outcome.basis,
-        "heldout_per_row": h["per_row"],
-        "heldout_rms_as_predicted_mm": h["heldout_rms_as_predicted_mm"],
-        "heldout_folds": h["heldout_folds"],
-        "not_named": h["not_named"],
-        "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
-                           for s, shift in judgement.shifts.items() if shift.shifted}
-        | calibration_session_shifts(rec, disc.chosen),
-        "flagged_poses": [i + 1 for i in flagged],
-        "outliers": {"bad_rows": sorted(int(disc.kept[j]) + 1 for j in scan.bad),
-                     "model_wrong": bool(scan.model_wrong),
-                     "shared": {str(int(disc.kept[r.row]) + 1): dict(r.by) for r in scan.shared},
-                     "threshold": scan.threshold, "scale": scan.scale},
-        "tests": disc.tests.to_dict(),
-        "evidence": disc.evidence.to_dict(),
-        "identified_errors": robot.table.to_dict(disc.chosen.errors),
-        "identified_std": robot.table.to_dict(np.sqrt(np.clip(np.diag(disc.chosen.geometry_covariance()), 0.0, None))),
-        "parameter_units": dict(zip(robot.table.names, robot.table.units)),
-        "free_parameters": list(robot.free_default),
-        "declared_noise": rec.noise.to_dict(),
-        "located": disc.located.to_dict(),
-        "rows": int(rec.joints.shape[0]),
-        "proposed_law": None if disc.proposed_law is None else disc.proposed_law.summary(),
-        "search": disc.search.to_dict(),
-    }
-    summary["implausible_parameters"] = implausibility(rec, disc)
-    summary["time"] = "row order" if row_order(rec) else "measured"
-    summary["effect_parameters"] = placed_by_row(summary["effect_parameters"], rec, disc.kept, row_order(rec))
-    summary["separation"] = {} if disc.separation is None else dict(disc.separation.to_dict(),
-                                                                      prior_source=tolerance_source)
-    if rec.meta.get("simulation", {}).get("effect") is not None:
-        summary["simulated_truth"] = {k: v for k, v in rec.meta["simulation"].items() if k != "injected_errors"}
-    if resimulated is not None:
-        summary.update(resimulated)
-    return summary
-
-
-def row_order(rec: Recording) -> bool:
-    """Whether the recording's time is only its rows' order (every session's ``time`` is ``"row
-    order"``: a lab export with ``[time] format = "none"``, ``t_s`` = 0, 1, 2, ...)."""
-    return all(rec.session_info.get(s, {}).get("time") == "row order" for s in rec.session_names)
-
-
-def placed_by_row(params: dict, rec: Recording, kept: np.ndarray, by_row: bool) -> dict:
-    """``effect_parameters`` with each step in time (a lost count's ``step_time``) placed by the
-    first row after it (``from_row``, 1-based data row); on a recording whose time is the rows'
-    order the step time itself is dropped (it is no time), and rates per second are per row."""
-    out = {}
-    for name, p in params.items():
-        p = dict(p)
-        if "step_time" in p:
-            t0 = p["step_time"]["value"]
-            after = kept[rec.t_s[kept] > t0]
-            p["from_row"] = {"value": float(after[0] + 1) if after.size else float("nan"), "std": float("nan"),
-                             "unit": "row"}
-            if by_row:
-                del p["step_time"]
-        if by_row:
-            p = {k: (dict(v, unit=v["unit"].replace("/s", "/row")) if isinstance(v, dict) and "unit" in v else v)
-                 for k, v in p.items()}
-        out[name] = p
-    return out
+                           calibration=calibration, report=report)
 
 
 def resimulation_block(rec: Recording, disc: Discovery, sysid: bool, seed: int) -> dict:
@@ -423,72 +286,6 @@ def resimulation_block(rec: Recording, disc: Discovery, sysid: bool, seed: int) 
     out = resimulate(rec, disc, sysid=sysid, seed=seed)
     out["wall_time_s"] = time.perf_counter() - t1
     return {"mujoco_resimulation": out}
-
-
-#: The name a kept law (``--use-law``) has as a candidate effect.
-KEPT_LAW_NAME = "kept_law"
-#: What a kept law file holds (``--law``): its format's name, written and checked.
-KEPT_LAW_FORMAT = "parallel-calib kept law 1"
-
-
-def keep_law(path: Path, summary: dict, *, overwrite: bool = False) -> Path | None:
-    """Write the summary's proposed law to ``path`` (JSON, atomically; an existing file refused
-    without ``overwrite``): the law as data (terms, granularity, the constants found), the robot,
-    the formula and its units, and where it was found. None (nothing written) when no law was
-    proposed."""
-    law = summary.get("proposed_law")
-    if law is None:
-        return None
-    kept = {"format": KEPT_LAW_FORMAT, "robot": summary["robot"], "formula": law["formula"], "terms": law["terms"],
-            "units": law["units"], "constants": law["constants"], "law": law["law"],
-            "found_on": summary.get("source")}
-    atomic_write(path, json.dumps(kept, indent=1), overwrite=overwrite)
-    return Path(path)
-
-
-def read_kept_law(path: Path, robot: str | None = None) -> dict:
-    """A law kept by :func:`keep_law` (checked: its format, keys and terms; of ``robot`` when
-    given).
-
-    Raises:
-        ValueError: the file cannot be read, is not a kept law, lacks a key, or is another robot's
-            (the message names the file and the key).
-    """
-    from calib.effects.laws import law_from_dict
-
-    d = read_json_file(Path(path), "kept law (JSON)", ValueError)
-    if not isinstance(d, dict) or d.get("format") != KEPT_LAW_FORMAT:
-        raise ValueError(f"{path}: key 'format' is not {KEPT_LAW_FORMAT!r}: not a law kept by pipeline.discover --law")
-    for key in ("robot", "law"):
-        if key not in d:
-            raise ValueError(f"{path}: key {key!r} missing")
-    try:
-        law_from_dict(d["law"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: key 'law' is not a law's terms ({exc!r} missing or bad)") from None
-    if robot is not None and d["robot"] != robot:
-        raise ValueError(f"{path}: key 'robot' is {d['robot']!r}, a law of another robot than the {robot}")
-    return d
-
-
-def kept_law_effect(kept: dict, rec: Recording):
-    """The kept law (:func:`read_kept_law`'s data) as a candidate effect on ``rec`` (name
-    :data:`KEPT_LAW_NAME`; its terms and granularity kept, its constants refitted; a recorded
-    channel it uses taken from ``rec.extras`` by time).
-
-    Raises:
-        ValueError: a law of another robot, or one using a channel ``rec`` does not record.
-    """
-    from calib.effects.laws import law_channels, law_effect, law_from_dict
-
-    if kept["robot"] != rec.robot.name:
-        raise ValueError(f"the kept law is of the {kept['robot']}, the recording of the {rec.robot.name}")
-    terms, gran = law_from_dict(kept["law"])
-    missing = [c for c in law_channels(terms) if c not in rec.extras]
-    if missing:
-        raise ValueError(f"the kept law uses the recorded channel {missing[0]!r}, which the recording lacks")
-    channels = {c: rec.extras[c] for c in law_channels(terms)}
-    return law_effect(terms, gran, channels, name=KEPT_LAW_NAME, channel_times_s=rec.t_s)
 
 
 #: The robot of a scenario that names none.
@@ -537,26 +334,6 @@ class DiscoverySettings:
     use_law: Path | None = None
     export_mjcf: Path | None = None
     report: Path | None = None
-
-
-def implausibility(rec: Recording, disc: Discovery) -> dict:
-    """The identified errors beyond three tolerances (the sidecar's ``meta.parameter_tolerance`` or
-    the robot's default) with the geometry alone and with the effects found, and those the effects
-    bring back within tolerance: a geometry that had absorbed physics."""
-    robot = rec.robot
-    tolerance, source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
-    names = robot.free_default
-    alone = implausible_parameters(robot, disc.geometry.errors, tolerance, names)
-    with_effects = implausible_parameters(robot, disc.chosen.errors, tolerance, names)
-    still = {d["name"] for d in with_effects}
-    back = [d for d in alone if d["name"] not in still]
-    k = {n: robot.table.index(n) for n in names}
-    words = [f"{d['name']}: {d['error']:+.4g} {d['unit']} with the geometry alone, "
-             f"{disc.chosen.errors[k[d['name']]]:+.4g} {d['unit']} with {', '.join(disc.effects) or 'no effect'}: back "
-             f"within {IMPLAUSIBLE_TOLERANCES:g} tolerances ({d['tolerance']:.4g} {d['unit']})" for d in back]
-    return {"tolerance_source": source, "tolerance": tolerance.tolerance_by_name(robot),
-            "geometry_alone": alone, "with_effects": with_effects,
-            "back_within_tolerance": [d["name"] for d in back], "words": words}
 
 
 def geometry_crossvalidation(rec: Recording, read, seed: int) -> dict:
@@ -655,30 +432,44 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
     if read is not None:
         report.summary.update(read.block)
         report.summary["warnings"] = warnings
-        if not np.any(rec.sets == "validation"):
-            report.summary.update(geometry_crossvalidation(rec, read, settings.seed))
+        cv = None if np.any(rec.sets == "validation") else geometry_crossvalidation(rec, read, settings.seed)
+        report.summary.update(cv or {})
+        report.report = with_read(report.report, read.block, warnings, cv)
+    return write_discovery_files(report, settings, rrd_path, calibration_path,
+                                 recording=str(settings.real) if settings.real is not None else source["simulated"],
+                                 law_source=str(settings.real or stem))
+
+
+def write_discovery_files(report: DiscoveryReport, settings: DiscoverySettings, rrd_path: Path, calibration_path: Path,
+                          *, recording: str, law_source: str) -> DiscoveryReport:
+    """Write what ``settings`` asks of ``report`` (the ``.rrd``, the calibration; the MJCF, the kept
+    law, the summary JSON, the HTML report where asked), each named in its summary and report
+    (``recording``: the recording in words; ``law_source``: where a kept law was found)."""
     from pipeline.views import write_discovery_rrd  # Rerun for the file alone: the analysis and its words load none
 
-    rrd = write_discovery_rrd(rrd_path, robot, rec, report, overwrite=settings.overwrite)
-    report.summary["rrd"] = str(rrd)
-    cal = report.calibration
-    report.summary["calibration"] = str(write_calibration(calibration_path, cal, overwrite=settings.overwrite))
+    rec, cal, overwrite = report.recording, report.calibration, settings.overwrite
+    files = {"rrd": str(write_discovery_rrd(rrd_path, rec.robot, rec, report, overwrite=overwrite))}
+    report.summary["rrd"] = files["rrd"]
+    report.summary["calibration"] = files["calibration"] = str(write_calibration(calibration_path, cal,
+                                                                                 overwrite=overwrite))
     if settings.export_mjcf is not None:
-        report.summary["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=settings.overwrite))
+        report.summary["mjcf"] = files["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=overwrite))
+    law_kept = None
     if settings.law_out is not None:
-        kept = keep_law(settings.law_out, dict(report.summary, source=str(settings.real or stem)),
-                        overwrite=settings.overwrite)
-        report.summary["law_kept"] = None if kept is None else str(kept)
-    report.summary["recording"] = str(settings.real) if settings.real is not None else source["simulated"]
+        kept = keep_law(settings.law_out, dict(report.summary, source=law_source), overwrite=overwrite)
+        report.summary["law_kept"] = law_kept = None if kept is None else str(kept)
+    report.summary["recording"] = recording
+    compensation = None
     if settings.report is not None:
-        report.summary["report"] = str(settings.report)
-        report.summary["compensation"] = compensation_table(rec, cal, report.summary)
-    report.report = build_report(report.summary)  # every file named: the report of the whole discovery
+        report.summary["report"] = files["report"] = str(settings.report)
+        report.summary["compensation"] = compensation = compensation_table(rec, cal, report.outcome.judgement)
+    report.report = with_files(report.report, recording=recording, files=files, law_asked=settings.law_out is not None,
+                               law_kept=law_kept, compensation=compensation)  # every file named
     if settings.summary_json is not None:
         atomic_write(settings.summary_json, json.dumps({**report.summary, REPORT_KEY: report.report.to_dict()},
-                                                       indent=1), overwrite=settings.overwrite)
+                                                       indent=1), overwrite=overwrite)
     if settings.report is not None:
-        write_report(report.report, settings.report, overwrite=settings.overwrite)
+        write_report(report.report, settings.report, overwrite=overwrite)
     return report
 
 
@@ -686,7 +477,7 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
 COMPENSATION_TARGETS = 20
 
 
-def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict | None:
+def compensation_table(rec: Recording, cal: Calibration, judgement: HeldoutJudgement) -> dict | None:
     """The summary's ``compensation`` (for the report): the commands ``pipeline.compensate`` gives
     for the first :data:`COMPENSATION_TARGETS` held-out rows' measured poses as targets, commanded in
     the recording's order at its times (:func:`calib.compensation.compensated_commands` with the
@@ -696,7 +487,7 @@ def compensation_table(rec: Recording, cal: Calibration, summary: dict) -> dict 
     if not cal.effects:
         return None
     robot = rec.robot
-    rows = np.asarray(summary["heldout_per_row"]["rows"][:COMPENSATION_TARGETS], dtype=int) - 1
+    rows = np.asarray([int(i) for i in judgement.fold.held[:COMPENSATION_TARGETS]], dtype=int)
     channels = {k: v[rows] for k, v in rec.extras.items()}
     try:
         comp = compensated_commands(robot, cal.theta, rec.measured[rows], cal.fitted_effects(channels),

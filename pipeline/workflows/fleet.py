@@ -220,7 +220,9 @@ def _discovered(read, summary_path: Path) -> dict:
     s = report.summary
     s.update(read.block)
     atomic_write(summary_path, json.dumps(s, indent=1) + "\n", overwrite=True)
-    return {"explained": f"{'yes' if s['explained'] else 'no'}: {model_words(s['effects'])}",
+    found = report.report  # the words from the discovery's report; the file is its summary
+    return {"explained": f"{'yes' if found.verdict.success else 'no'}: "
+                         f"{model_words([e.name for e in found.effects.effects])}",
             "discovery": str(summary_path)}
 
 
