@@ -35,7 +35,6 @@ from calib.compensation import compensated_commands
 from calib.crossval import crossvalidate
 from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
-from calib.measurement import frame_from_dict
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks, recording_source, write_calibration)
 from pipeline.report import REPORT_KEY, Report, write_report
 from pipeline.report.discovery import discovery_report, with_files, with_read
@@ -346,18 +345,6 @@ def geometry_crossvalidation(rec: Recording, read, seed: int) -> dict:
     out = cv.summary()
     out["crossvalidation"]["model"] = "the geometry alone (forward fit with the tolerances as prior)"
     return out
-
-
-def frames_of(rec: Recording, block: dict) -> tuple[dict, dict]:
-    """``({session: (6,) frame}, {session: (6,) std})`` a run's read of ``rec`` registered (its
-    summary keys ``measurement_frame(s)``), empty when the data were in the base frame."""
-    if "measurement_frames" in block:
-        return ({s: frame_from_dict(f) for s, f in block["measurement_frames"].items()},
-                {s: frame_from_dict(f) for s, f in block["measurement_frames_std"].items()})
-    if "measurement_frame" in block:
-        s = rec.session_names[0]
-        return {s: frame_from_dict(block["measurement_frame"])}, {s: frame_from_dict(block["measurement_frame_std"])}
-    return {}, {}
 
 
 def discover_in_words(rec: Recording, settings: DiscoverySettings, read, source: dict) -> DiscoveryReport:
