@@ -514,8 +514,8 @@ def calibrate(robot: Robot, joints, measured, noise: SensorNoise, *, measurement
 def calibrate_checked(data: CalibrationData, options: IdentificationOptions, *, heldout: Callable | None = None,
                       diagnosis=None, assess: bool = True) -> CalibrationOutcome:
     """:func:`calibrate`'s back end: trusts its input, ``data`` and ``options`` as
-    :func:`checked_arguments` (or :func:`checked_data` and :func:`checked_options`) returns them (``heldout``, ``diagnosis``, ``assess`` as
-    :func:`calibrate` takes them)."""
+    :func:`checked_arguments` (or :func:`checked_data` and :func:`checked_options`) returns them
+    (``heldout``, ``diagnosis``, ``assess`` as :func:`calibrate` takes them)."""
     warnings: list[str] = []
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()

@@ -49,7 +49,8 @@ def run_record(inp, outcome, settings, *, truth, figures: dict | None, implausib
                       variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth, free))
     misfit = bool(ident.report is not None and ident.report.misfit)
     outliers = Outliers(test=OUTLIER_TEST, verdict=ident.outlier_verdict,
-                        flagged_rows=tuple(int(inp.data.rows[i]) + 1 for i in ident.flagged_idx), left_out=ident.left_out,
+                        flagged_rows=tuple(int(inp.data.rows[i]) + 1 for i in ident.flagged_idx),
+                        left_out=ident.left_out,
                         model_misfit=misfit, search=None if ident.report is None else ident.report.search)
     held = outcome.heldout
     return RunRecord(

@@ -566,8 +566,9 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
     (at least :data:`calib.effects.heldout.MIN_SESSION_ROWS`) whose rows show a shift against the
     calibration (:func:`calib.session_shift.fit_session_shift`: each joint's zero and the
     instrument frame, by evidence), with its words; empty when none shifted or nothing was read."""
-    cal, rec = outcome.calibration, inp.rec
-    if rec is None or cal is None or not len(inp.data.validation_joints) or any(m.n_targets for m in inp.data.measurement or ()):
+    cal, rec, data = outcome.calibration, inp.rec, inp.data
+    if rec is None or cal is None or not len(data.validation_joints) \
+            or any(m.n_targets for m in data.measurement or ()):
         return {}
     from calib.effects.heldout import MIN_SESSION_ROWS  # a recording's run only: the default run loads no discovery
     from calib.session_shift import fit_session_shift
@@ -580,11 +581,12 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
         at = rec.sessions[val_rows] == name
         if name in trained or at.sum() < MIN_SESSION_ROWS:
             continue
-        group = int(inp.data.validation_sessions[at][0])
-        frame = cal.frames.get(inp.data.session_names[group]) if 0 <= group < len(inp.data.session_names) else None
+        group = int(data.validation_sessions[at][0])
+        frame = cal.frames.get(data.session_names[group]) if 0 <= group < len(data.session_names) else None
         try:
-            shift = fit_session_shift(robot, lambda q: robot.forward_kinematics(cal.theta, q), inp.data.validation_joints[at],
-                                      inp.data.validation_measured[at], inp.data.noise, frame=frame)
+            shift = fit_session_shift(robot, lambda q: robot.forward_kinematics(cal.theta, q),
+                                      data.validation_joints[at], data.validation_measured[at], data.noise,
+                                      frame=frame)
         except KinematicsError:  # a row the identified machine cannot reach: said by the held-out figures
             continue
         if shift.shifted:
@@ -759,9 +761,10 @@ def log_step(inp: CalibrationInput, ident: Identification, held, report: Report,
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
     from pipeline.views.run_view import MAX_MACHINE_POSES, drawn_poses
 
-    robot, result, joints, measured = inp.data.robot, ident.result, inp.data.joints, ident.measured
+    robot, joints, noise = inp.data.robot, inp.data.joints, inp.data.noise
+    result, measured = ident.result, ident.measured
     nominal = robot.table.nominal
-    analysis = analyze_observability(robot, result.start, measured[ident.used], inp.data.noise, joints=joints[ident.used])
+    analysis = analyze_observability(robot, result.start, measured[ident.used], noise, joints=joints[ident.used])
     observability = {"condition_number": float(analysis.condition_number),
                      "crb_std": robot.table.to_dict(analysis.crb_std)}
     targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)
