@@ -58,7 +58,8 @@ from .robot import KinematicsError, Robot, chain_jacobian_factors, pose_jacobian
 from .robust import GrossRowResult, find_gross_rows
 from .validation import as_array
 
-__all__ = ["calibrate", "calibrate_checked", "checked_arguments", "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
+__all__ = ["calibrate", "calibrate_checked", "checked_arguments", "checked_data", "checked_options",
+           "CalibrationOutcome", "CalibrationData", "IdentificationOptions", "Identification",
            "Verdict", "VerdictEvidence", "PredictionCheck", "NoMotion", "NoInformation", "DescriptionPattern", "NoConvergence",
            "GrossSearch", "Misprediction", "SessionSearch", "UnreachableRows", "BASE_FRAME", "INSTRUMENT_FOLDS",
            "SOLVERS", "PRODUCED_BY", "VERDICT_CAUSES", "DIAGNOSED_CAUSES",
@@ -513,8 +514,8 @@ def calibrate(robot: Robot, joints, measured, noise: SensorNoise, *, measurement
 def calibrate_checked(data: CalibrationData, options: IdentificationOptions, *, heldout: Callable | None = None,
                       diagnosis=None, assess: bool = True) -> CalibrationOutcome:
     """:func:`calibrate`'s back end: trusts its input, ``data`` and ``options`` as
-    :func:`checked_arguments` returns them (``heldout``, ``diagnosis``, ``assess`` as
-    :func:`calibrate` takes them)."""
+    :func:`checked_arguments` (or :func:`checked_data` and :func:`checked_options`) returns them
+    (``heldout``, ``diagnosis``, ``assess`` as :func:`calibrate` takes them)."""
     warnings: list[str] = []
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -566,12 +567,44 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
                       tolerance, tolerance_declared, tolerance_source, prior, method, solver, weighted,
                       keep_outliers, search_gross_rows, cross_validate, rows, t_s, where, geometry_source,
                       seed) -> tuple[CalibrationData, IdentificationOptions]:
-    """The arguments of :func:`calibrate`, checked, as its back end takes them.
+    """The arguments of :func:`calibrate`, checked, as its back end takes them: the scalars first (in
+    the signature's order), then :func:`checked_data` and :func:`checked_options`.
 
     Raises:
         TypeError, ValueError: naming the argument that is wrong.
     """
-    _check_scalars(robot, noise, method, solver, heldout, seed, where)
+    _check_types(robot, noise)
+    _check_method(method, solver)
+    _check_heldout(heldout)
+    _check_seed(seed)
+    _check_where(where)
+    data = checked_data(robot, joints, measured, noise, measurement=measurement, sessions=sessions,
+                        session_names=session_names, session_frames=session_frames,
+                        validation_joints=validation_joints, validation_measured=validation_measured,
+                        validation_sessions=validation_sessions, validation_rows=validation_rows, heldout=heldout,
+                        tolerance=tolerance, tolerance_declared=tolerance_declared,
+                        tolerance_source=tolerance_source, prior=prior, rows=rows, t_s=t_s, where=where,
+                        geometry_source=geometry_source)
+    options = checked_options(method=method, solver=solver, weighted=weighted, keep_outliers=keep_outliers,
+                              search_gross_rows=search_gross_rows, cross_validate=cross_validate, seed=seed)
+    return data, options
+
+
+def checked_data(robot, joints, measured, noise, *, measurement=None, sessions=None, session_names=None,
+                 session_frames=None, validation_joints=None, validation_measured=None, validation_sessions=None,
+                 validation_rows=None, heldout: Callable | None = None, tolerance=None, tolerance_declared=None,
+                 tolerance_source=None, prior: bool = True, rows=None, t_s=None, where: str = "the calibration rows",
+                 geometry_source: str | None = None) -> CalibrationData:
+    """The data of :func:`calibrate` (its arguments of the same names, their defaults), checked:
+    the :class:`CalibrationData` :func:`calibrate_checked` takes. ``heldout``: the held-out errors
+    the caller will give :func:`calibrate_checked` (checked against validation rows), or None.
+
+    Raises:
+        TypeError, ValueError: naming the argument that is wrong.
+    """
+    _check_types(robot, noise)
+    _check_heldout(heldout)
+    _check_where(where)
     per, joints, measured, sessions, names, frames_of = _checked_groups(robot, joints, measured, measurement, sessions,
                                                                         session_names, session_frames)
     n = joints.shape[0]
@@ -581,31 +614,55 @@ def checked_arguments(robot, joints, measured, noise, *, measurement, sessions, 
                                                                    validation_joints, validation_measured,
                                                                    validation_sessions, validation_rows, heldout)
     tolerance, declared, tolerance_source = _checked_tolerance(robot, tolerance, tolerance_declared, tolerance_source)
-    data = CalibrationData(robot=robot, noise=noise, joints=joints, measured=measured, rows=rows, t_s=t_s,
+    return CalibrationData(robot=robot, noise=noise, joints=joints, measured=measured, rows=rows, t_s=t_s,
                            measurement=per, sessions=sessions, session_names=names, session_frames=frames_of,
                            validation_joints=v_joints, validation_measured=v_measured, validation_sessions=v_sessions,
                            validation_rows=v_rows, tolerance=tolerance, prior=tolerance if prior else None,
                            tolerance_declared=declared, tolerance_source=str(tolerance_source), where=where,
                            geometry_source=geometry_source)
-    options = IdentificationOptions(method=method, solver=solver, weighted=bool(weighted),
-                                    keep_outliers=bool(keep_outliers), search_gross_rows=bool(search_gross_rows),
-                                    cross_validate=bool(cross_validate), seed=int(seed))
-    return data, options
 
 
-def _check_scalars(robot, noise, method, solver, heldout, seed, where) -> None:
+def checked_options(*, method: str = "chainwise", solver: str | None = None, weighted: bool = False,
+                    keep_outliers: bool = False, search_gross_rows: bool = True, cross_validate: bool = True,
+                    seed: int = 0) -> IdentificationOptions:
+    """The identification options of :func:`calibrate` (its arguments of the same names, their
+    defaults), checked.
+
+    Raises:
+        ValueError: naming the argument that is wrong.
+    """
+    _check_method(method, solver)
+    _check_seed(seed)
+    return IdentificationOptions(method=method, solver=solver, weighted=bool(weighted),
+                                 keep_outliers=bool(keep_outliers), search_gross_rows=bool(search_gross_rows),
+                                 cross_validate=bool(cross_validate), seed=int(seed))
+
+
+def _check_types(robot, noise) -> None:
     if not isinstance(robot, Robot):
         raise TypeError(f"robot must be a calib.robot.Robot, got {type(robot).__name__}")
     if not isinstance(noise, SensorNoise):
         raise TypeError(f"noise must be a calib.noise.SensorNoise, got {type(noise).__name__}")
+
+
+def _check_method(method, solver) -> None:
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if solver is not None and solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS} or None, got {solver!r}")
+
+
+def _check_heldout(heldout) -> None:
     if heldout is not None and not callable(heldout):
         raise TypeError(f"heldout must be callable (theta -> (before, after)), got {type(heldout).__name__}")
+
+
+def _check_seed(seed) -> None:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise ValueError(f"seed must be an integer, got {seed!r}")
+
+
+def _check_where(where) -> None:
     if not isinstance(where, str):
         raise ValueError(f"where must be a string, got {type(where).__name__}")
 

@@ -10,7 +10,7 @@ import pytest
 from calib.calibration import Calibration
 from calib.engine import gauge_representative
 from calib.identification import (BASE_FRAME, CalibrationOutcome, GrossSearch, Misprediction, UnreachableRows,
-                                  calibrate)
+                                  calibrate, calibrate_checked, checked_data, checked_options)
 from calib.measurement import MeasurementSettings, instrument_measurements
 from calib.noise import SensorNoise
 from calib.robots import default_robot, reference_errors
@@ -184,7 +184,8 @@ def test_a_row_the_model_cannot_reach_is_named_by_the_callers_number():
     assert int(err.value.rows[err.value.kinematics.index]) == 504 and "row 505" in str(err.value)
 
 
-@pytest.mark.parametrize("change, named", [
+#: ``(arguments changed, the name the refusal gives)``: a bad argument of calibrate each.
+BAD_ARGUMENTS = [
     ({"joints": np.zeros((5, 2))}, "joints"),
     ({"measured": np.zeros((ROWS, 2))}, "measured"),
     ({"method": "newton"}, "method"),
@@ -199,13 +200,51 @@ def test_a_row_the_model_cannot_reach_is_named_by_the_callers_number():
     ({"seed": 1.5}, "seed"),
     ({"validation_joints": np.zeros((3, 3)), "validation_measured": np.zeros((3, 3)),
       "validation_sessions": [0, BASE_FRAME, 0]}, "validation_sessions"),
-])
+]
+
+
+@pytest.mark.parametrize("change, named", BAD_ARGUMENTS)
 def test_a_bad_argument_is_refused_by_name(change, named):
     robot, _, q, m, _, _ = machine("delta", seed=8)
     args = {"joints": q, "measured": m} | change
     q, m = args.pop("joints"), args.pop("measured")
     with pytest.raises(ValueError, match=named):
         calibrate(robot, q, m, NOISE, **args)
+
+
+#: The arguments of calibrate that checked_options takes; the others but heldout, diagnosis and
+#: assess are checked_data's.
+OPTION_ARGUMENTS = ("method", "solver", "weighted", "keep_outliers", "search_gross_rows", "cross_validate", "seed")
+
+
+@pytest.mark.parametrize("change, named", BAD_ARGUMENTS)
+def test_the_data_and_options_checks_refuse_in_calibrates_words(change, named):
+    """A caller that checks the data and the options apart (pipeline, when it reads a recording)
+    is refused in the words calibrate uses."""
+    robot, _, q, m, _, _ = machine("delta", seed=8)
+    args = {"joints": q, "measured": m} | change
+    q, m = args.pop("joints"), args.pop("measured")
+    with pytest.raises(ValueError) as whole:
+        calibrate(robot, q, m, NOISE, **args)
+    options = {k: v for k, v in args.items() if k in OPTION_ARGUMENTS}
+    with pytest.raises(ValueError) as apart:
+        checked_data(robot, q, m, NOISE, **{k: v for k, v in args.items() if k not in OPTION_ARGUMENTS})
+        checked_options(**options)
+    assert str(apart.value) == str(whole.value) and named in str(apart.value)
+
+
+def test_data_and_options_checked_apart_calibrate_as_calibrate_does():
+    """checked_data and checked_options, given calibrate's arguments, make the fit calibrate makes,
+    to the bit (one code path)."""
+    robot, _, q, m, qv, mv = machine("hexapod", seed=9)
+    rows = np.arange(ROWS) + 100
+    whole = calibrate(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv, rows=rows, seed=3,
+                      search_gross_rows=False)
+    data = checked_data(robot, q, m, NOISE, validation_joints=qv, validation_measured=mv, rows=rows)
+    apart = calibrate_checked(data, checked_options(seed=3, search_gross_rows=False))
+    assert np.array_equal(apart.result.theta, whole.result.theta)
+    assert np.array_equal(apart.heldout[1], whole.heldout[1]) and apart.verdict.success == whole.verdict.success
+    np.testing.assert_array_equal(apart.data.validation_rows, whole.data.validation_rows)
 
 
 def test_a_wrong_type_is_refused_by_name():

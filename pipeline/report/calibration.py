@@ -179,13 +179,13 @@ def frame_held_words(fit) -> list[str]:
 
 def flagged_rows(inp, ident) -> list[int]:
     """The rows named gross or flagged, as 1-based data rows (:data:`ROW_NUMBERING`)."""
-    return [int(inp.rows[i]) + 1 for i in ident.flagged_idx]
+    return [int(inp.data.rows[i]) + 1 for i in ident.flagged_idx]
 
 
 def gross_rows(inp, ident) -> tuple[list[int], bool]:
     """The rows the gross-row stage named (1-based data rows) and whether they were left out."""
-    return ([int(inp.rows[i]) + 1 for i in ident.gross_idx],
-            bool(ident.gross_idx) and len(ident.kept) < len(inp.measured))
+    return ([int(inp.data.rows[i]) + 1 for i in ident.gross_idx],
+            bool(ident.gross_idx) and len(ident.kept) < len(inp.data.measured))
 
 
 def fit_history(robot, inp, ident, method: str) -> list[float]:
@@ -194,7 +194,7 @@ def fit_history(robot, inp, ident, method: str) -> list[float]:
     if method == "chainwise" and ident.solver == "gn" and instrument is None:
         return list(result.history)
     residuals = result.pose_residuals if instrument is None else \
-        ident.measured - robot.forward_kinematics(result.theta, inp.joints)
+        ident.measured - robot.forward_kinematics(result.theta, inp.data.joints)
     return [float(integrated_error(robot, residuals)[2].max())]
 
 
@@ -223,8 +223,8 @@ def _fit(inp, outcome, method: str) -> Fit:
     return Fit(method="forward" if instrument is not None else method,
                solver="lm" if instrument is not None else ident.solver, iterations=result.iterations,
                converged=result.success, message=result.message or "",
-               history=tuple(fit_history(inp.robot, inp, ident, method)),
-               condition_numbers=tuple(result.condition_numbers.tolist()), rows=int(len(inp.measured)),
+               history=tuple(fit_history(inp.data.robot, inp, ident, method)),
+               condition_numbers=tuple(result.condition_numbers.tolist()), rows=int(len(inp.data.measured)),
                rows_used=int(ident.used.size), heldout_poses=0 if outcome.heldout is None else len(outcome.heldout[0]))
 
 
@@ -248,7 +248,7 @@ def _parameters(outcome, implausible: list[dict]) -> tuple[Parameters, Determina
 
 def _heldout(inp, outcome, shift_words: tuple[str, ...]) -> Heldout | None:
     ident, held = outcome.identification, outcome.heldout
-    robot = inp.robot
+    robot = inp.data.robot
     if held is None:
         return _crossvalidated(outcome.crossvalidation)
     before, after = held
@@ -257,7 +257,7 @@ def _heldout(inp, outcome, shift_words: tuple[str, ...]) -> Heldout | None:
     rows = None if inp.rec is None else [int(r) + 1 for r in inp.rec.rows("validation")]
     iso = ()
     if inp.rec is not None and before.shape[1] == robot.pose_dim:
-        iso = iso_poses(robot, before, after, inp.val_joints, inp.noise.joint_std, rows)
+        iso = iso_poses(robot, before, after, inp.data.validation_joints, inp.data.noise.joint_std, rows)
     return Heldout(basis=heldout_basis(inp, ident), poses=len(before),
                    figures=heldout_figure_rows(robot, before, after, targets),
                    per_pose=per_pose_rows(robot, before, after, rows), iso9283=iso,
@@ -287,7 +287,7 @@ def _frames(inp, fit) -> Frames | None:
         return None
     held = tuple(frame_held_words(fit)) if fit.frame_estimated else ()
     if inp.n_sessions > 1:
-        names = inp.frame_sessions
+        names = inp.data.session_names
         rows = tuple(row(names[s], f, frame_to_dict(fit.frames_std[s])) for s, f in fit.frames_dict().items())
         return Frames(rows=rows, held=held, sessions=True)
     if not fit.frame_estimated:
@@ -301,7 +301,7 @@ def _flagged(inp, outcome) -> Flagged:
     without = with_ = None
     if ident.result_kept is not None and outcome.heldout_with_flagged is not None \
             and outcome.heldout_without_flagged is not None:
-        with_, without = (float(pose_error_norms(inp.robot, h[1])[0].mean())
+        with_, without = (float(pose_error_norms(inp.data.robot, h[1])[0].mean())
                           for h in (outcome.heldout_with_flagged, outcome.heldout_without_flagged))
     return Flagged(rows=tuple(flagged_rows(inp, ident)), gross=tuple(gross), left_out=bool(ident.left_out),
                    gross_left_out=gross_out, outlier_verdict=ident.outlier_verdict, heldout_after_without_mm=without,
@@ -324,7 +324,7 @@ def calibration_report(inp, outcome, *, method: str, seed: int, truth: dict | No
     parameters, determination = _parameters(outcome, implausible)
     pe, gain = (truth or {}).get("parameter_error"), (truth or {}).get("gain_G_percent")
     verdict = outcome.verdict
-    return Report(kind="calibration", source=_source_of(inp.robot, str(inp.scenario), inp.noise, seed),
+    return Report(kind="calibration", source=_source_of(inp.data.robot, str(inp.scenario), inp.data.noise, seed),
                   verdict=Verdict(bool(verdict.success), verdict_sentence(verdict), verdict.cause),
                   fit=_fit(inp, outcome, method),
                   truth=None if truth is None else Truth(pe["rms_mm"], pe["rms_rad"], gain.get("mean"), gain.get("norm")),

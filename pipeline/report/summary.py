@@ -41,7 +41,7 @@ def run_record(inp, outcome, settings, *, truth, figures: dict | None, implausib
     gauge or None; ``figures``: ``{"parameter_error", "gain_G_percent"}`` against it or None;
     ``implausible``: the implausible parameters, ``{"name", "error", "tolerance", "unit", "words"}``)."""
     ident, data = outcome.identification, outcome.data
-    robot, result, table = inp.robot, ident.result, inp.robot.table
+    robot, result, table = inp.data.robot, ident.result, inp.data.robot.table
     free = result.free_names
     comparison = (None, None)
     if ident.result_kept is not None:
@@ -49,13 +49,14 @@ def run_record(inp, outcome, settings, *, truth, figures: dict | None, implausib
                       variant(robot, ident.result_kept, list(ident.keep), outcome.heldout_without_flagged, truth, free))
     misfit = bool(ident.report is not None and ident.report.misfit)
     outliers = Outliers(test=OUTLIER_TEST, verdict=ident.outlier_verdict,
-                        flagged_rows=tuple(int(inp.rows[i]) + 1 for i in ident.flagged_idx), left_out=ident.left_out,
+                        flagged_rows=tuple(int(inp.data.rows[i]) + 1 for i in ident.flagged_idx),
+                        left_out=ident.left_out,
                         model_misfit=misfit, search=None if ident.report is None else ident.report.search)
     held = outcome.heldout
     return RunRecord(
         method=settings.method, solver=ident.solver,
         weighted=(settings.weighted or data.prior is not None) if settings.method == "chainwise" else True,
-        declared_noise=inp.noise.to_dict(), parameter_units=tuple(zip(table.names, table.units)), free=tuple(free),
+        declared_noise=inp.data.noise.to_dict(), parameter_units=tuple(zip(table.names, table.units)), free=tuple(free),
         fixed=tuple(n for n in table.names if n not in free),
         injected_errors=None if inp.injected is None else _named(table, inp.injected),
         identified_errors=_named(table, result.errors), identified_std=_named(table, result.std),
@@ -105,7 +106,7 @@ def instrument_fit(inp, fit) -> InstrumentFit:
     """The instrument frame or target fit ``fit`` of a recording's run (``inp``: its input)."""
     sessions = {}
     if inp.n_sessions > 1:
-        names = inp.frame_sessions
+        names = inp.data.session_names
         motion = {}
         for s in range(1, len(names)):
             m, sd = fit.session_motion(s, 0)
@@ -156,7 +157,7 @@ def prior_used(outcome) -> PriorUsed:
 def simulation(inp, settings) -> Simulation:
     """A simulated run's settling, its machine's options, how far the settled machine departs from
     its own kinematics (load, compliance, ...)."""
-    robot, cal = inp.robot, inp.sim["cal"]
+    robot, cal = inp.data.robot, inp.sim["cal"]
     options = {"gravity": settings.gravity, "payload_kg": settings.payload_kg, "stiffness": settings.stiffness,
                "friction": settings.friction}
     dep = cal.true_poses - robot.forward_kinematics(inp.actual, cal.commanded, initial=cal.true_poses)

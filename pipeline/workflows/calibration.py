@@ -21,7 +21,8 @@ from calib import paper
 from calib.calibration import Calibration
 from calib.design import augment_poses
 from calib.engine import IdentificationResult, gauge_representative
-from calib.identification import BASE_FRAME, CalibrationOutcome, Identification, UnreachableRows, calibrate
+from calib.identification import (BASE_FRAME, CalibrationData, CalibrationOutcome, Identification, UnreachableRows,
+                                  calibrate_checked, checked_data, checked_options)
 from calib.measurement import frame_to_dict, measured_gauge_representative
 from calib.metrics import calibration_gain
 from calib.noise import SensorNoise
@@ -342,69 +343,43 @@ def write_data_files(outputs, report: Report, settings: RunSettings, targets_out
 
 @dataclass(frozen=True, eq=False)
 class CalibrationInput:
-    """The measurements a run calibrates from, simulated or read (the first step of a run), as
-    plain data for :func:`calib.identification.calibrate` (:func:`calibrate_input`).
+    """The measurements a run calibrates from, simulated or read (the first step of a run): the
+    checked data of :func:`calib.identification.calibrate_checked` (:func:`calibrate_input`) and
+    what the run knows about them besides.
 
     Attributes:
-        robot, noise: the robot and the declared noise.
-        joints: (N, C) calibration joints; measured: (N, D) calibration poses (or (N, 3K) target
-            positions), each row in its frame group's instrument frame.
-        rows: (N,) 0-based data rows of the calibration rows in the recording.
-        t_s: (N,) the calibration rows' times, s.
-        where: how messages name the data (the file, or the simulated poses).
+        data: the rows, noise, frame groups, validation rows and declared tolerance, checked
+            (:func:`calib.identification.checked_data`; :attr:`CalibrationData.where` names the file,
+            or the simulated poses). Its ``tolerance`` is the one declared
+            (:func:`declared_tolerance`): the prior (unless --no-prior), and the yardstick of
+            :func:`implausible_parameters`; where none is declared the run may learn one from the rows
+            (:func:`calib.identification.learn_tolerance`, :attr:`calib.identification.CalibrationOutcome.data`
+            holds the one used). A simulated run's data have no validation rows, one frame group and
+            poses in the base frame.
         scenario: the run's scenario in words.
         actual, injected: the true parameter vector and its errors, when known (else None).
-        val_joints, val_meas: the recording's validation rows (empty when simulating).
         rec: the recording read (None when simulating); sim: the simulation's parts (None when reading).
-        tolerance: each parameter's tolerance as declared (:func:`declared_tolerance`): the prior
-            (unless --no-prior), and the yardstick of :func:`implausible_parameters`; where none
-            is declared the run may learn one from the rows (:func:`calib.identification.learn_tolerance`,
-            :attr:`calib.identification.CalibrationOutcome.data` holds the one used).
-        tolerance_source: where the tolerance came from, in words.
-        tolerance_declared: the sidecar declares ``meta.parameter_tolerance`` or --tolerance was given.
-        measurement: (S,) how each frame group was measured (:func:`pipeline.formats.session_measurement`
-            of the session that owns its frame), or None (simulated: poses in the base frame).
-        sessions: (N,) each calibration row's frame group; val_sessions: (M,) each validation
-            row's (:data:`calib.identification.BASE_FRAME` for the base frame); None when simulating.
-        frame_sessions: (S,) the name of each frame group's session (:func:`frame_groups`).
-        session_frames: ``{session: frame group}`` of every session of the recording.
     """
 
-    robot: Robot
-    noise: SensorNoise
-    joints: np.ndarray
-    measured: np.ndarray
-    rows: np.ndarray
-    t_s: np.ndarray
-    where: str
+    data: CalibrationData
     scenario: str
     actual: np.ndarray | None
     injected: np.ndarray | None
-    val_joints: np.ndarray
-    val_meas: np.ndarray
     rec: Recording | None = None
     sim: dict | None = None
-    tolerance: ParameterPrior | None = None
-    tolerance_source: str = ""
-    tolerance_declared: bool = False
-    measurement: tuple | None = None
-    sessions: np.ndarray | None = None
-    val_sessions: np.ndarray | None = None
-    frame_sessions: tuple = ()
-    session_frames: dict | None = None
 
     @property
     def n_sessions(self) -> int:
         """Instrument frames of the recording: its sessions with a frame of their own and
         calibration rows (:func:`frame_groups`; 1 for a simulated run)."""
-        return 1 if self.rec is None else len(self.frame_sessions)
+        return 1 if self.rec is None else len(self.data.session_names)
 
 
 def calibrate_input(inp: CalibrationInput, settings: RunSettings, *, diagnosis=None, progress=None,
                     assess: bool = True) -> CalibrationOutcome:
-    """The identification policy (:func:`calib.identification.calibrate`) on ``inp`` as ``settings``
-    ask: a recording's rows searched for gross rows and cross-validated where it has no validation
-    rows; a simulated run's held-out errors measured on its machine (:func:`simulated_heldout`).
+    """The identification policy (:func:`calib.identification.calibrate_checked`) on ``inp`` as
+    ``settings`` ask: a recording's rows searched for gross rows and cross-validated where it has no
+    validation rows; a simulated run's held-out errors measured on its machine (:func:`simulated_heldout`).
 
     Raises:
         ValueError: rows that cannot be calibrated; a row the model cannot reach named by its data
@@ -413,21 +388,11 @@ def calibrate_input(inp: CalibrationInput, settings: RunSettings, *, diagnosis=N
     sim = inp.sim
     heldout = simulated_heldout(inp, progress) if sim is not None and sim["val"] is not None else None
     recorded = inp.rec is not None
+    options = checked_options(method=settings.method, solver=settings.solver, weighted=settings.weighted,
+                              keep_outliers=settings.keep_outliers, search_gross_rows=recorded,
+                              cross_validate=recorded, seed=settings.seed)
     try:
-        return calibrate(inp.robot, inp.joints, inp.measured, inp.noise, measurement=inp.measurement,
-                         sessions=inp.sessions if recorded else None,
-                         session_names=inp.frame_sessions if recorded else None,
-                         session_frames=inp.session_frames,
-                         validation_joints=inp.val_joints if recorded else None,
-                         validation_measured=inp.val_meas if recorded else None,
-                         validation_sessions=inp.val_sessions if recorded else None,
-                         validation_rows=inp.rec.rows("validation") if recorded else None, heldout=heldout,
-                         tolerance=inp.tolerance, tolerance_declared=inp.tolerance_declared,
-                         tolerance_source=inp.tolerance_source, prior=settings.prior, method=settings.method,
-                         solver=settings.solver, weighted=settings.weighted, keep_outliers=settings.keep_outliers,
-                         search_gross_rows=recorded, cross_validate=recorded, assess=assess, rows=inp.rows,
-                         t_s=inp.t_s, diagnosis=diagnosis, where=inp.where,
-                         geometry_source=sidecar_name(settings.real) if recorded else None, seed=settings.seed)
+        return calibrate_checked(inp.data, options, heldout=heldout, diagnosis=diagnosis, assess=assess)
     except UnreachableRows as exc:
         raise ValueError(f"{row_message(exc.kinematics, exc.where, exc.rows)} ({exc.what})") from None
 
@@ -440,7 +405,7 @@ def simulated_heldout(inp: CalibrationInput, progress):
     Raises (from ``errors``):
         ValueError: the model cannot command a held-out pose (its geometry is implausible).
     """
-    robot, sim = inp.robot, inp.sim
+    robot, sim = inp.data.robot, inp.sim
     progress = progress or (lambda label, done, total: None)
 
     def errors(theta):
@@ -519,15 +484,17 @@ def read_input(settings: RunSettings, rec: Recording) -> CalibrationInput:
     cal_rows, val_rows = rec.rows("calibration"), rec.rows("validation")
     # every session's frame group (a session captured in another's frame too), as the calibration names them
     session_frames = {name: int(index[rec.session_rows(name)[0]]) for name in rec.session_names}
-    return CalibrationInput(robot=robot, noise=rec.noise, joints=joints, measured=measured, rows=cal_rows,
-                            t_s=rec.t_s[cal_rows], where=where, scenario=f"recording {settings.real}",
+    data = checked_data(robot, joints, measured, rec.noise,
+                        measurement=tuple(session_measurement(rec, name) for name in groups),
+                        sessions=index[cal_rows], session_names=groups, session_frames=session_frames,
+                        validation_joints=val_joints, validation_measured=val_meas,
+                        validation_sessions=index[val_rows], validation_rows=val_rows, tolerance=tolerance,
+                        tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None,
+                        tolerance_source=source, prior=settings.prior, rows=cal_rows, t_s=rec.t_s[cal_rows],
+                        where=where, geometry_source=sidecar_name(settings.real))
+    return CalibrationInput(data=data, scenario=f"recording {settings.real}",
                             actual=None if injected is None else robot.table.nominal + injected, injected=injected,
-                            val_joints=val_joints, val_meas=val_meas, rec=rec, tolerance=tolerance,
-                            tolerance_source=source,
-                            tolerance_declared="parameter_tolerance" in rec.meta or settings.tolerance is not None,
-                            measurement=tuple(session_measurement(rec, name) for name in groups),
-                            sessions=index[cal_rows], val_sessions=index[val_rows], frame_sessions=groups,
-                            session_frames=session_frames)
+                            rec=rec)
 
 
 def frame_groups(rec: Recording, where: str = "the recording") -> tuple[tuple[str, ...], np.ndarray]:
@@ -572,13 +539,12 @@ def simulate_input(settings: RunSettings, progress) -> CalibrationInput:
     noise = simulated_noise(settings)
     sim = _simulate(robot, settings, noise, progress)
     cal = sim["cal"]
-    empty = np.zeros((0, robot.pose_dim))
     tolerance, source = declared_tolerance(robot, None, "", settings.tolerance)
-    return CalibrationInput(robot=robot, noise=noise, joints=cal.encoders, measured=cal.measured,
-                            rows=np.arange(len(cal.measured)), t_s=cal.t_s, where="the simulated calibration poses",
-                            scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"],
-                            val_joints=np.zeros((0, robot.n_chains)), val_meas=empty, sim=sim, tolerance=tolerance,
-                            tolerance_source=source, tolerance_declared=settings.tolerance is not None)
+    data = checked_data(robot, cal.encoders, cal.measured, noise, tolerance=tolerance,
+                        tolerance_declared=settings.tolerance is not None, tolerance_source=source,
+                        prior=settings.prior, rows=np.arange(len(cal.measured)), t_s=cal.t_s,
+                        where="the simulated calibration poses")
+    return CalibrationInput(data=data, scenario=sim["scenario"], actual=sim["actual"], injected=sim["errors"], sim=sim)
 
 
 def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray | None:
@@ -587,7 +553,7 @@ def truth_in_gauge(inp: CalibrationInput, ident: Identification) -> np.ndarray |
     :func:`calib.measurement.measured_gauge_representative`), or None where unknown."""
     if inp.actual is None:
         return None
-    robot, result, instrument = inp.robot, ident.result, ident.instrument
+    robot, result, instrument = inp.data.robot, ident.result, ident.instrument
     if instrument is None:
         return gauge_representative(robot, inp.actual, result.start)
     return measured_gauge_representative(robot, inp.actual, estimate_frame=instrument.frame_estimated,
@@ -600,8 +566,9 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
     (at least :data:`calib.effects.heldout.MIN_SESSION_ROWS`) whose rows show a shift against the
     calibration (:func:`calib.session_shift.fit_session_shift`: each joint's zero and the
     instrument frame, by evidence), with its words; empty when none shifted or nothing was read."""
-    cal, rec = outcome.calibration, inp.rec
-    if rec is None or cal is None or not len(inp.val_joints) or any(m.n_targets for m in inp.measurement or ()):
+    cal, rec, data = outcome.calibration, inp.rec, inp.data
+    if rec is None or cal is None or not len(data.validation_joints) \
+            or any(m.n_targets for m in data.measurement or ()):
         return {}
     from calib.effects.heldout import MIN_SESSION_ROWS  # a recording's run only: the default run loads no discovery
     from calib.session_shift import fit_session_shift
@@ -614,11 +581,12 @@ def validation_session_shifts(inp: CalibrationInput, outcome: CalibrationOutcome
         at = rec.sessions[val_rows] == name
         if name in trained or at.sum() < MIN_SESSION_ROWS:
             continue
-        group = int(inp.val_sessions[at][0])
-        frame = cal.frames.get(inp.frame_sessions[group]) if 0 <= group < len(inp.frame_sessions) else None
+        group = int(data.validation_sessions[at][0])
+        frame = cal.frames.get(data.session_names[group]) if 0 <= group < len(data.session_names) else None
         try:
-            shift = fit_session_shift(robot, lambda q: robot.forward_kinematics(cal.theta, q), inp.val_joints[at],
-                                      inp.val_meas[at], inp.noise, frame=frame)
+            shift = fit_session_shift(robot, lambda q: robot.forward_kinematics(cal.theta, q),
+                                      data.validation_joints[at], data.validation_measured[at], data.noise,
+                                      frame=frame)
         except KinematicsError:  # a row the identified machine cannot reach: said by the held-out figures
             continue
         if shift.shifted:
@@ -631,7 +599,7 @@ def truth_figures(inp: CalibrationInput, ident: Identification, truth: np.ndarra
     (:func:`truth_in_gauge`; None where unknown)."""
     if truth is None:
         return None
-    robot, result = inp.robot, ident.result
+    robot, result = inp.data.robot, ident.result
     free = result.free_names
     return {"parameter_error": parameter_error(robot, result.theta, truth, free),
             "gain_G_percent": {k: v for k, v in calibration_gain(robot, truth, result.start, result.theta,
@@ -650,7 +618,7 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
     measured, frames, frames_std = rec.measured, {}, {}
     if instrument is not None:
         if instrument.targets is not None:
-            raise ValueError(f"{inp.where}: position-only target data (meta.measurement.targets): the analysis "
+            raise ValueError(f"{inp.data.where}: position-only target data (meta.measurement.targets): the analysis "
                              "needs full poses")
         several = inp.n_sessions > 1
         measured = in_base_frame(instrument, rec.measured, session_index(rec), several)
@@ -659,12 +627,12 @@ def as_read(inp: CalibrationInput, outcome: CalibrationOutcome) -> AsRead:
         if several:
             block.update(session_keys(instrument_fit(inp, instrument)))
         frames, frames_std = instrument_frames(inp, instrument, several)
-    gross = [int(inp.rows[i]) for i in ident.gross_idx]
+    gross = [int(inp.data.rows[i]) for i in ident.gross_idx]
     meta = rec.meta
     if not data.tolerance_declared and data.tolerance_estimate is not None:
         # The tolerance learnt from the rows travels with the recording as read: every later fit of it
         # (discovery's) takes it as the run did, and says where it came from.
-        meta = {**rec.meta, "parameter_tolerance": data.tolerance.tolerance_by_name(inp.robot),
+        meta = {**rec.meta, "parameter_tolerance": data.tolerance.tolerance_by_name(inp.data.robot),
                 TOLERANCE_SOURCE_KEY: data.tolerance_source}
     return AsRead(recording=replace(rec, measured=measured, meta=meta), gross_rows=gross, block=block, frames=frames,
                   frames_std=frames_std)
@@ -674,7 +642,7 @@ def instrument_frames(inp: CalibrationInput, fit, several: bool) -> tuple[dict, 
     """``({session: (6,) frame}, {session: (6,) std})`` the instrument fit ``fit`` registered: every
     frame session's (``several``), else the recording's first session's."""
     if several:
-        names = inp.frame_sessions
+        names = inp.data.session_names
         return ({names[s]: np.array(f, dtype=float) for s, f in enumerate(fit.frames)},
                 {names[s]: np.array(sd, dtype=float) for s, sd in enumerate(fit.frames_std)})
     first = inp.rec.session_names[0]
@@ -703,14 +671,14 @@ def suggested_poses(inp: CalibrationInput, outcome: CalibrationOutcome, settings
     poses at the joints read (a measured pose carries its noise: 1000 mm puts a Delta's outside
     its workspace, where no Jacobian is)."""
     ident = outcome.identification
-    robot, result = inp.robot, ident.result
+    robot, result = inp.data.robot, ident.result
     measured = ident.measured[ident.used]
-    at = machine_poses(robot, result.theta, inp.joints[ident.used], measured)
+    at = machine_poses(robot, result.theta, inp.data.joints[ident.used], measured)
     prior_std = outcome.data.prior.std
-    poses = augment_poses(robot, result.theta, at, SUGGESTED_POSES, inp.noise, prior_std,
+    poses = augment_poses(robot, result.theta, at, SUGGESTED_POSES, inp.data.noise, prior_std,
                           free=result.free_names, seed=settings.seed)
     why = f"the measured poses leave {len(left)} parameter combination(s) to the prior"
-    added = directions_added(robot, result, at, poses, inp.noise, prior_std)
+    added = directions_added(robot, result, at, poses, inp.data.noise, prior_std)
     if added < DETERMINED_DIRECTION:
         return None, {
             "poses": 0, "why": why,
@@ -772,12 +740,12 @@ def pose_kind_words(robot: Robot, measured: np.ndarray, suggested: np.ndarray) -
 def simulated_recording(inp: CalibrationInput, settings: RunSettings) -> Recording:
     """The recording of a simulated run (calibration rows, then the held-out rows measured under
     nominal commands)."""
-    robot, sim = inp.robot, inp.sim
+    robot, sim = inp.data.robot, inp.sim
     parts = [sim["cal"]] + ([sim["val"]] if sim["val"] is not None else [])
     simulation = {"injected_errors": robot.table.to_dict(inp.injected), "gravity": settings.gravity,
                   "payload_kg": settings.payload_kg, "stiffness": settings.stiffness, "friction": settings.friction}
     return Recording(
-        robot=robot, noise=inp.noise, t_s=np.concatenate([p.t_s for p in parts]),
+        robot=robot, noise=inp.data.noise, t_s=np.concatenate([p.t_s for p in parts]),
         joints=np.vstack([p.encoders for p in parts]), measured=np.vstack([p.measured for p in parts]),
         sets=np.array(["calibration"] * len(parts[0].t_s) + ["validation"] * sum(len(p.t_s) for p in parts[1:])),
         meta={"scenario": inp.scenario, "seed": settings.seed, "simulation": simulation})
@@ -793,9 +761,10 @@ def log_step(inp: CalibrationInput, ident: Identification, held, report: Report,
     from pipeline.views import application_id, blueprint, log_calibration_run, run_eye, run_magnification, save_recording
     from pipeline.views.run_view import MAX_MACHINE_POSES, drawn_poses
 
-    robot, result, joints, measured = inp.robot, ident.result, inp.joints, ident.measured
+    robot, joints, noise = inp.data.robot, inp.data.joints, inp.data.noise
+    result, measured = ident.result, ident.measured
     nominal = robot.table.nominal
-    analysis = analyze_observability(robot, result.start, measured[ident.used], inp.noise, joints=joints[ident.used])
+    analysis = analyze_observability(robot, result.start, measured[ident.used], noise, joints=joints[ident.used])
     observability = {"condition_number": float(analysis.condition_number),
                      "crb_std": robot.table.to_dict(analysis.crb_std)}
     targets = inp.sim["targets"] if inp.sim is not None else _predicted_or(robot, nominal, joints, measured)
@@ -840,7 +809,7 @@ def _run(settings: RunSettings, rec, warnings: list, progress, split: dict, t0: 
     truth = truth_in_gauge(inp, ident)
     figures = truth_figures(inp, ident, truth)
     result = ident.result
-    implausible = implausible_parameters(inp.robot, result.errors, outcome.data.tolerance, result.free_names)
+    implausible = implausible_parameters(inp.data.robot, result.errors, outcome.data.tolerance, result.free_names)
     shifts = validation_session_shifts(inp, outcome)
     report = calibration_report(inp, outcome, method=settings.method, seed=settings.seed, truth=figures,
                                 implausible=implausible, warnings=warnings,
