@@ -11,15 +11,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .model import (OUTPUT_KEYS, Alias, Candidate, Coefficient, CompensationTable, CrossValidation, EffectRow, Effects,
-                    FigureRow, Figures, Flagged, FrameRow, Frames, GeometryTest, Heldout, Implausible, Law, LawConstant,
-                    Noise, Outputs, ParameterRow, Parameters, PerPose, PoseFamily, Remaining, Report, Resimulation,
-                    Search, Separation, Source, SysId, Timing, Unseparated, Verdict)
+from calib.effects.session_zeros import SessionZeros
 
-__all__ = ["discovery_report", "with_read", "with_files", "outlier_keys", "not_named_words"]
+if TYPE_CHECKING:
+    from calib.effects.heldout import HeldoutJudgement
+    from pipeline.formats import Recording
+
+from .model import (OUTPUT_KEYS, Alias, Candidate, Coefficient, CompensationTable, CrossValidation, DiscoveryRecord,
+                    EffectRow, Effects, FigureRow, Figures, Flagged, FrameRow, Frames, GeometryTest, Heldout,
+                    Implausible, Law, LawConstant, Noise, Outputs, ParameterRow, Parameters, PerPose, PoseFamily,
+                    Remaining, Report, Resimulation, Search, Separation, Source, SysId, Timing, Unseparated, Verdict)
+
+__all__ = ["discovery_report", "discovery_record", "with_read", "with_files", "outlier_keys", "not_named_words",
+           "heldout_block", "calibration_session_shifts", "row_order", "placed_by_row"]
 
 
 def _finite(v) -> float | None:
@@ -204,6 +212,100 @@ def _flagged(disc, total_rows: int) -> Flagged:
                    shared=tuple((k, tuple(v)) for k, v in out["shared"].items()), total_rows=total_rows)
 
 
+def heldout_block(judgement: HeldoutJudgement) -> dict:
+    """The summary's held-out figures (closure residual RMS, mm) of the geometry alone and of the
+    effects named, both fitted on the training rows, with each shifted session's shift taken out;
+    the noise floor; each row's RMS over the joints; the shifts found by session; the effects the
+    held-out rows did not confirm; every fold's figures."""
+    g, m = judgement.geometry, judgement.model
+    held = judgement.fold.held
+    per_row = {"rows": [int(i) + 1 for i in held], "before_mm": g.per_row_mm.tolist(), "after_mm": m.per_row_mm.tolist(),
+               "before_mean_mm": float(g.per_row_mm.mean()), "before_max_mm": float(g.per_row_mm.max()),
+               "after_mean_mm": float(m.per_row_mm.mean()), "after_max_mm": float(m.per_row_mm.max()),
+               "what": "closure residual RMS over the joints of each held-out row (1-based data rows), each shifted "
+                       "session's shift taken out"}
+    return {"heldout_rms_before_mm": g.unshifted_rms_mm, "heldout_rms_after_mm": m.unshifted_rms_mm,
+            # as predicted, a shifted session's shift left in: said only where a session shifted
+            "heldout_rms_as_predicted_mm": {"before": g.rms_mm, "after": m.rms_mm}
+            if any(s.shifted for s in judgement.shifts.values()) else None,
+            "noise_floor_mm": judgement.floor_mm, "after_over_floor": m.unshifted_rms_mm / judgement.floor_mm,
+            "heldout_rows": [int(i) for i in held], "per_row": per_row,
+            "heldout_folds": [{"kind": k, "rows": n, "geometry_rms_mm": gb, "model_rms_mm": mb}
+                              for k, n, gb, mb in judgement.folds],
+            "not_named": [{"effect": r.name, "delta_bic": r.delta_bic, "geometry_rms_mm": r.geometry_mm,
+                           "with_effect_rms_mm": r.with_effect_mm, "judged_on": r.fold, "why": r.why,
+                           "words": not_named_words(r)} for r in judgement.rejected]}
+
+
+def calibration_session_shifts(rec: Recording, fit) -> dict:
+    """``{session: {shift, words}}`` of the later sessions a named ``session_zeros`` moved (fitted
+    with the geometry from the calibration rows of every session)."""
+    for m in fit.models:
+        if isinstance(m, SessionZeros):
+            sl = fit.slices()[m.name]
+            zeros, stds = m.zeros(fit.coefficients[sl], rec.robot), m.zeros(fit.coefficient_std[sl], rec.robot)
+            unit = rec.robot.joint_unit
+            return {s: {"model": "joint zeros", "fitted_with": "the geometry, on the calibration rows of every session",
+                        "shift": {f"zero.{j}": {"value": float(v), "std": float(e), "unit": unit}
+                                  for j, v, e in zip(rec.robot.joint_names, d, stds[s])},
+                        "words": f"the machine re-homed before session {s!r}: each joint's zero moved by "
+                                 + ", ".join(f"{v:+.3g} +- {e:.2g}" for v, e in zip(d, stds[s]))
+                                 + f" {unit} (fitted with the geometry); the calibration file holds the first "
+                                   f"session's zeros: re-reference a later session (pipeline.run --from)"}
+                    for s, d in zeros.items()}
+    return {}
+
+
+def row_order(rec: Recording) -> bool:
+    """Whether the recording's time is only its rows' order (every session's ``time`` is ``"row
+    order"``: a lab export with ``[time] format = "none"``, ``t_s`` = 0, 1, 2, ...)."""
+    return all(rec.session_info.get(s, {}).get("time") == "row order" for s in rec.session_names)
+
+
+def placed_by_row(params: dict, rec: Recording, kept: np.ndarray, by_row: bool) -> dict:
+    """``effect_parameters`` with each step in time (a lost count's ``step_time``) placed by the
+    first row after it (``from_row``, 1-based data row); on a recording whose time is the rows'
+    order the step time itself is dropped (it is no time), and rates per second are per row."""
+    out = {}
+    for name, p in params.items():
+        p = dict(p)
+        if "step_time" in p:
+            t0 = p["step_time"]["value"]
+            after = kept[rec.t_s[kept] > t0]
+            p["from_row"] = {"value": float(after[0] + 1) if after.size else float("nan"), "std": float("nan"),
+                             "unit": "row"}
+            if by_row:
+                del p["step_time"]
+        if by_row:
+            p = {k: (dict(v, unit=v["unit"].replace("/s", "/row")) if isinstance(v, dict) and "unit" in v else v)
+                 for k, v in p.items()}
+        out[name] = p
+    return out
+
+
+def discovery_record(rec, outcome, *, implausible: dict, effect_parameters: dict, prior_source: str,
+                     session_shifts: dict, resimulated: dict | None) -> DiscoveryRecord:
+    """The record of what a discovery's summary holds beyond the report's sections, made from its
+    objects (the arguments as :func:`discovery_report`'s)."""
+    robot = rec.robot
+    disc = outcome.discovery
+    simulated = rec.meta.get("simulation", {})
+    return DiscoveryRecord(
+        remaining=disc.remaining.to_dict(), effects=tuple(disc.effects), partial=tuple(disc.partial),
+        aliases=tuple(a.to_dict() for a in disc.aliases), candidates=tuple(n for n in outcome.names if n != "none"),
+        effect_parameters=effect_parameters, heldout=heldout_block(outcome.judgement), heldout_basis=outcome.basis,
+        session_shifts=session_shifts, outliers=outlier_keys(disc), tests=disc.tests.to_dict(),
+        evidence=disc.evidence.to_dict(), identified_errors=robot.table.to_dict(disc.chosen.errors),
+        identified_std=robot.table.to_dict(np.sqrt(np.clip(np.diag(disc.chosen.geometry_covariance()), 0.0, None))),
+        parameter_units=dict(zip(robot.table.names, robot.table.units)), free_parameters=tuple(robot.free_default),
+        declared_noise=rec.noise.to_dict(), located=disc.located.to_dict(),
+        proposed_law=None if disc.proposed_law is None else disc.proposed_law.summary(), search=disc.search.to_dict(),
+        implausible=implausible, time="row order" if row_order(rec) else "measured",
+        separation={} if disc.separation is None else dict(disc.separation.to_dict(), prior_source=prior_source),
+        simulated_truth={k: v for k, v in simulated.items() if k != "injected_errors"}
+        if simulated.get("effect") is not None else None, resimulated=resimulated)
+
+
 def discovery_report(rec, outcome, *, verdict: str, implausible: dict, effect_parameters: dict, prior_source: str,
                      session_shifts: dict, resimulated: dict | None, wall_time_s: float) -> Report:
     """The report of a discovery of ``rec`` (the recording as analysed) judged by its held-out rows
@@ -224,7 +326,10 @@ def discovery_report(rec, outcome, *, verdict: str, implausible: dict, effect_pa
                                           with_effects=tuple(d["words"] for d in implausible.get("with_effects") or ())),
                   heldout=_heldout(outcome.judgement, outcome.basis, session_shifts), frames=None,
                   effects=_effects(outcome, effect_parameters, prior_source, resimulated),
-                  flagged=_flagged(disc, int(rec.joints.shape[0])), timing=Timing(float(wall_time_s), ()))
+                  flagged=_flagged(disc, int(rec.joints.shape[0])), timing=Timing(float(wall_time_s), ()),
+                  discovery=discovery_record(rec, outcome, implausible=implausible, effect_parameters=effect_parameters,
+                                             prior_source=prior_source, session_shifts=session_shifts,
+                                             resimulated=resimulated))
 
 
 def _frames(block: dict) -> Frames | None:
@@ -246,8 +351,9 @@ def _frames(block: dict) -> Frames | None:
 def with_read(report: Report, block: dict, warnings, crossvalidation: dict | None) -> Report:
     """``report`` with what the read of its recording found (``block``: the read's one dict, its
     gross rows and instrument frames; :class:`pipeline.workflows.calibration.AsRead`), the
-    recording's warnings and, without validation rows, the geometry's cross-validated prediction
-    error (``crossvalidation``: :meth:`calib.crossval.CrossValidationResult.summary`, None: none)."""
+    recording's warnings (None: none checked, the summary names none) and, without validation
+    rows, the geometry's cross-validated prediction error (``crossvalidation``:
+    :meth:`calib.crossval.CrossValidationResult.summary`, None: none)."""
     g = block.get("gross_rows") or {}
     flagged = replace(report.flagged, gross=tuple(g.get("rows") or ()), gross_left_out=bool(g.get("left_out")))
     heldout = report.heldout
@@ -259,7 +365,11 @@ def with_read(report: Report, block: dict, warnings, crossvalidation: dict | Non
                           crossvalidation=None if not info else CrossValidation(
                               scheme=str(info.get("scheme", "")), fits=info.get("fits"), model=info.get("model"),
                               message=info.get("message", "")))
-    return replace(report, frames=_frames(block), flagged=flagged, heldout=heldout, warnings=tuple(warnings or ()))
+    record = None if report.discovery is None else replace(
+        report.discovery, read=dict(block), warnings=None if warnings is None else tuple(warnings),
+        crossvalidation=crossvalidation)
+    return replace(report, frames=_frames(block), flagged=flagged, heldout=heldout, warnings=tuple(warnings or ()),
+                   discovery=record)
 
 
 def with_files(report: Report, *, recording: str, files: dict, law_asked: bool, law_kept: str | None,
@@ -272,6 +382,8 @@ def with_files(report: Report, *, recording: str, files: dict, law_asked: bool, 
         what=c.get("what", ""), compensated=tuple(c.get("compensated") or ()),
         not_compensated=tuple((c.get("not_compensated") or {}).items()), columns=tuple(c.get("columns") or ()),
         rows=tuple(tuple(r) for r in c.get("rows") or ()))
+    record = None if report.discovery is None else replace(report.discovery, compensation=compensation)
     return replace(report, source=replace(report.source, recording=str(recording or "")), compensation=table,
+                   discovery=record,
                    outputs=Outputs(files=tuple((k, str(files[k])) for k in OUTPUT_KEYS if files.get(k)),
                                    law_asked=law_asked, law_kept=law_kept))

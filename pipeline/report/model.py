@@ -24,7 +24,7 @@ __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow
            "FrameRow", "Frames", "Coefficient", "EffectRow", "Candidate", "Remaining", "GeometryTest", "Alias",
            "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Search", "Effects",
            "Flagged", "CompensationTable", "Timing", "Outputs", "Variant", "Outliers", "GrossStage", "InstrumentFit",
-           "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "REPORT_KEY", "OUTPUT_KEYS"]
+           "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "DiscoveryRecord", "REPORT_KEY", "OUTPUT_KEYS"]
 
 #: The key of the report model in a summary JSON (what ``--summary-json`` writes beside the summary's keys).
 REPORT_KEY = "report_model"
@@ -672,6 +672,50 @@ class RunRecord:
 
 
 @dataclass(frozen=True)
+class DiscoveryRecord:
+    """What a discovery's summary holds beyond the other sections (the keys
+    :func:`pipeline.report.summary.discovery_summary_keys` writes from it), JSON-ready as the
+    summary gives them: what remains, the effects named, partial and aliased, the candidates, the
+    effect parameters placed by row, the held-out figures (``heldout``: the summary's
+    ``heldout_*``, ``noise_floor_mm``, ``per_row``, ``not_named``) and their basis, the sessions
+    shifted, the outliers, the tests and evidence, the identified errors, their std and units, the
+    free parameters, the declared noise, where the residuals concentrate, the proposed law, the
+    search, the implausible errors, the time's kind, the separation, a simulation's truth, the
+    MuJoCo re-simulation's keys; then what the read found (its keys, warnings, cross-validation)
+    and the compensation table."""
+
+    remaining: dict
+    effects: tuple[str, ...]
+    partial: tuple[str, ...]
+    aliases: tuple[dict, ...]
+    candidates: tuple[str, ...]
+    effect_parameters: dict
+    heldout: dict
+    heldout_basis: str | None
+    session_shifts: dict
+    outliers: dict
+    tests: dict
+    evidence: dict
+    identified_errors: dict
+    identified_std: dict
+    parameter_units: dict
+    free_parameters: tuple[str, ...]
+    declared_noise: dict
+    located: dict
+    proposed_law: dict | None
+    search: dict
+    implausible: dict
+    time: str
+    separation: dict
+    simulated_truth: dict | None
+    resimulated: dict | None
+    read: dict | None = None
+    warnings: tuple[str, ...] | None = None
+    crossvalidation: dict | None = None
+    compensation: dict | None = None
+
+
+@dataclass(frozen=True)
 class Report:
     """One calibration's or discovery's report (``kind``: ``calibration`` or ``discovery``); a
     section is None where the summary has none of it."""
@@ -694,13 +738,15 @@ class Report:
     outputs: Outputs = field(default_factory=Outputs)
     #: A calibration run's record of what its summary holds beyond the sections above (None: not a run's).
     run: RunRecord | None = None
+    #: A discovery's record of what its summary holds beyond the sections above (None: not a discovery's).
+    discovery: DiscoveryRecord | None = None
 
     def to_dict(self) -> dict:
-        """The report as JSON-ready nested dicts and lists (field names as keys), but its ``run``
-        record: a summary JSON holds that one as its own keys (:func:`pipeline.report.summary.summary_keys`),
-        once."""
-        plain = dataclasses.asdict(dataclasses.replace(self, run=None))
-        del plain["run"]
+        """The report as JSON-ready nested dicts and lists (field names as keys), but its ``run`` and
+        ``discovery`` records: a summary JSON holds those as its own keys
+        (:func:`pipeline.report.summary.summary_keys`, :func:`~pipeline.report.summary.discovery_summary_keys`), once."""
+        plain = dataclasses.asdict(dataclasses.replace(self, run=None, discovery=None))
+        del plain["run"], plain["discovery"]
         return _plain(plain)
 
     @classmethod

@@ -17,7 +17,7 @@ from .calibration import (gross_rows, heldout_figure_rows, heldout_keys, iso_key
 from .model import (GrossStage, ImplausibleParameter, InstrumentFit, Outliers, PriorUsed, Report, RunRecord,
                     Simulation, Variant)
 
-__all__ = ["run_record", "summary_keys", "gross_stage", "gross_keys", "instrument_fit", "session_keys",
+__all__ = ["run_record", "summary_keys", "discovery_summary_keys", "gross_stage", "gross_keys", "instrument_fit", "session_keys",
            "diagnosis_summary", "OUTLIER_TEST"]
 
 #: What the outlier test after the fit is.
@@ -268,4 +268,50 @@ def summary_keys(report: Report) -> dict:
         keys.update(_instrument_keys(r.instrument))
     keys.update(_prior_keys(report))
     keys.update(_later_keys(report))
+    return keys
+
+
+def _discovery_found_keys(report: Report) -> dict:
+    """The discovery's keys of what it found, up to the MuJoCo re-simulation (its record's)."""
+    r, h = report.discovery, report.discovery.heldout
+    keys = {"robot": report.source.robot, "explained": report.verdict.success, "verdict": report.verdict.words,
+            "remaining": r.remaining, "effects": list(r.effects), "partial": list(r.partial),
+            "aliases": list(r.aliases), "candidates": list(r.candidates), "effect_parameters": r.effect_parameters,
+            "heldout_rms_before_mm": h["heldout_rms_before_mm"], "heldout_rms_after_mm": h["heldout_rms_after_mm"],
+            "noise_floor_mm": h["noise_floor_mm"], "heldout_basis": r.heldout_basis, "heldout_per_row": h["per_row"],
+            "heldout_rms_as_predicted_mm": h["heldout_rms_as_predicted_mm"], "heldout_folds": h["heldout_folds"],
+            "not_named": h["not_named"], "session_shifts": r.session_shifts,
+            "flagged_poses": list(report.flagged.rows), "outliers": r.outliers, "tests": r.tests,
+            "evidence": r.evidence, "identified_errors": r.identified_errors, "identified_std": r.identified_std,
+            "parameter_units": r.parameter_units, "free_parameters": list(r.free_parameters),
+            "declared_noise": r.declared_noise, "located": r.located, "rows": report.source.rows,
+            "proposed_law": r.proposed_law, "search": r.search, "implausible_parameters": r.implausible,
+            "time": r.time, "separation": r.separation}
+    if r.simulated_truth is not None:
+        keys["simulated_truth"] = r.simulated_truth
+    keys.update(r.resimulated or {})
+    return keys
+
+
+def discovery_summary_keys(report: Report) -> dict:
+    """A discovery's summary (``--summary-json``, a fleet's ``<machine>.discovery.json``; the keys
+    docs/commands.md lists) from its ``report`` (with its
+    :class:`~pipeline.report.model.DiscoveryRecord`, the read's findings, files and timing where
+    they entered it)."""
+    r, files = report.discovery, dict(report.outputs.files)
+    keys = _discovery_found_keys(report)
+    keys["wall_time_s"] = report.timing.total_s
+    if r.read is not None:
+        keys.update(r.read)
+    if r.warnings is not None:
+        keys["warnings"] = list(r.warnings)
+    keys.update(r.crossvalidation or {})
+    if "rrd" not in files:  # the files not written yet
+        return keys
+    keys.update((k, files[k]) for k in ("rrd", "calibration", "mjcf") if k in files)
+    if report.outputs.law_asked:
+        keys["law_kept"] = report.outputs.law_kept
+    keys["recording"] = report.source.recording
+    if "report" in files:
+        keys.update(report=files["report"], compensation=r.compensation)
     return keys

@@ -10,9 +10,9 @@ the held-out fit improve, and re-simulates the MuJoCo machine with the effects a
 calibration found) is calib's (:func:`calib.discovery.discover_machine`); here are the recording's
 edge, the MuJoCo witness and the files. :func:`run_discovery` does what ``python -m pipeline.discover``
 does (a recording or a seeded scenario in, the ``.rrd``, the calibration and the summary out);
-:func:`discover` analyses a recording in memory. Its summary is :mod:`.discovery_summary`'s, its
-report :mod:`pipeline.report.discovery`'s, a kept law's file :mod:`.kept_law`'s. Nothing here
-depends on the robot or the effect.
+:func:`discover` analyses a recording in memory. Its report is :mod:`pipeline.report.discovery`'s,
+its summary written from that report (:func:`pipeline.report.summary.discovery_summary_keys`), a
+kept law's file :mod:`.kept_law`'s. Nothing here depends on the robot or the effect.
 """
 
 from __future__ import annotations
@@ -37,13 +37,15 @@ from calib.diagnosis import motionless_rows
 from mjcf.simulator import SettleError
 from pipeline.formats import (CALIBRATION_SUFFIX, Calibration, Recording, atomic_write, check_outputs, output_folder, read_recording, recording_checks, recording_source, write_calibration)
 from pipeline.report import REPORT_KEY, Report, write_report
-from pipeline.report.discovery import discovery_report, with_files, with_read
+from pipeline.report.discovery import (calibration_session_shifts, discovery_report, placed_by_row, row_order,
+                                       with_files, with_read)
+from pipeline.report.summary import discovery_summary_keys
+from pipeline.report.text import shift_words, verdict_words
 from pipeline.simulation import effect_recording, effects_settings, machine_context, merged_settings, simulate
 from pipeline.simulation.mjcf_export import export_mjcf
 from pipeline.report.verdict_words import no_motion_words
 
-from .calibration import machine_tolerance, read_as_a_run_does
-from .discovery_summary import discovery_parts, discovery_summary
+from .calibration import IMPLAUSIBLE_TOLERANCES, implausible_parameters, machine_tolerance, read_as_a_run_does
 from .kept_law import KEPT_LAW_NAME, keep_law, kept_law_effect, read_kept_law
 
 __all__ = ["DiscoverySettings", "DiscoveryReport", "run_discovery", "discover", "resimulate",
@@ -267,13 +269,45 @@ def discover(rec: Recording, *, seed: int = 0, heldout_fraction: float = HELDOUT
         resimulated = resimulation_block(rec, outcome.discovery, sysid, seed)
         outcome, resimulated = witnessed(outcome, resimulated)
     parts = discovery_parts(rec, outcome)
-    summary = discovery_summary(rec, outcome, tolerance_source, resimulated, parts)
-    summary["wall_time_s"] = wall = time.perf_counter() - t0
+    wall = time.perf_counter() - t0
     calibration = outcome.calibration(frames=frames[0], frames_std=frames[1], recording=source or {})
     report = discovery_report(rec, outcome, **parts, prior_source=tolerance_source, resimulated=resimulated,
                               wall_time_s=wall)
-    return DiscoveryReport(discovery=outcome.discovery, summary=summary, outcome=outcome, recording=rec,
-                           calibration=calibration, report=report)
+    return DiscoveryReport(discovery=outcome.discovery, summary=discovery_summary_keys(report), outcome=outcome,
+                           recording=rec, calibration=calibration, report=report)
+
+
+def discovery_parts(rec: Recording, outcome: DiscoveryOutcome) -> dict:
+    """What the summary and the report of a discovery both hold, made once from its objects: the
+    verdict in words, the implausible errors (:func:`implausibility`), the effect parameters placed
+    by row (:func:`placed_by_row`), the sessions shifted (``{session: {..., words}}``)."""
+    disc, judgement, robot = outcome.discovery, outcome.judgement, rec.robot
+    return {"verdict": verdict_words(disc.explained, list(disc.effects), disc.remaining.to_dict()),
+            "implausible": implausibility(rec, disc),
+            "effect_parameters": placed_by_row(disc.chosen.parameters(), rec, disc.kept, row_order(rec)),
+            "session_shifts": {s: dict(shift.to_dict(), words=shift_words(s, shift, robot.joint_unit))
+                               for s, shift in judgement.shifts.items() if shift.shifted}
+            | calibration_session_shifts(rec, disc.chosen)}
+
+
+def implausibility(rec: Recording, disc: Discovery) -> dict:
+    """The identified errors beyond three tolerances (the sidecar's ``meta.parameter_tolerance`` or
+    the robot's default) with the geometry alone and with the effects found, and those the effects
+    bring back within tolerance: a geometry that had absorbed physics."""
+    robot = rec.robot
+    tolerance, source = machine_tolerance(robot, rec.meta, "the recording's sidecar")
+    names = robot.free_default
+    alone = implausible_parameters(robot, disc.geometry.errors, tolerance, names)
+    with_effects = implausible_parameters(robot, disc.chosen.errors, tolerance, names)
+    still = {d["name"] for d in with_effects}
+    back = [d for d in alone if d["name"] not in still]
+    k = {n: robot.table.index(n) for n in names}
+    words = [f"{d['name']}: {d['error']:+.4g} {d['unit']} with the geometry alone, "
+             f"{disc.chosen.errors[k[d['name']]]:+.4g} {d['unit']} with {', '.join(disc.effects) or 'no effect'}: back "
+             f"within {IMPLAUSIBLE_TOLERANCES:g} tolerances ({d['tolerance']:.4g} {d['unit']})" for d in back]
+    return {"tolerance_source": source, "tolerance": tolerance.tolerance_by_name(robot),
+            "geometry_alone": alone, "with_effects": with_effects,
+            "back_within_tolerance": [d["name"] for d in back], "words": words}
 
 
 def resimulation_block(rec: Recording, disc: Discovery, sysid: bool, seed: int) -> dict:
@@ -417,11 +451,9 @@ def run_discovery(settings: DiscoverySettings) -> DiscoveryReport:
                                     f"{settings.scenario_granularity}"}
     report = discover_in_words(rec, settings, read, source)
     if read is not None:
-        report.summary.update(read.block)
-        report.summary["warnings"] = warnings
         cv = None if np.any(rec.sets == "validation") else geometry_crossvalidation(rec, read, settings.seed)
-        report.summary.update(cv or {})
         report.report = with_read(report.report, read.block, warnings, cv)
+        report.summary = discovery_summary_keys(report.report)
     return write_discovery_files(report, settings, rrd_path, calibration_path,
                                  recording=str(settings.real) if settings.real is not None else source["simulated"],
                                  law_source=str(settings.real or stem))
@@ -436,22 +468,20 @@ def write_discovery_files(report: DiscoveryReport, settings: DiscoverySettings, 
 
     rec, cal, overwrite = report.recording, report.calibration, settings.overwrite
     files = {"rrd": str(write_discovery_rrd(rrd_path, rec.robot, rec, report, overwrite=overwrite))}
-    report.summary["rrd"] = files["rrd"]
-    report.summary["calibration"] = files["calibration"] = str(write_calibration(calibration_path, cal,
-                                                                                 overwrite=overwrite))
+    files["calibration"] = str(write_calibration(calibration_path, cal, overwrite=overwrite))
     if settings.export_mjcf is not None:
-        report.summary["mjcf"] = files["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=overwrite))
+        files["mjcf"] = str(export_mjcf(cal, settings.export_mjcf, overwrite=overwrite))
     law_kept = None
     if settings.law_out is not None:
         kept = keep_law(settings.law_out, dict(report.summary, source=law_source), overwrite=overwrite)
-        report.summary["law_kept"] = law_kept = None if kept is None else str(kept)
-    report.summary["recording"] = recording
+        law_kept = None if kept is None else str(kept)
     compensation = None
     if settings.report is not None:
-        report.summary["report"] = files["report"] = str(settings.report)
-        report.summary["compensation"] = compensation = compensation_table(rec, cal, report.outcome.judgement)
+        files["report"] = str(settings.report)
+        compensation = compensation_table(rec, cal, report.outcome.judgement)
     report.report = with_files(report.report, recording=recording, files=files, law_asked=settings.law_out is not None,
                                law_kept=law_kept, compensation=compensation)  # every file named
+    report.summary = discovery_summary_keys(report.report)
     if settings.summary_json is not None:
         atomic_write(settings.summary_json, json.dumps({**report.summary, REPORT_KEY: report.report.to_dict()},
                                                        indent=1), overwrite=overwrite)

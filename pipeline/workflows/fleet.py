@@ -206,6 +206,8 @@ def _discovered(read, summary_path: Path) -> dict:
     the base frame, its gross rows left out)."""
     from numpy.linalg import LinAlgError
 
+    from pipeline.report.discovery import with_read
+    from pipeline.report.summary import discovery_summary_keys
     from pipeline.report.text import model_words
     from pipeline.workflows.discovery import discover
 
@@ -217,10 +219,9 @@ def _discovered(read, summary_path: Path) -> dict:
         refused = isinstance(exc, ValueError) and not isinstance(exc, LinAlgError)  # LinAlgError is a ValueError
         why = one_line(exc) if refused else f"discovery failed: {type(exc).__name__}: {one_line(exc)}"
         return {"explained": f"{NOT_RUN}: {why}", "discovery": None}
-    s = report.summary
-    s.update(read.block)
-    atomic_write(summary_path, json.dumps(s, indent=1) + "\n", overwrite=True)
-    found = report.report  # the words from the discovery's report; the file is its summary
+    report.report = with_read(report.report, read.block, None, None)  # the read's gross rows and frames, no checks
+    atomic_write(summary_path, json.dumps(discovery_summary_keys(report.report), indent=1) + "\n", overwrite=True)
+    found = report.report  # the words and the file from the discovery's report
     return {"explained": f"{'yes' if found.verdict.success else 'no'}: "
                          f"{model_words([e.name for e in found.effects.effects])}",
             "discovery": str(summary_path)}
