@@ -219,7 +219,8 @@ def heldout_block(judgement: HeldoutJudgement) -> dict:
     held-out rows did not confirm; every fold's figures."""
     g, m = judgement.geometry, judgement.model
     held = judgement.fold.held
-    per_row = {"rows": [int(i) + 1 for i in held], "before_mm": g.per_row_mm.tolist(), "after_mm": m.per_row_mm.tolist(),
+    per_row = {"rows": [int(i) + 1 for i in held], "before_mm": g.per_row_mm.tolist(),
+               "after_mm": m.per_row_mm.tolist(),
                "before_mean_mm": float(g.per_row_mm.mean()), "before_max_mm": float(g.per_row_mm.max()),
                "after_mean_mm": float(m.per_row_mm.mean()), "after_max_mm": float(m.per_row_mm.max()),
                "what": "closure residual RMS over the joints of each held-out row (1-based data rows), each shifted "

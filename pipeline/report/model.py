@@ -24,7 +24,8 @@ __all__ = ["Report", "Source", "Noise", "Verdict", "Fit", "Truth", "ParameterRow
            "FrameRow", "Frames", "Coefficient", "EffectRow", "Candidate", "Remaining", "GeometryTest", "Alias",
            "Unseparated", "PoseFamily", "Separation", "LawConstant", "Law", "SysId", "Resimulation", "Search", "Effects",
            "Flagged", "CompensationTable", "Timing", "Outputs", "Variant", "Outliers", "GrossStage", "InstrumentFit",
-           "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "DiscoveryRecord", "REPORT_KEY", "OUTPUT_KEYS"]
+           "PriorUsed", "ImplausibleParameter", "Simulation", "RunRecord", "DiscoveryRecord",
+           "REPORT_KEY", "OUTPUT_KEYS"]
 
 #: The key of the report model in a summary JSON (what ``--summary-json`` writes beside the summary's keys).
 REPORT_KEY = "report_model"
@@ -744,7 +745,8 @@ class Report:
     def to_dict(self) -> dict:
         """The report as JSON-ready nested dicts and lists (field names as keys), but its ``run`` and
         ``discovery`` records: a summary JSON holds those as its own keys
-        (:func:`pipeline.report.summary.summary_keys`, :func:`~pipeline.report.summary.discovery_summary_keys`), once."""
+        (:func:`pipeline.report.summary.summary_keys`,
+        :func:`~pipeline.report.summary.discovery_summary_keys`), once."""
         plain = dataclasses.asdict(dataclasses.replace(self, run=None, discovery=None))
         del plain["run"], plain["discovery"]
         return _plain(plain)

@@ -1,7 +1,11 @@
 """A calibration run's summary (the keys ``python -m pipeline.run --summary-json`` writes, documented
 in docs/commands.md), written from its report: :func:`run_record` makes the report's
 :class:`~pipeline.report.model.RunRecord` from the run's objects (what the summary holds beyond
-the report's other sections), :func:`summary_keys` writes every key from the report.
+the report's other sections), :func:`summary_keys` writes every key from the report. A
+discovery's summary (``python -m pipeline.discover --summary-json``, a fleet's
+``<machine>.discovery.json``) likewise: :func:`discovery_summary_keys` writes it from the
+discovery's report and its :class:`~pipeline.report.model.DiscoveryRecord`
+(:func:`pipeline.report.discovery.discovery_record` makes that one from the objects).
 """
 
 from __future__ import annotations
@@ -17,8 +21,8 @@ from .calibration import (gross_rows, heldout_figure_rows, heldout_keys, iso_key
 from .model import (GrossStage, ImplausibleParameter, InstrumentFit, Outliers, PriorUsed, Report, RunRecord,
                     Simulation, Variant)
 
-__all__ = ["run_record", "summary_keys", "discovery_summary_keys", "gross_stage", "gross_keys", "instrument_fit", "session_keys",
-           "diagnosis_summary", "OUTLIER_TEST"]
+__all__ = ["run_record", "summary_keys", "discovery_summary_keys", "gross_stage", "gross_keys", "instrument_fit",
+           "session_keys", "diagnosis_summary", "OUTLIER_TEST"]
 
 #: What the outlier test after the fit is.
 OUTLIER_TEST = ("closed-form leave-one-out (hat matrix, studentized deleted residuals, chi-square "
