@@ -24,7 +24,7 @@ from calib.klipper import KLIPPER_PARAMETERS, VOLUME_STEP_MM, fit_klipper, mesh_
 from pipeline.formats import check_export_folder, write_export_folder
 from pipeline.formats.klipper import SAVE_CONFIG_HEADER, SAVE_CONFIG_NOTICE, SAVE_CONFIG_PREFIX, STEPPERS
 
-from .klipper_rotary import rotary_export
+from .klipper_rotary import is_probe_calibration, probe_bed, rotary_export
 from .protocol import Delivery, ExportReport, ExportSettings
 
 __all__ = ["DELIVERY", "write_klipper", "write_klipper_rotary", "write_klipper_for", "SAVE_CONFIG_NAME", "KLIPPER_NOTES_NAME", "MESH_COUNT", "MESH_PROFILE"]
@@ -37,15 +37,9 @@ MESH_VERSION, MESH_ALGO, MESH_TENSION, MESH_PPS = 1, "bicubic", 0.2, 2
 
 
 def bed_of(cal: Calibration) -> np.ndarray:
-    """(3,) the bed plane a probe calibration estimated (zero for any other)."""
-    bed = cal.recording.get("bed") or {}
-    return np.array([bed.get("z_mm", 0.0), bed.get("tilt_x_rad", 0.0), bed.get("tilt_y_rad", 0.0)], dtype=float)
-
-
-def fixes_no_shift(cal: Calibration) -> bool:
-    """Whether the calibration's data leave a shift of the whole print in x, y open: a probe
-    calibration's (touches, manual heights and distances see none)."""
-    return "bed_mode" in cal.recording
+    """(3,) the bed plane a probe calibration estimated (:func:`probe_bed`; zero for any other)."""
+    bed = probe_bed(cal)
+    return np.zeros(3) if bed is None else bed
 
 
 def calibrated_radius(cal: Calibration) -> float:
@@ -122,7 +116,7 @@ error left at the bed is not the one above it, so no `[bed_mesh]` profile was wr
 def notes_text(cal: Calibration, settings: ExportSettings, res: dict, n_points: int, radius: float, rotation) -> str:
     """NOTES.md: the projection's residual, what Klipper cannot hold, the accuracy given up."""
     shift = (", after the best shift of the whole print in x, y (the probe data fix none: the print as a whole "
-             "may sit elsewhere in x, y than under the old settings)") if fixes_no_shift(cal) else ""
+             "may sit elsewhere in x, y than under the old settings)") if is_probe_calibration(cal) else ""
     by = cal.robot.table.to_dict(cal.theta)
     std = cal.robot.table.to_dict(cal.std)
     leans = ", ".join(f"{n} {1e3 * by[n]:+.2f} +- {1e3 * std[n]:.2f} mrad" for n in by if n.startswith("lean"))
@@ -166,7 +160,7 @@ def write_klipper(cal: Calibration, settings: ExportSettings) -> ExportReport:
     robot, bed = cal.robot, bed_of(cal)
     radius = calibrated_radius(cal)
     grid = volume_grid(radius)
-    kappa, errors = fit_klipper(robot, cal.theta, bed, grid, free_shift=fixes_no_shift(cal))
+    kappa, errors = fit_klipper(robot, cal.theta, bed, grid, free_shift=is_probe_calibration(cal))
     axis, points = mesh_points(robot, cal.theta, bed, kappa, radius, MESH_COUNT)
     res = residuals(errors, grid)
     rotation = rotation_distances(cal)

@@ -79,7 +79,7 @@ def rotary_notes_text(cal: Calibration, settings: ExportSettings, projection: Ro
     start = projection.start_figures()
     where = "at the bottom of the robot's workspace" if bed is None else \
         f"the plane the probe fit estimated (tilt {1e3 * bed[1]:+.3f}, {1e3 * bed[2]:+.3f} mrad in x, y)"
-    seen = "the robot's workspace (a probe calibration's touches see no height)" if "bed_mode" in cal.recording \
+    seen = "the robot's workspace (a probe calibration's touches see no height)" if is_probe_calibration(cal) \
         else "the box the calibration saw"
     return f"""# Klipper export of {settings.calibration or 'a calibration made in memory'}
 
@@ -111,16 +111,24 @@ Klipper's steps count the arms' turn from there.
 def projection_box(cal: Calibration) -> tuple:
     """``(pose_min, pose_max)`` the projection's box: the box the calibration saw; a probe
     calibration's (its touches on the bed see no height) the robot's workspace (None, None)."""
-    if "bed_mode" in cal.recording:
+    if is_probe_calibration(cal):
         return None, None
     return cal.validity["pose_min"], cal.validity["pose_max"]
 
 
+def is_probe_calibration(cal: Calibration) -> bool:
+    """Whether ``cal`` was fitted to probe data (``pipeline.probe``: its recording names the bed's
+    mode and plane); both Klipper deliveries ask."""
+    return "bed_mode" in cal.recording
+
+
 def probe_bed(cal: Calibration) -> np.ndarray | None:
     """(3,) the bed plane a probe calibration estimated (``z`` mm, ``tilt_x``, ``tilt_y`` rad:
-    Klipper's z = 0), None for any other calibration (level at the bottom of the robot's workspace)."""
-    bed = cal.recording.get("bed") if "bed_mode" in cal.recording else None
-    return None if bed is None else np.array([bed["z_mm"], bed["tilt_x_rad"], bed["tilt_y_rad"]], dtype=float)
+    Klipper's z = 0), None for any other calibration."""
+    if not is_probe_calibration(cal):
+        return None
+    bed = cal.recording["bed"]
+    return np.array([bed["z_mm"], bed["tilt_x_rad"], bed["tilt_y_rad"]], dtype=float)
 
 
 def rotary_export(cal: Calibration, settings: ExportSettings) -> RotaryExport:
